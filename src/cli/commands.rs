@@ -1,0 +1,445 @@
+//! The subcommands of `conifer`.
+
+use super::{BakeArgs, CutArgs, InspectArgs, PreviewArgs, ViewArgs};
+use crate::generate::{GenerateOptions, Species, generate};
+use crate::model::merge::PartnerSearch;
+use crate::model::metric::{PixelError, ViewParams, line_opacity, relative_error};
+use crate::model::record::{ErrorRange, LodRecord};
+use crate::model::{BakeOptions, BakeProgress, BakeStage, MergeWeights, read_record, write_record};
+use crate::preview::{PreviewCamera, PreviewOptions, PreviewPrimitive, render_preview};
+use anyhow::{Context, bail};
+use glam::Vec3;
+use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Progress bars for a bake, drawn on stderr only when it is a terminal.
+struct BakeBars {
+    groups: ProgressBar,
+    tree: ProgressBar,
+}
+
+impl BakeBars {
+    fn new() -> Self {
+        let multi = MultiProgress::new();
+        let style = ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} merges ({elapsed})")
+            .expect("valid template")
+            .progress_chars("=> ");
+        let bar = |prefix: &'static str| {
+            let bar = multi.add(ProgressBar::new(0).with_style(style.clone()).with_prefix(prefix));
+            bar.enable_steady_tick(Duration::from_millis(200));
+            bar
+        };
+        Self { groups: bar("groups"), tree: bar("whole tree") }
+    }
+}
+
+impl BakeProgress for BakeBars {
+    fn progress(&self, stage: BakeStage, done: usize, total: usize) {
+        let bar = match stage {
+            BakeStage::MergeGroups => &self.groups,
+            BakeStage::MergeTree => &self.tree,
+        };
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    }
+}
+
+/// Summary printed by `conifer bake --json`.
+#[derive(Serialize)]
+struct BakeReport<'a> {
+    output: &'a Path,
+    needles: usize,
+    groups: usize,
+    lines_merged: usize,
+    bytes: u64,
+    bytes_per_needle: f64,
+    generate_seconds: f64,
+    bake_seconds: f64,
+    write_seconds: f64,
+}
+
+pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let input = match (&args.preset, &args.input) {
+        (Some(name), _) => {
+            let species: Species = name.parse().map_err(|e| anyhow::anyhow!("--preset {name}: {e}"))?;
+            let mut tree = generate(species, &GenerateOptions { seed: args.seed, target_needles: args.needles });
+            tree.name = species.name().to_string();
+            tree
+        }
+        (None, Some(path)) => {
+            bail!(
+                "{}: importing glTF trees is not yet supported by this version of conifer; bake a --preset instead",
+                path.display()
+            )
+        }
+        (None, None) => bail!("give an input file or --preset NAME"),
+    };
+    let generate_seconds = started.elapsed().as_secs_f64();
+    let [direction, distance, needle_count] = args.weights[..] else {
+        bail!("--weights takes three numbers k1,k2,k3");
+    };
+    let mut options = BakeOptions { max_sides: args.max_sides, ..Default::default() };
+    options.merge.weights = MergeWeights { direction, distance, needle_count };
+    options.merge.tree_search = if args.exhaustive {
+        PartnerSearch::Exhaustive
+    } else {
+        PartnerSearch::Nearest { neighbours: args.neighbours.max(1) }
+    };
+    let bars = BakeBars::new();
+    let mut record = crate::model::bake(&input, &options, &bars).with_context(|| format!("baking {}", input.name))?;
+    bars.groups.finish_and_clear();
+    bars.tree.finish_and_clear();
+    record.bake.source = match (&args.preset, &args.input) {
+        (Some(name), _) => format!("preset {name} seed {}", args.seed),
+        (None, Some(path)) => path.display().to_string(),
+        (None, None) => String::new(),
+    };
+    let write_started = Instant::now();
+    let bytes = write_record(&record, &args.output).with_context(|| format!("{}: cannot write record", args.output.display()))?;
+    let report = BakeReport {
+        output: &args.output,
+        needles: record.needle_count(),
+        groups: record.group_count(),
+        lines_merged: record.merged.len(),
+        bytes,
+        bytes_per_needle: bytes as f64 / record.needle_count() as f64,
+        generate_seconds,
+        bake_seconds: record.bake.bake_seconds.unwrap_or(0.0),
+        write_seconds: write_started.elapsed().as_secs_f64(),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        eprintln!(
+            "baked {} needles in {} groups ({} merged lines) in {:.2} s → {} ({} bytes, {:.1} bytes/needle)",
+            report.needles,
+            report.groups,
+            report.lines_merged,
+            report.bake_seconds,
+            args.output.display(),
+            bytes,
+            report.bytes_per_needle
+        );
+    }
+    Ok(())
+}
+
+fn load(path: &Path) -> anyhow::Result<(LodRecord, u64)> {
+    let record = read_record(path).with_context(|| format!("{}: cannot load record", path.display()))?;
+    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    Ok((record, bytes))
+}
+
+/// Smallest, median and largest of a set of numbers.
+#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+pub struct MinMedianMax {
+    /// Smallest value.
+    pub min: f64,
+    /// Median (lower median for an even count).
+    pub median: f64,
+    /// Largest value.
+    pub max: f64,
+}
+
+impl MinMedianMax {
+    fn of(mut values: Vec<f64>) -> Self {
+        if values.is_empty() {
+            return Self { min: 0.0, median: 0.0, max: 0.0 };
+        }
+        values.sort_by(f64::total_cmp);
+        Self { min: values[0], median: values[(values.len() - 1) / 2], max: values[values.len() - 1] }
+    }
+}
+
+/// What `conifer inspect --json` prints.
+#[derive(Debug, Serialize)]
+pub struct InspectReport {
+    /// Tree name.
+    pub name: String,
+    /// Where the tree came from.
+    pub source: String,
+    /// Needle count.
+    pub needles: usize,
+    /// Phyllotaxy groups.
+    pub groups: usize,
+    /// Original lines (one per needle).
+    pub lines_original: usize,
+    /// Merged lines.
+    pub lines_merged: usize,
+    /// Roots of the merge forest.
+    pub roots: usize,
+    /// Lmax.
+    pub max_sides: u8,
+    /// Wood segments.
+    pub wood_segments: usize,
+    /// `[min, max]` error of each part, metres.
+    pub error_ranges: BTreeMap<&'static str, [f32; 2]>,
+    /// Needle radius, metres.
+    pub radius: MinMedianMax,
+    /// Needle length, metres.
+    pub length: MinMedianMax,
+    /// Needles per group.
+    pub group_size: MinMedianMax,
+    /// Tree height (bounding box), metres.
+    pub height: f32,
+    /// File size.
+    pub bytes: u64,
+    /// File size per needle.
+    pub bytes_per_needle: f64,
+    /// Bake time, if recorded.
+    pub bake_seconds: Option<f64>,
+    /// Merge weights k1, k2, k3.
+    pub weights: [f32; 3],
+}
+
+pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
+    let (record, bytes) = load(&args.file)?;
+    let ranges = record.part_ranges();
+    let pair = |r: ErrorRange| [r.min, r.max];
+    let mut error_ranges = BTreeMap::new();
+    error_ranges.insert("cylinders", pair(ranges.cylinders));
+    error_ranges.insert("original_lines", pair(ranges.original_lines));
+    if let Some(merged) = ranges.merged_lines {
+        error_ranges.insert("merged_lines", pair(merged));
+    }
+    let mut group_sizes = vec![0f64; record.group_count()];
+    for needle in &record.needles {
+        group_sizes[needle.group as usize] += 1.0;
+    }
+    let (lo, hi) = record.bounds();
+    let w = record.bake.weights;
+    let report = InspectReport {
+        name: record.name.clone(),
+        source: record.bake.source.clone(),
+        needles: record.needle_count(),
+        groups: record.group_count(),
+        lines_original: record.needle_count(),
+        lines_merged: record.merged.len(),
+        roots: record.roots().len(),
+        max_sides: record.max_sides,
+        wood_segments: record.wood.len(),
+        error_ranges,
+        radius: MinMedianMax::of(record.needles.iter().map(|n| n.radius as f64).collect()),
+        length: MinMedianMax::of(record.needles.iter().map(|n| n.length() as f64).collect()),
+        group_size: MinMedianMax::of(group_sizes),
+        height: hi.y - lo.y,
+        bytes,
+        bytes_per_needle: bytes as f64 / record.needle_count() as f64,
+        bake_seconds: record.bake.bake_seconds,
+        weights: [w.direction, w.distance, w.needle_count],
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!("{} ({})", report.name, report.source);
+        println!("  needles {} in {} groups, {} merged lines, {} roots", report.needles, report.groups, report.lines_merged, report.roots);
+        for (part, [min, max]) in &report.error_ranges {
+            println!("  {part:>15}: error {min:.6} .. {max:.6} m");
+        }
+        println!("  {} bytes ({:.1} per needle)", report.bytes, report.bytes_per_needle);
+    }
+    Ok(())
+}
+
+/// What `conifer cut --json` prints.
+#[derive(Debug, Serialize)]
+pub struct CutReport {
+    /// Viewing distance, metres.
+    pub distance: f32,
+    /// Spatial error e, metres.
+    pub spatial_error: f32,
+    /// Needles drawn as prisms.
+    pub prisms: u64,
+    /// Prisms by side count.
+    pub prism_sides: BTreeMap<u8, u64>,
+    /// Original lines drawn.
+    pub lines_original: u64,
+    /// Merged lines drawn.
+    pub lines_merged: u64,
+    /// Needles stood for by the cut.
+    pub needles_covered: u64,
+    /// Needles in the record.
+    pub needles: usize,
+    /// Prism triangles.
+    pub triangles: u64,
+    /// Line segments.
+    pub line_segments: u64,
+    /// Triangles plus line segments.
+    pub primitives: u64,
+    /// Mean opacity of the original lines drawn, `δ · 2/ρ` (paper), or null.
+    pub mean_original_line_opacity: Option<f32>,
+}
+
+fn view_params(view: &ViewArgs) -> ViewParams {
+    ViewParams {
+        vertical_fov: view.fov_deg.to_radians(),
+        viewport_height_px: view.height_px,
+        pixel_error: PixelError(view.pixel_error),
+    }
+}
+
+/// The cut report of `record` seen from `view`.
+pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
+    let e = view_params(view).spatial_error(view.distance);
+    let cut = record.cut(e);
+    let stats = record.cut_stats(&cut);
+    let opacity_sum: f32 = cut
+        .original_lines
+        .iter()
+        .map(|&i| line_opacity(relative_error(e, record.needles[i as usize].radius), view.transition))
+        .sum();
+    CutReport {
+        distance: view.distance,
+        spatial_error: e,
+        prisms: stats.prisms,
+        prism_sides: stats.prism_sides.clone(),
+        lines_original: stats.lines_original,
+        lines_merged: stats.lines_merged,
+        needles_covered: stats.needles_covered,
+        needles: record.needle_count(),
+        triangles: stats.triangles,
+        line_segments: stats.line_segments,
+        primitives: stats.primitives(),
+        mean_original_line_opacity: (!cut.original_lines.is_empty()).then(|| opacity_sum / cut.original_lines.len() as f32),
+    }
+}
+
+pub(super) fn cut(args: &CutArgs) -> anyhow::Result<()> {
+    check_view(&args.view)?;
+    let (record, _) = load(&args.file)?;
+    let report = cut_report(&record, &args.view);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "e = {:.6} m at {} m: {} prisms ({} triangles), {} original lines, {} merged lines; {} of {} needles covered",
+            report.spatial_error,
+            report.distance,
+            report.prisms,
+            report.triangles,
+            report.lines_original,
+            report.lines_merged,
+            report.needles_covered,
+            report.needles
+        );
+    }
+    Ok(())
+}
+
+fn check_view(view: &ViewArgs) -> anyhow::Result<()> {
+    if !(view.distance.is_finite() && view.distance >= 0.0) {
+        bail!("--distance must be a finite number ≥ 0, got {}", view.distance);
+    }
+    if !(view.fov_deg > 0.0 && view.fov_deg < 180.0) {
+        bail!("--fov-deg must be in (0, 180), got {}", view.fov_deg);
+    }
+    if !(view.height_px >= 1.0 && view.height_px.is_finite()) {
+        bail!("--height-px must be at least 1, got {}", view.height_px);
+    }
+    if !(view.pixel_error > 0.0 && view.pixel_error.is_finite()) {
+        bail!("--pixel-error must be > 0, got {}", view.pixel_error);
+    }
+    if !(view.transition > 0.0 && view.transition <= 1.0) {
+        bail!("--transition must be in (0, 1], got {}", view.transition);
+    }
+    Ok(())
+}
+
+fn parse_size(size: &str) -> anyhow::Result<(u32, u32)> {
+    let parsed = size.split_once('x').and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
+    match parsed {
+        Some((w, h)) if (1..=8192).contains(&w) && (1..=8192).contains(&h) => Ok((w, h)),
+        _ => bail!("--size must be WIDTHxHEIGHT with both in 1..=8192, got {size:?}"),
+    }
+}
+
+/// Preview primitives of the cut of `record` at spatial error `e`: prisms and
+/// original lines at the needle's width (the rasterizer turns a sub-pixel
+/// width into the paper's `2/ρ` coverage), original lines scaled by δ, merged
+/// lines at the width that keeps their needles' summed area.
+pub(crate) fn preview_primitives(record: &LodRecord, e: f32, transition: f32) -> Vec<PreviewPrimitive> {
+    let cut = record.cut(e);
+    let needle_color = {
+        let c = record.material.needle_color;
+        [c[0], c[1], c[2]]
+    };
+    let mut primitives = Vec::with_capacity(cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len() + record.wood.len());
+    for wood in &record.wood {
+        let c = record.material.wood_color;
+        primitives.push(PreviewPrimitive {
+            a: wood.start,
+            b: wood.end,
+            width: wood.start_radius + wood.end_radius,
+            normal: Vec3::Z,
+            color: [c[0], c[1], c[2]],
+            opacity: 1.0,
+        });
+    }
+    for &(i, _) in &cut.prisms {
+        let n = &record.needles[i as usize];
+        primitives.push(PreviewPrimitive { a: n.base, b: n.tip, width: 2.0 * n.radius, normal: n.normal, color: needle_color, opacity: 1.0 });
+    }
+    for &i in &cut.original_lines {
+        let n = &record.needles[i as usize];
+        primitives.push(PreviewPrimitive { a: n.base, b: n.tip, width: 2.0 * n.radius, normal: n.normal, color: needle_color, opacity: transition });
+    }
+    for &node in &cut.merged_lines {
+        let [(a, na), (b, nb)] = record.node_ends(node);
+        let length = a.distance(b).max(1e-6);
+        primitives.push(PreviewPrimitive {
+            a,
+            b,
+            width: record.node_needle_area(node) / length,
+            normal: (na + nb).normalize_or(na),
+            color: needle_color,
+            opacity: transition,
+        });
+    }
+    primitives
+}
+
+pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
+    let (width, height) = parse_size(&args.size)?;
+    let view = ViewArgs {
+        distance: args.distance,
+        fov_deg: args.fov_deg,
+        height_px: height as f32,
+        pixel_error: args.pixel_error,
+        transition: args.transition,
+    };
+    check_view(&view)?;
+    let (record, _) = load(&args.file)?;
+    let e = view_params(&view).spatial_error(args.distance);
+    let (lo, hi) = record.bounds();
+    let centre = (lo + hi) * 0.5;
+    let camera = PreviewCamera {
+        eye: centre + Vec3::Z * args.distance.max(1e-3),
+        target: centre,
+        vertical_fov: args.fov_deg.to_radians(),
+        width,
+        height,
+    };
+    let started = Instant::now();
+    let image = render_preview(&preview_primitives(&record, e, args.transition), &camera, &PreviewOptions::default());
+    let render_ms = started.elapsed().as_secs_f64() * 1e3;
+    image.save(&args.output).with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
+    let report = cut_report(&record, &view);
+    println!(
+        "{}",
+        serde_json::json!({
+            "output": args.output,
+            "spatial_error": e,
+            "prisms": report.prisms,
+            "lines_original": report.lines_original,
+            "lines_merged": report.lines_merged,
+            "triangles": report.triangles,
+            "lines": report.line_segments,
+            "render_ms": render_ms,
+        })
+    );
+    Ok(())
+}

@@ -1,0 +1,153 @@
+//! The `conifer` command line: argument parsing and the subcommands.
+//!
+//! Kept in the library (behind the `cli` feature) so integration tests can
+//! run the same code paths the binary runs.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+use std::ffi::OsString;
+use std::path::PathBuf;
+
+pub use commands::{CutReport, InspectReport, MinMedianMax};
+
+/// Continuous-LOD records for coniferous trees: bake, inspect, cut, preview.
+#[derive(Debug, Parser)]
+#[command(name = "conifer", version, about, long_about = None)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Bake a tree (a procedural preset or a glTF file) into a `.conifer` LOD record.
+    Bake(BakeArgs),
+    /// Print what a record holds.
+    Inspect(InspectArgs),
+    /// Print the cut (what is drawn) of a record at a viewing distance.
+    Cut(CutArgs),
+    /// Render the cut at a viewing distance to a PNG with the CPU preview rasterizer.
+    Preview(PreviewArgs),
+}
+
+/// Arguments of `conifer bake`.
+#[derive(Debug, clap::Args)]
+pub struct BakeArgs {
+    /// Input glTF/GLB file (alternative to --preset).
+    #[arg(conflicts_with = "preset", required_unless_present = "preset")]
+    pub input: Option<PathBuf>,
+    /// Procedural species preset: scots-pine, norway-spruce, eastern-white-pine, lawson-cypress.
+    #[arg(long)]
+    pub preset: Option<String>,
+    /// Seed of the procedural tree.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Approximate needle count of the procedural tree (default: the preset's own).
+    #[arg(long)]
+    pub needles: Option<usize>,
+    /// Output record path.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Lmax: most sides of a needle prism (3..=64).
+    #[arg(long, default_value_t = 8)]
+    pub max_sides: u8,
+    /// Merge cost weights k1,k2,k3 (direction, distance, needle count).
+    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.25f32, 0.25, 0.5])]
+    pub weights: Vec<f32>,
+    /// Partner candidates per line in the whole-tree merge (nearest neighbours).
+    #[arg(long, default_value_t = 12)]
+    pub neighbours: usize,
+    /// Search every live line for the whole-tree merge (exact, quadratic: small trees only).
+    #[arg(long)]
+    pub exhaustive: bool,
+    /// Print a JSON summary of the bake on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `conifer inspect`.
+#[derive(Debug, clap::Args)]
+pub struct InspectArgs {
+    /// The record.
+    pub file: PathBuf,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// How a view is described on the command line.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ViewArgs {
+    /// Distance from the viewer to the tree, metres.
+    #[arg(long)]
+    pub distance: f32,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 45.0)]
+    pub fov_deg: f32,
+    /// Viewport height, pixels.
+    #[arg(long, default_value_t = 1080.0)]
+    pub height_px: f32,
+    /// Pixel error ε.
+    #[arg(long, default_value_t = 1.0)]
+    pub pixel_error: f32,
+    /// Transition coefficient δ in (0, 1], scaling original lines' opacity.
+    #[arg(long, default_value_t = 1.0)]
+    pub transition: f32,
+}
+
+/// Arguments of `conifer cut`.
+#[derive(Debug, clap::Args)]
+pub struct CutArgs {
+    /// The record.
+    pub file: PathBuf,
+    /// The view.
+    #[command(flatten)]
+    pub view: ViewArgs,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `conifer preview`.
+#[derive(Debug, clap::Args)]
+pub struct PreviewArgs {
+    /// The record.
+    pub file: PathBuf,
+    /// Distance from the camera to the tree's centre, metres.
+    #[arg(long)]
+    pub distance: f32,
+    /// Image size, WIDTHxHEIGHT pixels (the height is the viewport height of the error).
+    #[arg(long, default_value = "512x512")]
+    pub size: String,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 45.0)]
+    pub fov_deg: f32,
+    /// Pixel error ε.
+    #[arg(long, default_value_t = 1.0)]
+    pub pixel_error: f32,
+    /// Transition coefficient δ.
+    #[arg(long, default_value_t = 1.0)]
+    pub transition: f32,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Parses `args` (program name first) and runs the command.
+pub fn run<I, T>(args: I) -> anyhow::Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    // Usage errors print clap's message and exit with status 2; --help exits 0.
+    let cli = Cli::parse_from(args);
+    match cli.command {
+        Command::Bake(args) => commands::bake(&args),
+        Command::Inspect(args) => commands::inspect(&args),
+        Command::Cut(args) => commands::cut(&args),
+        Command::Preview(args) => commands::preview(&args),
+    }
+}

@@ -1,0 +1,237 @@
+//! Needle placement: how many needles each foliage site gets (calibrated to
+//! the requested total), and where they go for each phyllotaxy — pine
+//! fascicles, spruce spirals, cypress scale leaves.
+
+use std::f32::consts::{FRAC_PI_2, TAU};
+
+use glam::Vec3;
+
+use super::geometry::{GOLDEN_ANGLE, UP, bend, cone_direction, perpendicular_toward, rotate_around};
+use super::params::{FoliageParams, Phyllotaxy};
+use super::random::TreeRng;
+use super::skeleton::FoliageSite;
+use crate::model::Needle;
+
+/// Radius of a young shoot: needles attach on its surface.
+const SHOOT_RADIUS: f32 = 0.0015;
+
+/// Covers `sites` with about `target` needles.
+pub(crate) fn grow_needles(
+    sites: &[FoliageSite],
+    params: &FoliageParams,
+    target: usize,
+    rng: &mut TreeRng,
+) -> Vec<Needle> {
+    let units = units_per_site(sites, params, target);
+    let total_units: usize = units.iter().map(|&u| u as usize).sum();
+    let mut placer = Placer {
+        params,
+        rng,
+        needles: Vec::with_capacity(total_units * needles_per_unit(params) as usize),
+        next_group: 0,
+        spray: None,
+    };
+    for (site, &count) in sites.iter().zip(&units) {
+        match params.phyllotaxy {
+            Phyllotaxy::Fascicle { needles, spread, twist } => placer.fascicles(site, count, needles, spread, twist),
+            Phyllotaxy::Spiral => placer.spiral(site, count),
+            Phyllotaxy::Scales => placer.scales(site, count),
+        }
+    }
+    placer.needles
+}
+
+/// Needles per placed unit: a fascicle's needles, or 1.
+fn needles_per_unit(params: &FoliageParams) -> u32 {
+    match params.phyllotaxy {
+        Phyllotaxy::Fascicle { needles, .. } => needles.max(1),
+        Phyllotaxy::Spiral | Phyllotaxy::Scales => 1,
+    }
+}
+
+/// Units (fascicles or needles) per site, proportional to the site's
+/// weight, rounded with error diffusion, with the minimum shoot group size
+/// for spirals; the density is adjusted until the total meets `target`.
+fn units_per_site(sites: &[FoliageSite], params: &FoliageParams, target: usize) -> Vec<u32> {
+    let per_unit = needles_per_unit(params) as f32;
+    let target_units = (target as f32 / per_unit).round();
+    let total_weight: f32 = sites.iter().map(|s| s.weight).sum();
+    if target_units < 1.0 || total_weight <= 0.0 {
+        return vec![0; sites.len()];
+    }
+    let default_density = params.default_needles as f32 / per_unit / total_weight;
+    let mut density = target_units / total_weight;
+    let mut units = Vec::new();
+    for _ in 0..12 {
+        let floor = minimum_units(params, density / default_density);
+        units = diffuse(sites, density, floor);
+        let total = units.iter().map(|&u| u as f32).sum::<f32>().max(1.0);
+        if (total - target_units).abs() <= 0.002 * target_units {
+            break;
+        }
+        density *= target_units / total;
+    }
+    units
+}
+
+/// The fewest needles a spiral shoot gets at `relative_density` (1 = the
+/// species' default density); other phyllotaxies have no floor.
+fn minimum_units(params: &FoliageParams, relative_density: f32) -> u32 {
+    match params.phyllotaxy {
+        Phyllotaxy::Spiral => (params.group_size.0 as f32 * relative_density.min(1.0)).round() as u32,
+        Phyllotaxy::Fascicle { .. } | Phyllotaxy::Scales => 0,
+    }
+}
+
+/// `weight × density` per site, rounded so the rounding errors cancel out
+/// along the list, then raised to `floor`.
+fn diffuse(sites: &[FoliageSite], density: f32, floor: u32) -> Vec<u32> {
+    let mut carry = 0.0_f32;
+    sites
+        .iter()
+        .map(|site| {
+            let wanted = site.weight * density + carry;
+            let rounded = wanted.round().max(0.0);
+            carry = wanted - rounded;
+            (rounded as u32).max(floor)
+        })
+        .collect()
+}
+
+struct Placer<'a> {
+    params: &'a FoliageParams,
+    rng: &'a mut TreeRng,
+    needles: Vec<Needle>,
+    next_group: u32,
+    /// Spray key and size of the scale-leaf group being filled.
+    spray: Option<(u32, usize)>,
+}
+
+impl Placer<'_> {
+    /// Position of unit `index` of `count` along the site, 0 at its base:
+    /// evenly spaced with jitter, crowded toward the tip for tufted species.
+    fn position(&mut self, site: &FoliageSite, index: u32, count: u32) -> (f32, Vec3) {
+        let even = ((index as f32 + 0.5 + 0.4 * self.rng.signed()) / count as f32).clamp(0.0, 1.0);
+        let t = even.powf(1.0 / self.params.tip_crowding.max(1.0));
+        (t, site.start.lerp(site.end, t))
+    }
+
+    /// Needle length for a site, shorter on weak shoots.
+    fn length(&mut self, site: &FoliageSite) -> f32 {
+        self.rng.range(self.params.length) * (0.8 + 0.2 * site.vigor.min(1.0))
+    }
+
+    /// Adds a needle; its length is kept within the species' range.
+    fn push(&mut self, base: Vec3, dir: Vec3, length: f32, normal: Vec3, group: u32) {
+        let (shortest, longest) = self.params.length;
+        let radius = self.rng.range(self.params.radius);
+        self.needles.push(Needle {
+            base,
+            tip: base + dir * length.clamp(shortest, longest),
+            radius,
+            normal,
+            group,
+        });
+    }
+
+    /// Pine fascicles spirally on the shoot, each its own group: `needles`
+    /// needles fanning `spread` from the bundle's axis, flat faces toward
+    /// it, rolled by up to `twist`.
+    fn fascicles(&mut self, site: &FoliageSite, count: u32, needles: u32, spread: f32, twist: f32) {
+        let axis = site.axis();
+        let phase = self.rng.unit() * TAU;
+        for index in 0..count {
+            let (_, pos) = self.position(site, index, count);
+            let radial = cone_direction(axis, site.up, FRAC_PI_2, phase + index as f32 * GOLDEN_ANGLE);
+            let divergence = self.rng.range(self.params.divergence);
+            let bundle = (axis * divergence.cos() + radial * divergence.sin()).normalize();
+            let bundle = bend(bundle, -UP, self.params.droop * (0.6 + 0.4 * self.rng.unit()));
+            let length = self.length(site);
+            let roll = self.rng.unit() * TAU;
+            let group = self.new_group();
+            let base = pos + radial * SHOOT_RADIUS;
+            for needle in 0..needles {
+                let azimuth = roll + needle as f32 * TAU / needles as f32;
+                let dir = cone_direction(bundle, radial, self.rng.jitter(spread, 0.3), azimuth);
+                let outward = perpendicular_toward(dir, dir - bundle);
+                let normal = rotate_around(outward, dir, twist * self.rng.signed());
+                let needle_length = self.rng.jitter(length, 0.1);
+                self.push(base, dir, needle_length, normal, group);
+            }
+        }
+    }
+
+    /// Spruce: single needles spirally all round the shoot, pointing
+    /// forward; the ones beneath turn to the sides. The shoot is one group,
+    /// split into even runs when it exceeds the maximum group size.
+    fn spiral(&mut self, site: &FoliageSite, count: u32) {
+        let axis = site.axis();
+        let phase = self.rng.unit() * TAU;
+        let max_group = self.params.group_size.1.max(1) as u32;
+        let runs = count.div_ceil(max_group).max(1);
+        let run_length = count.div_ceil(runs).max(1);
+        let first_group = self.next_group;
+        self.next_group += runs;
+        for index in 0..count {
+            let (t, pos) = self.position(site, index, count);
+            let mut radial = cone_direction(axis, site.up, FRAC_PI_2, phase + index as f32 * GOLDEN_ANGLE);
+            let downward = -radial.y;
+            if downward > 0.0 {
+                radial = perpendicular_toward(axis, radial + UP * (0.8 * downward));
+            }
+            let divergence = self.rng.range(self.params.divergence);
+            let dir = (axis * divergence.cos() + radial * divergence.sin()).normalize();
+            let length = self.length(site) * (0.7 + 0.3 * (std::f32::consts::PI * t).sin());
+            let normal = perpendicular_toward(dir, radial);
+            self.push(
+                pos + radial * SHOOT_RADIUS,
+                dir,
+                length,
+                normal,
+                first_group + index / run_length,
+            );
+        }
+    }
+
+    /// Cypress scale leaves flat in the spray plane, cycling through a
+    /// facial scale along the branchlet and lateral scales either side.
+    fn scales(&mut self, site: &FoliageSite, count: u32) {
+        let axis = site.axis();
+        let in_plane = site.up.cross(axis).normalize_or(axis.any_orthonormal_vector());
+        let first_kind = self.rng.count((0, 2));
+        for index in 0..count {
+            let (_, pos) = self.position(site, index, count);
+            let angle = match (first_kind + index) % 3 {
+                0 => 0.08 * self.rng.signed(),
+                1 => self.rng.range(self.params.divergence),
+                _ => -self.rng.range(self.params.divergence),
+            };
+            let dir = (axis * angle.cos() + in_plane * angle.sin()).normalize();
+            let length = self.length(site);
+            let group = self.spray_group(site.group_key);
+            self.push(pos, dir, length, perpendicular_toward(dir, site.up), group);
+        }
+    }
+
+    fn new_group(&mut self) -> u32 {
+        let group = self.next_group;
+        self.next_group += 1;
+        group
+    }
+
+    /// The group of the next scale of spray `key`: the spray's current
+    /// group, or a new one when the spray changes or the group is full.
+    fn spray_group(&mut self, key: u32) -> u32 {
+        let max_group = self.params.group_size.1.max(1);
+        match self.spray {
+            Some((current, size)) if current == key && size < max_group => {
+                self.spray = Some((key, size + 1));
+                self.next_group - 1
+            }
+            _ => {
+                self.spray = Some((key, 1));
+                self.new_group()
+            }
+        }
+    }
+}

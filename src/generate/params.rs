@@ -1,0 +1,457 @@
+//! The numbers that make each species: one parameter set per preset, read
+//! by the shared grower (`skeleton`, `spray`) and needle placer (`foliage`).
+//! Lengths in metres, angles in radians.
+
+use crate::model::FoliageMaterial;
+
+/// Everything the generator needs to grow one species.
+#[derive(Clone, Debug)]
+pub(crate) struct SpeciesParams {
+    pub trunk: TrunkParams,
+    pub crown: CrownParams,
+    pub branching: BranchParams,
+    /// Flattened scale-leaf sprays (cypresses); `None` for needle-bearing shoots.
+    pub spray: Option<SprayParams>,
+    pub foliage: FoliageParams,
+    pub material: FoliageMaterial,
+}
+
+/// The stem and its yearly height growth.
+#[derive(Clone, Debug)]
+pub(crate) struct TrunkParams {
+    /// Number of annual growth units (the tree's age).
+    pub age_years: u32,
+    /// Range of the total height.
+    pub height: (f32, f32),
+    /// Radius at the ground.
+    pub base_radius: f32,
+    /// Yearly height increment grows like `year^growth_acceleration`.
+    pub growth_acceleration: f32,
+    /// Random lean added per trunk piece (crooked pines > straight spruce).
+    pub wander: f32,
+    /// How far the leader nods over at the top (cypress), radians at the tip.
+    pub nod: f32,
+    /// Length of the nodding part of the leader.
+    pub nod_length: f32,
+    /// Trunk pieces per annual unit; branching nodes sit at each piece's top.
+    pub nodes_per_year: u32,
+}
+
+/// The envelope the branches fill.
+#[derive(Clone, Debug)]
+pub(crate) struct CrownParams {
+    /// The crown starts at this fraction of the height; lower branches are
+    /// pruned (left as stubs when `BranchParams::stubs`).
+    pub base_fraction: (f32, f32),
+    /// Horizontal reach of the longest branch.
+    pub radius: f32,
+    /// How the reach varies from crown base to top.
+    pub shape: CrownShape,
+    /// Random spread of each branch's reach (fraction).
+    pub irregularity: f32,
+}
+
+/// Crown silhouettes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum CrownShape {
+    /// Reach falls like `(1 - c)^exponent` from crown base (c = 0) to top (c = 1).
+    Conical { exponent: f32 },
+    /// Narrower at the crown base, widest a third of the way up, rounded top (pines).
+    Rounded,
+    /// A narrow column with a short tapering top (cypress).
+    Columnar,
+}
+
+impl CrownShape {
+    /// Fraction of the crown radius a branch at crown height `c` (0 = crown
+    /// base, 1 = top) reaches.
+    pub(crate) fn reach_fraction(self, c: f32) -> f32 {
+        let c = c.clamp(0.0, 1.0);
+        match self {
+            CrownShape::Conical { exponent } => (1.0 - c).powf(exponent),
+            CrownShape::Rounded => (1.0 - c).powf(0.55) * (0.6 + 0.4 * (c / 0.35).min(1.0)),
+            CrownShape::Columnar => (1.0 - c).powf(0.45) * (0.75 + 0.25 * (1.0 - c)),
+        }
+    }
+}
+
+/// Branches off the trunk (order 1) and their laterals (orders 2, 3, ...).
+#[derive(Clone, Debug)]
+pub(crate) struct BranchParams {
+    /// Branches in the whorl at the top of each annual trunk unit.
+    pub whorl_size: (u32, u32),
+    /// Branches at each node inside an annual trunk unit.
+    pub interwhorl_size: (u32, u32),
+    /// Reach of interwhorl branches relative to whorl branches.
+    pub interwhorl_vigor: f32,
+    /// Angle from the vertical of branches at the crown base and at the top.
+    pub angle_bottom: f32,
+    pub angle_top: f32,
+    /// Downward bending per metre of the older part of a branch (weight).
+    pub sag: f32,
+    /// Upward bending per metre of the youngest part (tips turning up).
+    pub upturn: f32,
+    /// Highest branching order (1 = branches without laterals).
+    pub max_order: u32,
+    /// Branching nodes per annual unit of a branch.
+    pub nodes_per_year: u32,
+    /// Laterals at each node of a first-order branch.
+    pub laterals: (u32, u32),
+    /// Laterals at each node of a higher-order axis.
+    pub sublaterals: (u32, u32),
+    /// Angle between a lateral and its parent.
+    pub lateral_angle: f32,
+    /// Yearly length of a lateral relative to its parent's.
+    pub lateral_length: f32,
+    /// Probability that a lateral lies in the branch's horizontal plane
+    /// (left/right) rather than at a random azimuth.
+    pub planarity: f32,
+    /// Extra downward bending per metre of order ≥ 3 axes (hanging branchlets).
+    pub hanging: f32,
+    /// Radius of a shoot tip (pipe model: a branch's cross-section is the
+    /// sum of its tips').
+    pub tip_radius: f32,
+    /// Leave short dead stubs where branches were pruned below the crown.
+    pub stubs: bool,
+}
+
+/// Flattened fern-like sprays of scale leaves (cypress).
+#[derive(Clone, Debug)]
+pub(crate) struct SprayParams {
+    /// Distance between sprays along a young branch.
+    pub spacing: f32,
+    /// Length of a spray's main axis.
+    pub length: (f32, f32),
+    /// Angle between a spray and the axis it sits on.
+    pub angle: f32,
+    /// Distance between side branchlets along the spray axis.
+    pub pinna_spacing: f32,
+    /// Angle between a branchlet and the spray axis.
+    pub pinna_angle: f32,
+    /// Length of the lowest branchlet relative to the spray axis.
+    pub pinna_length: f32,
+    /// How much a spray's tip bends down (radians over its length).
+    pub droop: f32,
+    /// Random roll of the spray plane about the spray axis, up to this many
+    /// radians either way (0: every spray lies in the branch plane).
+    pub roll: f32,
+}
+
+/// How needles sit on a shoot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Phyllotaxy {
+    /// Pines: bundles of `needles` needles, spread `spread` radians from the
+    /// bundle's axis, each needle rolled up to `twist` radians.
+    Fascicle { needles: u32, spread: f32, twist: f32 },
+    /// Spruces: single needles spirally all around the shoot, the shoot
+    /// (or a run of it) being the group.
+    Spiral,
+    /// Cypresses: scale leaves lying flat in the spray plane, one spray a group.
+    Scales,
+}
+
+/// Needle shape, density and grouping.
+#[derive(Clone, Debug)]
+pub(crate) struct FoliageParams {
+    pub phyllotaxy: Phyllotaxy,
+    /// Needle count at default options (before a ±8 % per-seed vigour factor).
+    pub default_needles: usize,
+    /// Shoots (or sprays) younger than this carry needles.
+    pub retention_years: u32,
+    /// Needle density on a shoot one year older, relative (needle fall).
+    pub survival_per_year: f32,
+    pub length: (f32, f32),
+    pub radius: (f32, f32),
+    /// Angle between a needle (or fascicle, or lateral scale) and its shoot.
+    pub divergence: (f32, f32),
+    /// How much needles bend toward the ground (soft needles).
+    pub droop: f32,
+    /// ≥ 1: above 1 crowds the needles toward the shoot tip (tufts).
+    pub tip_crowding: f32,
+    /// Group sizes for `Spiral`/`Scales`: a shoot with fewer than `.0`
+    /// needles at default density gets `.0`; a group never exceeds `.1`.
+    pub group_size: (usize, usize),
+}
+
+const fn deg(degrees: f32) -> f32 {
+    degrees * (std::f32::consts::PI / 180.0)
+}
+
+/// Linear colour from 8-bit sRGB.
+fn srgb(r: u8, g: u8, b: u8) -> [f32; 4] {
+    let lin = |c: u8| {
+        let c = f32::from(c) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    [lin(r), lin(g), lin(b), 1.0]
+}
+
+/// Scots pine (*Pinus sylvestris*), about 10 years old, 3.6–4.6 m: an
+/// irregular rounded crown on a trunk bare of live branches in its lower
+/// third, 2-needle fascicles of stiff twisted blue-green needles.
+pub(crate) fn scots_pine() -> SpeciesParams {
+    SpeciesParams {
+        trunk: TrunkParams {
+            age_years: 10,
+            height: (3.3, 4.3),
+            base_radius: 0.065,
+            growth_acceleration: 0.6,
+            wander: 0.06,
+            nod: 0.0,
+            nod_length: 0.0,
+            nodes_per_year: 2,
+        },
+        crown: CrownParams {
+            base_fraction: (0.22, 0.32),
+            radius: 1.4,
+            shape: CrownShape::Rounded,
+            irregularity: 0.35,
+        },
+        branching: BranchParams {
+            whorl_size: (4, 6),
+            interwhorl_size: (0, 0),
+            interwhorl_vigor: 0.0,
+            angle_bottom: deg(72.0),
+            angle_top: deg(42.0),
+            sag: 0.25,
+            upturn: 0.9,
+            max_order: 3,
+            nodes_per_year: 1,
+            laterals: (3, 4),
+            sublaterals: (2, 3),
+            lateral_angle: deg(42.0),
+            lateral_length: 0.7,
+            planarity: 0.45,
+            hanging: 0.0,
+            tip_radius: 0.002,
+            stubs: true,
+        },
+        spray: None,
+        foliage: FoliageParams {
+            phyllotaxy: Phyllotaxy::Fascicle {
+                needles: 2,
+                spread: deg(9.0),
+                twist: deg(60.0),
+            },
+            default_needles: 56_000,
+            retention_years: 3,
+            survival_per_year: 0.8,
+            length: (0.03, 0.07),
+            radius: (0.0007, 0.001),
+            divergence: (deg(30.0), deg(55.0)),
+            droop: 0.05,
+            tip_crowding: 1.0,
+            group_size: (2, 2),
+        },
+        material: FoliageMaterial {
+            needle_color: srgb(62, 98, 80),
+            wood_color: srgb(120, 72, 44),
+            roughness: 0.7,
+            reflectance: 0.35,
+        },
+    }
+}
+
+/// Norway spruce (*Picea abies*), about 8 years old, ~3 m: a dense cone down
+/// to the ground, single needles all round each shoot, hanging branchlets.
+pub(crate) fn norway_spruce() -> SpeciesParams {
+    SpeciesParams {
+        trunk: TrunkParams {
+            age_years: 8,
+            height: (2.7, 3.3),
+            base_radius: 0.04,
+            growth_acceleration: 0.8,
+            wander: 0.015,
+            nod: 0.0,
+            nod_length: 0.0,
+            nodes_per_year: 3,
+        },
+        crown: CrownParams {
+            base_fraction: (0.0, 0.04),
+            radius: 0.85,
+            shape: CrownShape::Conical { exponent: 0.8 },
+            irregularity: 0.15,
+        },
+        branching: BranchParams {
+            whorl_size: (4, 6),
+            interwhorl_size: (1, 2),
+            interwhorl_vigor: 0.6,
+            angle_bottom: deg(90.0),
+            angle_top: deg(55.0),
+            sag: 0.6,
+            upturn: 1.2,
+            max_order: 3,
+            nodes_per_year: 1,
+            laterals: (2, 2),
+            sublaterals: (1, 1),
+            lateral_angle: deg(50.0),
+            lateral_length: 0.5,
+            planarity: 0.9,
+            hanging: 2.5,
+            tip_radius: 0.001,
+            stubs: false,
+        },
+        spray: None,
+        foliage: FoliageParams {
+            phyllotaxy: Phyllotaxy::Spiral,
+            default_needles: 60_000,
+            retention_years: 5,
+            survival_per_year: 0.75,
+            length: (0.012, 0.025),
+            radius: (0.0005, 0.0007),
+            divergence: (deg(45.0), deg(70.0)),
+            droop: 0.0,
+            tip_crowding: 1.0,
+            group_size: (10, 60),
+        },
+        material: FoliageMaterial {
+            needle_color: srgb(34, 72, 36),
+            wood_color: srgb(96, 66, 50),
+            roughness: 0.65,
+            reflectance: 0.3,
+        },
+    }
+}
+
+/// Eastern white pine (*Pinus strobus*), about 10 years old, 4–5 m: an open
+/// crown of nearly level branch layers, soft drooping 5-needle fascicles in
+/// tufts at the shoot ends.
+pub(crate) fn eastern_white_pine() -> SpeciesParams {
+    SpeciesParams {
+        trunk: TrunkParams {
+            age_years: 10,
+            height: (4.0, 5.0),
+            base_radius: 0.08,
+            growth_acceleration: 1.2,
+            wander: 0.02,
+            nod: 0.0,
+            nod_length: 0.0,
+            nodes_per_year: 2,
+        },
+        crown: CrownParams {
+            base_fraction: (0.1, 0.18),
+            radius: 1.5,
+            shape: CrownShape::Conical { exponent: 0.9 },
+            irregularity: 0.2,
+        },
+        branching: BranchParams {
+            whorl_size: (4, 6),
+            interwhorl_size: (0, 0),
+            interwhorl_vigor: 0.0,
+            angle_bottom: deg(84.0),
+            angle_top: deg(55.0),
+            sag: 0.15,
+            upturn: 0.5,
+            max_order: 3,
+            nodes_per_year: 1,
+            laterals: (2, 3),
+            sublaterals: (2, 3),
+            lateral_angle: deg(45.0),
+            lateral_length: 0.65,
+            planarity: 0.9,
+            hanging: 0.0,
+            tip_radius: 0.002,
+            stubs: false,
+        },
+        spray: None,
+        foliage: FoliageParams {
+            phyllotaxy: Phyllotaxy::Fascicle {
+                needles: 5,
+                spread: deg(14.0),
+                twist: deg(30.0),
+            },
+            default_needles: 62_000,
+            retention_years: 2,
+            survival_per_year: 0.7,
+            length: (0.06, 0.13),
+            radius: (0.0004, 0.0005),
+            divergence: (deg(20.0), deg(40.0)),
+            droop: 0.5,
+            tip_crowding: 2.2,
+            group_size: (5, 5),
+        },
+        material: FoliageMaterial {
+            needle_color: srgb(74, 110, 88),
+            wood_color: srgb(88, 80, 68),
+            roughness: 0.5,
+            reflectance: 0.3,
+        },
+    }
+}
+
+/// Lawson cypress (*Chamaecyparis lawsoniana*). The paper's is 30 years old
+/// and 8–10 m; modelled as scale leaves that tree would need millions of
+/// needles, so this preset is a young tree, about 8 years old and 2.6–3.2 m,
+/// with the species' form: a narrow columnar cone with a nodding leader,
+/// ascending branches ending in flat fern-like sprays of tiny scale leaves.
+pub(crate) fn lawson_cypress() -> SpeciesParams {
+    SpeciesParams {
+        trunk: TrunkParams {
+            age_years: 6,
+            height: (1.9, 2.3),
+            base_radius: 0.02,
+            growth_acceleration: 0.8,
+            wander: 0.015,
+            nod: deg(75.0),
+            nod_length: 0.3,
+            nodes_per_year: 4,
+        },
+        crown: CrownParams {
+            base_fraction: (0.0, 0.03),
+            radius: 0.42,
+            shape: CrownShape::Columnar,
+            irregularity: 0.2,
+        },
+        branching: BranchParams {
+            whorl_size: (1, 2),
+            interwhorl_size: (1, 1),
+            interwhorl_vigor: 0.9,
+            angle_bottom: deg(70.0),
+            angle_top: deg(35.0),
+            sag: 0.3,
+            upturn: 0.2,
+            max_order: 2,
+            nodes_per_year: 1,
+            laterals: (1, 1),
+            sublaterals: (1, 1),
+            lateral_angle: deg(45.0),
+            lateral_length: 0.5,
+            planarity: 1.0,
+            hanging: 0.0,
+            tip_radius: 0.0006,
+            stubs: false,
+        },
+        spray: Some(SprayParams {
+            spacing: 0.07,
+            length: (0.1, 0.17),
+            angle: deg(50.0),
+            pinna_spacing: 0.006,
+            pinna_angle: deg(45.0),
+            pinna_length: 0.4,
+            droop: 0.8,
+            roll: 0.9,
+        }),
+        foliage: FoliageParams {
+            phyllotaxy: Phyllotaxy::Scales,
+            default_needles: 78_000,
+            retention_years: 2,
+            survival_per_year: 0.8,
+            length: (0.0025, 0.004),
+            radius: (0.00045, 0.00055),
+            divergence: (deg(25.0), deg(35.0)),
+            droop: 0.0,
+            tip_crowding: 1.0,
+            group_size: (1, 600),
+        },
+        material: FoliageMaterial {
+            needle_color: srgb(40, 88, 48),
+            wood_color: srgb(110, 62, 42),
+            roughness: 0.55,
+            reflectance: 0.3,
+        },
+    }
+}

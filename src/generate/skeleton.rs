@@ -1,0 +1,433 @@
+//! The shared branch grower: a trunk of annual growth units with whorls of
+//! branches, each branch a chain of annual units with laterals at its nodes
+//! (up to `max_order`), radii from the pipe model. It emits the wood and the
+//! foliage sites (young shoots, or the branchlets of sprays) that the needle
+//! placer then covers.
+
+use std::f32::consts::{PI, TAU};
+
+use glam::Vec3;
+
+use super::geometry::{
+    GOLDEN_ANGLE, UP, bend_vertically, cone_direction, from_vertical, horizontal, perpendicular_toward,
+};
+use super::params::SpeciesParams;
+use super::random::TreeRng;
+use super::spray::grow_spray;
+use crate::model::WoodSegment;
+
+/// A straight piece of shoot (or spray branchlet) that carries needles.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FoliageSite {
+    pub start: Vec3,
+    pub end: Vec3,
+    /// Unit vector perpendicular to the shoot: its upper side, or the normal
+    /// of the spray plane.
+    pub up: Vec3,
+    /// Needle capacity at unit density: length × needle survival.
+    pub weight: f32,
+    /// Consecutive sites with the same key form one phyllotaxy group (a spray).
+    pub group_key: u32,
+    /// Shoot vigour (≈ 0.5–1.2): weaker shoots carry shorter needles.
+    pub vigor: f32,
+}
+
+impl FoliageSite {
+    /// Unit direction from start to end.
+    pub(crate) fn axis(&self) -> Vec3 {
+        (self.end - self.start).normalize_or(UP)
+    }
+}
+
+/// Exponent of the pipe model (da Vinci's rule): a branch's `r^e` is the
+/// sum of its children's. 2 conserves area; real trees are nearer 2.5.
+const PIPE_EXPONENT: f32 = 2.5;
+
+/// Lowest height a branch may reach.
+const GROUND_CLEARANCE: f32 = 0.05;
+
+/// `dir`, levelled (and then turned slightly up) when a piece of `length`
+/// along it from `pos` would dip below the ground clearance.
+fn keep_above_ground(pos: Vec3, dir: Vec3, length: f32) -> Vec3 {
+    if pos.y + dir.y * length >= GROUND_CLEARANCE {
+        return dir;
+    }
+    let climb = ((GROUND_CLEARANCE - pos.y) / length).clamp(0.0, 0.5);
+    let flat = Vec3::new(dir.x, 0.0, dir.z).normalize_or(Vec3::X);
+    (flat * (1.0 - climb * climb).sqrt() + UP * climb).normalize()
+}
+
+/// `dir`, levelled when a piece of `length` along it from `pos` would rise
+/// above 97 % of the tree's height: no branch overtops the leader.
+fn keep_below_leader(pos: Vec3, dir: Vec3, length: f32, height: f32) -> Vec3 {
+    let ceiling = 0.97 * height;
+    if pos.y + dir.y * length <= ceiling || dir.y <= 0.0 {
+        return dir;
+    }
+    let rise = ((ceiling - pos.y) / length).clamp(-0.3, dir.y);
+    let flat = Vec3::new(dir.x, 0.0, dir.z).normalize_or(Vec3::X);
+    (flat * (1.0 - rise * rise).sqrt() + UP * rise).normalize()
+}
+
+/// The grown tree without needles.
+pub(crate) struct Skeleton {
+    pub wood: Vec<WoodSegment>,
+    pub sites: Vec<FoliageSite>,
+}
+
+/// One branch (or lateral) to grow.
+#[derive(Clone, Copy, Debug)]
+struct Axis {
+    origin: Vec3,
+    direction: Vec3,
+    /// Annual units, the oldest first.
+    age: u32,
+    order: u32,
+    /// Length of one annual unit.
+    segment_length: f32,
+    vigor: f32,
+    /// The pipe model's radius is capped here (a branch thinner than its parent).
+    max_radius: f32,
+}
+
+/// A grown piece of an axis, waiting for its radius.
+struct Piece {
+    start: Vec3,
+    end: Vec3,
+    /// Sum of the laterals' base cross-section measures at `end`.
+    children_measure: f32,
+}
+
+/// Grows the trunk, branches and foliage sites of one tree.
+pub(crate) fn grow_skeleton(params: &SpeciesParams, rng: &mut TreeRng) -> Skeleton {
+    let height = rng.range(params.trunk.height);
+    let crown_base = height * rng.range(params.crown.base_fraction);
+    let mut grower = Grower {
+        params,
+        rng,
+        wood: Vec::new(),
+        sites: Vec::new(),
+        height,
+        crown_base,
+        next_group_key: 0,
+        whorl_count: 0,
+    };
+    grower.grow_trunk();
+    Skeleton {
+        wood: grower.wood,
+        sites: grower.sites,
+    }
+}
+
+struct Grower<'a> {
+    params: &'a SpeciesParams,
+    rng: &'a mut TreeRng,
+    wood: Vec<WoodSegment>,
+    sites: Vec<FoliageSite>,
+    height: f32,
+    crown_base: f32,
+    next_group_key: u32,
+    whorl_count: u32,
+}
+
+impl Grower<'_> {
+    /// Length of each annual trunk unit, summing to the tree's height.
+    fn annual_increments(&mut self) -> Vec<f32> {
+        let trunk = &self.params.trunk;
+        let weights: Vec<f32> = (1..=trunk.age_years)
+            .map(|year| (year as f32).powf(trunk.growth_acceleration) * self.rng.jitter(1.0, 0.15))
+            .collect();
+        let total: f32 = weights.iter().sum();
+        weights.iter().map(|w| w * self.height / total).collect()
+    }
+
+    fn trunk_radius(&self, path: f32) -> f32 {
+        let tip = self.params.branching.tip_radius * 1.5;
+        let rest = (1.0 - path / self.height).clamp(0.0, 1.0);
+        tip + (self.params.trunk.base_radius - tip) * rest.powf(0.9)
+    }
+
+    /// The trunk's direction at `path` metres up: vertical plus a slowly
+    /// wandering lean, nodding over toward `nod_toward` near the top.
+    fn trunk_direction(&self, lean: Vec3, path: f32, nod_toward: Vec3) -> Vec3 {
+        let trunk = &self.params.trunk;
+        let dir = (UP + lean).normalize();
+        let nod_start = self.height - trunk.nod_length;
+        if trunk.nod <= 0.0 || path <= nod_start {
+            return dir;
+        }
+        let along = ((path - nod_start) / trunk.nod_length).min(1.0);
+        let angle = trunk.nod * along.powf(1.5);
+        let toward = perpendicular_toward(dir, nod_toward);
+        dir * angle.cos() + toward * angle.sin()
+    }
+
+    fn grow_trunk(&mut self) {
+        let params = self.params;
+        let trunk = &params.trunk;
+        let nodes = trunk.nodes_per_year.max(1);
+        let nod_toward = horizontal(self.rng.unit() * TAU);
+        let increments = self.annual_increments();
+        let (mut pos, mut lean, mut path) = (Vec3::ZERO, Vec3::ZERO, 0.0);
+        for (year, increment) in increments.iter().enumerate() {
+            let years_old = trunk.age_years - 1 - year as u32;
+            let piece = increment / nodes as f32;
+            for node in 1..=nodes {
+                lean = lean * 0.7 + horizontal(self.rng.unit() * TAU) * trunk.wander * self.rng.unit();
+                let dir = self.trunk_direction(lean, path + 0.5 * piece, nod_toward);
+                let end = pos + dir * piece;
+                self.wood.push(WoodSegment {
+                    start: pos,
+                    end,
+                    start_radius: self.trunk_radius(path),
+                    end_radius: self.trunk_radius(path + piece),
+                });
+                let is_tip = year as u32 + 1 == trunk.age_years && node == nodes;
+                self.add_foliage(pos, end, years_old, 1.2, is_tip);
+                if years_old >= 1 {
+                    let is_whorl = node == nodes;
+                    self.grow_whorl(end, years_old, is_whorl, self.trunk_radius(path + piece));
+                }
+                pos = end;
+                path += piece;
+            }
+        }
+    }
+
+    /// The branches at one trunk node: a whorl evenly spread around the
+    /// trunk, or the few weaker interwhorl branches.
+    fn grow_whorl(&mut self, node: Vec3, age: u32, is_whorl: bool, trunk_radius: f32) {
+        let branching = &self.params.branching;
+        let (size, vigor) = if is_whorl {
+            (branching.whorl_size, 1.0)
+        } else {
+            (branching.interwhorl_size, branching.interwhorl_vigor)
+        };
+        let count = self.rng.count(size);
+        self.whorl_count += 1;
+        let first_azimuth = self.whorl_count as f32 * GOLDEN_ANGLE;
+        for index in 0..count {
+            let spread = TAU / count as f32;
+            let azimuth = first_azimuth + index as f32 * spread + 0.35 * spread * self.rng.signed();
+            self.grow_branch(node, azimuth, age, vigor, trunk_radius);
+        }
+    }
+
+    /// One first-order branch, sized so its reach follows the crown shape.
+    fn grow_branch(&mut self, node: Vec3, azimuth: f32, age: u32, vigor: f32, trunk_radius: f32) {
+        let params = self.params;
+        if node.y < self.crown_base {
+            if params.branching.stubs {
+                self.grow_stub(node, azimuth, trunk_radius);
+            }
+            return;
+        }
+        let crown_height = (self.height - self.crown_base).max(1e-3);
+        let c = (node.y - self.crown_base) / crown_height;
+        let crown = &params.crown;
+        let reach = crown.radius * crown.shape.reach_fraction(c) * self.rng.jitter(1.0, crown.irregularity) * vigor;
+        let branching = &params.branching;
+        let angle =
+            branching.angle_bottom + (branching.angle_top - branching.angle_bottom) * c + 0.12 * self.rng.signed();
+        let segment_length = (reach / (age as f32 * angle.sin().max(0.4))).max(0.02);
+        self.grow_axis(Axis {
+            origin: node,
+            direction: from_vertical(angle, azimuth),
+            age,
+            order: 1,
+            segment_length,
+            vigor: 0.8 + 0.2 * vigor,
+            max_radius: 0.6 * trunk_radius,
+        });
+    }
+
+    /// A short dead stub where a branch below the crown was shed.
+    fn grow_stub(&mut self, node: Vec3, azimuth: f32, trunk_radius: f32) {
+        let direction = from_vertical(1.3 + 0.2 * self.rng.signed(), azimuth);
+        let length = self.rng.range((0.03, 0.12));
+        let radius = (0.25 * trunk_radius).min(0.008);
+        self.wood.push(WoodSegment {
+            start: node,
+            end: node + direction * length,
+            start_radius: radius,
+            end_radius: 0.5 * radius,
+        });
+    }
+
+    /// Grows an axis unit by unit (bending with age), its laterals
+    /// recursively, and emits its wood. Returns its base cross-section
+    /// measure for the parent's pipe model.
+    fn grow_axis(&mut self, axis: Axis) -> f32 {
+        let branching = &self.params.branching;
+        let nodes = branching.nodes_per_year.max(1);
+        let mut pieces = Vec::with_capacity((axis.age * nodes) as usize);
+        let (mut pos, mut dir) = (axis.origin, axis.direction);
+        let mut node_index = self.rng.count((0, 1));
+        for year in 0..axis.age {
+            let years_old = axis.age - 1 - year;
+            let youth = 1.0 - years_old as f32 / axis.age as f32;
+            let piece_length = self.rng.jitter(axis.segment_length, 0.2) / nodes as f32;
+            for node in 1..=nodes {
+                dir = bend_vertically(dir, self.bending(axis.order, youth) * piece_length);
+                dir = keep_above_ground(pos, dir, piece_length);
+                dir = keep_below_leader(pos, dir, piece_length, self.height);
+                let end = pos + dir * piece_length;
+                let is_tip = year + 1 == axis.age && node == nodes;
+                self.add_foliage(pos, end, years_old, axis.vigor, is_tip);
+                let children_measure = if years_old >= 1 && axis.order < branching.max_order {
+                    node_index += 1;
+                    self.grow_laterals(end, dir, years_old, &axis, node_index)
+                } else {
+                    0.0
+                };
+                pieces.push(Piece {
+                    start: pos,
+                    end,
+                    children_measure,
+                });
+                pos = end;
+            }
+        }
+        self.emit_wood(&pieces, axis.max_radius)
+    }
+
+    /// Upward (positive) bending per metre: tips turn up, older wood sags,
+    /// high-order branchlets hang.
+    fn bending(&self, order: u32, youth: f32) -> f32 {
+        let branching = &self.params.branching;
+        let hanging = if order >= 3 { branching.hanging } else { 0.0 };
+        branching.upturn * youth * youth - branching.sag * (1.0 - youth) - hanging
+    }
+
+    /// The laterals at one node of `parent`, alternating left and right in
+    /// the branch plane (with probability `planarity`) or at random azimuths.
+    fn grow_laterals(&mut self, node: Vec3, parent_dir: Vec3, age: u32, parent: &Axis, node_index: u32) -> f32 {
+        let branching = &self.params.branching;
+        let count = self.rng.count(if parent.order == 1 {
+            branching.laterals
+        } else {
+            branching.sublaterals
+        });
+        let side = perpendicular_toward(parent_dir, parent_dir.cross(UP));
+        let mut measure = 0.0;
+        for index in 0..count {
+            let azimuth = if self.rng.chance(branching.planarity) {
+                let left = (node_index + index) % 2 == 0;
+                (if left { 0.0 } else { PI }) + 0.25 * self.rng.signed()
+            } else {
+                self.rng.unit() * TAU
+            };
+            let angle = self.rng.jitter(branching.lateral_angle, 0.2);
+            let length_ratio = self.rng.jitter(branching.lateral_length, 0.2);
+            measure += self.grow_axis(Axis {
+                origin: node,
+                direction: cone_direction(parent_dir, side, angle, azimuth),
+                age,
+                order: parent.order + 1,
+                segment_length: parent.segment_length * length_ratio,
+                vigor: parent.vigor * 0.85,
+                max_radius: parent.max_radius * 0.7,
+            });
+        }
+        measure
+    }
+
+    /// Wood of an axis from the pipe model: walking from the tip down, the
+    /// cross-section measure `r^PIPE_EXPONENT` grows by each lateral's and
+    /// a little per piece. Returns the measure at the base.
+    fn emit_wood(&mut self, pieces: &[Piece], max_radius: f32) -> f32 {
+        let tip = self.params.branching.tip_radius.powf(PIPE_EXPONENT);
+        let max = max_radius.powf(PIPE_EXPONENT);
+        let radius = |measure: f32| measure.min(max).powf(PIPE_EXPONENT.recip());
+        let mut measure = tip;
+        for piece in pieces.iter().rev() {
+            measure += piece.children_measure;
+            let end_radius = radius(measure);
+            measure += 0.15 * tip;
+            self.wood.push(WoodSegment {
+                start: piece.start,
+                end: piece.end,
+                start_radius: radius(measure),
+                end_radius,
+            });
+        }
+        measure.min(max)
+    }
+
+    /// Records the needle-bearing part of a young piece: the piece itself
+    /// (needle shoots) or the sprays along it (scale-leaf species).
+    fn add_foliage(&mut self, start: Vec3, end: Vec3, years_old: u32, vigor: f32, is_tip: bool) {
+        let foliage = &self.params.foliage;
+        if years_old >= foliage.retention_years {
+            return;
+        }
+        let weight_scale = foliage.survival_per_year.powi(years_old as i32);
+        match &self.params.spray {
+            Some(spray) => self.add_sprays(spray, start, end, weight_scale, vigor, is_tip),
+            None => {
+                let dir = (end - start).normalize_or(UP);
+                self.sites.push(FoliageSite {
+                    start,
+                    end,
+                    up: perpendicular_toward(dir, UP),
+                    weight: start.distance(end) * weight_scale,
+                    group_key: self.next_group_key,
+                    vigor,
+                });
+                self.next_group_key += 1;
+            }
+        }
+    }
+
+    /// Sprays along a young piece, alternating sides in the branch plane,
+    /// plus one continuing the axis at its tip.
+    fn add_sprays(
+        &mut self,
+        spray: &super::params::SprayParams,
+        start: Vec3,
+        end: Vec3,
+        weight_scale: f32,
+        vigor: f32,
+        is_tip: bool,
+    ) {
+        let dir = (end - start).normalize_or(UP);
+        let side = perpendicular_toward(dir, dir.cross(UP));
+        let count = self.rng.round(start.distance(end) / spray.spacing);
+        for index in 0..count {
+            let t = (index as f32 + 0.5 + 0.3 * self.rng.signed()) / count as f32;
+            let toward = if (index + self.next_group_key) % 2 == 0 {
+                side
+            } else {
+                -side
+            };
+            let angle = self.rng.jitter(spray.angle, 0.2);
+            let spray_dir = (dir * angle.cos() + toward * angle.sin()).normalize();
+            self.grow_one_spray(spray, start.lerp(end, t), spray_dir, weight_scale, vigor);
+        }
+        if is_tip {
+            self.grow_one_spray(spray, end, dir, weight_scale, vigor);
+        }
+    }
+
+    fn grow_one_spray(
+        &mut self,
+        spray: &super::params::SprayParams,
+        origin: Vec3,
+        direction: Vec3,
+        weight_scale: f32,
+        vigor: f32,
+    ) {
+        let key = self.next_group_key;
+        self.next_group_key += 1;
+        grow_spray(
+            &mut self.sites,
+            self.rng,
+            spray,
+            origin,
+            direction,
+            key,
+            weight_scale,
+            vigor,
+        );
+    }
+}

@@ -1,0 +1,29 @@
+//! # bevy_conifer_lod
+//!
+//! Continuous level of detail for coniferous foliage, after Deng, Zhang, Gay
+//! and Lei, *Continuous LOD Model of Coniferous Foliage*, IJVR 6(4), 2007.
+//!
+//! Close needles are drawn as round prisms whose side count follows the
+//! viewer's distance; needles thinner than a pixel become translucent lines;
+//! far lines merge hierarchically, so a distant tree costs a few thousand
+//! lines or fewer.
+//!
+//! Data flows one way:
+//!
+//! ```text
+//! input (generate / import) → bake (model::bake) → record file (model::file)
+//!        → asset → GPU
+//! ```
+//!
+//! * [`model`]: the Bevy-free LOD model: needles, error math, prisms, the
+//!   merge forest, the cut, and the binary record file.
+//! * [`generate`]: deterministic procedural conifers (our default input).
+//! * [`preview`]: a small CPU rasterizer for preview pictures.
+#![deny(missing_docs)]
+
+pub mod generate;
+pub mod model;
+pub mod preview;
+
+#[cfg(feature = "cli")]
+pub mod cli;

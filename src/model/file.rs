@@ -1,0 +1,360 @@
+//! The binary record file (`.conifer`).
+//!
+//! ```text
+//! offset  size  field
+//! 0       8     magic  b"CONIFLOD"
+//! 8       4     format version, u32 little-endian (FORMAT_VERSION)
+//! 12      8     payload length in bytes, u64 little-endian
+//! 20      4     CRC-32 (IEEE) of the payload, u32 little-endian
+//! 24      …     payload: postcard (serde) encoding of the record
+//! ```
+//!
+//! The payload stores only what cannot be derived:
+//!
+//! * needles as cylinders: base, tip, radius (f32) and the normal in 4 bytes
+//!   (octahedral, 16 bits a coordinate); prisms are rebuilt at load time;
+//! * groups as run lengths (needles are sorted by group);
+//! * original lines not at all (a needle's line is its centerline);
+//! * each merged line as its two children (varint distances back from its own
+//!   id), one byte saying which two of the children's four ends it keeps, and
+//!   its error (f32);
+//! * wood segments, material and bake information.
+//!
+//! Decoding checks everything: a truncated, corrupted, wrong-version,
+//! malformed or NaN-carrying file gives a [`RecordError`], never a panic.
+
+use super::merge::{EndpointId, MergeWeights, MergedLine};
+use super::needle::{FoliageMaterial, Needle, WoodSegment};
+use super::record::{BakeInfo, LodRecord, RecordInvalid};
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+
+/// First eight bytes of every record file.
+pub const MAGIC: [u8; 8] = *b"CONIFLOD";
+
+/// Format version written, and the only one read.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Size of the fixed header before the payload.
+pub const HEADER_BYTES: usize = 24;
+
+/// Why a record could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// Reading or writing the file failed.
+    #[error("i/o error: {0}")]
+    Io(#[from] std::io::Error),
+    /// The data does not start with the record magic number.
+    #[error("not a conifer LOD record (bad magic number)")]
+    NotARecord,
+    /// The file was written by another format version.
+    #[error("record format version {found} is not supported (this build reads version {supported})")]
+    UnsupportedVersion {
+        /// Version in the file.
+        found: u32,
+        /// Version this build reads.
+        supported: u32,
+    },
+    /// The file ends before the header or payload does.
+    #[error("record is truncated: {expected} bytes expected, {found} present")]
+    Truncated {
+        /// Bytes the header announces (header included).
+        expected: u64,
+        /// Bytes present.
+        found: u64,
+    },
+    /// Bytes follow the payload.
+    #[error("record has {0} unexpected bytes after its payload")]
+    TrailingBytes(u64),
+    /// The payload's checksum does not match: the file is corrupted.
+    #[error("record is corrupted: checksum {computed:#010x} does not match the stored {stored:#010x}")]
+    ChecksumMismatch {
+        /// Checksum in the header.
+        stored: u32,
+        /// Checksum of the payload read.
+        computed: u32,
+    },
+    /// The payload does not decode.
+    #[error("record payload is malformed: {0}")]
+    Malformed(String),
+    /// The payload decodes but breaks an invariant of the record.
+    #[error("record is invalid: {0}")]
+    Invalid(#[from] RecordInvalid),
+}
+
+#[derive(Serialize, Deserialize)]
+struct MergedEntry {
+    /// `id − child` for both children (≥ 1).
+    back: [u32; 2],
+    /// Bits 0–1: index of end 0 among the children's four ends
+    /// `[c0.end0, c0.end1, c1.end0, c1.end1]`; bits 2–3: end 1.
+    ends: u8,
+    error: f32,
+}
+
+#[derive(Serialize, Deserialize)]
+struct PayloadV1 {
+    name: String,
+    source: String,
+    bake_seconds: Option<f64>,
+    weights: [f32; 3],
+    max_sides: u8,
+    material: FoliageMaterial,
+    group_sizes: Vec<u32>,
+    bases: Vec<[f32; 3]>,
+    tips: Vec<[f32; 3]>,
+    radii: Vec<f32>,
+    normals: Vec<[u8; 4]>,
+    merged: Vec<MergedEntry>,
+    wood: Vec<[f32; 8]>,
+}
+
+/// Octahedral encoding of a unit vector in 2 × 16 bits
+/// (Cigolle et al., *A Survey of Efficient Representations for Independent
+/// Unit Vectors*, JCGT 2014). A zero or non-finite vector encodes +Z.
+pub fn encode_normal(normal: Vec3) -> [u8; 4] {
+    // f64 arithmetic makes decode → encode exact for every code.
+    let [nx, ny, nz] = normal.to_array().map(f64::from);
+    let l1 = nx.abs() + ny.abs() + nz.abs();
+    let (mut x, mut y) = if l1 > 0.0 && l1.is_finite() { (nx / l1, ny / l1) } else { (0.0, 0.0) };
+    if nz < 0.0 {
+        let (ox, oy) = (x, y);
+        x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
+        y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
+    }
+    let quantize = |v: f64| (((v.clamp(-1.0, 1.0) * 0.5 + 0.5) * 65535.0).round() as u16).to_le_bytes();
+    let [x0, x1] = quantize(x);
+    let [y0, y1] = quantize(y);
+    [x0, x1, y0, y1]
+}
+
+/// Inverse of [`encode_normal`]: a unit vector.
+pub fn decode_normal(code: [u8; 4]) -> Vec3 {
+    let unquantize = |lo: u8, hi: u8| u16::from_le_bytes([lo, hi]) as f64 / 65535.0 * 2.0 - 1.0;
+    let (x, y) = (unquantize(code[0], code[1]), unquantize(code[2], code[3]));
+    let z = 1.0 - x.abs() - y.abs();
+    let t = (-z).max(0.0);
+    let x = x + if x >= 0.0 { -t } else { t };
+    let y = y + if y >= 0.0 { -t } else { t };
+    let length = (x * x + y * y + z * z).sqrt();
+    Vec3::new((x / length) as f32, (y / length) as f32, (z / length) as f32)
+}
+
+/// The normal as the record stores it: `decode_normal(encode_normal(n))`.
+/// Bakes snap normals so that writing and reading a record is exact.
+pub fn snap_normal(normal: Vec3) -> Vec3 {
+    decode_normal(encode_normal(normal))
+}
+
+fn node_ends(needles: usize, merged: &[MergedLine], node: u32) -> [EndpointId; 2] {
+    if (node as usize) < needles { [2 * node, 2 * node + 1] } else { merged[node as usize - needles].ends }
+}
+
+/// Encodes a record into the bytes of a record file.
+pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
+    let n = record.needles.len();
+    let mut group_sizes: Vec<u32> = Vec::new();
+    for (i, needle) in record.needles.iter().enumerate() {
+        if i == 0 || needle.group != record.needles[i - 1].group {
+            group_sizes.push(0);
+        }
+        *group_sizes.last_mut().expect("pushed above") += 1;
+    }
+    let mut merged = Vec::with_capacity(record.merged.len());
+    for (k, line) in record.merged.iter().enumerate() {
+        let id = (n + k) as u32;
+        let [c0, c1] = line.children;
+        let candidates = [node_ends(n, &record.merged, c0), node_ends(n, &record.merged, c1)].concat();
+        let find = |end: EndpointId| candidates.iter().position(|&c| c == end);
+        let (Some(e0), Some(e1)) = (find(line.ends[0]), find(line.ends[1])) else {
+            return Err(RecordInvalid::BadReference(k).into());
+        };
+        merged.push(MergedEntry {
+            back: [id - c0, id - c1],
+            ends: (e0 | (e1 << 2)) as u8,
+            error: line.error,
+        });
+    }
+    let w = record.bake.weights;
+    let payload = PayloadV1 {
+        name: record.name.clone(),
+        source: record.bake.source.clone(),
+        bake_seconds: record.bake.bake_seconds,
+        weights: [w.direction, w.distance, w.needle_count],
+        max_sides: record.max_sides,
+        material: record.material,
+        group_sizes,
+        bases: record.needles.iter().map(|x| x.base.to_array()).collect(),
+        tips: record.needles.iter().map(|x| x.tip.to_array()).collect(),
+        radii: record.needles.iter().map(|x| x.radius).collect(),
+        normals: record.needles.iter().map(|x| encode_normal(x.normal)).collect(),
+        merged,
+        wood: record
+            .wood
+            .iter()
+            .map(|s| {
+                let (a, b) = (s.start, s.end);
+                [a.x, a.y, a.z, b.x, b.y, b.z, s.start_radius, s.end_radius]
+            })
+            .collect(),
+    };
+    let body = postcard::to_allocvec(&payload).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
+    bytes.extend_from_slice(&MAGIC);
+    bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    bytes.extend_from_slice(&crc32fast::hash(&body).to_le_bytes());
+    bytes.extend_from_slice(&body);
+    Ok(bytes)
+}
+
+/// Decodes the bytes of a record file.
+pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
+    if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != MAGIC {
+        if bytes.len() < MAGIC.len() && MAGIC.starts_with(bytes) {
+            return Err(RecordError::Truncated { expected: HEADER_BYTES as u64, found: bytes.len() as u64 });
+        }
+        return Err(RecordError::NotARecord);
+    }
+    if bytes.len() < HEADER_BYTES {
+        return Err(RecordError::Truncated { expected: HEADER_BYTES as u64, found: bytes.len() as u64 });
+    }
+    let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
+    let version = u32_at(8);
+    if version != FORMAT_VERSION {
+        return Err(RecordError::UnsupportedVersion { found: version, supported: FORMAT_VERSION });
+    }
+    let payload_len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
+    let available = (bytes.len() - HEADER_BYTES) as u64;
+    if payload_len > available {
+        return Err(RecordError::Truncated {
+            expected: (HEADER_BYTES as u64).saturating_add(payload_len),
+            found: bytes.len() as u64,
+        });
+    }
+    if payload_len < available {
+        return Err(RecordError::TrailingBytes(available - payload_len));
+    }
+    let body = &bytes[HEADER_BYTES..];
+    let stored = u32_at(20);
+    let computed = crc32fast::hash(body);
+    if stored != computed {
+        return Err(RecordError::ChecksumMismatch { stored, computed });
+    }
+    let payload: PayloadV1 = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    payload_to_record(payload)
+}
+
+fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
+    let n = p.bases.len();
+    if p.tips.len() != n || p.radii.len() != n || p.normals.len() != n {
+        return Err(RecordError::Malformed("needle arrays differ in length".into()));
+    }
+    let group_total: u64 = p.group_sizes.iter().map(|&s| s as u64).sum();
+    if group_total != n as u64 || p.group_sizes.contains(&0) {
+        return Err(RecordError::Malformed("group sizes do not add up to the needle count".into()));
+    }
+    let mut needles = Vec::with_capacity(n);
+    let mut groups = p.group_sizes.iter().enumerate().flat_map(|(g, &s)| std::iter::repeat_n(g as u32, s as usize));
+    for i in 0..n {
+        needles.push(Needle {
+            base: Vec3::from(p.bases[i]),
+            tip: Vec3::from(p.tips[i]),
+            radius: p.radii[i],
+            normal: decode_normal(p.normals[i]),
+            group: groups.next().expect("sizes add up to n"),
+        });
+    }
+    let mut merged: Vec<MergedLine> = Vec::with_capacity(p.merged.len());
+    for (k, entry) in p.merged.iter().enumerate() {
+        let id = (n + k) as u64;
+        if entry.back.iter().any(|&b| b == 0 || b as u64 > id) || entry.ends >> 4 != 0 {
+            return Err(RecordInvalid::BadReference(k).into());
+        }
+        let children = entry.back.map(|b| (id - b as u64) as u32);
+        let candidates = [node_ends(n, &merged, children[0]), node_ends(n, &merged, children[1])].concat();
+        merged.push(MergedLine {
+            ends: [candidates[(entry.ends & 3) as usize], candidates[(entry.ends >> 2) as usize]],
+            children,
+            error: entry.error,
+        });
+    }
+    let [direction, distance, needle_count] = p.weights;
+    let bake = BakeInfo {
+        weights: MergeWeights { direction, distance, needle_count },
+        bake_seconds: p.bake_seconds,
+        source: p.source,
+    };
+    if !p.weights.iter().all(|w| w.is_finite()) {
+        return Err(RecordInvalid::NonFinite("merge weights").into());
+    }
+    let wood = p
+        .wood
+        .iter()
+        .map(|w| WoodSegment {
+            start: Vec3::new(w[0], w[1], w[2]),
+            end: Vec3::new(w[3], w[4], w[5]),
+            start_radius: w[6],
+            end_radius: w[7],
+        })
+        .collect();
+    Ok(LodRecord::from_parts(p.name, needles, merged, wood, p.material, p.max_sides, bake)?)
+}
+
+/// Writes `record` to `path` atomically: the bytes go to a temporary file
+/// beside it, which is renamed over `path` only once complete, so a failure
+/// never leaves a half-written record (nor damages one already there).
+pub fn write_record(record: &LodRecord, path: &Path) -> Result<u64, RecordError> {
+    let bytes = encode_record(record)?;
+    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let file_name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::InvalidInput, "output path has no file name")
+    })?;
+    let tmp = dir.join(format!(".{}.tmp-{}", file_name.to_string_lossy(), std::process::id()));
+    let result = (|| {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(&bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e.into());
+    }
+    Ok(bytes.len() as u64)
+}
+
+/// Reads and checks a record file.
+pub fn read_record(path: &Path) -> Result<LodRecord, RecordError> {
+    decode_record(&std::fs::read(path)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn normal_codes_round_trip_exactly() {
+        let mut state = 0x2545F4914F6CDD1Du64;
+        for _ in 0..200_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let code = (state as u32).to_le_bytes();
+            let n = decode_normal(code);
+            assert!((n.length() - 1.0).abs() < 1e-5);
+            let again = decode_normal(encode_normal(n));
+            assert_eq!(again, n, "code {code:?}");
+        }
+    }
+
+    #[test]
+    fn snapped_normals_are_close() {
+        for n in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.4, -0.866).normalize(), Vec3::new(-1.0, 2.0, 3.0).normalize()] {
+            assert!(snap_normal(n).angle_between(n) < 1e-3);
+        }
+        assert!(snap_normal(Vec3::ZERO).angle_between(Vec3::Z) < 1e-4);
+    }
+}

@@ -1,0 +1,802 @@
+//! Line merging (paper, §4): lines are merged in pairs, cheapest first, in
+//! two levels — inside each phyllotaxy group until the group is one line,
+//! then across the whole tree until one line is left.
+//!
+//! The result is a binary merge forest whose nodes are the original lines
+//! (one per needle) and the merged lines, each with its merge error.
+//!
+//! ## Partner search
+//!
+//! Greedy merging needs, at every step, the cheapest pair of live lines.
+//! Every live line keeps its best partner in a min-heap; entries whose line
+//! or partner has since been merged are recomputed lazily when popped (the
+//! cost of a pair never changes, so a popped entry whose two lines are still
+//! live is the cheapest pair among the partners searched).
+//!
+//! * [`PartnerSearch::Exhaustive`] scans every live line of the set: the
+//!   paper's exact greedy, `O(k²)` for `k` lines — right for phyllotaxy
+//!   groups, too slow for a whole tree.
+//! * [`PartnerSearch::Nearest`] costs only a line's neighbours in a graph:
+//!   at the start the symmetric `k`-nearest-neighbour graph of the lines
+//!   (found in parallel with an `rstar` R*-tree), then contracted by every
+//!   merge — the new line inherits the union of its children's neighbours
+//!   (the `2k` nearest kept), the way edge-collapse mesh simplifiers keep
+//!   candidate pairs. No spatial query runs inside the merge loop; should
+//!   the graph fall apart into pieces, it is rebuilt over the live lines.
+//!   The cost is dominated by direction and needle count, both of which only
+//!   matter between lines close enough to merge sensibly; the effect of the
+//!   restriction on the result is measured against the exhaustive search in
+//!   the tests.
+
+use super::needle::Needle;
+use glam::Vec3;
+use rayon::prelude::*;
+use rstar::{AABB, PointDistance, RTree, RTreeObject};
+use serde::{Deserialize, Serialize};
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// Weights of the three terms of the merge cost (paper, §4.2):
+/// `S = k1·S1 + k2·S2 + k3·S3`, `k1 + k2 + k3 = 1`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MergeWeights {
+    /// `k1`, weight of the direction difference `S1 = 1 − |⟨t(X), t(Y)⟩|`.
+    pub direction: f32,
+    /// `k2`, weight of the position difference `S2` = minimum distance
+    /// between the segments over the diagonal of the crown's bounding box.
+    pub distance: f32,
+    /// `k3`, weight of the merging-time difference
+    /// `S3 = (G(X) + G(Y) + |G(X) − G(Y)|) / 2N = max(G(X), G(Y)) / N`,
+    /// `G` the needles a line stands for, `N` the tree's needle count.
+    pub needle_count: f32,
+}
+
+impl Default for MergeWeights {
+    /// The paper's weights: 0.25, 0.25, 0.5.
+    fn default() -> Self {
+        Self {
+            direction: 0.25,
+            distance: 0.25,
+            needle_count: 0.5,
+        }
+    }
+}
+
+impl MergeWeights {
+    /// `true` when every weight is finite and not negative, and not all are 0.
+    pub fn is_valid(&self) -> bool {
+        let w = [self.direction, self.distance, self.needle_count];
+        w.iter().all(|k| k.is_finite() && *k >= 0.0) && w.iter().sum::<f32>() > 0.0
+    }
+}
+
+/// How the partner of a line is searched for (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum PartnerSearch {
+    /// Every live line of the set: exact greedy, quadratic.
+    Exhaustive,
+    /// A line's neighbours in the contracted nearest-neighbour graph.
+    Nearest {
+        /// Nearest neighbours per line in the initial graph.
+        neighbours: usize,
+    },
+}
+
+/// Options of the two-level merge.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MergeOptions {
+    /// Cost weights.
+    pub weights: MergeWeights,
+    /// Partner search inside a phyllotaxy group (level 1); groups larger than
+    /// `exhaustive_group_limit` use the whole-tree search instead.
+    pub group_search: PartnerSearch,
+    /// Largest group searched exhaustively.
+    pub exhaustive_group_limit: usize,
+    /// Partner search across the tree (level 2).
+    pub tree_search: PartnerSearch,
+}
+
+impl Default for MergeOptions {
+    fn default() -> Self {
+        Self {
+            weights: MergeWeights::default(),
+            group_search: PartnerSearch::Exhaustive,
+            exhaustive_group_limit: 256,
+            tree_search: PartnerSearch::Nearest { neighbours: 12 },
+        }
+    }
+}
+
+/// Index of a line end in a tree: end 0 (base) of needle `i` is `2i`, end 1
+/// (tip) is `2i + 1`. Merged lines keep two of their children's ends, so
+/// every end of every line is a needle end.
+pub type EndpointId = u32;
+
+/// One merge: the new line `X` that replaced the lines `children`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MergedLine {
+    /// The two ends of the line (the farthest-apart pair of the children's
+    /// four ends; they keep their needles' normals).
+    pub ends: [EndpointId; 2],
+    /// The two node ids merged: ids below the needle count are original
+    /// lines (needle ids), others are merged lines (`needles + index`).
+    pub children: [u32; 2],
+    /// Merge error `e(X)`, metres.
+    pub error: f32,
+}
+
+/// Which of the two levels a merge belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MergeLevel {
+    /// Inside a phyllotaxy group.
+    Group,
+    /// Across the whole tree.
+    Tree,
+}
+
+/// Progress of a running merge, for progress bars.
+pub trait MergeProgress: Sync {
+    /// `done` of `total` merges of `level` are finished.
+    fn merged(&self, level: MergeLevel, done: usize, total: usize);
+}
+
+impl MergeProgress for () {
+    fn merged(&self, _: MergeLevel, _: usize, _: usize) {}
+}
+
+/// A line taking part in merging.
+#[derive(Clone, Copy, Debug)]
+struct Line {
+    a: Vec3,
+    b: Vec3,
+    ends: [EndpointId; 2],
+    error: f32,
+    needles: u32,
+}
+
+/// Constants of the cost function for one tree.
+#[derive(Clone, Copy, Debug)]
+pub struct CostContext {
+    weights: MergeWeights,
+    inv_diagonal: f32,
+    inv_needles: f32,
+}
+
+impl CostContext {
+    /// The context of a tree whose crown bounding box has diagonal
+    /// `crown_diagonal` metres and which has `needles` needles.
+    pub fn new(weights: MergeWeights, crown_diagonal: f32, needles: usize) -> Self {
+        Self {
+            weights,
+            inv_diagonal: if crown_diagonal > 0.0 { 1.0 / crown_diagonal } else { 0.0 },
+            inv_needles: 1.0 / needles.max(1) as f32,
+        }
+    }
+}
+
+/// Merge cost `S(X, Y)` of two lines given by their ends and needle counts
+/// (paper, §4.2; see [`MergeWeights`] for the three terms).
+pub fn merge_cost(
+    context: &CostContext,
+    (x_a, x_b, x_needles): (Vec3, Vec3, u32),
+    (y_a, y_b, y_needles): (Vec3, Vec3, u32),
+) -> f32 {
+    let tx = (x_b - x_a).normalize_or_zero();
+    let ty = (y_b - y_a).normalize_or_zero();
+    let direction = 1.0 - tx.dot(ty).abs();
+    let distance = segment_distance(x_a, x_b, y_a, y_b) * context.inv_diagonal;
+    let needle_count = x_needles.max(y_needles) as f32 * context.inv_needles;
+    let w = context.weights;
+    w.direction * direction + w.distance * distance + w.needle_count * needle_count
+}
+
+fn line_cost(context: &CostContext, x: &Line, y: &Line) -> f32 {
+    merge_cost(context, (x.a, x.b, x.needles), (y.a, y.b, y.needles))
+}
+
+/// Distance from `p` to the segment `a`–`b`.
+pub fn point_segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    p.distance(a + ab * t)
+}
+
+/// Minimum distance between the segments `p1`–`q1` and `p2`–`q2`
+/// (closest points of two segments, Ericson, *Real-Time Collision Detection* §5.1.9).
+pub fn segment_distance(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> f32 {
+    let d1 = q1 - p1;
+    let d2 = q2 - p2;
+    let r = p1 - p2;
+    let a = d1.length_squared();
+    let e = d2.length_squared();
+    let f = d2.dot(r);
+    const TINY: f32 = 1e-20;
+    let (s, t) = if a <= TINY && e <= TINY {
+        (0.0, 0.0)
+    } else if a <= TINY {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = d1.dot(r);
+        if e <= TINY {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = d1.dot(d2);
+            let denom = a * e - b * b;
+            let mut s = if denom > TINY { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    (p1 + d1 * s).distance(p2 + d2 * t)
+}
+
+/// The new line of a merge (paper, §4.1) and its error (§4.3).
+///
+/// Of the four ends of `y1` and `y2`, the two farthest apart become the ends of
+/// `X`. Its error is `e(X) = 2 · max_i { D(Yi, X) + e(Yi)/2 }` with
+/// `D(Y, X)` the larger distance of `Y`'s two ends to `X`. Since `X`'s ends
+/// are the farthest pair, every other end projects inside the segment, so the
+/// distance to the segment is the paper's distance to the line. Geometrically,
+/// the capsule of radius `e(X)/2` around `X` contains the capsules of radius
+/// `e(Yi)/2` around its children, hence `e(X) ≥ e(Yi)`.
+fn merge_lines(y1: &Line, y2: &Line) -> Line {
+    let points = [(y1.a, y1.ends[0]), (y1.b, y1.ends[1]), (y2.a, y2.ends[0]), (y2.b, y2.ends[1])];
+    let mut best = (0usize, 1usize, -1.0f32);
+    for i in 0..4 {
+        for j in i + 1..4 {
+            let d = points[i].0.distance_squared(points[j].0);
+            if d > best.2 {
+                best = (i, j, d);
+            }
+        }
+    }
+    let (a, b) = (points[best.0], points[best.1]);
+    let spread = |y: &Line| {
+        point_segment_distance(y.a, a.0, b.0).max(point_segment_distance(y.b, a.0, b.0)) + y.error / 2.0
+    };
+    Line {
+        a: a.0,
+        b: b.0,
+        ends: [a.1, b.1],
+        error: 2.0 * spread(y1).max(spread(y2)),
+        needles: y1.needles + y2.needles,
+    }
+}
+
+/// A heap entry: line `line`'s best known partner `partner` at `cost`.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    cost: f32,
+    line: u32,
+    partner: u32,
+}
+
+impl PartialEq for Candidate {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Candidate {}
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Candidate {
+    /// Reversed, so `BinaryHeap` pops the cheapest; ties broken by ids for
+    /// determinism.
+    fn cmp(&self, other: &Self) -> Ordering {
+        other
+            .cost
+            .total_cmp(&self.cost)
+            .then_with(|| other.line.cmp(&self.line))
+            .then_with(|| other.partner.cmp(&self.partner))
+    }
+}
+
+/// A segment in the R*-tree used to find each line's nearest neighbours.
+#[derive(Clone, Copy, Debug)]
+struct IndexedLine {
+    id: u32,
+    a: [f32; 3],
+    b: [f32; 3],
+}
+
+impl RTreeObject for IndexedLine {
+    type Envelope = AABB<[f32; 3]>;
+    fn envelope(&self) -> Self::Envelope {
+        AABB::from_corners(self.a, self.b)
+    }
+}
+
+impl PointDistance for IndexedLine {
+    fn distance_2(&self, point: &[f32; 3]) -> f32 {
+        let d = point_segment_distance(Vec3::from(*point), Vec3::from(self.a), Vec3::from(self.b));
+        d * d
+    }
+}
+
+/// The symmetric `k`-nearest-neighbour graph of the lines `ids` (nearest to
+/// each line's midpoint, by point-to-segment distance), built in parallel on
+/// a bulk-loaded R*-tree. Returns one sorted neighbour list per entry of `ids`
+/// holding line ids.
+fn neighbour_graph(lines: &[Line], ids: &[u32], k: usize) -> Vec<Vec<u32>> {
+    let index = RTree::bulk_load(
+        ids.iter()
+            .map(|&id| {
+                let l = &lines[id as usize];
+                IndexedLine { id, a: l.a.to_array(), b: l.b.to_array() }
+            })
+            .collect(),
+    );
+    let nearest: Vec<Vec<u32>> = ids
+        .par_iter()
+        .map(|&id| {
+            let l = &lines[id as usize];
+            let mid = ((l.a + l.b) * 0.5).to_array();
+            index.nearest_neighbor_iter(mid).map(|f| f.id).filter(|&f| f != id).take(k).collect()
+        })
+        .collect();
+    // Symmetrize, so a merge is seen from both sides.
+    let position: std::collections::HashMap<u32, usize> = ids.iter().enumerate().map(|(i, &id)| (id, i)).collect();
+    let mut graph = nearest.clone();
+    for (i, list) in nearest.iter().enumerate() {
+        for other in list {
+            graph[position[other]].push(ids[i]);
+        }
+    }
+    for list in &mut graph {
+        list.sort_unstable();
+        list.dedup();
+    }
+    graph
+}
+
+/// Where a line looks for merge partners.
+enum Partners {
+    /// Every live line.
+    All,
+    /// Its neighbours in a graph that merges contract: a merged line's
+    /// neighbours are the union of its children's (the `cap` nearest kept),
+    /// and a neighbour that was merged since stands for the line it became.
+    Graph {
+        /// Neighbours kept per line.
+        cap: usize,
+        /// Neighbour lists (line ids, possibly since merged).
+        lists: Vec<Vec<u32>>,
+        /// For a merged line, the line it was merged into; for a live line, itself.
+        forward: Vec<u32>,
+    },
+}
+
+/// Greedy merging of one set of lines down to a single line.
+struct MergeSet<'a> {
+    context: &'a CostContext,
+    lines: Vec<Line>,
+    live: Vec<bool>,
+    live_count: usize,
+    partners: Partners,
+}
+
+/// A merge inside a set: `children` are set-local ids (inputs first, then
+/// merges in creation order).
+#[derive(Clone, Copy, Debug)]
+struct LocalMerge {
+    children: [u32; 2],
+    ends: [EndpointId; 2],
+    error: f32,
+}
+
+/// The live line that line `id` became (with path compression).
+fn find(forward: &mut [u32], id: u32) -> u32 {
+    let mut root = id;
+    while forward[root as usize] != root {
+        root = forward[root as usize];
+    }
+    let mut at = id;
+    while forward[at as usize] != root {
+        let next = forward[at as usize];
+        forward[at as usize] = root;
+        at = next;
+    }
+    root
+}
+
+impl<'a> MergeSet<'a> {
+    fn new(context: &'a CostContext, search: PartnerSearch, lines: Vec<Line>) -> Self {
+        let live_count = lines.len();
+        let partners = match search {
+            PartnerSearch::Exhaustive => Partners::All,
+            PartnerSearch::Nearest { neighbours } => {
+                let ids: Vec<u32> = (0..live_count as u32).collect();
+                Partners::Graph {
+                    cap: 2 * neighbours.max(1),
+                    lists: neighbour_graph(&lines, &ids, neighbours.max(1)),
+                    forward: ids,
+                }
+            }
+        };
+        let mut lines = lines;
+        lines.reserve(live_count.saturating_sub(1));
+        Self { context, live: vec![true; live_count], lines, live_count, partners }
+    }
+
+    /// Cheapest live partner of line `id` among its candidates (read-only:
+    /// every neighbour must still be live, as before the first merge).
+    fn initial_partner(&self, id: u32) -> Option<Candidate> {
+        let line = &self.lines[id as usize];
+        let cheapest = |others: &mut dyn Iterator<Item = u32>| {
+            others
+                .filter(|&o| o != id && self.live[o as usize])
+                .map(|o| Candidate { cost: line_cost(self.context, line, &self.lines[o as usize]), line: id, partner: o })
+                .max()
+        };
+        match &self.partners {
+            Partners::All => cheapest(&mut (0..self.lines.len() as u32)),
+            Partners::Graph { lists, .. } => cheapest(&mut lists[id as usize].iter().copied()),
+        }
+    }
+
+    /// Cheapest live partner of line `id` among its candidates, first
+    /// replacing merged neighbours by the lines they became.
+    fn best_partner(&mut self, id: u32) -> Option<Candidate> {
+        if let Partners::Graph { lists, forward, .. } = &mut self.partners {
+            let mut list = std::mem::take(&mut lists[id as usize]);
+            for other in &mut list {
+                *other = find(forward, *other);
+            }
+            list.sort_unstable();
+            list.dedup();
+            list.retain(|&o| o != id);
+            lists[id as usize] = list;
+        }
+        self.initial_partner(id)
+    }
+
+    /// Records that `x` and `y` became the new line `z` (already pushed).
+    fn contract(&mut self, x: u32, y: u32, z: u32) {
+        let Partners::Graph { cap, lists, forward } = &mut self.partners else {
+            return;
+        };
+        forward.push(z);
+        forward[x as usize] = z;
+        forward[y as usize] = z;
+        let mut list = std::mem::take(&mut lists[x as usize]);
+        list.append(&mut std::mem::take(&mut lists[y as usize]));
+        for other in &mut list {
+            *other = find(forward, *other);
+        }
+        list.sort_unstable();
+        list.dedup();
+        list.retain(|&o| o != z);
+        if list.len() > *cap {
+            let line = self.lines[z as usize];
+            let distance = |o: &u32| {
+                let l = &self.lines[*o as usize];
+                segment_distance(line.a, line.b, l.a, l.b)
+            };
+            list.select_nth_unstable_by(*cap, |p, q| distance(p).total_cmp(&distance(q)));
+            list.truncate(*cap);
+        }
+        lists.push(list);
+    }
+
+    /// Rebuilds the neighbour graph over the live lines: the graph can fall
+    /// apart into components that each merge down to one line.
+    fn reconnect(&mut self) {
+        let live: Vec<u32> = (0..self.lines.len() as u32).filter(|&i| self.live[i as usize]).collect();
+        if let Partners::Graph { cap, lists, .. } = &mut self.partners {
+            let graph = neighbour_graph(&self.lines, &live, (*cap / 2).max(1));
+            for (id, list) in live.iter().zip(graph) {
+                lists[*id as usize] = list;
+            }
+        }
+    }
+
+    /// Merges the set down to one line; returns the merges and the root's
+    /// local id. Calls `progress` after every merge with the count so far.
+    fn run(mut self, progress: impl Fn(usize)) -> (Vec<LocalMerge>, u32) {
+        let inputs = self.lines.len();
+        let mut merges = Vec::with_capacity(inputs.saturating_sub(1));
+        if inputs <= 1 {
+            return (merges, 0);
+        }
+        let initial: Vec<Candidate> = if inputs > 2048 {
+            (0..inputs as u32).into_par_iter().filter_map(|i| self.initial_partner(i)).collect()
+        } else {
+            (0..inputs as u32).filter_map(|i| self.initial_partner(i)).collect()
+        };
+        let mut heap = BinaryHeap::from(initial);
+        while self.live_count > 1 {
+            let Some(top) = heap.pop() else {
+                // Every live line's neighbours merged into itself: the graph
+                // fell apart. Join the pieces and go on.
+                self.reconnect();
+                let live: Vec<u32> = (0..self.lines.len() as u32).filter(|&i| self.live[i as usize]).collect();
+                heap.extend(live.into_iter().filter_map(|i| self.best_partner(i)));
+                continue;
+            };
+            if !self.live[top.line as usize] {
+                continue;
+            }
+            if !self.live[top.partner as usize] {
+                if let Some(candidate) = self.best_partner(top.line) {
+                    heap.push(candidate);
+                }
+                continue;
+            }
+            let (x, y) = (top.line.min(top.partner), top.line.max(top.partner));
+            let merged = merge_lines(&self.lines[x as usize], &self.lines[y as usize]);
+            let z = self.lines.len() as u32;
+            self.live[x as usize] = false;
+            self.live[y as usize] = false;
+            self.lines.push(merged);
+            self.live.push(true);
+            self.live_count -= 1;
+            self.contract(x, y, z);
+            merges.push(LocalMerge { children: [x, y], ends: merged.ends, error: merged.error });
+            progress(merges.len());
+            if self.live_count > 1
+                && let Some(candidate) = self.best_partner(z)
+            {
+                heap.push(candidate);
+            }
+        }
+        let root = self.lines.len() as u32 - 1;
+        (merges, root)
+    }
+}
+
+/// The merge forest of a tree: original lines `0..needles`, merged lines
+/// `needles..needles + merged.len()`, children always before parents.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MergeForest {
+    /// The merges, in creation order: all group-level merges (group by group),
+    /// then the tree level.
+    pub merged: Vec<MergedLine>,
+    /// How many of `merged` are group-level merges.
+    pub group_merges: usize,
+}
+
+fn needle_line(needle_id: u32, needle: &Needle) -> Line {
+    Line {
+        a: needle.base,
+        b: needle.tip,
+        ends: [2 * needle_id, 2 * needle_id + 1],
+        error: super::metric::line_error(needle.radius),
+        needles: 1,
+    }
+}
+
+/// Runs the two-level merge on `needles`, which must be sorted by group
+/// (needles of one group contiguous) and valid ([`Needle::is_valid`]).
+///
+/// Level 1 merges each group to one line (groups in parallel); level 2 merges
+/// the group lines to one root. Deterministic: the same needles and options
+/// give the same forest.
+pub fn merge_tree(needles: &[Needle], options: &MergeOptions, progress: &dyn MergeProgress) -> MergeForest {
+    let n = needles.len();
+    if n == 0 {
+        return MergeForest::default();
+    }
+    let diagonal = super::needle::bounds(needles.iter().flat_map(|x| [x.base, x.tip]))
+        .map(|(lo, hi)| lo.distance(hi))
+        .unwrap_or(0.0);
+    let context = CostContext::new(options.weights, diagonal, n);
+
+    // Group ranges (needles sorted by group).
+    let mut groups: Vec<(usize, usize)> = Vec::new();
+    let mut start = 0;
+    for i in 1..=n {
+        if i == n || needles[i].group != needles[start].group {
+            groups.push((start, i));
+            start = i;
+        }
+    }
+
+    // Level 1, groups in parallel.
+    let group_total = n - groups.len();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let local: Vec<(Vec<LocalMerge>, u32)> = groups
+        .par_iter()
+        .map(|&(lo, hi)| {
+            let lines: Vec<Line> = (lo..hi).map(|i| needle_line(i as u32, &needles[i])).collect();
+            let search = if lines.len() <= options.exhaustive_group_limit {
+                options.group_search
+            } else {
+                options.tree_search
+            };
+            let result = MergeSet::new(&context, search, lines).run(|_| {});
+            let so_far = done.fetch_add(result.0.len(), std::sync::atomic::Ordering::Relaxed);
+            progress.merged(MergeLevel::Group, so_far + result.0.len(), group_total);
+            result
+        })
+        .collect();
+
+    let mut merged: Vec<MergedLine> = Vec::with_capacity(n.saturating_sub(1));
+    let mut group_roots: Vec<(u32, Line)> = Vec::with_capacity(groups.len());
+    for (&(lo, hi), (merges, root)) in groups.iter().zip(local) {
+        let inputs = (hi - lo) as u32;
+        let base = (n + merged.len()) as u32;
+        let global = |local: u32| if local < inputs { lo as u32 + local } else { base + (local - inputs) };
+        for m in &merges {
+            merged.push(MergedLine {
+                ends: m.ends,
+                children: m.children.map(global),
+                error: m.error,
+            });
+        }
+        let root_id = global(root);
+        let root_line = if root < inputs {
+            needle_line(root_id, &needles[root_id as usize])
+        } else {
+            let m = &merges[(root - inputs) as usize];
+            let needle_count = hi - lo;
+            line_from_ends(needles, m.ends, m.error, needle_count as u32)
+        };
+        group_roots.push((root_id, root_line));
+    }
+    let group_merges = merged.len();
+
+    // Level 2: the group lines across the tree.
+    let inputs = group_roots.len() as u32;
+    let lines: Vec<Line> = group_roots.iter().map(|(_, l)| *l).collect();
+    let tree_total = group_roots.len().saturating_sub(1);
+    let set = MergeSet::new(&context, options.tree_search, lines);
+    let (merges, _) = set.run(|k| {
+        if k % 1024 == 0 || k == tree_total {
+            progress.merged(MergeLevel::Tree, k, tree_total)
+        }
+    });
+    let base = (n + merged.len()) as u32;
+    let global = |local: u32| if local < inputs { group_roots[local as usize].0 } else { base + (local - inputs) };
+    for m in &merges {
+        merged.push(MergedLine {
+            ends: m.ends,
+            children: m.children.map(global),
+            error: m.error,
+        });
+    }
+    MergeForest { merged, group_merges }
+}
+
+/// Position of a needle end.
+pub fn endpoint_position(needles: &[Needle], end: EndpointId) -> Vec3 {
+    let needle = &needles[(end / 2) as usize];
+    if end % 2 == 0 { needle.base } else { needle.tip }
+}
+
+fn line_from_ends(needles: &[Needle], ends: [EndpointId; 2], error: f32, needle_count: u32) -> Line {
+    Line {
+        a: endpoint_position(needles, ends[0]),
+        b: endpoint_position(needles, ends[1]),
+        ends,
+        error,
+        needles: needle_count,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn segment_distance_cases() {
+        let d = segment_distance(Vec3::ZERO, Vec3::X, Vec3::new(0.5, 1.0, 0.0), Vec3::new(0.5, 2.0, 0.0));
+        assert!((d - 1.0).abs() < 1e-6);
+        let d = segment_distance(Vec3::ZERO, Vec3::X, Vec3::new(0.5, -1.0, 1.0), Vec3::new(0.5, 1.0, 1.0));
+        assert!((d - 1.0).abs() < 1e-6);
+        let d = segment_distance(Vec3::ZERO, Vec3::X, Vec3::new(2.0, 0.0, 0.0), Vec3::new(3.0, 0.0, 0.0));
+        assert!((d - 1.0).abs() < 1e-6);
+        let d = segment_distance(Vec3::ZERO, Vec3::ZERO, Vec3::Y, Vec3::Y);
+        assert!((d - 1.0).abs() < 1e-6);
+        // Parallel overlapping segments.
+        let d = segment_distance(Vec3::ZERO, Vec3::X, Vec3::new(0.5, 0.3, 0.0), Vec3::new(1.5, 0.3, 0.0));
+        assert!((d - 0.3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn new_line_takes_farthest_ends_and_error_contains_children() {
+        let y1 = Line { a: Vec3::ZERO, b: Vec3::X, ends: [0, 1], error: 0.002, needles: 1 };
+        let y2 = Line { a: Vec3::new(0.2, 0.1, 0.0), b: Vec3::new(1.5, 0.1, 0.0), ends: [2, 3], error: 0.001, needles: 1 };
+        let x = merge_lines(&y1, &y2);
+        assert_eq!(x.ends, [0, 3]);
+        assert_eq!(x.needles, 2);
+        // e(X) = 2 max(D(Y1,X) + e1/2, D(Y2,X) + e2/2)
+        let d1 = point_segment_distance(y1.b, x.a, x.b);
+        let d2 = point_segment_distance(y2.a, x.a, x.b);
+        let expected = 2.0 * (d1 + 0.001).max(d2 + 0.0005);
+        assert!((x.error - expected).abs() < 1e-7);
+        assert!(x.error >= y1.error && x.error >= y2.error);
+    }
+
+    #[test]
+    fn cost_terms_follow_the_paper() {
+        let ctx = CostContext::new(MergeWeights::default(), 10.0, 100);
+        // Parallel, touching, single needles: only S3 = 1/100.
+        let c = merge_cost(&ctx, (Vec3::ZERO, Vec3::X, 1), (Vec3::X, Vec3::X * 2.0, 1));
+        assert!((c - 0.5 * 0.01).abs() < 1e-7);
+        // Perpendicular, 1 m apart, G = 3 and 7: 0.25·1 + 0.25·0.1 + 0.5·0.07.
+        let c = merge_cost(&ctx, (Vec3::ZERO, Vec3::X, 3), (Vec3::new(0.0, 1.0, -1.0), Vec3::new(0.0, 1.0, 1.0), 7));
+        assert!((c - (0.25 + 0.025 + 0.035)).abs() < 1e-6, "{c}");
+    }
+
+    fn random_lines(count: usize, seed: u64) -> Vec<Line> {
+        let mut state = seed.wrapping_mul(0x9E3779B97F4A7C15) | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..count as u32)
+            .map(|i| {
+                let a = Vec3::new(next(), next(), next());
+                let b = a + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 0.2;
+                Line { a, b, ends: [2 * i, 2 * i + 1], error: 0.001 + next() * 0.001, needles: 1 }
+            })
+            .collect()
+    }
+
+    /// The paper's greedy, written the obvious way: every step costs all pairs.
+    fn naive_greedy(context: &CostContext, mut lines: Vec<Line>) -> Vec<([u32; 2], [u32; 2], f32)> {
+        let mut live: Vec<u32> = (0..lines.len() as u32).collect();
+        let mut merges = Vec::new();
+        while live.len() > 1 {
+            let mut best = (f32::INFINITY, 0, 0);
+            for (i, &x) in live.iter().enumerate() {
+                for &y in &live[i + 1..] {
+                    let c = line_cost(context, &lines[x as usize], &lines[y as usize]);
+                    if c < best.0 {
+                        best = (c, x, y);
+                    }
+                }
+            }
+            let (_, x, y) = best;
+            let merged = merge_lines(&lines[x as usize], &lines[y as usize]);
+            live.retain(|&k| k != x && k != y);
+            live.push(lines.len() as u32);
+            lines.push(merged);
+            merges.push(([x.min(y), x.max(y)], merged.ends, merged.error));
+        }
+        merges
+    }
+
+    #[test]
+    fn exhaustive_search_is_the_exact_greedy() {
+        for seed in 1..6 {
+            let lines = random_lines(60, seed);
+            let context = CostContext::new(MergeWeights::default(), 3f32.sqrt(), 60);
+            let reference = naive_greedy(&context, lines.clone());
+            let (merges, root) = MergeSet::new(&context, PartnerSearch::Exhaustive, lines).run(|_| {});
+            let ours: Vec<_> = merges.iter().map(|m| (m.children, m.ends, m.error)).collect();
+            assert_eq!(ours, reference, "seed {seed}");
+            assert_eq!(root, 60 + 59 - 1);
+        }
+    }
+
+    #[test]
+    fn nearest_search_merges_everything_once() {
+        let lines = random_lines(3000, 7);
+        let context = CostContext::new(MergeWeights::default(), 3f32.sqrt(), 3000);
+        let (merges, root) = MergeSet::new(&context, PartnerSearch::Nearest { neighbours: 8 }, lines).run(|_| {});
+        assert_eq!(merges.len(), 2999);
+        assert_eq!(root, 3000 + 2999 - 1);
+        let mut seen = vec![false; 3000 + 2999];
+        for m in &merges {
+            for c in m.children {
+                assert!(!seen[c as usize], "line {c} merged twice");
+                seen[c as usize] = true;
+            }
+        }
+        assert_eq!(seen.iter().filter(|s| !**s).count(), 1, "only the root is never merged");
+    }
+}

@@ -1,0 +1,24 @@
+//! The LOD model, free of Bevy: what the paper computes, and the record it
+//! writes.
+//!
+//! * [`needle`]: the input (needles, wood, material).
+//! * [`metric`]: spatial error, prism side counts, line opacity.
+//! * [`prism`]: prism tessellation of a needle.
+//! * [`merge`]: the two-level line merging and its cost function.
+//! * [`record`]: the LOD record (merge forest, error ranges) and the cut.
+//! * [`file`]: the binary record file.
+
+pub mod bake;
+pub mod file;
+pub mod merge;
+pub mod metric;
+pub mod needle;
+pub mod prism;
+pub mod record;
+
+pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, bake};
+pub use file::{RecordError, decode_record, encode_record, read_record, write_record};
+pub use merge::{MergeOptions, MergeWeights, PartnerSearch};
+pub use metric::{PixelError, ViewParams, spatial_error};
+pub use needle::*;
+pub use record::{Cut, CutStats, LodRecord, Representation};

@@ -1,0 +1,165 @@
+//! Prism tessellation of a needle (paper, §3.1): the cylinder of a needle
+//! drawn as an `m`-sided prism, rebuilt from the cylinder at load time rather
+//! than stored.
+
+use super::metric::MIN_PRISM_SIDES;
+use super::needle::Needle;
+use glam::Vec3;
+use std::f32::consts::TAU;
+
+/// Triangles of one capped `sides`-sided prism: `2m` for the sides plus
+/// `m − 2` for each of the two caps.
+pub fn prism_triangle_count(sides: u8) -> u32 {
+    let m = sides.max(MIN_PRISM_SIDES) as u32;
+    2 * m + 2 * (m - 2)
+}
+
+/// Vertices of one capped prism: the sides use smooth radial normals (two
+/// rings of `m`), each cap has its own flat ring of `m`.
+pub fn prism_vertex_count(sides: u8) -> u32 {
+    4 * sides.max(MIN_PRISM_SIDES) as u32
+}
+
+/// An indexed triangle list with per-vertex normals.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriangleMesh {
+    /// Vertex positions, metres.
+    pub positions: Vec<Vec3>,
+    /// Unit vertex normals.
+    pub normals: Vec<Vec3>,
+    /// Counter-clockwise triangles (seen from outside), three indices each.
+    pub indices: Vec<u32>,
+}
+
+impl TriangleMesh {
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// An orthonormal frame `(u, v)` around a needle's axis, `u` as close as
+/// possible to the needle's normal so a 3-sided prism shows a flat face to it.
+fn radial_frame(axis: Vec3, normal: Vec3) -> (Vec3, Vec3) {
+    let u = (normal - axis * normal.dot(axis)).normalize_or_zero();
+    let u = if u == Vec3::ZERO { axis.any_orthonormal_vector() } else { u };
+    (u, axis.cross(u))
+}
+
+/// Appends the capped `sides`-sided prism of `needle` to `mesh`: the polygon
+/// inscribed in the needle's circle (radius `R`) swept from base to tip.
+/// Side vertices carry smooth radial normals so the prism shades round.
+///
+/// `sides` below 3 is raised to 3. A needle with a degenerate axis appends
+/// nothing.
+pub fn append_prism(mesh: &mut TriangleMesh, needle: &Needle, sides: u8) {
+    let m = sides.max(MIN_PRISM_SIDES) as u32;
+    let axis_vec = needle.tip - needle.base;
+    let Some(axis) = axis_vec.try_normalize() else {
+        return;
+    };
+    let (u, v) = radial_frame(axis, needle.normal);
+    let first = mesh.positions.len() as u32;
+    let ring = |k: u32| {
+        let angle = TAU * k as f32 / m as f32;
+        u * angle.cos() + v * angle.sin()
+    };
+    // Side rings: base ring at first..first+m, tip ring at first+m..first+2m.
+    for end in [needle.base, needle.tip] {
+        for k in 0..m {
+            let radial = ring(k);
+            mesh.positions.push(end + radial * needle.radius);
+            mesh.normals.push(radial);
+        }
+    }
+    for k in 0..m {
+        let next = (k + 1) % m;
+        let (b0, b1) = (first + k, first + next);
+        let (t0, t1) = (first + m + k, first + m + next);
+        mesh.indices.extend_from_slice(&[b0, b1, t1, b0, t1, t0]);
+    }
+    // Caps: base ring faces -axis, tip ring faces +axis.
+    for (end, normal) in [(needle.base, -axis), (needle.tip, axis)] {
+        let cap = mesh.positions.len() as u32;
+        for k in 0..m {
+            mesh.positions.push(end + ring(k) * needle.radius);
+            mesh.normals.push(normal);
+        }
+        for k in 1..m - 1 {
+            if normal == axis {
+                mesh.indices.extend_from_slice(&[cap, cap + k, cap + k + 1]);
+            } else {
+                mesh.indices.extend_from_slice(&[cap, cap + k + 1, cap + k]);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::metric::prism_error;
+
+    fn needle() -> Needle {
+        Needle {
+            base: Vec3::new(0.1, 0.2, 0.3),
+            tip: Vec3::new(0.1, 0.25, 0.34),
+            radius: 0.0008,
+            normal: Vec3::X,
+            group: 0,
+        }
+    }
+
+    #[test]
+    fn counts_match_the_mesh() {
+        for sides in 3..=12u8 {
+            let mut mesh = TriangleMesh::default();
+            append_prism(&mut mesh, &needle(), sides);
+            assert_eq!(mesh.triangle_count() as u32, prism_triangle_count(sides));
+            assert_eq!(mesh.positions.len() as u32, prism_vertex_count(sides));
+            assert!(mesh.indices.iter().all(|&i| (i as usize) < mesh.positions.len()));
+        }
+    }
+
+    #[test]
+    fn vertices_lie_on_the_cylinder_and_faces_within_the_prism_error() {
+        let n = needle();
+        let axis = (n.tip - n.base).normalize();
+        for sides in 3..=10u8 {
+            let mut mesh = TriangleMesh::default();
+            append_prism(&mut mesh, &n, sides);
+            for p in &mesh.positions {
+                let d = *p - n.base;
+                let radial = (d - axis * d.dot(axis)).length();
+                assert!((radial - n.radius).abs() < 1e-6);
+            }
+            // Mid-point of a side edge: its distance to the circle is the prism error.
+            let mid = (mesh.positions[0] + mesh.positions[1]) * 0.5 - n.base;
+            let radial = (mid - axis * mid.dot(axis)).length();
+            assert!((n.radius - radial - prism_error(n.radius, sides)).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn triangles_face_outwards() {
+        let n = needle();
+        let mut mesh = TriangleMesh::default();
+        append_prism(&mut mesh, &n, 5);
+        let centre = (n.base + n.tip) * 0.5;
+        for tri in mesh.indices.chunks(3) {
+            let [a, b, c] = [0, 1, 2].map(|i| mesh.positions[tri[i] as usize]);
+            let face = (b - a).cross(c - a);
+            let out = (a + b + c) / 3.0 - centre;
+            assert!(face.dot(out) > 0.0);
+        }
+    }
+
+    #[test]
+    fn degenerate_needle_appends_nothing() {
+        let mut n = needle();
+        n.tip = n.base;
+        let mut mesh = TriangleMesh::default();
+        append_prism(&mut mesh, &n, 6);
+        assert!(mesh.positions.is_empty() && mesh.indices.is_empty());
+    }
+}

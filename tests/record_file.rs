@@ -1,0 +1,169 @@
+//! The record file: round trip, size, and every malformed-file case gives a
+//! typed error, never a panic, and never damages a file already written.
+
+use bevy_conifer_lod::model::file::{FORMAT_VERSION, HEADER_BYTES, MAGIC};
+use bevy_conifer_lod::model::{BakeOptions, LodRecord, Needle, RecordError, TreeInput, WoodSegment, bake, decode_record, encode_record, read_record, write_record};
+use glam::Vec3;
+
+/// A small deterministic tree: 40 fascicles of 3 needles on a helix.
+fn small_record() -> LodRecord {
+    let mut needles = Vec::new();
+    for g in 0..40u32 {
+        let t = g as f32 * 0.37;
+        let base = Vec3::new(t.cos() * 0.3, g as f32 * 0.02, t.sin() * 0.3);
+        for k in 0..3 {
+            let direction = Vec3::new(t.cos(), 0.4 + 0.1 * k as f32, t.sin() + 0.2 * k as f32).normalize();
+            needles.push(Needle {
+                base,
+                tip: base + direction * 0.05,
+                radius: 0.000_777 + 0.000_01 * k as f32,
+                normal: direction.any_orthonormal_vector(),
+                group: g,
+            });
+        }
+    }
+    let wood = vec![WoodSegment { start: Vec3::ZERO, end: Vec3::Y, start_radius: 0.03, end_radius: 0.01 }];
+    let input = TreeInput { name: "helix".into(), needles, wood, ..Default::default() };
+    bake(&input, &BakeOptions::default(), &()).unwrap()
+}
+
+/// Recomputes the header checksum after the payload was edited, so the
+/// decoder's own checks (not the checksum) must catch the problem.
+fn fix_checksum(bytes: &mut [u8]) {
+    let crc = crc32fast::hash(&bytes[HEADER_BYTES..]);
+    bytes[20..24].copy_from_slice(&crc.to_le_bytes());
+}
+
+#[test]
+fn round_trip_through_a_file() {
+    let record = small_record();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("helix.conifer");
+    let bytes = write_record(&record, &path).unwrap();
+    assert_eq!(bytes, std::fs::metadata(&path).unwrap().len());
+    assert_eq!(read_record(&path).unwrap(), record);
+    // Compact: far below the paper's prism sequences (≥ 66 vertices a needle).
+    let per_needle = bytes as f64 / record.needle_count() as f64;
+    assert!(per_needle < 60.0, "{per_needle} bytes per needle");
+}
+
+#[test]
+fn every_truncation_is_reported_as_truncated() {
+    let bytes = encode_record(&small_record()).unwrap();
+    for len in 0..bytes.len() {
+        match decode_record(&bytes[..len]) {
+            Err(RecordError::Truncated { found, .. }) => assert_eq!(found, len as u64),
+            other => panic!("length {len}: expected Truncated, got {other:?}"),
+        }
+    }
+}
+
+#[test]
+fn every_flipped_byte_is_an_error_not_a_panic() {
+    let bytes = encode_record(&small_record()).unwrap();
+    for at in 0..bytes.len() {
+        for flip in [0x01u8, 0x80] {
+            let mut bad = bytes.clone();
+            bad[at] ^= flip;
+            let result = decode_record(&bad);
+            assert!(result.is_err(), "flipping byte {at} went unnoticed");
+            if at >= HEADER_BYTES {
+                assert!(matches!(result, Err(RecordError::ChecksumMismatch { .. })), "byte {at}: {result:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn edited_payloads_with_valid_checksums_are_rejected() {
+    let bytes = encode_record(&small_record()).unwrap();
+    // Any single-byte edit of the payload, checksum recomputed: either a
+    // typed error or a record that passes every invariant, never a panic.
+    for at in HEADER_BYTES..bytes.len() {
+        for value in [0x00u8, 0xFF, 0x7F] {
+            let mut edited = bytes.clone();
+            edited[at] = value;
+            fix_checksum(&mut edited);
+            if let Ok(record) = decode_record(&edited) {
+                for e in [0.0, 0.001, 0.01, 0.1, 10.0] {
+                    let cut = record.cut(e);
+                    assert!(record.coverage(&cut).iter().all(|&c| c == 1));
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn wrong_magic_and_version() {
+    let bytes = encode_record(&small_record()).unwrap();
+    let mut bad = bytes.clone();
+    bad[0] = b'X';
+    assert!(matches!(decode_record(&bad), Err(RecordError::NotARecord)));
+    assert!(matches!(decode_record(b"glTF\x02\0\0\0 not a record at all"), Err(RecordError::NotARecord)));
+    let mut future = bytes.clone();
+    future[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
+    match decode_record(&future) {
+        Err(RecordError::UnsupportedVersion { found, supported }) => {
+            assert_eq!((found, supported), (FORMAT_VERSION + 1, FORMAT_VERSION));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(&bytes[..8], &MAGIC);
+}
+
+#[test]
+fn trailing_bytes_and_huge_lengths() {
+    let bytes = encode_record(&small_record()).unwrap();
+    let mut longer = bytes.clone();
+    longer.extend_from_slice(b"junk");
+    assert!(matches!(decode_record(&longer), Err(RecordError::TrailingBytes(4))));
+    let mut huge = bytes.clone();
+    huge[12..20].copy_from_slice(&u64::MAX.to_le_bytes());
+    assert!(matches!(decode_record(&huge), Err(RecordError::Truncated { .. })));
+}
+
+#[test]
+fn nan_carrying_records_are_rejected() {
+    let record = small_record();
+    let bytes = encode_record(&record).unwrap();
+    // The first needle's radius, as stored (f32 little-endian, fixed width).
+    let radius = record.needles[0].radius.to_le_bytes();
+    let at = bytes.windows(4).position(|w| w == radius).expect("radius stored verbatim");
+    let mut bad = bytes.clone();
+    bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    fix_checksum(&mut bad);
+    match decode_record(&bad) {
+        Err(RecordError::Invalid(reason)) => assert!(reason.to_string().contains("non-finite"), "{reason}"),
+        other => panic!("{other:?}"),
+    }
+    // A merged line's error.
+    let error = record.merged.last().unwrap().error.to_le_bytes();
+    let at = bytes.windows(4).rposition(|w| w == error).expect("error stored verbatim");
+    let mut bad = bytes.clone();
+    bad[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    fix_checksum(&mut bad);
+    assert!(matches!(decode_record(&bad), Err(RecordError::Invalid(_))));
+}
+
+#[test]
+fn a_failed_write_leaves_the_existing_file_intact() {
+    let record = small_record();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tree.conifer");
+    write_record(&record, &path).unwrap();
+    let before = std::fs::read(&path).unwrap();
+    // Writing into a directory that does not exist fails cleanly.
+    let missing = dir.path().join("no/such/dir/tree.conifer");
+    assert!(matches!(write_record(&record, &missing), Err(RecordError::Io(_))));
+    // A path that is a directory cannot be replaced: the error leaves no temp file.
+    assert!(write_record(&record, dir.path()).is_err());
+    assert_eq!(std::fs::read(&path).unwrap(), before);
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(leftovers.len(), 1, "{leftovers:?}");
+}
+
+#[test]
+fn reading_a_missing_file_is_an_io_error() {
+    assert!(matches!(read_record(std::path::Path::new("/nonexistent/x.conifer")), Err(RecordError::Io(_))));
+}
