@@ -73,7 +73,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         image.save(out_dir.join(format!("{}.png", species.name())))?;
         image::imageops::replace(&mut sheet, &image, sheet_x.into(), sheet_y.into());
 
-        let closeup = render_preview(&primitives, &closeup_camera(&tree.needles), &options);
+        let closeup = render_preview(
+            &primitives,
+            &closeup_camera(tree.needles.iter().map(|n| n.base), max.y),
+            &options,
+        );
         closeup.save(out_dir.join(format!("{}-closeup.png", species.name())))?;
         image::imageops::replace(&mut closeup_sheet, &closeup, sheet_x.into(), sheet_y.into());
     }
@@ -98,20 +102,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// A camera 40 cm high looking at the needle nearest the crown's +Z edge at
-/// two thirds of the crown height, from outside the crown.
-fn closeup_camera(needles: &[bevy_conifer_lod::model::Needle]) -> PreviewCamera {
-    let top = needles.iter().map(|n| n.tip.y).fold(0.0_f32, f32::max);
-    let band = |n: &&bevy_conifer_lod::model::Needle| (n.base.y - 0.6 * top).abs() < 0.1 * top;
-    let focus = needles
-        .iter()
-        .filter(band)
-        .max_by(|a, b| (a.base.z - a.base.x.abs()).total_cmp(&(b.base.z - b.base.x.abs())))
-        .map_or(Vec3::new(0.0, 0.6 * top, 0.0), |n| n.base);
+/// A camera 40 cm high looking from +Z at the outermost shoot on the
+/// crown's +X side at 60 % of the tree's height, so the shoot stands
+/// against the sky.
+fn closeup_camera(needle_bases: impl Iterator<Item = Vec3>, top: f32) -> PreviewCamera {
+    let focus = needle_bases
+        .filter(|base| (base.y - 0.6 * top).abs() < 0.08 * top)
+        .max_by(|a, b| a.x.total_cmp(&b.x))
+        .unwrap_or(Vec3::new(0.0, 0.6 * top, 0.0));
+    // Centre the window a little inside the tip so the shoot fills it.
+    let target = focus - Vec3::new(0.12, 0.0, 0.0);
     let distance = 0.2 / (0.5 * FOV).tan();
     PreviewCamera {
-        eye: focus + Vec3::new(0.0, 0.05, distance),
-        target: focus - Vec3::new(0.0, 0.0, 0.05),
+        eye: target + Vec3::new(0.0, 0.0, distance),
+        target,
         vertical_fov: FOV,
         width: SIZE,
         height: SIZE,

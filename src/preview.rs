@@ -16,7 +16,7 @@
 use glam::{Mat4, Vec2, Vec3};
 use image::RgbaImage;
 
-use crate::model::{Needle, TreeInput, WoodSegment};
+use crate::model::{Cut, LodRecord, Needle, TreeInput, WoodSegment};
 
 /// Fraction of the light every surface gets regardless of orientation.
 const AMBIENT: f32 = 0.35;
@@ -87,12 +87,46 @@ pub fn tree_primitives(tree: &TreeInput) -> Vec<PreviewPrimitive> {
     tree.wood
         .iter()
         .map(|w| PreviewPrimitive::wood(w, wood))
-        .chain(
-            tree.needles
-                .iter()
-                .map(|n| PreviewPrimitive::needle(n, needle)),
-        )
+        .chain(tree.needles.iter().map(|n| PreviewPrimitive::needle(n, needle)))
         .collect()
+}
+
+/// The primitives of a cut of `record`: its wood, prisms and original lines
+/// at the needle's width `2R` (the rasterizer turns a sub-pixel width into
+/// the paper's `2/ρ` coverage), original lines' opacity scaled by the
+/// transition coefficient `transition` (δ), and merged lines at the width
+/// that keeps their needles' summed side area (`Σ 2R·L / length`), so a
+/// merged line covers what its needles covered.
+pub fn cut_primitives(record: &LodRecord, cut: &Cut, transition: f32) -> Vec<PreviewPrimitive> {
+    let rgb = |c: [f32; 4]| [c[0], c[1], c[2]];
+    let needle_color = rgb(record.material.needle_color);
+    let wood_color = rgb(record.material.wood_color);
+    let mut primitives =
+        Vec::with_capacity(record.wood.len() + cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len());
+    primitives.extend(record.wood.iter().map(|w| PreviewPrimitive::wood(w, wood_color)));
+    for &(needle, _) in &cut.prisms {
+        primitives.push(PreviewPrimitive::needle(&record.needles[needle as usize], needle_color));
+    }
+    for &needle in &cut.original_lines {
+        let line = PreviewPrimitive::needle(&record.needles[needle as usize], needle_color);
+        primitives.push(PreviewPrimitive {
+            opacity: transition,
+            ..line
+        });
+    }
+    for &node in &cut.merged_lines {
+        let [(a, normal_a), (b, normal_b)] = record.node_ends(node);
+        let length = a.distance(b).max(1e-6);
+        primitives.push(PreviewPrimitive {
+            a,
+            b,
+            width: record.node_needle_area(node) / length,
+            normal: (normal_a + normal_b).normalize_or(normal_a),
+            color: needle_color,
+            opacity: transition,
+        });
+    }
+    primitives
 }
 
 /// A perspective camera looking from `eye` at `target`, +Y up.
@@ -114,15 +148,8 @@ impl PreviewCamera {
     /// A side view from +Z looking at the centre of the box
     /// `bounds_min..bounds_max`, far enough back that all of it is in frame
     /// (with a 5 % margin).
-    pub fn framing(
-        bounds_min: Vec3,
-        bounds_max: Vec3,
-        width: u32,
-        height: u32,
-        vertical_fov: f32,
-    ) -> Self {
-        let vertical_fov = if vertical_fov.is_finite() && vertical_fov > 1e-3 && vertical_fov < 3.1
-        {
+    pub fn framing(bounds_min: Vec3, bounds_max: Vec3, width: u32, height: u32, vertical_fov: f32) -> Self {
+        let vertical_fov = if vertical_fov.is_finite() && vertical_fov > 1e-3 && vertical_fov < 3.1 {
             vertical_fov
         } else {
             0.8
@@ -178,20 +205,12 @@ impl Default for PreviewOptions {
 /// Renders `primitives` seen by `camera`. A camera with no pixels gives a
 /// 0×0 image; a degenerate camera (eye on target, not finite) gives the
 /// background; primitives with non-finite numbers are skipped.
-pub fn render_preview(
-    primitives: &[PreviewPrimitive],
-    camera: &PreviewCamera,
-    options: &PreviewOptions,
-) -> RgbaImage {
+pub fn render_preview(primitives: &[PreviewPrimitive], camera: &PreviewCamera, options: &PreviewOptions) -> RgbaImage {
     if camera.width == 0 || camera.height == 0 {
         return RgbaImage::new(0, 0);
     }
     let samples = options.samples_per_pixel_side.clamp(1, 8);
-    let mut canvas = Canvas::new(
-        camera.width * samples,
-        camera.height * samples,
-        options.background,
-    );
+    let mut canvas = Canvas::new(camera.width * samples, camera.height * samples, options.background);
     if let Some(projection) = Projection::new(camera, samples) {
         let light = options.light_direction.try_normalize().unwrap_or(Vec3::Y);
         let mut quads: Vec<ScreenQuad> = primitives
@@ -218,15 +237,10 @@ struct Projection {
 impl Projection {
     fn new(camera: &PreviewCamera, samples: u32) -> Option<Self> {
         let forward = (camera.target - camera.eye).try_normalize()?;
-        if !camera.eye.is_finite() || !camera.vertical_fov.is_finite() || camera.vertical_fov <= 0.0
-        {
+        if !camera.eye.is_finite() || !camera.vertical_fov.is_finite() || camera.vertical_fov <= 0.0 {
             return None;
         }
-        let up = if forward.y.abs() > 0.999 {
-            Vec3::Z
-        } else {
-            Vec3::Y
-        };
+        let up = if forward.y.abs() > 0.999 { Vec3::Z } else { Vec3::Y };
         let height = (camera.height * samples) as f32;
         Some(Self {
             view: Mat4::look_at_rh(camera.eye, camera.target, up),
@@ -278,10 +292,7 @@ impl Projection {
 
 /// Lambert plus ambient, two-sided; a zero normal is half lit.
 fn shade(primitive: &PreviewPrimitive, light: Vec3) -> [f32; 3] {
-    let diffuse = primitive
-        .normal
-        .try_normalize()
-        .map_or(0.5, |n| n.dot(light).abs());
+    let diffuse = primitive.normal.try_normalize().map_or(0.5, |n| n.dot(light).abs());
     let factor = AMBIENT + (1.0 - AMBIENT) * diffuse;
     primitive.color.map(|c| (c * factor).max(0.0))
 }
@@ -299,22 +310,10 @@ struct ScreenQuad {
 }
 
 impl ScreenQuad {
-    fn new(
-        a: Vec2,
-        b: Vec2,
-        half_a: f32,
-        half_b: f32,
-        color: [f32; 3],
-        alpha: f32,
-        depth: f32,
-    ) -> Self {
+    fn new(a: Vec2, b: Vec2, half_a: f32, half_b: f32, color: [f32; 3], alpha: f32, depth: f32) -> Self {
         let along = b - a;
         let length = along.length();
-        let dir = if length > 1e-6 {
-            along / length
-        } else {
-            Vec2::X
-        };
+        let dir = if length > 1e-6 { along / length } else { Vec2::X };
         // An end-on cylinder still shows its disc: never shorter than wide.
         let min_length = half_a + half_b;
         let (a, b) = if length < min_length {
@@ -393,11 +392,9 @@ impl Canvas {
         } else {
             (self.height, self.width)
         };
-        let (min_y, max_y) = corners
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), c| {
-                (lo.min(c.y), hi.max(c.y))
-            });
+        let (min_y, max_y) = corners.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), c| {
+            (lo.min(c.y), hi.max(c.y))
+        });
         let first_line = (min_y - 0.5).ceil().max(0.0) as u32;
         let end_line = ((max_y - 0.5).floor() + 1.0).clamp(0.0, lines as f32) as u32;
         for line in first_line..end_line {
@@ -413,11 +410,7 @@ impl Canvas {
                 } else {
                     (position as u32, line)
                 };
-                self.blend(
-                    (y * self.width + x) as usize,
-                    quad.color,
-                    quad.alpha * cover,
-                );
+                self.blend((y * self.width + x) as usize, quad.color, quad.alpha * cover);
                 position += 1.0;
             }
         }
@@ -533,10 +526,7 @@ mod tests {
         for y in 0..100 {
             let expected = if (40..60).contains(&y) { 1.0 } else { 0.0 };
             for x in [0, 50, 99] {
-                assert!(
-                    (brightness(&image, x, y) - expected).abs() < 0.02,
-                    "row {y} col {x}"
-                );
+                assert!((brightness(&image, x, y) - expected).abs() < 0.02, "row {y} col {x}");
             }
         }
     }
@@ -556,13 +546,8 @@ mod tests {
             };
             let image = render_preview(&[line], &camera, &options(2));
             // The vertical line lands in column 32 (linear light; sRGB-decode the pixel).
-            let total: f32 = (0..64)
-                .map(|x| srgb_to_linear(image.get_pixel(x, 20).0[0]))
-                .sum();
-            assert!(
-                (total - fraction).abs() < 0.03,
-                "width {fraction}: drawn {total}"
-            );
+            let total: f32 = (0..64).map(|x| srgb_to_linear(image.get_pixel(x, 20).0[0])).sum();
+            assert!((total - fraction).abs() < 0.03, "width {fraction}: drawn {total}");
         }
     }
 
@@ -579,9 +564,7 @@ mod tests {
             )
         };
         let image = render_preview(&[line], &camera, &options(1));
-        let total: f32 = (0..32)
-            .map(|x| srgb_to_linear(image.get_pixel(x, 10).0[0]))
-            .sum();
+        let total: f32 = (0..32).map(|x| srgb_to_linear(image.get_pixel(x, 10).0[0])).sum();
         assert!((total - 0.2).abs() < 0.02, "drawn {total}");
     }
 
@@ -623,14 +606,8 @@ mod tests {
         };
         let image = render_preview(&[primitive], &zero, &options(2));
         assert_eq!((image.width(), image.height()), (0, 0));
-        let wide_only = PreviewCamera {
-            height: 0,
-            ..camera(8)
-        };
-        assert_eq!(
-            render_preview(&[primitive], &wide_only, &options(2)).width(),
-            0
-        );
+        let wide_only = PreviewCamera { height: 0, ..camera(8) };
+        assert_eq!(render_preview(&[primitive], &wide_only, &options(2)).width(), 0);
 
         let nan = [
             white(Vec3::NAN, Vec3::X, 0.1),
@@ -671,10 +648,7 @@ mod tests {
         let through = white(Vec3::new(0.0, -1.0, 20.0), Vec3::new(0.0, -1.0, -20.0), 0.2);
         let behind = white(Vec3::new(0.0, 0.0, 11.0), Vec3::new(1.0, 0.0, 12.0), 0.2);
         let image = render_preview(&[through, behind], &camera, &options(2));
-        assert!(
-            image.pixels().any(|p| p.0[0] > 0),
-            "the visible part is drawn"
-        );
+        assert!(image.pixels().any(|p| p.0[0] > 0), "the visible part is drawn");
     }
 
     #[test]

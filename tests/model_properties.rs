@@ -19,7 +19,10 @@ fn needle_set() -> impl Strategy<Value = TreeInput> {
         0.01f32..0.12,
         0.0002f32..0.0015,
     );
-    let group = (prop::array::uniform3(-2.0f32..2.0), prop::collection::vec(needle, 1..14));
+    let group = (
+        prop::array::uniform3(-2.0f32..2.0),
+        prop::collection::vec(needle, 1..14),
+    );
     prop::collection::vec(group, 1..24).prop_map(|groups| {
         let mut needles = Vec::new();
         for (g, (centre, members)) in groups.into_iter().enumerate() {
@@ -36,7 +39,11 @@ fn needle_set() -> impl Strategy<Value = TreeInput> {
                 });
             }
         }
-        TreeInput { name: "random".into(), needles, ..Default::default() }
+        TreeInput {
+            name: "random".into(),
+            needles,
+            ..Default::default()
+        }
     })
 }
 
@@ -166,7 +173,9 @@ fn greedy_with_nearest_search_is_close_to_exhaustive() {
     // enough for the exact search, the cut sizes at matched errors stay close.
     let input = {
         let mut runner = proptest::test_runner::TestRunner::deterministic();
-        let mut trees: Vec<TreeInput> = (0..8).map(|_| needle_set().new_tree(&mut runner).unwrap().current()).collect();
+        let mut trees: Vec<TreeInput> = (0..8)
+            .map(|_| needle_set().new_tree(&mut runner).unwrap().current())
+            .collect();
         let mut all = trees.remove(0);
         for (t, tree) in trees.into_iter().enumerate() {
             all.needles.extend(tree.needles.into_iter().map(|mut n| {
@@ -186,7 +195,10 @@ fn greedy_with_nearest_search_is_close_to_exhaustive() {
         let b = nearest.cut_stats(&nearest.cut(e)).line_segments as f64;
         println!("e {e:.5}: exhaustive {a} lines, nearest {b}");
         if a >= 50.0 {
-            assert!((b / a) < 1.25 && (a / b) < 1.25, "e {e}: exhaustive {a} lines, nearest {b}");
+            assert!(
+                (b / a) < 1.25 && (a / b) < 1.25,
+                "e {e}: exhaustive {a} lines, nearest {b}"
+            );
         }
         total_exact += a;
         total_nearest += b;

@@ -2,7 +2,10 @@
 //! typed error, never a panic, and never damages a file already written.
 
 use bevy_conifer_lod::model::file::{FORMAT_VERSION, HEADER_BYTES, MAGIC};
-use bevy_conifer_lod::model::{BakeOptions, LodRecord, Needle, RecordError, TreeInput, WoodSegment, bake, decode_record, encode_record, read_record, write_record};
+use bevy_conifer_lod::model::{
+    BakeOptions, LodRecord, Needle, RecordError, TreeInput, WoodSegment, bake, decode_record, encode_record,
+    read_record, write_record,
+};
 use glam::Vec3;
 
 /// A small deterministic tree: 40 fascicles of 3 needles on a helix.
@@ -22,8 +25,18 @@ fn small_record() -> LodRecord {
             });
         }
     }
-    let wood = vec![WoodSegment { start: Vec3::ZERO, end: Vec3::Y, start_radius: 0.03, end_radius: 0.01 }];
-    let input = TreeInput { name: "helix".into(), needles, wood, ..Default::default() };
+    let wood = vec![WoodSegment {
+        start: Vec3::ZERO,
+        end: Vec3::Y,
+        start_radius: 0.03,
+        end_radius: 0.01,
+    }];
+    let input = TreeInput {
+        name: "helix".into(),
+        needles,
+        wood,
+        ..Default::default()
+    };
     bake(&input, &BakeOptions::default(), &()).unwrap()
 }
 
@@ -68,7 +81,10 @@ fn every_flipped_byte_is_an_error_not_a_panic() {
             let result = decode_record(&bad);
             assert!(result.is_err(), "flipping byte {at} went unnoticed");
             if at >= HEADER_BYTES {
-                assert!(matches!(result, Err(RecordError::ChecksumMismatch { .. })), "byte {at}: {result:?}");
+                assert!(
+                    matches!(result, Err(RecordError::ChecksumMismatch { .. })),
+                    "byte {at}: {result:?}"
+                );
             }
         }
     }
@@ -100,7 +116,10 @@ fn wrong_magic_and_version() {
     let mut bad = bytes.clone();
     bad[0] = b'X';
     assert!(matches!(decode_record(&bad), Err(RecordError::NotARecord)));
-    assert!(matches!(decode_record(b"glTF\x02\0\0\0 not a record at all"), Err(RecordError::NotARecord)));
+    assert!(matches!(
+        decode_record(b"glTF\x02\0\0\0 not a record at all"),
+        Err(RecordError::NotARecord)
+    ));
     let mut future = bytes.clone();
     future[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
     match decode_record(&future) {
@@ -129,7 +148,10 @@ fn nan_carrying_records_are_rejected() {
     let bytes = encode_record(&record).unwrap();
     // The first needle's radius, as stored (f32 little-endian, fixed width).
     let radius = record.needles[0].radius.to_le_bytes();
-    let at = bytes.windows(4).position(|w| w == radius).expect("radius stored verbatim");
+    let at = bytes
+        .windows(4)
+        .position(|w| w == radius)
+        .expect("radius stored verbatim");
     let mut bad = bytes.clone();
     bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     fix_checksum(&mut bad);
@@ -139,7 +161,10 @@ fn nan_carrying_records_are_rejected() {
     }
     // A merged line's error.
     let error = record.merged.last().unwrap().error.to_le_bytes();
-    let at = bytes.windows(4).rposition(|w| w == error).expect("error stored verbatim");
+    let at = bytes
+        .windows(4)
+        .rposition(|w| w == error)
+        .expect("error stored verbatim");
     let mut bad = bytes.clone();
     bad[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
     fix_checksum(&mut bad);
@@ -159,11 +184,17 @@ fn a_failed_write_leaves_the_existing_file_intact() {
     // A path that is a directory cannot be replaced: the error leaves no temp file.
     assert!(write_record(&record, dir.path()).is_err());
     assert_eq!(std::fs::read(&path).unwrap(), before);
-    let leftovers: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     assert_eq!(leftovers.len(), 1, "{leftovers:?}");
 }
 
 #[test]
 fn reading_a_missing_file_is_an_io_error() {
-    assert!(matches!(read_record(std::path::Path::new("/nonexistent/x.conifer")), Err(RecordError::Io(_))));
+    assert!(matches!(
+        read_record(std::path::Path::new("/nonexistent/x.conifer")),
+        Err(RecordError::Io(_))
+    ));
 }

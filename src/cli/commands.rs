@@ -6,7 +6,7 @@ use crate::model::merge::PartnerSearch;
 use crate::model::metric::{PixelError, ViewParams, line_opacity, relative_error};
 use crate::model::record::{ErrorRange, LodRecord};
 use crate::model::{BakeOptions, BakeProgress, BakeStage, MergeWeights, read_record, write_record};
-use crate::preview::{PreviewCamera, PreviewOptions, PreviewPrimitive, render_preview};
+use crate::preview::{PreviewCamera, PreviewOptions, cut_primitives, render_preview};
 use anyhow::{Context, bail};
 use glam::Vec3;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -32,7 +32,10 @@ impl BakeBars {
             bar.enable_steady_tick(Duration::from_millis(200));
             bar
         };
-        Self { groups: bar("groups"), tree: bar("whole tree") }
+        Self {
+            groups: bar("groups"),
+            tree: bar("whole tree"),
+        }
     }
 }
 
@@ -66,7 +69,13 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let input = match (&args.preset, &args.input) {
         (Some(name), _) => {
             let species: Species = name.parse().map_err(|e| anyhow::anyhow!("--preset {name}: {e}"))?;
-            let mut tree = generate(species, &GenerateOptions { seed: args.seed, target_needles: args.needles });
+            let mut tree = generate(
+                species,
+                &GenerateOptions {
+                    seed: args.seed,
+                    target_needles: args.needles,
+                },
+            );
             tree.name = species.name().to_string();
             tree
         }
@@ -82,12 +91,21 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let [direction, distance, needle_count] = args.weights[..] else {
         bail!("--weights takes three numbers k1,k2,k3");
     };
-    let mut options = BakeOptions { max_sides: args.max_sides, ..Default::default() };
-    options.merge.weights = MergeWeights { direction, distance, needle_count };
+    let mut options = BakeOptions {
+        max_sides: args.max_sides,
+        ..Default::default()
+    };
+    options.merge.weights = MergeWeights {
+        direction,
+        distance,
+        needle_count,
+    };
     options.merge.tree_search = if args.exhaustive {
         PartnerSearch::Exhaustive
     } else {
-        PartnerSearch::Nearest { neighbours: args.neighbours.max(1) }
+        PartnerSearch::Nearest {
+            neighbours: args.neighbours.max(1),
+        }
     };
     let bars = BakeBars::new();
     let mut record = crate::model::bake(&input, &options, &bars).with_context(|| format!("baking {}", input.name))?;
@@ -99,7 +117,8 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         (None, None) => String::new(),
     };
     let write_started = Instant::now();
-    let bytes = write_record(&record, &args.output).with_context(|| format!("{}: cannot write record", args.output.display()))?;
+    let bytes = write_record(&record, &args.output)
+        .with_context(|| format!("{}: cannot write record", args.output.display()))?;
     let report = BakeReport {
         output: &args.output,
         needles: record.needle_count(),
@@ -148,10 +167,18 @@ pub struct MinMedianMax {
 impl MinMedianMax {
     fn of(mut values: Vec<f64>) -> Self {
         if values.is_empty() {
-            return Self { min: 0.0, median: 0.0, max: 0.0 };
+            return Self {
+                min: 0.0,
+                median: 0.0,
+                max: 0.0,
+            };
         }
         values.sort_by(f64::total_cmp);
-        Self { min: values[0], median: values[(values.len() - 1) / 2], max: values[values.len() - 1] }
+        Self {
+            min: values[0],
+            median: values[(values.len() - 1) / 2],
+            max: values[values.len() - 1],
+        }
     }
 }
 
@@ -236,7 +263,10 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         println!("{} ({})", report.name, report.source);
-        println!("  needles {} in {} groups, {} merged lines, {} roots", report.needles, report.groups, report.lines_merged, report.roots);
+        println!(
+            "  needles {} in {} groups, {} merged lines, {} roots",
+            report.needles, report.groups, report.lines_merged, report.roots
+        );
         for (part, [min, max]) in &report.error_ranges {
             println!("  {part:>15}: error {min:.6} .. {max:.6} m");
         }
@@ -304,7 +334,8 @@ pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
         triangles: stats.triangles,
         line_segments: stats.line_segments,
         primitives: stats.primitives(),
-        mean_original_line_opacity: (!cut.original_lines.is_empty()).then(|| opacity_sum / cut.original_lines.len() as f32),
+        mean_original_line_opacity: (!cut.original_lines.is_empty())
+            .then(|| opacity_sum / cut.original_lines.len() as f32),
     }
 }
 
@@ -350,56 +381,13 @@ fn check_view(view: &ViewArgs) -> anyhow::Result<()> {
 }
 
 fn parse_size(size: &str) -> anyhow::Result<(u32, u32)> {
-    let parsed = size.split_once('x').and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
+    let parsed = size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
     match parsed {
         Some((w, h)) if (1..=8192).contains(&w) && (1..=8192).contains(&h) => Ok((w, h)),
         _ => bail!("--size must be WIDTHxHEIGHT with both in 1..=8192, got {size:?}"),
     }
-}
-
-/// Preview primitives of the cut of `record` at spatial error `e`: prisms and
-/// original lines at the needle's width (the rasterizer turns a sub-pixel
-/// width into the paper's `2/ρ` coverage), original lines scaled by δ, merged
-/// lines at the width that keeps their needles' summed area.
-pub(crate) fn preview_primitives(record: &LodRecord, e: f32, transition: f32) -> Vec<PreviewPrimitive> {
-    let cut = record.cut(e);
-    let needle_color = {
-        let c = record.material.needle_color;
-        [c[0], c[1], c[2]]
-    };
-    let mut primitives = Vec::with_capacity(cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len() + record.wood.len());
-    for wood in &record.wood {
-        let c = record.material.wood_color;
-        primitives.push(PreviewPrimitive {
-            a: wood.start,
-            b: wood.end,
-            width: wood.start_radius + wood.end_radius,
-            normal: Vec3::Z,
-            color: [c[0], c[1], c[2]],
-            opacity: 1.0,
-        });
-    }
-    for &(i, _) in &cut.prisms {
-        let n = &record.needles[i as usize];
-        primitives.push(PreviewPrimitive { a: n.base, b: n.tip, width: 2.0 * n.radius, normal: n.normal, color: needle_color, opacity: 1.0 });
-    }
-    for &i in &cut.original_lines {
-        let n = &record.needles[i as usize];
-        primitives.push(PreviewPrimitive { a: n.base, b: n.tip, width: 2.0 * n.radius, normal: n.normal, color: needle_color, opacity: transition });
-    }
-    for &node in &cut.merged_lines {
-        let [(a, na), (b, nb)] = record.node_ends(node);
-        let length = a.distance(b).max(1e-6);
-        primitives.push(PreviewPrimitive {
-            a,
-            b,
-            width: record.node_needle_area(node) / length,
-            normal: (na + nb).normalize_or(na),
-            color: needle_color,
-            opacity: transition,
-        });
-    }
-    primitives
 }
 
 pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
@@ -424,9 +412,12 @@ pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
         height,
     };
     let started = Instant::now();
-    let image = render_preview(&preview_primitives(&record, e, args.transition), &camera, &PreviewOptions::default());
+    let primitives = cut_primitives(&record, &record.cut(e), args.transition);
+    let image = render_preview(&primitives, &camera, &PreviewOptions::default());
     let render_ms = started.elapsed().as_secs_f64() * 1e3;
-    image.save(&args.output).with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
+    image
+        .save(&args.output)
+        .with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
     let report = cut_report(&record, &view);
     println!(
         "{}",

@@ -55,7 +55,7 @@ pub struct BakeArgs {
     #[arg(long, default_value_t = 8)]
     pub max_sides: u8,
     /// Merge cost weights k1,k2,k3 (direction, distance, needle count).
-    #[arg(long, value_delimiter = ',', num_args = 3, default_values_t = [0.25f32, 0.25, 0.5])]
+    #[arg(long, value_name = "K1,K2,K3", value_delimiter = ',', default_values_t = [0.25f32, 0.25, 0.5])]
     pub weights: Vec<f32>,
     /// Partner candidates per line in the whole-tree merge (nearest neighbours).
     #[arg(long, default_value_t = 12)]

@@ -78,7 +78,12 @@ fn units_per_site(sites: &[FoliageSite], params: &FoliageParams, target: usize) 
 /// species' default density); other phyllotaxies have no floor.
 fn minimum_units(params: &FoliageParams, relative_density: f32) -> u32 {
     match params.phyllotaxy {
-        Phyllotaxy::Spiral => (params.group_size.0 as f32 * relative_density.min(1.0)).round() as u32,
+        Phyllotaxy::Spiral => {
+            // Full floor from 85 % of the default density: the default
+            // count's per-seed vigour (±8 %) keeps it.
+            let scale = (relative_density / 0.85).min(1.0);
+            (params.group_size.0 as f32 * scale).round() as u32
+        }
         Phyllotaxy::Fascicle { .. } | Phyllotaxy::Scales => 0,
     }
 }

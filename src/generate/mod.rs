@@ -39,20 +39,21 @@ use crate::model::TreeInput;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Species {
-    /// *Pinus sylvestris*, ~10 years, 3.6–4.6 m: irregular rounded crown on
-    /// a trunk bare in its lower third, 2-needle fascicles (3–7 cm).
+    /// *Pinus sylvestris*, ~10 years, 3.3–4.3 m: irregular rounded crown on
+    /// a trunk bare in its lower quarter, 2-needle fascicles (3–7 cm).
     ScotsPine,
-    /// *Picea abies*, ~8 years, ~3 m: dense cone to the ground, single
+    /// *Picea abies*, ~8 years, 2.7–3.3 m: cone to the ground, single
     /// needles (1–2.5 cm) spirally round each shoot, hanging branchlets.
     NorwaySpruce,
-    /// *Pinus strobus*, ~10 years, 4–5 m: open crown of level branch
+    /// *Pinus strobus*, ~10 years, 3.9–4.8 m: open crown of level branch
     /// layers, soft drooping 5-needle fascicles (6–13 cm) tufted at the
     /// shoot ends.
     EasternWhitePine,
-    /// *Chamaecyparis lawsoniana*, a young tree (~8 years, 2.6–3.2 m; the
-    /// paper's is 30 years and 8–10 m, which would take millions of scale
-    /// leaves): narrow columnar cone, nodding leader, flat sprays of scale
-    /// leaves (2–4 mm).
+    /// *Chamaecyparis lawsoniana*, a young tree (~6 years, 2.0–2.4 m; the
+    /// paper's is 30 years and 8–10 m, which as scale leaves would take
+    /// millions of needles): narrow columnar cone, nodding leader, flat
+    /// fern-like sprays of scale leaves (2.5–4 mm). Even so its ~75,000
+    /// scales cover a fifth of its silhouette or less: the crown is lacy.
     LawsonCypress,
 }
 
@@ -95,10 +96,10 @@ impl Species {
     /// One line about the preset: botanical name, age, height, phyllotaxy.
     pub fn description(self) -> &'static str {
         match self {
-            Species::ScotsPine => "Pinus sylvestris, ~10 years, 3.6-4.6 m, 2-needle fascicles",
+            Species::ScotsPine => "Pinus sylvestris, ~10 years, 3.3-4.3 m, 2-needle fascicles",
             Species::NorwaySpruce => "Picea abies, ~8 years, ~3 m, single needles round each shoot",
-            Species::EasternWhitePine => "Pinus strobus, ~10 years, 4-5 m, 5-needle fascicles",
-            Species::LawsonCypress => "Chamaecyparis lawsoniana, young (~8 years, ~3 m), scale-leaf sprays",
+            Species::EasternWhitePine => "Pinus strobus, ~10 years, 3.9-4.8 m, 5-needle fascicles",
+            Species::LawsonCypress => "Chamaecyparis lawsoniana, young (~6 years, ~2.2 m), scale-leaf sprays",
         }
     }
 
@@ -163,17 +164,6 @@ pub struct GenerateOptions {
 pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
     let params = species.params();
     let skeleton = skeleton::grow_skeleton(&params, &mut TreeRng::new(options.seed, Stream::Skeleton));
-    if std::env::var_os("CONIFER_DEBUG_SITES").is_some() {
-        let length: f32 = skeleton.sites.iter().map(|s| s.start.distance(s.end)).sum();
-        let weight: f32 = skeleton.sites.iter().map(|s| s.weight).sum();
-        eprintln!(
-            "DEBUG {}: {} sites, {:.1} m of shoot, weight {:.1}",
-            species.name(),
-            skeleton.sites.len(),
-            length,
-            weight
-        );
-    }
     let target = options
         .target_needles
         .unwrap_or_else(|| default_needle_count(&params, options.seed));

@@ -69,7 +69,7 @@ impl CrownShape {
         let c = c.clamp(0.0, 1.0);
         match self {
             CrownShape::Conical { exponent } => (1.0 - c).powf(exponent),
-            CrownShape::Rounded => (1.0 - c).powf(0.55) * (0.6 + 0.4 * (c / 0.35).min(1.0)),
+            CrownShape::Rounded => (1.0 - c).powf(0.4) * (0.6 + 0.4 * (c / 0.35).min(1.0)),
             CrownShape::Columnar => (1.0 - c).powf(0.45) * (0.75 + 0.25 * (1.0 - c)),
         }
     }
@@ -91,6 +91,9 @@ pub(crate) struct BranchParams {
     pub sag: f32,
     /// Upward bending per metre of the youngest part (tips turning up).
     pub upturn: f32,
+    /// Longest annual shoot of a first-order branch: young branches near
+    /// the top stay short even where the crown envelope leaves room.
+    pub max_annual_growth: f32,
     /// Highest branching order (1 = branches without laterals).
     pub max_order: u32,
     /// Branching nodes per annual unit of a branch.
@@ -190,9 +193,9 @@ fn srgb(r: u8, g: u8, b: u8) -> [f32; 4] {
     [lin(r), lin(g), lin(b), 1.0]
 }
 
-/// Scots pine (*Pinus sylvestris*), about 10 years old, 3.6–4.6 m: an
+/// Scots pine (*Pinus sylvestris*), about 10 years old, 3.3–4.3 m: an
 /// irregular rounded crown on a trunk bare of live branches in its lower
-/// third, 2-needle fascicles of stiff twisted blue-green needles.
+/// quarter, 2-needle fascicles of stiff twisted blue-green needles.
 pub(crate) fn scots_pine() -> SpeciesParams {
     SpeciesParams {
         trunk: TrunkParams {
@@ -209,16 +212,17 @@ pub(crate) fn scots_pine() -> SpeciesParams {
             base_fraction: (0.22, 0.32),
             radius: 1.4,
             shape: CrownShape::Rounded,
-            irregularity: 0.35,
+            irregularity: 0.45,
         },
         branching: BranchParams {
             whorl_size: (4, 6),
             interwhorl_size: (0, 0),
             interwhorl_vigor: 0.0,
             angle_bottom: deg(72.0),
-            angle_top: deg(42.0),
+            angle_top: deg(50.0),
             sag: 0.25,
             upturn: 0.9,
+            max_annual_growth: 0.32,
             max_order: 3,
             nodes_per_year: 1,
             laterals: (3, 4),
@@ -272,7 +276,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
         },
         crown: CrownParams {
             base_fraction: (0.0, 0.04),
-            radius: 0.85,
+            radius: 0.75,
             shape: CrownShape::Conical { exponent: 0.8 },
             irregularity: 0.15,
         },
@@ -284,6 +288,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             angle_top: deg(55.0),
             sag: 0.6,
             upturn: 1.2,
+            max_annual_growth: 0.22,
             max_order: 3,
             nodes_per_year: 1,
             laterals: (2, 2),
@@ -298,10 +303,10 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
         spray: None,
         foliage: FoliageParams {
             phyllotaxy: Phyllotaxy::Spiral,
-            default_needles: 60_000,
+            default_needles: 70_000,
             retention_years: 5,
             survival_per_year: 0.75,
-            length: (0.012, 0.025),
+            length: (0.013, 0.025),
             radius: (0.0005, 0.0007),
             divergence: (deg(45.0), deg(70.0)),
             droop: 0.0,
@@ -317,14 +322,14 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
     }
 }
 
-/// Eastern white pine (*Pinus strobus*), about 10 years old, 4–5 m: an open
+/// Eastern white pine (*Pinus strobus*), about 10 years old, 3.9–4.8 m: an open
 /// crown of nearly level branch layers, soft drooping 5-needle fascicles in
 /// tufts at the shoot ends.
 pub(crate) fn eastern_white_pine() -> SpeciesParams {
     SpeciesParams {
         trunk: TrunkParams {
             age_years: 10,
-            height: (4.0, 5.0),
+            height: (3.9, 4.8),
             base_radius: 0.08,
             growth_acceleration: 1.2,
             wander: 0.02,
@@ -346,6 +351,7 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
             angle_top: deg(55.0),
             sag: 0.15,
             upturn: 0.5,
+            max_annual_growth: 0.4,
             max_order: 3,
             nodes_per_year: 1,
             laterals: (2, 3),
@@ -361,7 +367,7 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
         foliage: FoliageParams {
             phyllotaxy: Phyllotaxy::Fascicle {
                 needles: 5,
-                spread: deg(14.0),
+                spread: deg(8.0),
                 twist: deg(30.0),
             },
             default_needles: 62_000,
@@ -385,20 +391,21 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
 
 /// Lawson cypress (*Chamaecyparis lawsoniana*). The paper's is 30 years old
 /// and 8–10 m; modelled as scale leaves that tree would need millions of
-/// needles, so this preset is a young tree, about 8 years old and 2.6–3.2 m,
+/// needles, so this preset is a young tree, about 6 years old and 2.0–2.4 m,
 /// with the species' form: a narrow columnar cone with a nodding leader,
-/// ascending branches ending in flat fern-like sprays of tiny scale leaves.
+/// many short ascending branches carrying flat fern-like sprays of tiny
+/// scale leaves.
 pub(crate) fn lawson_cypress() -> SpeciesParams {
     SpeciesParams {
         trunk: TrunkParams {
             age_years: 6,
-            height: (1.9, 2.3),
-            base_radius: 0.02,
+            height: (2.0, 2.4),
+            base_radius: 0.016,
             growth_acceleration: 0.8,
             wander: 0.015,
             nod: deg(75.0),
             nod_length: 0.3,
-            nodes_per_year: 4,
+            nodes_per_year: 10,
         },
         crown: CrownParams {
             base_fraction: (0.0, 0.03),
@@ -414,6 +421,7 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             angle_top: deg(35.0),
             sag: 0.3,
             upturn: 0.2,
+            max_annual_growth: 0.18,
             max_order: 2,
             nodes_per_year: 1,
             laterals: (1, 1),
@@ -426,18 +434,18 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             stubs: false,
         },
         spray: Some(SprayParams {
-            spacing: 0.07,
-            length: (0.1, 0.17),
+            spacing: 0.06,
+            length: (0.07, 0.12),
             angle: deg(50.0),
-            pinna_spacing: 0.006,
+            pinna_spacing: 0.004,
             pinna_angle: deg(45.0),
-            pinna_length: 0.4,
+            pinna_length: 0.35,
             droop: 0.8,
             roll: 0.9,
         }),
         foliage: FoliageParams {
             phyllotaxy: Phyllotaxy::Scales,
-            default_needles: 78_000,
+            default_needles: 74_000,
             retention_years: 2,
             survival_per_year: 0.8,
             length: (0.0025, 0.004),

@@ -11,9 +11,9 @@ use glam::Vec3;
 use super::geometry::{
     GOLDEN_ANGLE, UP, bend_vertically, cone_direction, from_vertical, horizontal, perpendicular_toward,
 };
-use super::params::SpeciesParams;
+use super::params::{SpeciesParams, SprayParams};
 use super::random::TreeRng;
-use super::spray::grow_spray;
+use super::spray::{SprayStart, grow_spray};
 use crate::model::WoodSegment;
 
 /// A straight piece of shoot (or spray branchlet) that carries needles.
@@ -229,7 +229,7 @@ impl Grower<'_> {
         let branching = &params.branching;
         let angle =
             branching.angle_bottom + (branching.angle_top - branching.angle_bottom) * c + 0.12 * self.rng.signed();
-        let segment_length = (reach / (age as f32 * angle.sin().max(0.4))).max(0.02);
+        let segment_length = (reach / (age as f32 * angle.sin().max(0.4))).clamp(0.02, branching.max_annual_growth);
         self.grow_axis(Axis {
             origin: node,
             direction: from_vertical(angle, azimuth),
@@ -312,7 +312,7 @@ impl Grower<'_> {
         let mut measure = 0.0;
         for index in 0..count {
             let azimuth = if self.rng.chance(branching.planarity) {
-                let left = (node_index + index) % 2 == 0;
+                let left = (node_index + index).is_multiple_of(2);
                 (if left { 0.0 } else { PI }) + 0.25 * self.rng.signed()
             } else {
                 self.rng.unit() * TAU
@@ -381,21 +381,13 @@ impl Grower<'_> {
 
     /// Sprays along a young piece, alternating sides in the branch plane,
     /// plus one continuing the axis at its tip.
-    fn add_sprays(
-        &mut self,
-        spray: &super::params::SprayParams,
-        start: Vec3,
-        end: Vec3,
-        weight_scale: f32,
-        vigor: f32,
-        is_tip: bool,
-    ) {
+    fn add_sprays(&mut self, spray: &SprayParams, start: Vec3, end: Vec3, weight_scale: f32, vigor: f32, is_tip: bool) {
         let dir = (end - start).normalize_or(UP);
         let side = perpendicular_toward(dir, dir.cross(UP));
         let count = self.rng.round(start.distance(end) / spray.spacing);
         for index in 0..count {
             let t = (index as f32 + 0.5 + 0.3 * self.rng.signed()) / count as f32;
-            let toward = if (index + self.next_group_key) % 2 == 0 {
+            let toward = if (index + self.next_group_key).is_multiple_of(2) {
                 side
             } else {
                 -side
@@ -409,25 +401,15 @@ impl Grower<'_> {
         }
     }
 
-    fn grow_one_spray(
-        &mut self,
-        spray: &super::params::SprayParams,
-        origin: Vec3,
-        direction: Vec3,
-        weight_scale: f32,
-        vigor: f32,
-    ) {
-        let key = self.next_group_key;
-        self.next_group_key += 1;
-        grow_spray(
-            &mut self.sites,
-            self.rng,
-            spray,
+    fn grow_one_spray(&mut self, spray: &SprayParams, origin: Vec3, direction: Vec3, weight_scale: f32, vigor: f32) {
+        let start = SprayStart {
             origin,
             direction,
-            key,
+            group_key: self.next_group_key,
             weight_scale,
             vigor,
-        );
+        };
+        self.next_group_key += 1;
+        grow_spray(&mut self.sites, self.rng, spray, start);
     }
 }

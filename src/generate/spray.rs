@@ -13,18 +13,28 @@ use super::skeleton::FoliageSite;
 /// Pieces of the main axis (its nodding curve).
 const AXIS_PIECES: usize = 3;
 
-/// Adds the sites of one spray starting at `origin` along `direction`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn grow_spray(
-    sites: &mut Vec<FoliageSite>,
-    rng: &mut TreeRng,
-    params: &SprayParams,
-    origin: Vec3,
-    direction: Vec3,
-    group_key: u32,
-    weight_scale: f32,
-    vigor: f32,
-) {
+/// Where a spray starts and what its sites inherit.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SprayStart {
+    pub origin: Vec3,
+    /// Unit direction of the spray's main axis at its base.
+    pub direction: Vec3,
+    /// The spray's phyllotaxy group key.
+    pub group_key: u32,
+    /// Needle survival factor of the shoot it grows on.
+    pub weight_scale: f32,
+    pub vigor: f32,
+}
+
+/// Adds the sites of one spray.
+pub(crate) fn grow_spray(sites: &mut Vec<FoliageSite>, rng: &mut TreeRng, params: &SprayParams, start: SprayStart) {
+    let SprayStart {
+        origin,
+        direction,
+        group_key,
+        weight_scale,
+        vigor,
+    } = start;
     let length = rng.range(params.length) * vigor.min(1.0);
     let roll = params.roll * rng.signed();
     let normal = rotate_around(perpendicular_toward(direction, UP), direction, roll);

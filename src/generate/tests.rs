@@ -32,8 +32,8 @@ fn height_range(species: Species) -> (f32, f32) {
     match species {
         Species::ScotsPine => (3.0, 5.0),
         Species::NorwaySpruce => (2.5, 3.5),
-        Species::EasternWhitePine => (3.5, 5.5),
-        Species::LawsonCypress => (2.2, 3.5),
+        Species::EasternWhitePine => (3.5, 5.0),
+        Species::LawsonCypress => (1.7, 2.6),
     }
 }
 

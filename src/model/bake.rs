@@ -1,10 +1,10 @@
 //! The bake: from a [`TreeInput`] to a [`LodRecord`] (paper, §4–5.1).
 
+use super::file::snap_normal;
 use super::merge::{MergeLevel, MergeOptions, MergeProgress, merge_tree};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::TreeInput;
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
-use super::file::snap_normal;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 

@@ -118,7 +118,11 @@ pub fn encode_normal(normal: Vec3) -> [u8; 4] {
     // f64 arithmetic makes decode → encode exact for every code.
     let [nx, ny, nz] = normal.to_array().map(f64::from);
     let l1 = nx.abs() + ny.abs() + nz.abs();
-    let (mut x, mut y) = if l1 > 0.0 && l1.is_finite() { (nx / l1, ny / l1) } else { (0.0, 0.0) };
+    let (mut x, mut y) = if l1 > 0.0 && l1.is_finite() {
+        (nx / l1, ny / l1)
+    } else {
+        (0.0, 0.0)
+    };
     if nz < 0.0 {
         let (ox, oy) = (x, y);
         x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
@@ -149,7 +153,11 @@ pub fn snap_normal(normal: Vec3) -> Vec3 {
 }
 
 fn node_ends(needles: usize, merged: &[MergedLine], node: u32) -> [EndpointId; 2] {
-    if (node as usize) < needles { [2 * node, 2 * node + 1] } else { merged[node as usize - needles].ends }
+    if (node as usize) < needles {
+        [2 * node, 2 * node + 1]
+    } else {
+        merged[node as usize - needles].ends
+    }
 }
 
 /// Encodes a record into the bytes of a record file.
@@ -214,17 +222,26 @@ pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
 pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != MAGIC {
         if bytes.len() < MAGIC.len() && MAGIC.starts_with(bytes) {
-            return Err(RecordError::Truncated { expected: HEADER_BYTES as u64, found: bytes.len() as u64 });
+            return Err(RecordError::Truncated {
+                expected: HEADER_BYTES as u64,
+                found: bytes.len() as u64,
+            });
         }
         return Err(RecordError::NotARecord);
     }
     if bytes.len() < HEADER_BYTES {
-        return Err(RecordError::Truncated { expected: HEADER_BYTES as u64, found: bytes.len() as u64 });
+        return Err(RecordError::Truncated {
+            expected: HEADER_BYTES as u64,
+            found: bytes.len() as u64,
+        });
     }
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
     let version = u32_at(8);
     if version != FORMAT_VERSION {
-        return Err(RecordError::UnsupportedVersion { found: version, supported: FORMAT_VERSION });
+        return Err(RecordError::UnsupportedVersion {
+            found: version,
+            supported: FORMAT_VERSION,
+        });
     }
     let payload_len = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
     let available = (bytes.len() - HEADER_BYTES) as u64;
@@ -254,10 +271,16 @@ fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
     }
     let group_total: u64 = p.group_sizes.iter().map(|&s| s as u64).sum();
     if group_total != n as u64 || p.group_sizes.contains(&0) {
-        return Err(RecordError::Malformed("group sizes do not add up to the needle count".into()));
+        return Err(RecordError::Malformed(
+            "group sizes do not add up to the needle count".into(),
+        ));
     }
     let mut needles = Vec::with_capacity(n);
-    let mut groups = p.group_sizes.iter().enumerate().flat_map(|(g, &s)| std::iter::repeat_n(g as u32, s as usize));
+    let mut groups = p
+        .group_sizes
+        .iter()
+        .enumerate()
+        .flat_map(|(g, &s)| std::iter::repeat_n(g as u32, s as usize));
     for i in 0..n {
         needles.push(Needle {
             base: Vec3::from(p.bases[i]),
@@ -276,14 +299,21 @@ fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
         let children = entry.back.map(|b| (id - b as u64) as u32);
         let candidates = [node_ends(n, &merged, children[0]), node_ends(n, &merged, children[1])].concat();
         merged.push(MergedLine {
-            ends: [candidates[(entry.ends & 3) as usize], candidates[(entry.ends >> 2) as usize]],
+            ends: [
+                candidates[(entry.ends & 3) as usize],
+                candidates[(entry.ends >> 2) as usize],
+            ],
             children,
             error: entry.error,
         });
     }
     let [direction, distance, needle_count] = p.weights;
     let bake = BakeInfo {
-        weights: MergeWeights { direction, distance, needle_count },
+        weights: MergeWeights {
+            direction,
+            distance,
+            needle_count,
+        },
         bake_seconds: p.bake_seconds,
         source: p.source,
     };
@@ -300,7 +330,15 @@ fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
             end_radius: w[7],
         })
         .collect();
-    Ok(LodRecord::from_parts(p.name, needles, merged, wood, p.material, p.max_sides, bake)?)
+    Ok(LodRecord::from_parts(
+        p.name,
+        needles,
+        merged,
+        wood,
+        p.material,
+        p.max_sides,
+        bake,
+    )?)
 }
 
 /// Writes `record` to `path` atomically: the bytes go to a temporary file
@@ -308,10 +346,13 @@ fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
 /// never leaves a half-written record (nor damages one already there).
 pub fn write_record(record: &LodRecord, path: &Path) -> Result<u64, RecordError> {
     let bytes = encode_record(record)?;
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let file_name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(std::io::ErrorKind::InvalidInput, "output path has no file name")
-    })?;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| std::io::Error::new(std::io::ErrorKind::InvalidInput, "output path has no file name"))?;
     let tmp = dir.join(format!(".{}.tmp-{}", file_name.to_string_lossy(), std::process::id()));
     let result = (|| {
         let mut file = std::fs::File::create(&tmp)?;
@@ -352,7 +393,12 @@ mod tests {
 
     #[test]
     fn snapped_normals_are_close() {
-        for n in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.4, -0.866).normalize(), Vec3::new(-1.0, 2.0, 3.0).normalize()] {
+        for n in [
+            Vec3::X,
+            -Vec3::Y,
+            Vec3::new(0.3, -0.4, -0.866).normalize(),
+            Vec3::new(-1.0, 2.0, 3.0).normalize(),
+        ] {
             assert!(snap_normal(n).angle_between(n) < 1e-3);
         }
         assert!(snap_normal(Vec3::ZERO).angle_between(Vec3::Z) < 1e-4);

@@ -168,7 +168,11 @@ impl CostContext {
     pub fn new(weights: MergeWeights, crown_diagonal: f32, needles: usize) -> Self {
         Self {
             weights,
-            inv_diagonal: if crown_diagonal > 0.0 { 1.0 / crown_diagonal } else { 0.0 },
+            inv_diagonal: if crown_diagonal > 0.0 {
+                1.0 / crown_diagonal
+            } else {
+                0.0
+            },
             inv_needles: 1.0 / needles.max(1) as f32,
         }
     }
@@ -198,7 +202,11 @@ fn line_cost(context: &CostContext, x: &Line, y: &Line) -> f32 {
 pub fn point_segment_distance(p: Vec3, a: Vec3, b: Vec3) -> f32 {
     let ab = b - a;
     let len2 = ab.length_squared();
-    let t = if len2 > 0.0 { ((p - a).dot(ab) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     p.distance(a + ab * t)
 }
 
@@ -223,7 +231,11 @@ pub fn segment_distance(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> f32 {
         } else {
             let b = d1.dot(d2);
             let denom = a * e - b * b;
-            let mut s = if denom > TINY { ((b * f - c * e) / denom).clamp(0.0, 1.0) } else { 0.0 };
+            let mut s = if denom > TINY {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let mut t = (b * s + f) / e;
             if t < 0.0 {
                 t = 0.0;
@@ -248,7 +260,12 @@ pub fn segment_distance(p1: Vec3, q1: Vec3, p2: Vec3, q2: Vec3) -> f32 {
 /// the capsule of radius `e(X)/2` around `X` contains the capsules of radius
 /// `e(Yi)/2` around its children, hence `e(X) ≥ e(Yi)`.
 fn merge_lines(y1: &Line, y2: &Line) -> Line {
-    let points = [(y1.a, y1.ends[0]), (y1.b, y1.ends[1]), (y2.a, y2.ends[0]), (y2.b, y2.ends[1])];
+    let points = [
+        (y1.a, y1.ends[0]),
+        (y1.b, y1.ends[1]),
+        (y2.a, y2.ends[0]),
+        (y2.b, y2.ends[1]),
+    ];
     let mut best = (0usize, 1usize, -1.0f32);
     for i in 0..4 {
         for j in i + 1..4 {
@@ -259,9 +276,8 @@ fn merge_lines(y1: &Line, y2: &Line) -> Line {
         }
     }
     let (a, b) = (points[best.0], points[best.1]);
-    let spread = |y: &Line| {
-        point_segment_distance(y.a, a.0, b.0).max(point_segment_distance(y.b, a.0, b.0)) + y.error / 2.0
-    };
+    let spread =
+        |y: &Line| point_segment_distance(y.a, a.0, b.0).max(point_segment_distance(y.b, a.0, b.0)) + y.error / 2.0;
     Line {
         a: a.0,
         b: b.0,
@@ -333,7 +349,11 @@ fn neighbour_graph(lines: &[Line], ids: &[u32], k: usize) -> Vec<Vec<u32>> {
         ids.iter()
             .map(|&id| {
                 let l = &lines[id as usize];
-                IndexedLine { id, a: l.a.to_array(), b: l.b.to_array() }
+                IndexedLine {
+                    id,
+                    a: l.a.to_array(),
+                    b: l.b.to_array(),
+                }
             })
             .collect(),
     );
@@ -342,7 +362,12 @@ fn neighbour_graph(lines: &[Line], ids: &[u32], k: usize) -> Vec<Vec<u32>> {
         .map(|&id| {
             let l = &lines[id as usize];
             let mid = ((l.a + l.b) * 0.5).to_array();
-            index.nearest_neighbor_iter(mid).map(|f| f.id).filter(|&f| f != id).take(k).collect()
+            index
+                .nearest_neighbor_iter(mid)
+                .map(|f| f.id)
+                .filter(|&f| f != id)
+                .take(k)
+                .collect()
         })
         .collect();
     // Symmetrize, so a merge is seen from both sides.
@@ -426,7 +451,13 @@ impl<'a> MergeSet<'a> {
         };
         let mut lines = lines;
         lines.reserve(live_count.saturating_sub(1));
-        Self { context, live: vec![true; live_count], lines, live_count, partners }
+        Self {
+            context,
+            live: vec![true; live_count],
+            lines,
+            live_count,
+            partners,
+        }
     }
 
     /// Cheapest live partner of line `id` among its candidates (read-only:
@@ -436,7 +467,11 @@ impl<'a> MergeSet<'a> {
         let cheapest = |others: &mut dyn Iterator<Item = u32>| {
             others
                 .filter(|&o| o != id && self.live[o as usize])
-                .map(|o| Candidate { cost: line_cost(self.context, line, &self.lines[o as usize]), line: id, partner: o })
+                .map(|o| Candidate {
+                    cost: line_cost(self.context, line, &self.lines[o as usize]),
+                    line: id,
+                    partner: o,
+                })
                 .max()
         };
         match &self.partners {
@@ -492,7 +527,9 @@ impl<'a> MergeSet<'a> {
     /// Rebuilds the neighbour graph over the live lines: the graph can fall
     /// apart into components that each merge down to one line.
     fn reconnect(&mut self) {
-        let live: Vec<u32> = (0..self.lines.len() as u32).filter(|&i| self.live[i as usize]).collect();
+        let live: Vec<u32> = (0..self.lines.len() as u32)
+            .filter(|&i| self.live[i as usize])
+            .collect();
         if let Partners::Graph { cap, lists, .. } = &mut self.partners {
             let graph = neighbour_graph(&self.lines, &live, (*cap / 2).max(1));
             for (id, list) in live.iter().zip(graph) {
@@ -510,7 +547,10 @@ impl<'a> MergeSet<'a> {
             return (merges, 0);
         }
         let initial: Vec<Candidate> = if inputs > 2048 {
-            (0..inputs as u32).into_par_iter().filter_map(|i| self.initial_partner(i)).collect()
+            (0..inputs as u32)
+                .into_par_iter()
+                .filter_map(|i| self.initial_partner(i))
+                .collect()
         } else {
             (0..inputs as u32).filter_map(|i| self.initial_partner(i)).collect()
         };
@@ -520,7 +560,9 @@ impl<'a> MergeSet<'a> {
                 // Every live line's neighbours merged into itself: the graph
                 // fell apart. Join the pieces and go on.
                 self.reconnect();
-                let live: Vec<u32> = (0..self.lines.len() as u32).filter(|&i| self.live[i as usize]).collect();
+                let live: Vec<u32> = (0..self.lines.len() as u32)
+                    .filter(|&i| self.live[i as usize])
+                    .collect();
                 heap.extend(live.into_iter().filter_map(|i| self.best_partner(i)));
                 continue;
             };
@@ -542,7 +584,11 @@ impl<'a> MergeSet<'a> {
             self.live.push(true);
             self.live_count -= 1;
             self.contract(x, y, z);
-            merges.push(LocalMerge { children: [x, y], ends: merged.ends, error: merged.error });
+            merges.push(LocalMerge {
+                children: [x, y],
+                ends: merged.ends,
+                error: merged.error,
+            });
             progress(merges.len());
             if self.live_count > 1
                 && let Some(candidate) = self.best_partner(z)
@@ -626,7 +672,13 @@ pub fn merge_tree(needles: &[Needle], options: &MergeOptions, progress: &dyn Mer
     for (&(lo, hi), (merges, root)) in groups.iter().zip(local) {
         let inputs = (hi - lo) as u32;
         let base = (n + merged.len()) as u32;
-        let global = |local: u32| if local < inputs { lo as u32 + local } else { base + (local - inputs) };
+        let global = |local: u32| {
+            if local < inputs {
+                lo as u32 + local
+            } else {
+                base + (local - inputs)
+            }
+        };
         for m in &merges {
             merged.push(MergedLine {
                 ends: m.ends,
@@ -657,7 +709,13 @@ pub fn merge_tree(needles: &[Needle], options: &MergeOptions, progress: &dyn Mer
         }
     });
     let base = (n + merged.len()) as u32;
-    let global = |local: u32| if local < inputs { group_roots[local as usize].0 } else { base + (local - inputs) };
+    let global = |local: u32| {
+        if local < inputs {
+            group_roots[local as usize].0
+        } else {
+            base + (local - inputs)
+        }
+    };
     for m in &merges {
         merged.push(MergedLine {
             ends: m.ends,
@@ -671,7 +729,7 @@ pub fn merge_tree(needles: &[Needle], options: &MergeOptions, progress: &dyn Mer
 /// Position of a needle end.
 pub fn endpoint_position(needles: &[Needle], end: EndpointId) -> Vec3 {
     let needle = &needles[(end / 2) as usize];
-    if end % 2 == 0 { needle.base } else { needle.tip }
+    if end.is_multiple_of(2) { needle.base } else { needle.tip }
 }
 
 fn line_from_ends(needles: &[Needle], ends: [EndpointId; 2], error: f32, needle_count: u32) -> Line {
@@ -705,8 +763,20 @@ mod tests {
 
     #[test]
     fn new_line_takes_farthest_ends_and_error_contains_children() {
-        let y1 = Line { a: Vec3::ZERO, b: Vec3::X, ends: [0, 1], error: 0.002, needles: 1 };
-        let y2 = Line { a: Vec3::new(0.2, 0.1, 0.0), b: Vec3::new(1.5, 0.1, 0.0), ends: [2, 3], error: 0.001, needles: 1 };
+        let y1 = Line {
+            a: Vec3::ZERO,
+            b: Vec3::X,
+            ends: [0, 1],
+            error: 0.002,
+            needles: 1,
+        };
+        let y2 = Line {
+            a: Vec3::new(0.2, 0.1, 0.0),
+            b: Vec3::new(1.5, 0.1, 0.0),
+            ends: [2, 3],
+            error: 0.001,
+            needles: 1,
+        };
         let x = merge_lines(&y1, &y2);
         assert_eq!(x.ends, [0, 3]);
         assert_eq!(x.needles, 2);
@@ -725,7 +795,11 @@ mod tests {
         let c = merge_cost(&ctx, (Vec3::ZERO, Vec3::X, 1), (Vec3::X, Vec3::X * 2.0, 1));
         assert!((c - 0.5 * 0.01).abs() < 1e-7);
         // Perpendicular, 1 m apart, G = 3 and 7: 0.25·1 + 0.25·0.1 + 0.5·0.07.
-        let c = merge_cost(&ctx, (Vec3::ZERO, Vec3::X, 3), (Vec3::new(0.0, 1.0, -1.0), Vec3::new(0.0, 1.0, 1.0), 7));
+        let c = merge_cost(
+            &ctx,
+            (Vec3::ZERO, Vec3::X, 3),
+            (Vec3::new(0.0, 1.0, -1.0), Vec3::new(0.0, 1.0, 1.0), 7),
+        );
         assert!((c - (0.25 + 0.025 + 0.035)).abs() < 1e-6, "{c}");
     }
 
@@ -741,7 +815,13 @@ mod tests {
             .map(|i| {
                 let a = Vec3::new(next(), next(), next());
                 let b = a + Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * 0.2;
-                Line { a, b, ends: [2 * i, 2 * i + 1], error: 0.001 + next() * 0.001, needles: 1 }
+                Line {
+                    a,
+                    b,
+                    ends: [2 * i, 2 * i + 1],
+                    error: 0.001 + next() * 0.001,
+                    needles: 1,
+                }
             })
             .collect()
     }

@@ -53,12 +53,7 @@ impl Default for ViewParams {
 impl ViewParams {
     /// Spatial error of a tree at `distance` metres; see [`spatial_error`].
     pub fn spatial_error(&self, distance: f32) -> f32 {
-        spatial_error(
-            self.pixel_error,
-            distance,
-            self.vertical_fov,
-            self.viewport_height_px,
-        )
+        spatial_error(self.pixel_error, distance, self.vertical_fov, self.viewport_height_px)
     }
 
     /// Metres of spatial error per metre of distance: `e = slope · D`.
@@ -178,11 +173,19 @@ pub fn needle_form(rho: f32, max_sides: u8) -> NeedleForm {
 /// Defined results: `ρ < 2` gives `δ` (a line is never more than opaque);
 /// `δ` is clamped to `[0, 1]`; NaN inputs give 0.
 pub fn line_opacity(rho: f32, transition: f32) -> f32 {
-    let transition = if transition.is_nan() { 0.0 } else { transition.clamp(0.0, 1.0) };
+    let transition = if transition.is_nan() {
+        0.0
+    } else {
+        transition.clamp(0.0, 1.0)
+    };
     if rho.is_nan() {
         return 0.0;
     }
-    let t = if rho <= LINE_RELATIVE_ERROR { 1.0 } else { LINE_RELATIVE_ERROR / rho };
+    let t = if rho <= LINE_RELATIVE_ERROR {
+        1.0
+    } else {
+        LINE_RELATIVE_ERROR / rho
+    };
     t * transition
 }
 

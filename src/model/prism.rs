@@ -42,7 +42,11 @@ impl TriangleMesh {
 /// possible to the needle's normal so a 3-sided prism shows a flat face to it.
 fn radial_frame(axis: Vec3, normal: Vec3) -> (Vec3, Vec3) {
     let u = (normal - axis * normal.dot(axis)).normalize_or_zero();
-    let u = if u == Vec3::ZERO { axis.any_orthonormal_vector() } else { u };
+    let u = if u == Vec3::ZERO {
+        axis.any_orthonormal_vector()
+    } else {
+        u
+    };
     (u, axis.cross(u))
 }
 

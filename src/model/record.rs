@@ -41,7 +41,10 @@ impl ErrorRange {
     fn of(values: impl IntoIterator<Item = f32>) -> Option<Self> {
         values.into_iter().fold(None, |acc, v| match acc {
             None => Some(Self { min: v, max: v }),
-            Some(r) => Some(Self { min: r.min.min(v), max: r.max.max(v) }),
+            Some(r) => Some(Self {
+                min: r.min.min(v),
+                max: r.max.max(v),
+            }),
         })
     }
 
@@ -146,7 +149,11 @@ impl LodRecord {
         }
         let mut expected_group = 0u32;
         for (i, needle) in needles.iter().enumerate() {
-            if !(needle.base.is_finite() && needle.tip.is_finite() && needle.normal.is_finite() && needle.radius.is_finite()) {
+            if !(needle.base.is_finite()
+                && needle.tip.is_finite()
+                && needle.normal.is_finite()
+                && needle.radius.is_finite())
+            {
                 return Err(RecordInvalid::NonFinite("needles"));
             }
             if !needle.is_valid() {
@@ -166,7 +173,10 @@ impl LodRecord {
             return Err(RecordInvalid::NonFinite("wood"));
         }
         let colors = material.needle_color.iter().chain(&material.wood_color);
-        if !colors.chain([&material.roughness, &material.reflectance]).all(|x| x.is_finite()) {
+        if !colors
+            .chain([&material.roughness, &material.reflectance])
+            .all(|x| x.is_finite())
+        {
             return Err(RecordInvalid::NonFinite("material"));
         }
         if bake.bake_seconds.is_some_and(|s| !s.is_finite()) {
@@ -197,7 +207,11 @@ impl LodRecord {
             parent[c1] = id as u32;
             let (mut count, mut area) = (0u32, 0f32);
             for c in [c0, c1] {
-                let child_error = if c < n { line_error(needles[c].radius) } else { merged[c - n].error };
+                let child_error = if c < n {
+                    line_error(needles[c].radius)
+                } else {
+                    merged[c - n].error
+                };
                 if line.error < child_error {
                     return Err(RecordInvalid::ErrorNotMonotone(k));
                 }
@@ -221,7 +235,10 @@ impl LodRecord {
                 min: prism_error(min_radius, max_sides),
                 max: prism_error(max_radius, super::metric::MIN_PRISM_SIDES),
             },
-            original_lines: ErrorRange { min: line_error(min_radius), max: line_error(max_radius) },
+            original_lines: ErrorRange {
+                min: line_error(min_radius),
+                max: line_error(max_radius),
+            },
             merged_lines: ErrorRange::of(merged.iter().map(|m| m.error)),
         };
         Ok(Self {
@@ -259,7 +276,11 @@ impl LodRecord {
     pub fn node_error(&self, node: u32) -> f32 {
         let n = self.needles.len();
         let node = node as usize;
-        if node < n { line_error(self.needles[node].radius) } else { self.merged[node - n].error }
+        if node < n {
+            line_error(self.needles[node].radius)
+        } else {
+            self.merged[node - n].error
+        }
     }
 
     /// Parent of node `node`, or [`NO_PARENT`] for a root.
@@ -278,20 +299,30 @@ impl LodRecord {
 
     /// Roots of the merge forest (nodes without parent), ascending.
     pub fn roots(&self) -> Vec<u32> {
-        (0..self.node_count() as u32).filter(|&k| self.parent[k as usize] == NO_PARENT).collect()
+        (0..self.node_count() as u32)
+            .filter(|&k| self.parent[k as usize] == NO_PARENT)
+            .collect()
     }
 
     /// Needles stood for by node `node` (1 for an original line).
     pub fn node_needle_count(&self, node: u32) -> u32 {
         let n = self.needles.len();
-        if (node as usize) < n { 1 } else { self.merged_needles[node as usize - n] }
+        if (node as usize) < n {
+            1
+        } else {
+            self.merged_needles[node as usize - n]
+        }
     }
 
     /// Summed side-on silhouette area (`2R · length`) of the needles stood
     /// for by node `node`, m²: what an area-preserving opacity needs.
     pub fn node_needle_area(&self, node: u32) -> f32 {
         let n = self.needles.len();
-        if (node as usize) < n { self.needles[node as usize].side_area() } else { self.merged_area[node as usize - n] }
+        if (node as usize) < n {
+            self.needles[node as usize].side_area()
+        } else {
+            self.merged_area[node as usize - n]
+        }
     }
 
     /// The two ends of node `node`'s line: positions and (the needles') normals.
@@ -302,7 +333,12 @@ impl LodRecord {
         } else {
             self.merged[node as usize - n].ends
         };
-        ends.map(|e| (endpoint_position(&self.needles, e), self.needles[(e / 2) as usize].normal))
+        ends.map(|e| {
+            (
+                endpoint_position(&self.needles, e),
+                self.needles[(e / 2) as usize].normal,
+            )
+        })
     }
 
     /// Error ranges of the three parts.

@@ -1,0 +1,224 @@
+//! The `conifer` command line, run as a user runs it: outputs, JSON keys,
+//! and clear errors (non-zero exit, file named, no panic) on bad input.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn conifer(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_conifer"))
+        .args(args)
+        .output()
+        .expect("conifer runs")
+}
+
+fn json(output: &Output) -> Value {
+    assert!(
+        output.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_slice(&output.stdout).expect("one JSON object on stdout")
+}
+
+/// Asserts a clean failure: non-zero exit, a message naming `needle`, no panic.
+fn assert_fails_naming(output: &Output, needle: &str) -> String {
+    let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+    assert!(!output.status.success(), "expected failure, stderr: {stderr}");
+    assert!(stderr.contains(needle), "stderr does not name {needle:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "panic: {stderr}");
+    stderr
+}
+
+fn baked(dir: &Path, preset: &str, needles: &str) -> PathBuf {
+    let out = dir.join(format!("{preset}.conifer"));
+    let output = conifer(&[
+        "bake",
+        "--preset",
+        preset,
+        "--seed",
+        "3",
+        "--needles",
+        needles,
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    out
+}
+
+#[test]
+fn bake_inspect_and_cut_a_preset() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = baked(dir.path(), "norway-spruce", "6000");
+    let path = file.to_str().unwrap();
+
+    let inspect = json(&conifer(&["inspect", path, "--json"]));
+    let needles = inspect["needles"].as_u64().unwrap();
+    assert!((4000..=8000).contains(&needles), "{needles}");
+    assert_eq!(inspect["lines_original"].as_u64(), Some(needles));
+    assert_eq!(inspect["lines_merged"].as_u64(), Some(needles - 1));
+    assert_eq!(inspect["roots"].as_u64(), Some(1));
+    assert!(inspect["groups"].as_u64().unwrap() > 10);
+    for part in ["cylinders", "original_lines", "merged_lines"] {
+        let range = inspect["error_ranges"][part].as_array().unwrap();
+        assert!(range[0].as_f64().unwrap() <= range[1].as_f64().unwrap());
+    }
+    let bytes = inspect["bytes"].as_u64().unwrap();
+    assert_eq!(bytes, std::fs::metadata(&file).unwrap().len());
+    assert!((inspect["bytes_per_needle"].as_f64().unwrap() - bytes as f64 / needles as f64).abs() < 1e-9);
+    assert!(inspect["bake_seconds"].as_f64().unwrap() > 0.0);
+
+    let mut previous_primitives = u64::MAX;
+    for distance in ["0.5", "2", "10", "40", "160", "1000"] {
+        let cut = json(&conifer(&["cut", path, "--distance", distance, "--json"]));
+        assert_eq!(cut["needles_covered"].as_u64(), Some(needles), "at {distance} m");
+        let triangles = cut["triangles"].as_u64().unwrap();
+        let segments = cut["line_segments"].as_u64().unwrap();
+        assert_eq!(
+            segments,
+            cut["lines_original"].as_u64().unwrap() + cut["lines_merged"].as_u64().unwrap()
+        );
+        let prism_total: u64 = cut["prism_sides"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_u64().unwrap())
+            .sum();
+        assert_eq!(prism_total, cut["prisms"].as_u64().unwrap());
+        assert!(triangles + segments <= previous_primitives, "cost grew at {distance} m");
+        previous_primitives = triangles + segments;
+    }
+    let close = json(&conifer(&["cut", path, "--distance", "0.5", "--json"]));
+    assert_eq!(
+        close["prisms"].as_u64(),
+        Some(needles),
+        "every needle is a prism at 0.5 m"
+    );
+    let far = json(&conifer(&["cut", path, "--distance", "1000", "--json"]));
+    assert_eq!(far["prisms"].as_u64(), Some(0));
+    assert!(far["line_segments"].as_u64().unwrap() < needles / 10);
+}
+
+#[test]
+fn preview_writes_a_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = baked(dir.path(), "scots-pine", "5000");
+    let png = dir.path().join("pine.png");
+    let report = json(&conifer(&[
+        "preview",
+        file.to_str().unwrap(),
+        "--distance",
+        "12",
+        "--size",
+        "128x160",
+        "-o",
+        png.to_str().unwrap(),
+    ]));
+    assert!(report["render_ms"].as_f64().unwrap() >= 0.0);
+    let image = image::open(&png).unwrap().to_rgba8();
+    assert_eq!(image.dimensions(), (128, 160));
+    let background = *image.get_pixel(0, 0);
+    let drawn = image.pixels().filter(|p| **p != background).count();
+    assert!(drawn > 500, "only {drawn} pixels differ from the background");
+}
+
+#[test]
+fn gltf_input_is_refused_clearly_for_now() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.conifer");
+    let output = conifer(&[
+        "bake",
+        "../shared/fixtures/small_pine_s0.glb",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = assert_fails_naming(&output, "small_pine_s0.glb");
+    assert!(stderr.contains("not yet supported"), "{stderr}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn unknown_preset_lists_the_valid_ones() {
+    let output = conifer(&["bake", "--preset", "oak", "-o", "/tmp/never.conifer"]);
+    let stderr = assert_fails_naming(&output, "oak");
+    for name in ["scots-pine", "norway-spruce", "eastern-white-pine", "lawson-cypress"] {
+        assert!(stderr.contains(name), "{stderr}");
+    }
+}
+
+#[test]
+fn bad_records_are_named_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = baked(dir.path(), "lawson-cypress", "5000");
+    let bytes = std::fs::read(&good).unwrap();
+
+    let missing = dir.path().join("missing.conifer");
+    assert_fails_naming(&conifer(&["inspect", missing.to_str().unwrap()]), "missing.conifer");
+
+    let truncated = dir.path().join("truncated.conifer");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    let stderr = assert_fails_naming(&conifer(&["inspect", truncated.to_str().unwrap()]), "truncated.conifer");
+    assert!(stderr.contains("truncated"), "{stderr}");
+
+    let corrupted = dir.path().join("corrupted.conifer");
+    let mut flipped = bytes.clone();
+    let middle = flipped.len() / 2;
+    flipped[middle] ^= 0x10;
+    std::fs::write(&corrupted, &flipped).unwrap();
+    let stderr = assert_fails_naming(
+        &conifer(&["cut", corrupted.to_str().unwrap(), "--distance", "10"]),
+        "corrupted.conifer",
+    );
+    assert!(stderr.contains("checksum"), "{stderr}");
+
+    let text = dir.path().join("notes.conifer");
+    std::fs::write(&text, "hello").unwrap();
+    let stderr = assert_fails_naming(
+        &conifer(&["inspect", text.to_str().unwrap(), "--json"]),
+        "notes.conifer",
+    );
+    assert!(stderr.contains("not a conifer LOD record"), "{stderr}");
+}
+
+#[test]
+fn bad_views_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = baked(dir.path(), "lawson-cypress", "5000");
+    let path = file.to_str().unwrap();
+    assert_fails_naming(&conifer(&["cut", path, "--distance=-1"]), "--distance");
+    assert_fails_naming(&conifer(&["cut", path, "--distance", "NaN"]), "--distance");
+    assert_fails_naming(
+        &conifer(&["cut", path, "--distance", "5", "--height-px", "0"]),
+        "--height-px",
+    );
+    assert_fails_naming(
+        &conifer(&["cut", path, "--distance", "5", "--transition", "1.5"]),
+        "--transition",
+    );
+    assert_fails_naming(
+        &conifer(&["preview", path, "--distance", "5", "--size", "0x0", "-o", "/tmp/x.png"]),
+        "--size",
+    );
+}
+
+#[test]
+fn a_failed_bake_keeps_the_previous_record() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = baked(dir.path(), "lawson-cypress", "5000");
+    let before = std::fs::read(&file).unwrap();
+    // Invalid options fail before anything is written.
+    let output = conifer(&[
+        "bake",
+        "--preset",
+        "lawson-cypress",
+        "--max-sides",
+        "2",
+        "-o",
+        file.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&output, "max sides");
+    assert_eq!(std::fs::read(&file).unwrap(), before);
+    let entries = std::fs::read_dir(dir.path()).unwrap().count();
+    assert_eq!(entries, 1, "no temporary file left behind");
+}

@@ -1,0 +1,47 @@
+//! Table 1 of the paper, in its spirit: the eastern white pine preset seen at
+//! the paper's four distances (45° vertical FOV, 1536 px, ε = 1). The paper's
+//! 10-year-old white pine used 23,310 / 14,391 / 6,212 / 2,022 lines there.
+
+use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake};
+
+const DISTANCES: [f32; 4] = [12.22, 26.71, 56.15, 118.40];
+const PAPER_LINES: [u64; 4] = [23_310, 14_391, 6_212, 2_022];
+
+#[test]
+fn lines_fall_with_distance_like_table_1() {
+    let tree = generate(Species::EasternWhitePine, &GenerateOptions::default());
+    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    let view = ViewParams {
+        vertical_fov: 45f32.to_radians(),
+        viewport_height_px: 1536.0,
+        pixel_error: PixelError(1.0),
+    };
+    println!("eastern-white-pine, {} needles", record.needle_count());
+    println!(
+        "{:>10} {:>10} {:>8} {:>10} {:>10} {:>10} {:>12}",
+        "distance", "e (m)", "prisms", "original", "merged", "lines", "paper lines"
+    );
+    let mut previous = u64::MAX;
+    let mut counts = Vec::new();
+    for (distance, paper) in DISTANCES.into_iter().zip(PAPER_LINES) {
+        let e = view.spatial_error(distance);
+        let cut = record.cut(e);
+        let stats = record.cut_stats(&cut);
+        println!(
+            "{distance:>10.2} {e:>10.5} {:>8} {:>10} {:>10} {:>10} {paper:>12}",
+            stats.prisms, stats.lines_original, stats.lines_merged, stats.line_segments
+        );
+        assert_eq!(stats.needles_covered, record.needle_count() as u64);
+        // Like the paper's tree, no polygons at any of these distances.
+        assert_eq!(stats.prisms, 0, "at {distance} m");
+        // Never more lines farther away; equal where no merge error lies
+        // between the two spatial errors (the preset's fascicles fan out, so
+        // their first merges cost more than 14 mm).
+        assert!(stats.line_segments <= previous, "lines must not grow with distance");
+        previous = stats.line_segments;
+        counts.push(stats.line_segments);
+    }
+    assert!(counts[3] * 2 < counts[0], "far view must use under half the near view's lines: {counts:?}");
+    assert!(counts[3] < counts[2] && counts[2] < counts[1], "{counts:?}");
+}
