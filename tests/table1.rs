@@ -42,6 +42,9 @@ fn lines_fall_with_distance_like_table_1() {
         previous = stats.line_segments;
         counts.push(stats.line_segments);
     }
-    assert!(counts[3] * 2 < counts[0], "far view must use under half the near view's lines: {counts:?}");
+    assert!(
+        counts[3] * 2 < counts[0],
+        "far view must use under half the near view's lines: {counts:?}"
+    );
     assert!(counts[3] < counts[2] && counts[2] < counts[1], "{counts:?}");
 }
