@@ -16,6 +16,7 @@
 use glam::{Mat4, Vec2, Vec3};
 use image::RgbaImage;
 
+use crate::model::prism::TriangleMesh;
 use crate::model::{Cut, LodRecord, Needle, TreeInput, WoodSegment};
 
 /// Fraction of the light every surface gets regardless of orientation.
@@ -129,6 +130,30 @@ pub fn cut_primitives(record: &LodRecord, cut: &Cut, transition: f32) -> Vec<Pre
     primitives
 }
 
+/// One flat triangle to draw (imported wood meshes), shaded with its face
+/// normal, two-sided.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PreviewTriangle {
+    /// Corners, world space (metres).
+    pub corners: [Vec3; 3],
+    /// Linear RGB colour.
+    pub color: [f32; 3],
+}
+
+/// The triangles of `mesh` in one colour.
+pub fn mesh_triangles(mesh: &TriangleMesh, color: [f32; 3]) -> Vec<PreviewTriangle> {
+    mesh.indices
+        .chunks_exact(3)
+        .filter_map(|t| {
+            let corner = |k: usize| mesh.positions.get(t[k] as usize).copied();
+            Some(PreviewTriangle {
+                corners: [corner(0)?, corner(1)?, corner(2)?],
+                color,
+            })
+        })
+        .collect()
+}
+
 /// A perspective camera looking from `eye` at `target`, +Y up.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PreviewCamera {
@@ -206,6 +231,18 @@ impl Default for PreviewOptions {
 /// 0×0 image; a degenerate camera (eye on target, not finite) gives the
 /// background; primitives with non-finite numbers are skipped.
 pub fn render_preview(primitives: &[PreviewPrimitive], camera: &PreviewCamera, options: &PreviewOptions) -> RgbaImage {
+    render_preview_scene(primitives, &[], camera, options)
+}
+
+/// [`render_preview`] with flat triangles too (an imported tree's wood
+/// mesh); triangles reaching behind the near plane are skipped, as are
+/// those with non-finite corners.
+pub fn render_preview_scene(
+    primitives: &[PreviewPrimitive],
+    triangles: &[PreviewTriangle],
+    camera: &PreviewCamera,
+    options: &PreviewOptions,
+) -> RgbaImage {
     if camera.width == 0 || camera.height == 0 {
         return RgbaImage::new(0, 0);
     }
@@ -217,6 +254,7 @@ pub fn render_preview(primitives: &[PreviewPrimitive], camera: &PreviewCamera, o
             .iter()
             .filter(|p| p.is_drawable())
             .filter_map(|p| projection.project(p, light))
+            .chain(triangles.iter().filter_map(|t| projection.project_triangle(t, light)))
             .collect();
         quads.sort_unstable_by(|x, y| y.depth.total_cmp(&x.depth));
         for quad in &quads {
@@ -282,6 +320,27 @@ impl Projection {
             alpha,
             0.5 * (depth_a + depth_b),
         );
+        quad.corners.iter().all(|c| c.is_finite()).then_some(quad)
+    }
+
+    /// The triangle projected (a quad with a repeated corner), or `None`
+    /// when a corner is behind the near plane or not finite.
+    fn project_triangle(&self, triangle: &PreviewTriangle, light: Vec3) -> Option<ScreenQuad> {
+        let view = triangle.corners.map(|c| self.view.transform_point3(c));
+        if view.iter().any(|v| !v.is_finite() || -v.z < NEAR) || !triangle.color.iter().all(|c| c.is_finite()) {
+            return None;
+        }
+        let [a, b, c] = view.map(|v| self.to_screen(v, -v.z));
+        let [p, q, r] = triangle.corners;
+        let diffuse = (q - p).cross(r - p).try_normalize().map_or(0.5, |n| n.dot(light).abs());
+        let factor = AMBIENT + (1.0 - AMBIENT) * diffuse;
+        let quad = ScreenQuad {
+            corners: [a, b, c, c],
+            mostly_horizontal: false,
+            color: triangle.color.map(|x| (x * factor).max(0.0)),
+            alpha: 1.0,
+            depth: -(view[0].z + view[1].z + view[2].z) / 3.0,
+        };
         quad.corners.iter().all(|c| c.is_finite()).then_some(quad)
     }
 
@@ -649,6 +708,28 @@ mod tests {
         let behind = white(Vec3::new(0.0, 0.0, 11.0), Vec3::new(1.0, 0.0, 12.0), 0.2);
         let image = render_preview(&[through, behind], &camera, &options(2));
         assert!(image.pixels().any(|p| p.0[0] > 0), "the visible part is drawn");
+    }
+
+    #[test]
+    fn triangles_fill_their_area() {
+        let camera = camera(64);
+        let metres_per_pixel = camera.pixel_height_at(10.0);
+        // A right triangle of legs 32 px, centred: half of a 32×32 square.
+        let leg = 32.0 * metres_per_pixel;
+        let triangle = PreviewTriangle {
+            corners: [Vec3::ZERO, Vec3::new(leg, 0.0, 0.0), Vec3::new(0.0, leg, 0.0)],
+            color: [1.0; 3],
+        };
+        let image = render_preview_scene(&[], &[triangle], &camera, &options(2));
+        let covered: f32 = image.pixels().map(|p| srgb_to_linear(p.0[0])).sum();
+        assert!((covered - 512.0).abs() < 16.0, "covered {covered} px");
+        // Behind the eye: nothing drawn.
+        let behind = PreviewTriangle {
+            corners: triangle.corners.map(|c| c + Vec3::Z * 20.0),
+            ..triangle
+        };
+        let image = render_preview_scene(&[], &[behind], &camera, &options(2));
+        assert!(image.pixels().all(|p| p.0 == BLACK));
     }
 
     #[test]

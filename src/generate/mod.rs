@@ -177,6 +177,7 @@ pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
         name: format!("{}-s{}", species.name(), options.seed),
         needles,
         wood: skeleton.wood,
+        wood_mesh: Default::default(),
         material: params.material,
     }
 }

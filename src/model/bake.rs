@@ -38,6 +38,10 @@ pub enum BakeError {
         /// Index of the needle in the input.
         index: usize,
     },
+    /// The wood mesh has an index out of range, a partial triangle, a
+    /// normal count unlike its position count, or a non-finite number.
+    #[error("the wood mesh is inconsistent (index out of range, partial triangle or non-finite number)")]
+    InvalidWoodMesh,
     /// `max_sides` is outside `[3, 64]`.
     #[error("max sides {0} is outside [3, 64]")]
     MaxSides(u8),
@@ -103,6 +107,9 @@ pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgres
     if let Some(index) = input.needles.iter().position(|n| !n.is_valid()) {
         return Err(BakeError::InvalidNeedle { index });
     }
+    if !input.wood_mesh.is_valid() {
+        return Err(BakeError::InvalidWoodMesh);
+    }
 
     // Renumber groups by first appearance, then sort stably by group.
     let mut renumber = std::collections::HashMap::new();
@@ -120,11 +127,16 @@ pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgres
         bake_seconds: None,
         source: input.name.clone(),
     };
+    let mut wood_mesh = input.wood_mesh.clone();
+    for normal in &mut wood_mesh.normals {
+        *normal = snap_normal(*normal);
+    }
     let mut record = LodRecord::from_parts(
         input.name.clone(),
         needles,
         forest.merged,
         input.wood.clone(),
+        wood_mesh,
         input.material,
         options.max_sides,
         info,

@@ -18,13 +18,20 @@
 //! * each merged line as its two children (varint distances back from its own
 //!   id), one byte saying which two of the children's four ends it keeps, and
 //!   its error (f32);
-//! * wood segments, material and bake information.
+//! * wood segments, material and bake information;
+//! * the wood mesh of imported trees: positions (f32), normals (4-byte
+//!   octahedral) and indices as zigzag varint differences from the previous
+//!   index (neighbouring triangles share nearby vertices: 1–2 bytes each).
+//!
+//! Version 2 added the wood mesh; version 1 files are refused with
+//! [`RecordError::UnsupportedVersion`] (re-bake them).
 //!
 //! Decoding checks everything: a truncated, corrupted, wrong-version,
 //! malformed or NaN-carrying file gives a [`RecordError`], never a panic.
 
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
+use super::prism::TriangleMesh;
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -35,7 +42,7 @@ use std::path::Path;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written, and the only one read.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Size of the fixed header before the payload.
 pub const HEADER_BYTES: usize = 24;
@@ -94,8 +101,53 @@ struct MergedEntry {
     error: f32,
 }
 
+/// The wood mesh as stored.
+#[derive(Default, Serialize, Deserialize)]
+struct StoredMesh {
+    positions: Vec<[f32; 3]>,
+    normals: Vec<[u8; 4]>,
+    /// `index[k] − index[k − 1]` (the first relative to 0), zigzag varints.
+    index_steps: Vec<i64>,
+}
+
+impl StoredMesh {
+    fn encode(mesh: &TriangleMesh) -> Self {
+        let mut previous = 0i64;
+        Self {
+            positions: mesh.positions.iter().map(|p| p.to_array()).collect(),
+            normals: mesh.normals.iter().map(|&n| encode_normal(n)).collect(),
+            index_steps: mesh
+                .indices
+                .iter()
+                .map(|&i| {
+                    let step = i as i64 - previous;
+                    previous = i as i64;
+                    step
+                })
+                .collect(),
+        }
+    }
+
+    fn decode(self) -> Result<TriangleMesh, RecordError> {
+        let mut previous = 0i64;
+        let mut indices = Vec::with_capacity(self.index_steps.len());
+        for step in self.index_steps {
+            previous = previous
+                .checked_add(step)
+                .filter(|i| (0..=u32::MAX as i64).contains(i))
+                .ok_or(RecordInvalid::BadWoodMesh)?;
+            indices.push(previous as u32);
+        }
+        Ok(TriangleMesh {
+            positions: self.positions.into_iter().map(Vec3::from).collect(),
+            normals: self.normals.into_iter().map(decode_normal).collect(),
+            indices,
+        })
+    }
+}
+
 #[derive(Serialize, Deserialize)]
-struct PayloadV1 {
+struct Payload {
     name: String,
     source: String,
     bake_seconds: Option<f64>,
@@ -109,6 +161,7 @@ struct PayloadV1 {
     normals: Vec<[u8; 4]>,
     merged: Vec<MergedEntry>,
     wood: Vec<[f32; 8]>,
+    wood_mesh: StoredMesh,
 }
 
 /// Octahedral encoding of a unit vector in 2 × 16 bits
@@ -186,7 +239,7 @@ pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
         });
     }
     let w = record.bake.weights;
-    let payload = PayloadV1 {
+    let payload = Payload {
         name: record.name.clone(),
         source: record.bake.source.clone(),
         bake_seconds: record.bake.bake_seconds,
@@ -207,6 +260,7 @@ pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
                 [a.x, a.y, a.z, b.x, b.y, b.z, s.start_radius, s.end_radius]
             })
             .collect(),
+        wood_mesh: StoredMesh::encode(&record.wood_mesh),
     };
     let body = postcard::to_allocvec(&payload).map_err(|e| RecordError::Malformed(e.to_string()))?;
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
@@ -260,11 +314,11 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     if stored != computed {
         return Err(RecordError::ChecksumMismatch { stored, computed });
     }
-    let payload: PayloadV1 = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    let payload: Payload = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
     payload_to_record(payload)
 }
 
-fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
+fn payload_to_record(p: Payload) -> Result<LodRecord, RecordError> {
     let n = p.bases.len();
     if p.tips.len() != n || p.radii.len() != n || p.normals.len() != n {
         return Err(RecordError::Malformed("needle arrays differ in length".into()));
@@ -330,11 +384,13 @@ fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
             end_radius: w[7],
         })
         .collect();
+    let wood_mesh = p.wood_mesh.decode()?;
     Ok(LodRecord::from_parts(
         p.name,
         needles,
         merged,
         wood,
+        wood_mesh,
         p.material,
         p.max_sides,
         bake,
@@ -346,6 +402,14 @@ fn payload_to_record(p: PayloadV1) -> Result<LodRecord, RecordError> {
 /// never leaves a half-written record (nor damages one already there).
 pub fn write_record(record: &LodRecord, path: &Path) -> Result<u64, RecordError> {
     let bytes = encode_record(record)?;
+    write_atomically(path, &bytes)?;
+    Ok(bytes.len() as u64)
+}
+
+/// Writes `bytes` to a temporary file beside `path` and renames it over
+/// `path` once complete and synced; on failure the temporary file is
+/// removed and `path` is untouched.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -356,15 +420,14 @@ pub fn write_record(record: &LodRecord, path: &Path) -> Result<u64, RecordError>
     let tmp = dir.join(format!(".{}.tmp-{}", file_name.to_string_lossy(), std::process::id()));
     let result = (|| {
         let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(&bytes)?;
+        file.write_all(bytes)?;
         file.sync_all()?;
         std::fs::rename(&tmp, path)
     })();
-    if let Err(e) = result {
+    if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
-        return Err(e.into());
     }
-    Ok(bytes.len() as u64)
+    result
 }
 
 /// Reads and checks a record file.

@@ -1,5 +1,6 @@
 //! The input of the LOD model: needles (the paper's cylinders) and wood.
 
+use super::prism::TriangleMesh;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
@@ -102,8 +103,11 @@ pub struct TreeInput {
     pub name: String,
     /// The needles. Group ids need not be contiguous or sorted.
     pub needles: Vec<Needle>,
-    /// Trunk and branches.
+    /// Trunk and branches as cylinders (procedural trees).
     pub wood: Vec<WoodSegment>,
+    /// Trunk and branches as a triangle mesh (imported trees), drawn as is.
+    #[serde(default)]
+    pub wood_mesh: TriangleMesh,
     /// Appearance.
     pub material: FoliageMaterial,
 }

@@ -5,6 +5,7 @@
 use super::metric::MIN_PRISM_SIDES;
 use super::needle::Needle;
 use glam::Vec3;
+use serde::{Deserialize, Serialize};
 use std::f32::consts::TAU;
 
 /// Triangles of one capped `sides`-sided prism: `2m` for the sides plus
@@ -21,7 +22,7 @@ pub fn prism_vertex_count(sides: u8) -> u32 {
 }
 
 /// An indexed triangle list with per-vertex normals.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct TriangleMesh {
     /// Vertex positions, metres.
     pub positions: Vec<Vec3>,
@@ -35,6 +36,28 @@ impl TriangleMesh {
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3
+    }
+
+    /// `true` when there are no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.indices.is_empty()
+    }
+
+    /// `true` when the mesh is consistent: one normal per position, whole
+    /// triangles, every index in range, every number finite.
+    pub fn is_valid(&self) -> bool {
+        self.normals.len() == self.positions.len()
+            && self.indices.len().is_multiple_of(3)
+            && self.indices.iter().all(|&i| (i as usize) < self.positions.len())
+            && self.positions.iter().chain(&self.normals).all(|v| v.is_finite())
+    }
+
+    /// Appends `other`, renumbering its indices.
+    pub fn append(&mut self, other: &TriangleMesh) {
+        let first = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        self.normals.extend_from_slice(&other.normals);
+        self.indices.extend(other.indices.iter().map(|&i| first + i));
     }
 }
 

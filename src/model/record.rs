@@ -20,7 +20,7 @@
 use super::merge::{EndpointId, MergeWeights, MergedLine, endpoint_position};
 use super::metric::{NeedleForm, line_error, needle_form, prism_error, relative_error};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
-use super::prism::prism_triangle_count;
+use super::prism::{TriangleMesh, prism_triangle_count};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -85,8 +85,10 @@ pub struct LodRecord {
     pub needles: Vec<Needle>,
     /// Merged lines in creation order (children before parents).
     pub merged: Vec<MergedLine>,
-    /// Trunk and branches.
+    /// Trunk and branches as cylinders.
     pub wood: Vec<WoodSegment>,
+    /// Trunk and branches as a triangle mesh (imported trees).
+    pub wood_mesh: TriangleMesh,
     /// Appearance.
     pub material: FoliageMaterial,
     /// `Lmax`: most prism sides.
@@ -125,17 +127,23 @@ pub enum RecordInvalid {
     /// A merged line's error is below one of its children's.
     #[error("merged line {0} has an error below a child's")]
     ErrorNotMonotone(usize),
+    /// The wood mesh has an index out of range, a partial triangle, a
+    /// normal count unlike its position count, or a non-finite number.
+    #[error("the wood mesh is inconsistent (index out of range, partial triangle or non-finite number)")]
+    BadWoodMesh,
 }
 
 impl LodRecord {
     /// Builds a record from its stored parts, checking every invariant the
     /// cut relies on (see [`RecordInvalid`]) and deriving parents, needle
     /// counts, areas and the part ranges.
+    #[allow(clippy::too_many_arguments)] // One argument per stored part, checked together.
     pub fn from_parts(
         name: String,
         needles: Vec<Needle>,
         merged: Vec<MergedLine>,
         wood: Vec<WoodSegment>,
+        wood_mesh: TriangleMesh,
         material: FoliageMaterial,
         max_sides: u8,
         bake: BakeInfo,
@@ -171,6 +179,9 @@ impl LodRecord {
         }
         if !wood.iter().all(WoodSegment::is_valid) {
             return Err(RecordInvalid::NonFinite("wood"));
+        }
+        if !wood_mesh.is_valid() {
+            return Err(RecordInvalid::BadWoodMesh);
         }
         let colors = material.needle_color.iter().chain(&material.wood_color);
         if !colors
@@ -246,6 +257,7 @@ impl LodRecord {
             needles,
             merged,
             wood,
+            wood_mesh,
             material,
             max_sides,
             bake,
@@ -350,7 +362,8 @@ impl LodRecord {
     pub fn bounds(&self) -> (Vec3, Vec3) {
         let points = self.needles.iter().flat_map(|x| [x.base, x.tip]);
         let wood = self.wood.iter().flat_map(|w| [w.start, w.end]);
-        super::needle::bounds(points.chain(wood)).unwrap_or((Vec3::ZERO, Vec3::ZERO))
+        let mesh = self.wood_mesh.positions.iter().copied();
+        super::needle::bounds(points.chain(wood).chain(mesh)).unwrap_or((Vec3::ZERO, Vec3::ZERO))
     }
 
     /// The cut at spatial error `e` by the paper's traversal, starting in the
