@@ -19,9 +19,13 @@
 //!   merge forest, the cut, and the binary record file.
 //! * [`generate`]: deterministic procedural conifers (our default input).
 //! * [`preview`]: a small CPU rasterizer for preview pictures.
+//! * [`import`]: trees from glTF files (needles found, split, fitted, grouped).
+//! * [`export`]: glTF files of LOD cuts and of tree inputs.
 #![deny(missing_docs)]
 
+pub mod export;
 pub mod generate;
+pub mod import;
 pub mod model;
 pub mod preview;
 

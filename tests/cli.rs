@@ -124,17 +124,205 @@ fn preview_writes_a_picture() {
 }
 
 #[test]
-fn gltf_input_is_refused_clearly_for_now() {
+fn bake_the_fixture_inspect_and_export() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("x.conifer");
+    let out = dir.path().join("pine.conifer");
     let output = conifer(&[
         "bake",
         "../shared/fixtures/small_pine_s0.glb",
         "-o",
         out.to_str().unwrap(),
+        "--json",
+    ]);
+    let report = json(&output);
+    assert_eq!(report["needles"].as_u64(), Some(48_607));
+    assert_eq!(report["import"]["needles"].as_u64(), Some(48_607));
+    assert_eq!(report["import"]["wood_triangles"].as_u64(), Some(60_224));
+    let inspect = json(&conifer(&["inspect", out.to_str().unwrap(), "--json"]));
+    assert_eq!(inspect["needles"].as_u64(), Some(48_607));
+    assert_eq!(inspect["wood_triangles"].as_u64(), Some(60_224));
+    let radius = inspect["radius"]["median"].as_f64().unwrap();
+    assert!((radius - 0.001_724).abs() < 2e-5, "{radius}");
+    for key in ["radius", "length", "group_size"] {
+        let v = &inspect[key];
+        assert!(v["min"].as_f64().unwrap() <= v["median"].as_f64().unwrap(), "{key}");
+        assert!(v["median"].as_f64().unwrap() <= v["max"].as_f64().unwrap(), "{key}");
+    }
+    assert!(inspect["group_size"]["max"].as_f64().unwrap() <= 128.0);
+
+    let glb = dir.path().join("cut.glb");
+    let export = json(&conifer(&[
+        "export",
+        out.to_str().unwrap(),
+        "--error",
+        "0.03",
+        "-o",
+        glb.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(export["wood_triangles"].as_u64(), Some(60_224));
+    let bytes = std::fs::read(&glb).unwrap();
+    assert_eq!(export["bytes"].as_u64(), Some(bytes.len() as u64));
+    let gltf = gltf::Gltf::from_slice(&bytes).expect("a valid glTF");
+    assert!(gltf.meshes().any(|m| m.name() == Some("lines")));
+    // The same cut as `conifer cut` at that error.
+    let cut = json(&conifer(&["cut", out.to_str().unwrap(), "--distance", "1", "--json"]));
+    assert!(cut["needles_covered"].as_u64() == Some(48_607));
+}
+
+#[test]
+fn needles_names_and_scale_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.conifer");
+    // Naming the wrong geometry: no needles, a clear error.
+    let output = conifer(&[
+        "bake",
+        "../shared/fixtures/small_pine_s0.glb",
+        "--needles",
+        "bark*",
+        "-o",
+        out.to_str().unwrap(),
     ]);
     let stderr = assert_fails_naming(&output, "small_pine_s0.glb");
-    assert!(stderr.contains("not yet supported"), "{stderr}");
+    assert!(
+        stderr.contains("no needle geometry") && stderr.contains("bark*"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+    // Naming the right one, in centimetres.
+    let report = json(&conifer(&[
+        "bake",
+        "../shared/fixtures/small_pine_s0.glb",
+        "--needles",
+        "LEAVES",
+        "--needles",
+        "unused",
+        "--scale",
+        "0.01",
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    let radius = report["import"]["radius"]["median"].as_f64().unwrap();
+    assert!((radius - 0.000_017_24).abs() < 2e-7, "{radius}");
+    // --needles with a preset is a count.
+    let output = conifer(&[
+        "bake",
+        "--preset",
+        "scots-pine",
+        "--needles",
+        "leaves",
+        "-o",
+        "/tmp/never.conifer",
+    ]);
+    assert_fails_naming(&output, "needle count");
+}
+
+#[test]
+fn bad_gltf_files_are_named_errors_and_write_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let fixture = std::fs::read("../shared/fixtures/small_pine_s0.glb").unwrap();
+    let quad = |count: u64, mode: u32, buffer: &str| {
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"nodes":[{{"mesh":0,"name":"leaves"}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1,"mode":{mode}}}]}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":4,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},
+                         {{"bufferView":1,"componentType":5125,"count":{count},"type":"SCALAR"}}],
+            "bufferViews":[{{"buffer":0,"byteLength":48}},{{"buffer":0,"byteOffset":48,"byteLength":24}}],
+            "buffers":[{{"byteLength":72,"uri":"{buffer}"}}]}}"#
+        )
+    };
+    let mut bin: Vec<u8> = [
+        [0.0f32, 0.0, 0.0],
+        [0.0, 0.1, 0.0],
+        [0.002, 0.1, 0.0],
+        [0.002, 0.0, 0.0],
+    ]
+    .iter()
+    .flatten()
+    .flat_map(|x| x.to_le_bytes())
+    .collect();
+    bin.extend([0u32, 1, 2, 0, 2, 3].iter().flat_map(|i| i.to_le_bytes()));
+    std::fs::write(dir.path().join("quad.bin"), &bin).unwrap();
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("notes.glb", b"these are my notes".to_vec(), "not a glTF file"),
+        ("cut.glb", fixture[..fixture.len() / 2].to_vec(), "truncated"),
+        (
+            "trunk.gltf",
+            quad(6, 4, "quad.bin").replace("leaves", "trunk").into_bytes(),
+            "no needle geometry",
+        ),
+        ("nobuffer.gltf", quad(6, 4, "gone.bin").into_bytes(), "gone.bin"),
+        (
+            "huge.gltf",
+            quad(2_000_000_000, 4, "quad.bin").into_bytes(),
+            "2000000000 elements",
+        ),
+        ("lines.gltf", quad(6, 1, "quad.bin").into_bytes(), "LINES"),
+    ];
+    for (name, bytes, cause) in cases {
+        let input = dir.path().join(name);
+        std::fs::write(&input, &bytes).unwrap();
+        let out = dir.path().join(format!("{name}.conifer"));
+        let stderr = assert_fails_naming(
+            &conifer(&["bake", input.to_str().unwrap(), "-o", out.to_str().unwrap()]),
+            name,
+        );
+        assert!(stderr.contains(cause), "{name}: {stderr}");
+        assert!(!out.exists(), "{name}: nothing written");
+    }
+    // A good one, for contrast, from the same buffer file.
+    let input = dir.path().join("good.gltf");
+    std::fs::write(&input, quad(6, 4, "quad.bin")).unwrap();
+    let out = dir.path().join("good.conifer");
+    let report = json(&conifer(&[
+        "bake",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(report["needles"].as_u64(), Some(1));
+    // A failed import leaves an existing record alone, and no temporary files.
+    let before = std::fs::read(&out).unwrap();
+    let notes = dir.path().join("notes.glb");
+    assert_fails_naming(
+        &conifer(&["bake", notes.to_str().unwrap(), "-o", out.to_str().unwrap()]),
+        "notes.glb",
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), before);
+    assert!(
+        std::fs::read_dir(dir.path())
+            .unwrap()
+            .all(|e| !e.unwrap().file_name().to_string_lossy().contains(".tmp"))
+    );
+}
+
+#[test]
+fn export_refuses_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = baked(dir.path(), "lawson-cypress", "5000");
+    let out = dir.path().join("x.glb");
+    for bad in [["--error", "-1"], ["--error", "NaN"]] {
+        let output = conifer(&[
+            "export",
+            file.to_str().unwrap(),
+            bad[0],
+            bad[1],
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert_fails_naming(&output, "--error");
+    }
+    let output = conifer(&[
+        "export",
+        "/nonexistent/x.conifer",
+        "--error",
+        "0.1",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_fails_naming(&output, "x.conifer");
     assert!(!out.exists());
 }
 

@@ -1,12 +1,14 @@
 //! The subcommands of `conifer`.
 
-use super::{BakeArgs, CutArgs, InspectArgs, PreviewArgs, ViewArgs};
+use super::{BakeArgs, CutArgs, ExportArgs, InspectArgs, PreviewArgs, ViewArgs};
+use crate::export::write_cut_glb;
 use crate::generate::{GenerateOptions, Species, generate};
+use crate::import::{ImportOptions, ImportReport, import_gltf};
 use crate::model::merge::PartnerSearch;
 use crate::model::metric::{PixelError, ViewParams, line_opacity, relative_error};
 use crate::model::record::{ErrorRange, LodRecord};
 use crate::model::{BakeOptions, BakeProgress, BakeStage, MergeWeights, read_record, write_record};
-use crate::preview::{PreviewCamera, PreviewOptions, cut_primitives, render_preview};
+use crate::preview::{PreviewCamera, PreviewOptions, cut_primitives, mesh_triangles, render_preview_scene};
 use anyhow::{Context, bail};
 use glam::Vec3;
 use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
@@ -62,28 +64,49 @@ struct BakeReport<'a> {
     generate_seconds: f64,
     bake_seconds: f64,
     write_seconds: f64,
+    /// What the glTF import found (glTF input only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    import: Option<&'a ImportReport>,
 }
 
 pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let started = Instant::now();
+    let mut import_report = None;
     let input = match (&args.preset, &args.input) {
         (Some(name), _) => {
             let species: Species = name.parse().map_err(|e| anyhow::anyhow!("--preset {name}: {e}"))?;
+            let target_needles = match &args.needles[..] {
+                [] => None,
+                [count] => Some(
+                    count
+                        .parse::<usize>()
+                        .map_err(|_| anyhow::anyhow!("--needles with --preset takes a needle count, got {count:?}"))?,
+                ),
+                _ => bail!("--needles with --preset takes one needle count"),
+            };
             let mut tree = generate(
                 species,
                 &GenerateOptions {
                     seed: args.seed,
-                    target_needles: args.needles,
+                    target_needles,
                 },
             );
             tree.name = species.name().to_string();
             tree
         }
         (None, Some(path)) => {
-            bail!(
-                "{}: importing glTF trees is not yet supported by this version of conifer; bake a --preset instead",
-                path.display()
-            )
+            let options = ImportOptions {
+                needle_names: args.needles.clone(),
+                scale: args.scale,
+                ..Default::default()
+            };
+            let (tree, report) =
+                import_gltf(path, &options).with_context(|| format!("{}: cannot import glTF", path.display()))?;
+            if !args.json {
+                print_import(path, &report);
+            }
+            import_report = Some(report);
+            tree
         }
         (None, None) => bail!("give an input file or --preset NAME"),
     };
@@ -129,6 +152,7 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         generate_seconds,
         bake_seconds: record.bake.bake_seconds.unwrap_or(0.0),
         write_seconds: write_started.elapsed().as_secs_f64(),
+        import: import_report.as_ref(),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -147,6 +171,44 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The import summary, on stderr.
+fn print_import(path: &Path, report: &ImportReport) {
+    let source = match &report.group_source {
+        crate::import::GroupSource::Attribute(name) => format!("from the {name} attribute"),
+        crate::import::GroupSource::Primitives => "one per needle primitive".to_string(),
+        crate::import::GroupSource::Inferred(info) => format!(
+            "inferred (base spacing {:.1} mm, link distance {:.1} mm, {} long pieces cut)",
+            info.base_spacing * 1e3,
+            info.link_distance * 1e3,
+            info.pieces_cut
+        ),
+    };
+    eprintln!(
+        "{}: {} needles from {}; {} wood triangles from {} primitive(s)",
+        path.display(),
+        report.needles,
+        report.needle_primitives.join(", "),
+        report.wood_triangles,
+        report.wood_primitives
+    );
+    eprintln!(
+        "  radius {:.2} / {:.2} / {:.2} mm, length {:.1} / {:.1} / {:.1} mm (min / median / max)",
+        report.radius.min * 1e3,
+        report.radius.median * 1e3,
+        report.radius.max * 1e3,
+        report.length.min * 1e3,
+        report.length.median * 1e3,
+        report.length.max * 1e3
+    );
+    eprintln!(
+        "  {} groups {source}, {} / {} / {} needles each",
+        report.groups, report.group_size.min, report.group_size.median, report.group_size.max
+    );
+    for warning in &report.warnings {
+        eprintln!("  warning: {warning}");
+    }
+}
+
 fn load(path: &Path) -> anyhow::Result<(LodRecord, u64)> {
     let record = read_record(path).with_context(|| format!("{}: cannot load record", path.display()))?;
     let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
@@ -154,33 +216,7 @@ fn load(path: &Path) -> anyhow::Result<(LodRecord, u64)> {
 }
 
 /// Smallest, median and largest of a set of numbers.
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
-pub struct MinMedianMax {
-    /// Smallest value.
-    pub min: f64,
-    /// Median (lower median for an even count).
-    pub median: f64,
-    /// Largest value.
-    pub max: f64,
-}
-
-impl MinMedianMax {
-    fn of(mut values: Vec<f64>) -> Self {
-        if values.is_empty() {
-            return Self {
-                min: 0.0,
-                median: 0.0,
-                max: 0.0,
-            };
-        }
-        values.sort_by(f64::total_cmp);
-        Self {
-            min: values[0],
-            median: values[(values.len() - 1) / 2],
-            max: values[values.len() - 1],
-        }
-    }
-}
+pub type MinMedianMax = crate::import::Spread;
 
 /// What `conifer inspect --json` prints.
 #[derive(Debug, Serialize)]
@@ -203,6 +239,8 @@ pub struct InspectReport {
     pub max_sides: u8,
     /// Wood segments.
     pub wood_segments: usize,
+    /// Triangles of the wood mesh (imported trees).
+    pub wood_triangles: usize,
     /// `[min, max]` error of each part, metres.
     pub error_ranges: BTreeMap<&'static str, [f32; 2]>,
     /// Needle radius, metres.
@@ -249,6 +287,7 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
         roots: record.roots().len(),
         max_sides: record.max_sides,
         wood_segments: record.wood.len(),
+        wood_triangles: record.wood_mesh.triangle_count(),
         error_ranges,
         radius: MinMedianMax::of(record.needles.iter().map(|n| n.radius as f64).collect()),
         length: MinMedianMax::of(record.needles.iter().map(|n| n.length() as f64).collect()),
@@ -380,7 +419,7 @@ fn check_view(view: &ViewArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn parse_size(size: &str) -> anyhow::Result<(u32, u32)> {
+pub(super) fn parse_size(size: &str) -> anyhow::Result<(u32, u32)> {
     let parsed = size
         .split_once('x')
         .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)));
@@ -413,7 +452,9 @@ pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
     };
     let started = Instant::now();
     let primitives = cut_primitives(&record, &record.cut(e), args.transition);
-    let image = render_preview(&primitives, &camera, &PreviewOptions::default());
+    let [r, g, b, _] = record.material.wood_color;
+    let wood = mesh_triangles(&record.wood_mesh, [r, g, b]);
+    let image = render_preview_scene(&primitives, &wood, &camera, &PreviewOptions::default());
     let render_ms = started.elapsed().as_secs_f64() * 1e3;
     image
         .save(&args.output)
@@ -432,5 +473,33 @@ pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
             "render_ms": render_ms,
         })
     );
+    Ok(())
+}
+
+pub(super) fn export(args: &ExportArgs) -> anyhow::Result<()> {
+    if !(args.error.is_finite() && args.error >= 0.0) {
+        bail!("--error must be a finite number ≥ 0 (metres), got {}", args.error);
+    }
+    if !(args.transition > 0.0 && args.transition <= 1.0) {
+        bail!("--transition must be in (0, 1], got {}", args.transition);
+    }
+    let (record, _) = load(&args.file)?;
+    let report = write_cut_glb(&record, args.error, args.transition, &args.output)
+        .with_context(|| format!("{}: cannot write glTF", args.output.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        eprintln!(
+            "e = {} m: {} prisms ({} triangles), {} original + {} merged lines, {} wood triangles → {} ({} bytes)",
+            report.spatial_error,
+            report.prisms,
+            report.prism_triangles,
+            report.lines_original,
+            report.lines_merged,
+            report.wood_triangles,
+            args.output.display(),
+            report.bytes
+        );
+    }
     Ok(())
 }

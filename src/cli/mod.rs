@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 pub use commands::{CutReport, InspectReport, MinMedianMax};
 
-/// Continuous-LOD records for coniferous trees: bake, inspect, cut, preview.
+/// Continuous-LOD records for coniferous trees: bake, inspect, cut, preview, export.
 #[derive(Debug, Parser)]
 #[command(name = "conifer", version, about, long_about = None)]
 pub struct Cli {
@@ -31,6 +31,8 @@ pub enum Command {
     Cut(CutArgs),
     /// Render the cut at a viewing distance to a PNG with the CPU preview rasterizer.
     Preview(PreviewArgs),
+    /// Write the cut at a spatial error as a glTF binary (prisms as triangles, lines as LINES).
+    Export(ExportArgs),
 }
 
 /// Arguments of `conifer bake`.
@@ -45,9 +47,14 @@ pub struct BakeArgs {
     /// Seed of the procedural tree.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Approximate needle count of the procedural tree (default: the preset's own).
-    #[arg(long)]
-    pub needles: Option<usize>,
+    /// With --preset: the approximate needle count N of the procedural tree (default: the
+    /// preset's own). With a glTF input: a node, mesh or material NAME holding needle geometry
+    /// (repeatable; any case; `*` wildcards); default: names containing leaf/leaves/needle/foliage.
+    #[arg(long, value_name = "N|NAME")]
+    pub needles: Vec<String>,
+    /// glTF input: metres per file unit (glTF is in metres).
+    #[arg(long, default_value_t = 1.0)]
+    pub scale: f32,
     /// Output record path.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -136,6 +143,25 @@ pub struct PreviewArgs {
     pub output: PathBuf,
 }
 
+/// Arguments of `conifer export`.
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    /// The record.
+    pub file: PathBuf,
+    /// Spatial error e of the cut, metres (see `conifer cut --json` for the e of a view).
+    #[arg(long)]
+    pub error: f32,
+    /// Transition coefficient δ in (0, 1], scaling the lines' opacity.
+    #[arg(long, default_value_t = 1.0)]
+    pub transition: f32,
+    /// Output GLB.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Print one JSON object.
+    #[arg(long)]
+    pub json: bool,
+}
+
 /// Parses `args` (program name first) and runs the command.
 pub fn run<I, T>(args: I) -> anyhow::Result<()>
 where
@@ -149,5 +175,6 @@ where
         Command::Inspect(args) => commands::inspect(&args),
         Command::Cut(args) => commands::cut(&args),
         Command::Preview(args) => commands::preview(&args),
+        Command::Export(args) => commands::export(&args),
     }
 }
