@@ -101,6 +101,29 @@ fn main() {
         started.elapsed().as_secs_f64()
     );
     println!("  groups: {:?}", report.group_source);
+    // The fixture has no groups, but writes each twig's needles one after
+    // another: a base more than 1 cm from the previous one starts a twig.
+    let mut twig = 0u32;
+    let twigs: Vec<u32> = tree
+        .needles
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            if i > 0 && tree.needles[i - 1].base.distance(n.base) > 0.01 {
+                twig += 1;
+            }
+            twig
+        })
+        .collect();
+    let inferred: Vec<u32> = tree.needles.iter().map(|n| n.group).collect();
+    let agreement = group_agreement(&twigs, &inferred);
+    println!(
+        "  against the file's {} twigs (needle order): purity {:.3}, completeness {:.3}, ARI {:.3}",
+        twig + 1,
+        agreement.purity,
+        agreement.completeness,
+        agreement.adjusted_rand_index
+    );
     println!("  orientation: {:?}", report.orientation);
     render_groups(&tree, &out.join("fixture-groups.png"), (900, 1000), None);
     // A close-up of one twig-laden branch: around the needle at the median height.
@@ -160,6 +183,21 @@ fn main() {
             &out.join(format!("{}-groups.png", species.name())),
             (700, 800),
             None,
+        );
+        // A close-up of the outer crown at mid height, where shoots are visible.
+        let (lo, hi) = imported.needle_bounds().expect("needles");
+        let mid_y = 0.5 * (lo.y + hi.y);
+        let outer = imported
+            .needles
+            .iter()
+            .filter(|n| (n.base.y - mid_y).abs() < 0.1 * (hi.y - lo.y))
+            .max_by(|a, b| a.base.x.total_cmp(&b.base.x))
+            .expect("needles at mid height");
+        render_groups(
+            &imported,
+            &out.join(format!("{}-groups-closeup.png", species.name())),
+            (600, 600),
+            Some((outer.base - Vec3::X * 0.15, 0.2)),
         );
     }
 }

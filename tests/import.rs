@@ -166,11 +166,11 @@ fn group_rule_on_trees_with_known_groups() {
     assert!(white_pine.adjusted_rand_index > 0.99, "{white_pine:?}");
     let scots = score(Species::ScotsPine);
     assert!(scots.purity > 0.99 && scots.adjusted_rand_index > 0.95, "{scots:?}");
-    // Spruce shoots interleave (an eighth of the needles have another
-    // shoot's base nearer than any of their own shoot's): a base-distance
-    // rule mixes neighbouring shoots. Measured, not hidden.
+    // Spruce shoots interleave (neighbouring shoots' bases are as close as
+    // a shoot's own): a base-distance rule mixes neighbouring shoots, and
+    // cuts at 128 where the preset cuts at 60. Measured, not hidden.
     let spruce = score(Species::NorwaySpruce);
-    assert!(spruce.purity > 0.15 && spruce.completeness > 0.5, "{spruce:?}");
+    assert!(spruce.purity > 0.25 && spruce.completeness > 0.8, "{spruce:?}");
 }
 
 // ---- hand-made GLBs: the features modelling tools write ----

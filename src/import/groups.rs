@@ -15,9 +15,12 @@
 //!    needle length.
 //! 3. Groups are the connected pieces of the links (single linkage): a
 //!    fascicle, or a run of needles along a shoot.
-//! 4. A piece larger than `max_group` needles (a long twig) is cut into
-//!    even runs along its principal axis, each at most `max_group`: shoot
-//!    segments, so the first merge level stays local.
+//! 4. A piece larger than `max_group` needles (a long twig, or shoots
+//!    joined where they touch) is cut into even runs, each at most
+//!    `max_group`, of a depth-first walk over its links (from its outermost
+//!    needle, nearest neighbour first): the walk follows one shoot to its
+//!    end before turning into the next, so the runs are shoot segments and
+//!    the first merge level stays local.
 //!
 //! Where shoots touch (a side shoot starting within `τ` of a needle of its
 //! parent) single linkage joins them; the accuracy of the rule on trees
@@ -96,12 +99,23 @@ pub fn infer_groups(needles: &[Needle], rule: &GroupRule) -> (Vec<u32>, GroupInf
     let link = if link.is_finite() { link } else { 0.0 };
 
     let mut sets = UnionFind::new(n);
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
     for (i, x) in needles.iter().enumerate() {
         for p in tree.locate_within_distance(x.base.to_array(), link * link) {
-            if p.data > i as u32 {
+            if p.data != i as u32 {
+                neighbours[i].push(p.data);
                 sets.union(i as u32, p.data);
             }
         }
+        // Nearest last: the walk below pops it first.
+        let base = x.base;
+        neighbours[i].sort_by(|&a, &b| {
+            let (da, db) = (
+                needles[a as usize].base.distance(base),
+                needles[b as usize].base.distance(base),
+            );
+            db.total_cmp(&da).then(b.cmp(&a))
+        });
     }
     let mut pieces: std::collections::HashMap<u32, Vec<u32>> = std::collections::HashMap::new();
     let mut order = Vec::new();
@@ -127,11 +141,7 @@ pub fn infer_groups(needles: &[Needle], rule: &GroupRule) -> (Vec<u32>, GroupInf
         let mut members = std::mem::take(pieces.get_mut(&root).expect("collected above"));
         if members.len() > max_group {
             info.pieces_cut += 1;
-            let axis = principal_axis(members.iter().map(|&i| needles[i as usize].base));
-            members.sort_by(|&a, &b| {
-                let (pa, pb) = (needles[a as usize].base.dot(axis), needles[b as usize].base.dot(axis));
-                pa.total_cmp(&pb).then(a.cmp(&b))
-            });
+            members = walk_order(needles, &members, &neighbours);
             let runs = members.len().div_ceil(max_group);
             let run_length = members.len().div_ceil(runs);
             for run in members.chunks(run_length) {
@@ -150,27 +160,33 @@ pub fn infer_groups(needles: &[Needle], rule: &GroupRule) -> (Vec<u32>, GroupInf
     (groups, info)
 }
 
-/// The direction of largest spread of `points` (power iteration).
-fn principal_axis(points: impl Iterator<Item = Vec3> + Clone) -> Vec3 {
-    let (sum, count) = points.clone().fold((Vec3::ZERO, 0.0f32), |(s, c), p| (s + p, c + 1.0));
-    let centre = sum / count.max(1.0);
-    let mut axis = points
-        .clone()
-        .map(|p| p - centre)
-        .max_by(|a, b| a.length_squared().total_cmp(&b.length_squared()))
-        .and_then(Vec3::try_normalize)
-        .unwrap_or(Vec3::Y);
-    for _ in 0..24 {
-        let next = points.clone().fold(Vec3::ZERO, |acc, p| {
-            let d = p - centre;
-            acc + d * d.dot(axis)
-        });
-        match next.try_normalize() {
-            Some(a) => axis = a,
-            None => break,
+/// The members of a linked piece in the order of a depth-first walk over
+/// the links, from the member farthest from the piece's centre, nearest
+/// neighbour first: the walk runs along one shoot to its end before it
+/// turns into another, so even runs of it are pieces of shoots.
+fn walk_order(needles: &[Needle], members: &[u32], neighbours: &[Vec<u32>]) -> Vec<u32> {
+    let centre = members.iter().map(|&i| needles[i as usize].base).sum::<Vec3>() / members.len() as f32;
+    let start = *members
+        .iter()
+        .max_by(|&&a, &&b| {
+            let (da, db) = (
+                needles[a as usize].base.distance(centre),
+                needles[b as usize].base.distance(centre),
+            );
+            da.total_cmp(&db).then(b.cmp(&a))
+        })
+        .expect("a piece has members");
+    let mut seen = std::collections::HashSet::with_capacity(members.len());
+    let mut order = Vec::with_capacity(members.len());
+    let mut stack = vec![start];
+    while let Some(i) = stack.pop() {
+        if !seen.insert(i) {
+            continue;
         }
+        order.push(i);
+        stack.extend(neighbours[i as usize].iter().copied().filter(|j| !seen.contains(j)));
     }
-    axis
+    order
 }
 
 /// How well inferred groups match known ones.

@@ -7,7 +7,7 @@
 //!   [`ImportOptions::needle_names`] is given, whose node, mesh or material
 //!   name matches one of them (any case, `*` matches any run of characters).
 //!   Every other triangle primitive is wood.
-//! * Needles: see [`needles`](self) — split into edge-connected pieces,
+//! * Needles: split into edge-connected pieces,
 //!   each fitted with a centerline, a radius (half its width) and a normal;
 //!   degenerate pieces are counted in [`SkipCounts`] and skipped.
 //! * Groups: a per-vertex attribute `_GROUP` (or `_SHOOT`, `_FASCICLE`,
@@ -21,7 +21,9 @@
 //!   placed each time, mirrored placements keep their winding.
 //! * Units: glTF metres, times [`ImportOptions::scale`].
 //!
-//! Nothing in the file is trusted: see [`gltf`](self) for the checks.
+//! Nothing in the file is trusted: every index, length and range is checked
+//! before it is used, and a malformed file is an [`ImportError`], never a
+//! panic or an allocation out of proportion to the file.
 
 mod gltf;
 pub mod groups;
