@@ -332,12 +332,10 @@ impl Projection {
         }
         let [a, b, c] = view.map(|v| self.to_screen(v, -v.z));
         let [p, q, r] = triangle.corners;
-        let diffuse = (q - p).cross(r - p).try_normalize().map_or(0.5, |n| n.dot(light).abs());
-        let factor = AMBIENT + (1.0 - AMBIENT) * diffuse;
         let quad = ScreenQuad {
             corners: [a, b, c, c],
             mostly_horizontal: false,
-            color: triangle.color.map(|x| (x * factor).max(0.0)),
+            color: shade_color(triangle.color, (q - p).cross(r - p), light),
             alpha: 1.0,
             depth: -(view[0].z + view[1].z + view[2].z) / 3.0,
         };
@@ -351,9 +349,14 @@ impl Projection {
 
 /// Lambert plus ambient, two-sided; a zero normal is half lit.
 fn shade(primitive: &PreviewPrimitive, light: Vec3) -> [f32; 3] {
-    let diffuse = primitive.normal.try_normalize().map_or(0.5, |n| n.dot(light).abs());
+    shade_color(primitive.color, primitive.normal, light)
+}
+
+/// `color` lit from `light` with the surface normal `normal` (any length).
+fn shade_color(color: [f32; 3], normal: Vec3, light: Vec3) -> [f32; 3] {
+    let diffuse = normal.try_normalize().map_or(0.5, |n| n.dot(light).abs());
     let factor = AMBIENT + (1.0 - AMBIENT) * diffuse;
-    primitive.color.map(|c| (c * factor).max(0.0))
+    color.map(|c| (c * factor).max(0.0))
 }
 
 /// A projected primitive: a convex quad (a trapezoid when the ends lie at

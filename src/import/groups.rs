@@ -62,7 +62,8 @@ pub struct GroupInferenceInfo {
 
 type Base = GeomWithData<[f32; 3], u32>;
 
-fn median(mut values: Vec<f32>) -> f32 {
+/// The median (the upper one for an even count) of `values`; 0 when empty.
+pub(crate) fn median(mut values: Vec<f32>) -> f32 {
     if values.is_empty() {
         return 0.0;
     }

@@ -329,13 +329,7 @@ type EndPoint = GeomWithData<[f32; 3], u32>;
 /// [`Needle`]s with group 0.
 pub(crate) fn orient(fitted: &[Fitted], wood: &[Vec3]) -> (Vec<Needle>, OrientStats) {
     let mut stats = OrientStats::default();
-    let mut lengths: Vec<f32> = fitted.iter().map(|f| f.ends[0].distance(f.ends[1])).collect();
-    let median_length = if lengths.is_empty() {
-        0.0
-    } else {
-        let mid = lengths.len() / 2;
-        *lengths.select_nth_unstable_by(mid, f32::total_cmp).1
-    };
+    let median_length = super::groups::median(fitted.iter().map(|f| f.ends[0].distance(f.ends[1])).collect());
     let ends_tree = RTree::bulk_load(
         fitted
             .iter()
