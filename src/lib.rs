@@ -21,6 +21,7 @@
 //! * [`preview`]: a small CPU rasterizer for preview pictures.
 //! * [`import`]: trees from glTF files (needles found, split, fitted, grouped).
 //! * [`export`]: glTF files of LOD cuts and of tree inputs.
+//! * `plugin` (feature `plugin`): the Bevy plugin.
 #![deny(missing_docs)]
 
 pub mod export;
@@ -31,3 +32,14 @@ pub mod preview;
 
 #[cfg(feature = "cli")]
 pub mod cli;
+#[cfg(feature = "plugin")]
+pub mod plugin;
+
+/// The types a Bevy user needs: `use bevy_conifer_lod::prelude::*;`.
+#[cfg(feature = "plugin")]
+pub mod prelude {
+    pub use crate::plugin::{
+        ConiferFoliage, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet, ConiferLodSettings, ConiferLodState,
+        ConiferSpecies, LineOpacity,
+    };
+}

@@ -4,6 +4,8 @@
 //! run the same code paths the binary runs.
 
 mod commands;
+#[cfg(feature = "plugin")]
+mod render;
 
 use clap::{Parser, Subcommand};
 use std::ffi::OsString;
@@ -33,6 +35,9 @@ pub enum Command {
     Preview(PreviewArgs),
     /// Write the cut at a spatial error as a glTF binary (prisms as triangles, lines as LINES).
     Export(ExportArgs),
+    /// Render a record through the Bevy plugin, headless, to a PNG.
+    #[cfg(feature = "plugin")]
+    Render(render::RenderArgs),
 }
 
 /// Arguments of `conifer bake`.
@@ -176,5 +181,7 @@ where
         Command::Cut(args) => commands::cut(&args),
         Command::Preview(args) => commands::preview(&args),
         Command::Export(args) => commands::export(&args),
+        #[cfg(feature = "plugin")]
+        Command::Render(args) => render::render(&args),
     }
 }

@@ -7,9 +7,11 @@
 //! * [`merge`]: the two-level line merging and its cost function.
 //! * [`record`]: the LOD record (merge forest, error ranges) and the cut.
 //! * [`file`]: the binary record file.
+//! * [`gpu_layout`]: the GPU-ready arrays of a record and the CPU reference of the shader.
 
 pub mod bake;
 pub mod file;
+pub mod gpu_layout;
 pub mod merge;
 pub mod metric;
 pub mod needle;

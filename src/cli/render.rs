@@ -1,0 +1,171 @@
+//! `conifer render`: a record drawn through the Bevy plugin, headless.
+
+use crate::model::metric::{PixelError, ViewParams};
+use crate::model::read_record;
+use crate::plugin::headless::HeadlessRenderer;
+use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, LineOpacity};
+use anyhow::{Context, bail};
+use bevy::asset::LoadState;
+use bevy::prelude::*;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `conifer render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// The record.
+    pub file: PathBuf,
+    /// Distance from the camera to the crown's centre, metres.
+    #[arg(long)]
+    pub distance: f32,
+    /// Image size, WIDTHxHEIGHT pixels.
+    #[arg(long, default_value = "512x512")]
+    pub size: String,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 45.0)]
+    pub fov_deg: f32,
+    /// Pixel error ε.
+    #[arg(long, default_value_t = 1.0)]
+    pub pixel_error: f32,
+    /// Transition coefficient δ in (0, 1].
+    #[arg(long, default_value_t = 1.0)]
+    pub transition: f32,
+    /// Colour needles by representation (prisms blue, original lines green, merged lines yellow-red).
+    #[arg(long)]
+    pub overlay: bool,
+    /// Use the paper's line opacity (2/ρ) instead of the area-preserving default.
+    #[arg(long)]
+    pub paper: bool,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Frames allowed for the record to load and the screenshot to arrive.
+const MAX_FRAMES: u32 = 600;
+
+pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
+    let (width, height) = super::commands::parse_size(&args.size)?;
+    if !(args.distance.is_finite() && args.distance >= 0.0) {
+        bail!("--distance must be a finite number ≥ 0, got {}", args.distance);
+    }
+    if !(args.fov_deg > 0.0 && args.fov_deg < 180.0) {
+        bail!("--fov-deg must be in (0, 180), got {}", args.fov_deg);
+    }
+    if !(args.pixel_error > 0.0 && args.pixel_error.is_finite()) {
+        bail!("--pixel-error must be > 0, got {}", args.pixel_error);
+    }
+    if !(args.transition > 0.0 && args.transition <= 1.0) {
+        bail!("--transition must be in (0, 1], got {}", args.transition);
+    }
+    let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
+    let file = std::fs::canonicalize(&args.file)?;
+    let root = file
+        .parent()
+        .map(|p| p.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+
+    let mut renderer = HeadlessRenderer::new(&root);
+    let crown = crate::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip]))
+        .map_or(Vec3::ZERO, |(a, b)| (a + b) * 0.5);
+    {
+        let world = renderer.world_mut();
+        *world.resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
+            pixel_error: args.pixel_error,
+            transition: args.transition,
+            line_opacity: if args.paper {
+                LineOpacity::Paper
+            } else {
+                LineOpacity::AreaPreserving
+            },
+            enabled: true,
+            debug_colors: args.overlay,
+        };
+    }
+    let target = renderer.render_target(width, height);
+    let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load(name);
+    let eye = crown + Vec3::Z * args.distance.max(1e-3);
+    renderer.world_mut().spawn((
+        HeadlessRenderer::camera_bundle(
+            &target,
+            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
+            args.fov_deg.to_radians(),
+        ),
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::srgb(0.92, 0.93, 0.95)),
+            ..default()
+        },
+    ));
+    spawn_lights(renderer.world_mut());
+    renderer
+        .world_mut()
+        .spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+
+    for frame in 0.. {
+        renderer.update()?;
+        match renderer.world().resource::<AssetServer>().load_state(&handle) {
+            LoadState::Loaded => break,
+            LoadState::Failed(error) => bail!("{}: {error}", args.file.display()),
+            _ if frame >= MAX_FRAMES => bail!("{}: record did not load in {MAX_FRAMES} frames", args.file.display()),
+            _ => std::thread::sleep(std::time::Duration::from_millis(2)),
+        }
+    }
+    // Warm up (pipelines, buffers), then time steady frames.
+    for _ in 0..2 {
+        renderer.update()?;
+    }
+    let mut frame_ms = Vec::new();
+    for _ in 0..3 {
+        let started = Instant::now();
+        renderer.update()?;
+        frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
+    }
+    frame_ms.sort_by(f64::total_cmp);
+    let image = renderer.capture(&target, 10)?;
+    image
+        .save(&args.output)
+        .with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
+
+    let view = ViewParams {
+        vertical_fov: args.fov_deg.to_radians(),
+        viewport_height_px: height as f32,
+        pixel_error: PixelError(args.pixel_error),
+    };
+    let e = view.spatial_error(args.distance);
+    let stats = record.cut_stats(&record.cut(e));
+    println!(
+        "{}",
+        serde_json::json!({
+            "output": args.output,
+            "distance": args.distance,
+            "spatial_error": e,
+            "prisms": stats.prisms,
+            "lines_original": stats.lines_original,
+            "lines_merged": stats.lines_merged,
+            "triangles": stats.triangles,
+            "lines": stats.line_segments,
+            "render_ms": frame_ms[1],
+        })
+    );
+    Ok(())
+}
+
+/// A sun, a fill light and ambient light, as the README pictures use.
+pub fn spawn_lights(world: &mut World) {
+    world.spawn((
+        DirectionalLight {
+            illuminance: 9_000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 600.0,
+        ..default()
+    });
+}

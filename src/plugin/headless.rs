@@ -1,0 +1,165 @@
+//! Rendering without a window (software Vulkan is enough): the engine of
+//! `conifer render`, the render tests and the README pictures.
+//!
+//! Follows Bevy's `externally_driven_headless_renderer` example: no winit,
+//! no primary window, synchronous pipeline compilation, the update loop
+//! pumped by hand with a blocking device poll after every frame, and
+//! screenshots of an image render target read back into memory.
+
+use super::ConiferLodPlugin;
+use bevy::app::SubApps;
+use bevy::asset::RenderAssetUsages;
+use bevy::camera::RenderTarget;
+use bevy::prelude::*;
+use bevy::render::RenderPlugin;
+use bevy::render::render_resource::{Extent3d, PollType, TextureDimension, TextureFormat, TextureUsages};
+use bevy::render::renderer::RenderDevice;
+use bevy::render::view::screenshot::{Screenshot, ScreenshotCaptured};
+use bevy::window::ExitCondition;
+use bevy::winit::WinitPlugin;
+use std::sync::{Arc, Mutex};
+
+/// Why a headless frame could not be captured.
+#[derive(Debug, thiserror::Error)]
+pub enum HeadlessError {
+    /// The screenshot did not arrive within the frames allowed.
+    #[error("no screenshot arrived after {0} frames")]
+    NoScreenshot(u32),
+    /// The captured image could not be converted.
+    #[error("captured image is not RGBA8: {0}")]
+    Format(String),
+    /// The GPU device could not be polled.
+    #[error("device poll failed: {0}")]
+    Poll(String),
+}
+
+/// A Bevy app with the conifer plugin, rendering to images, driven by hand.
+pub struct HeadlessRenderer {
+    apps: SubApps,
+}
+
+impl HeadlessRenderer {
+    /// Builds the app: Bevy's default plugins without winit or a window, the
+    /// conifer plugin, assets read from `asset_root`.
+    pub fn new(asset_root: &str) -> Self {
+        let mut app = App::new();
+        app.add_plugins(
+            DefaultPlugins
+                .set(WindowPlugin {
+                    primary_window: None,
+                    exit_condition: ExitCondition::DontExit,
+                    ..default()
+                })
+                .set(RenderPlugin {
+                    synchronous_pipeline_compilation: true,
+                    ..default()
+                })
+                .set(AssetPlugin {
+                    file_path: asset_root.to_string(),
+                    ..default()
+                })
+                .disable::<WinitPlugin>(),
+        )
+        .add_plugins(ConiferLodPlugin);
+        app.finish();
+        app.cleanup();
+        Self {
+            apps: std::mem::take(app.sub_apps_mut()),
+        }
+    }
+
+    /// The main world, to spawn cameras, lights and trees.
+    pub fn world_mut(&mut self) -> &mut World {
+        self.apps.main.world_mut()
+    }
+
+    /// The main world.
+    pub fn world(&self) -> &World {
+        self.apps.main.world()
+    }
+
+    /// A new sRGB image to render into.
+    pub fn render_target(&mut self, width: u32, height: u32) -> Handle<Image> {
+        let mut image = Image::new_uninit(
+            Extent3d {
+                width: width.max(1),
+                height: height.max(1),
+                depth_or_array_layers: 1,
+            },
+            TextureDimension::D2,
+            TextureFormat::Rgba8UnormSrgb,
+            RenderAssetUsages::RENDER_WORLD,
+        );
+        image.texture_descriptor.usage |= TextureUsages::RENDER_ATTACHMENT;
+        self.world_mut().resource_mut::<Assets<Image>>().add(image)
+    }
+
+    /// Runs one frame and waits for the GPU to finish it.
+    pub fn update(&mut self) -> Result<(), HeadlessError> {
+        self.apps.update();
+        self.apps
+            .main
+            .world()
+            .resource::<RenderDevice>()
+            .wgpu_device()
+            .poll(PollType::Wait {
+                submission_index: None,
+                timeout: None,
+            })
+            .map_err(|e| HeadlessError::Poll(e.to_string()))?;
+        Ok(())
+    }
+
+    /// Renders frames until `target`'s screenshot arrives (at most
+    /// `max_frames`) and returns it.
+    pub fn capture(&mut self, target: &Handle<Image>, max_frames: u32) -> Result<image::RgbaImage, HeadlessError> {
+        let mut images = self.capture_all(std::slice::from_ref(target), max_frames)?;
+        Ok(images.remove(0))
+    }
+
+    /// Screenshots of several targets taken in the same frame.
+    pub fn capture_all(
+        &mut self,
+        targets: &[Handle<Image>],
+        max_frames: u32,
+    ) -> Result<Vec<image::RgbaImage>, HeadlessError> {
+        let slots: Vec<Arc<Mutex<Option<Image>>>> = targets.iter().map(|_| Arc::default()).collect();
+        for (target, slot) in targets.iter().zip(&slots) {
+            let sink = slot.clone();
+            self.world_mut().spawn(Screenshot::image(target.clone())).observe(
+                move |captured: On<ScreenshotCaptured>| {
+                    *sink.lock().expect("screenshot slot") = Some(captured.image.clone());
+                },
+            );
+        }
+        for _ in 0..max_frames {
+            self.update()?;
+            if slots.iter().all(|slot| slot.lock().expect("screenshot slot").is_some()) {
+                return slots
+                    .iter()
+                    .map(|slot| {
+                        let image = slot.lock().expect("screenshot slot").take().expect("checked above");
+                        let dynamic = image
+                            .try_into_dynamic()
+                            .map_err(|e| HeadlessError::Format(e.to_string()))?;
+                        Ok(dynamic.to_rgba8())
+                    })
+                    .collect();
+            }
+        }
+        Err(HeadlessError::NoScreenshot(max_frames))
+    }
+
+    /// A camera rendering into `target`.
+    pub fn camera_bundle(target: &Handle<Image>, transform: Transform, vertical_fov: f32) -> impl Bundle {
+        (
+            Camera3d::default(),
+            RenderTarget::from(target.clone()),
+            Projection::Perspective(PerspectiveProjection {
+                fov: vertical_fov,
+                ..default()
+            }),
+            transform,
+        )
+    }
+}

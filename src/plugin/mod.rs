@@ -1,0 +1,211 @@
+//! The Bevy plugin: continuous LOD of conifer foliage for every instance of
+//! every tree, chosen on the GPU.
+//!
+//! ```no_run
+//! use bevy::prelude::*;
+//! use bevy_conifer_lod::prelude::*;
+//!
+//! fn setup(mut commands: Commands, asset_server: Res<AssetServer>) {
+//!     commands.spawn((
+//!         ConiferFoliage(asset_server.load("trees/scots-pine.conifer")),
+//!         Transform::from_xyz(0.0, 0.0, -20.0),
+//!     ));
+//! }
+//!
+//! App::new()
+//!     .add_plugins((DefaultPlugins, ConiferLodPlugin))
+//!     .add_systems(Startup, setup)
+//!     .run();
+//! ```
+//!
+//! ## How it draws
+//!
+//! A [`ConiferSpecies`] asset holds two meshes shared by all its instances:
+//! every needle as an `Lmax`-slot prism and every original and merged line,
+//! with each primitive's error interval as vertex data. The vertex shader
+//! computes each instance's spatial error for the view being drawn (so each
+//! camera, and each shadow view, gets its own LOD) and keeps exactly the
+//! paper's cut. The CPU does no traversal and never touches a mesh after
+//! load; per frame it only hides a species' prism or line part on instances
+//! where no primitive of that part can be in the cut, and records each
+//! instance's [`ConiferLodState`].
+//!
+//! ## System sets
+//!
+//! Both run in `PostUpdate`, after transform propagation and before
+//! visibility checks: [`ConiferLodSet::Prepare`] (spawn the mesh parts of
+//! newly loaded trees, keep materials in sync with the settings), then
+//! [`ConiferLodSet::Select`] (per-instance spatial error and part visibility).
+
+mod asset;
+pub mod headless;
+mod material;
+mod systems;
+
+pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, SpeciesMeshes, wood_mesh};
+pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
+pub use systems::{SpeciesMaterials, view_error_slope};
+
+use bevy::asset::AssetApp;
+use bevy::camera::visibility::VisibilitySystems;
+use bevy::prelude::*;
+use bevy::transform::TransformSystems;
+
+/// Adds continuous conifer LOD: the `.conifer` asset loader, the foliage
+/// material, and the systems of [`ConiferLodSet`].
+///
+/// Needs Bevy's asset, mesh and (for drawing) render/PBR plugins; without a
+/// render app (e.g. `MinimalPlugins` in tests) it still loads records and
+/// computes every instance's [`ConiferLodState`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ConiferLodPlugin;
+
+impl Plugin for ConiferLodPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_asset::<ConiferSpecies>()
+            .init_asset_loader::<ConiferRecordLoader>()
+            .init_resource::<ConiferLodSettings>()
+            .init_resource::<SpeciesMaterials>()
+            .configure_sets(
+                PostUpdate,
+                (ConiferLodSet::Prepare, ConiferLodSet::Select)
+                    .chain()
+                    .after(TransformSystems::Propagate)
+                    .before(VisibilitySystems::VisibilityPropagate),
+            )
+            .add_systems(
+                PostUpdate,
+                (
+                    (
+                        systems::release_unused_materials,
+                        systems::spawn_parts,
+                        systems::sync_materials,
+                    )
+                        .chain()
+                        .in_set(ConiferLodSet::Prepare),
+                    systems::select_lod.in_set(ConiferLodSet::Select),
+                ),
+            );
+        if app.is_plugin_added::<bevy::pbr::PbrPlugin>() {
+            material::build(app);
+        }
+    }
+}
+
+/// The plugin's system sets, in `PostUpdate`, in this order.
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ConiferLodSet {
+    /// Spawns the mesh parts of trees whose species just loaded, and keeps
+    /// the species' materials in sync with [`ConiferLodSettings`].
+    Prepare,
+    /// Computes every instance's [`ConiferLodState`] and hides parts that
+    /// cannot draw anything at its error.
+    Select,
+}
+
+/// How merged (and original) lines get their opacity.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
+pub enum LineOpacity {
+    /// The paper: `T = 2/ρ` (`2R/e`) for an original line; a merged line,
+    /// read as a cylinder of radius `e(X)/2`, gets `e(X)/e`.
+    Paper,
+    /// The needles' summed side area over the line's pixel area (capped at
+    /// 1): the tree keeps its projected density as lines merge.
+    #[default]
+    AreaPreserving,
+}
+
+/// Run-time LOD settings, shared by every tree; change them at any time.
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
+pub struct ConiferLodSettings {
+    /// Pixel error ε: how many pixels of deviation the simplification may
+    /// cause. Larger is faster and coarser. Default 1.
+    pub pixel_error: f32,
+    /// Transition coefficient δ in `(0, 1]`: scales the opacity of original
+    /// lines where they take over from prisms. Default 1.
+    pub transition: f32,
+    /// Opacity rule of lines.
+    pub line_opacity: LineOpacity,
+    /// `false` draws every needle as a prism of `Lmax` sides (LOD off).
+    pub enabled: bool,
+    /// Colour needles by representation (prisms blue, original lines green,
+    /// merged lines yellow to red).
+    pub debug_colors: bool,
+}
+
+impl Default for ConiferLodSettings {
+    fn default() -> Self {
+        Self {
+            pixel_error: 1.0,
+            transition: 1.0,
+            line_opacity: LineOpacity::default(),
+            enabled: true,
+            debug_colors: false,
+        }
+    }
+}
+
+impl ConiferLodSettings {
+    /// The paper's configuration: `T = 2/ρ` opacity, everything else as given.
+    pub fn paper() -> Self {
+        Self {
+            line_opacity: LineOpacity::Paper,
+            ..Self::default()
+        }
+    }
+}
+
+/// A tree: spawn it with a `Transform` and it is drawn with continuous LOD.
+#[derive(Component, Clone, Debug, PartialEq, Eq)]
+#[require(Transform, Visibility, ConiferLodState)]
+pub struct ConiferFoliage(pub Handle<ConiferSpecies>);
+
+/// Per-tree override of the global [`ConiferLodSettings`] (e.g. a hero tree
+/// with a finer pixel error). Trees with equal overrides share materials.
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct ConiferLodOverride {
+    /// Pixel error ε for this tree.
+    pub pixel_error: Option<f32>,
+    /// Transition coefficient δ for this tree.
+    pub transition: Option<f32>,
+}
+
+/// What a tree's LOD is this frame, over every active camera (written by
+/// [`ConiferLodSet::Select`]).
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct ConiferLodState {
+    /// Smallest spatial error over the views (tree-local metres); infinite
+    /// with no camera.
+    pub min_spatial_error: f32,
+    /// Largest spatial error over the views.
+    pub max_spatial_error: f32,
+    /// Cameras that see this tree's LOD.
+    pub views: u32,
+    /// Whether any needle can be a prism in some view.
+    pub prisms_visible: bool,
+    /// Whether any line can be drawn in some view.
+    pub lines_visible: bool,
+}
+
+/// The mesh entities of a tree (its children), spawned once its species
+/// has loaded.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConiferParts {
+    /// The prism part.
+    pub prisms: Entity,
+    /// The line part.
+    pub lines: Entity,
+    /// The wood part.
+    pub wood: Entity,
+}
+
+/// Marks a mesh entity spawned by the plugin as part of a tree.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ConiferPart {
+    /// Prisms.
+    Prisms,
+    /// Lines.
+    Lines,
+    /// Wood.
+    Wood,
+}

@@ -1,0 +1,353 @@
+//! The plugin's systems under `MinimalPlugins` (no renderer): loading
+//! records, the per-tree spatial error against the paper's formula, the
+//! representation as the camera backs off, settings taking effect, several
+//! cameras, defined results without a usable camera, and no per-frame asset
+//! churn.
+#![cfg(feature = "plugin")]
+
+use bevy::asset::{AssetPlugin, LoadState};
+use bevy::camera::{CameraProjection, Viewport};
+use bevy::prelude::*;
+use bevy::render::storage::ShaderBuffer;
+use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake, write_record};
+use bevy_conifer_lod::plugin::{ConiferPart, ConiferParts, SpeciesMaterials};
+use bevy_conifer_lod::prelude::*;
+
+const HEIGHT_PX: u32 = 720;
+const FOV_DEG: f32 = 45.0;
+
+/// An app with the plugin and just what it needs, loading from `dir`.
+fn app(dir: &std::path::Path) -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        AssetPlugin {
+            file_path: dir.to_string_lossy().into_owned(),
+            ..default()
+        },
+        TransformPlugin,
+    ))
+    .init_asset::<Mesh>()
+    .init_asset::<ShaderBuffer>()
+    .add_plugins(ConiferLodPlugin);
+    app
+}
+
+fn write_tree(dir: &std::path::Path, name: &str) -> Vec3 {
+    let tree = generate(
+        Species::NorwaySpruce,
+        &GenerateOptions {
+            seed: 1,
+            target_needles: Some(4000),
+        },
+    );
+    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    write_record(&record, &dir.join(name)).unwrap();
+    let (lo, hi) = bevy_conifer_lod::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip])).unwrap();
+    (lo + hi) * 0.5
+}
+
+fn camera(distance: f32) -> impl Bundle {
+    (
+        Camera3d::default(),
+        Camera {
+            viewport: Some(Viewport {
+                physical_size: UVec2::new(HEIGHT_PX * 4 / 3, HEIGHT_PX),
+                ..default()
+            }),
+            ..default()
+        },
+        Projection::Perspective(PerspectiveProjection {
+            fov: FOV_DEG.to_radians(),
+            ..default()
+        }),
+        Transform::from_xyz(0.0, 0.0, distance),
+    )
+}
+
+/// Loads `name` and spawns one tree with its crown centre at the origin (so
+/// the camera distance is exact).
+fn spawn_tree(app: &mut App, name: &str, crown: Vec3) -> (Entity, Handle<ConiferSpecies>) {
+    let handle: Handle<ConiferSpecies> = app.world().resource::<AssetServer>().load(name.to_string());
+    for _ in 0..200 {
+        app.update();
+        match app.world().resource::<AssetServer>().load_state(&handle) {
+            LoadState::Loaded => break,
+            LoadState::Failed(error) => panic!("{error}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(5)),
+        }
+    }
+    let tree = app
+        .world_mut()
+        .spawn((ConiferFoliage(handle.clone()), Transform::from_translation(-crown)))
+        .id();
+    app.update();
+    (tree, handle)
+}
+
+fn state(app: &App, tree: Entity) -> ConiferLodState {
+    *app.world().get::<ConiferLodState>(tree).unwrap()
+}
+
+fn paper_error(distance: f32, pixel_error: f32) -> f32 {
+    ViewParams {
+        vertical_fov: FOV_DEG.to_radians(),
+        viewport_height_px: HEIGHT_PX as f32,
+        pixel_error: PixelError(pixel_error),
+    }
+    .spatial_error(distance)
+}
+
+#[test]
+fn error_matches_the_formula_and_representation_follows_distance() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    let cam = app.world_mut().spawn(camera(5.0)).id();
+    let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
+
+    let species = app
+        .world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(&handle)
+        .unwrap()
+        .clone();
+    assert!(
+        app.world().get::<ConiferParts>(tree).is_some(),
+        "parts spawned once loaded"
+    );
+
+    let mut saw = (false, false, false);
+    for distance in [0.5f32, 0.9, 1.0, 1.1, 2.0, 5.0, 20.0, 80.0, 300.0] {
+        app.world_mut().get_mut::<Transform>(cam).unwrap().translation.z = distance;
+        app.update();
+        let s = state(&app, tree);
+        let expected = paper_error(distance, 1.0);
+        assert!(
+            (s.min_spatial_error - expected).abs() <= expected * 1e-4,
+            "{distance} m: {} vs {expected}",
+            s.min_spatial_error
+        );
+        assert_eq!(s.views, 1);
+        assert_eq!(s.prisms_visible, expected < species.max_line_error, "{distance} m");
+        assert_eq!(s.lines_visible, expected >= species.min_line_error, "{distance} m");
+        saw.0 |= s.prisms_visible && !s.lines_visible;
+        saw.1 |= s.prisms_visible && s.lines_visible;
+        saw.2 |= !s.prisms_visible && s.lines_visible;
+        // Hidden parts follow the state.
+        let parts = *app.world().get::<ConiferParts>(tree).unwrap();
+        let hidden = |e: Entity| *app.world().get::<Visibility>(e).unwrap() == Visibility::Hidden;
+        assert_eq!(hidden(parts.prisms), !s.prisms_visible);
+        assert_eq!(hidden(parts.lines), !s.lines_visible);
+    }
+    assert_eq!(
+        saw,
+        (true, true, true),
+        "prisms only, both, then lines only as the camera backs off"
+    );
+}
+
+#[test]
+fn settings_and_overrides_take_effect_next_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    app.world_mut().spawn(camera(30.0));
+    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let before = state(&app, tree).min_spatial_error;
+    app.world_mut().resource_mut::<ConiferLodSettings>().pixel_error = 2.0;
+    app.update();
+    let after = state(&app, tree).min_spatial_error;
+    assert!((after / before - 2.0).abs() < 1e-5, "{before} → {after}");
+    app.world_mut().entity_mut(tree).insert(ConiferLodOverride {
+        pixel_error: Some(0.5),
+        transition: None,
+    });
+    app.update();
+    assert!((state(&app, tree).min_spatial_error / before - 0.5).abs() < 1e-5);
+    app.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
+    app.update();
+    let s = state(&app, tree);
+    assert_eq!(s.min_spatial_error, 0.0);
+    assert!(
+        s.prisms_visible && !s.lines_visible,
+        "LOD off draws every needle as a prism"
+    );
+}
+
+#[test]
+fn each_camera_counts_and_bad_cameras_are_quiet() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
+    // No camera: a defined state, nothing drawn.
+    let s = state(&app, tree);
+    assert_eq!((s.views, s.prisms_visible, s.lines_visible), (0, false, false));
+    assert!(s.min_spatial_error.is_infinite());
+    // A camera with a zero-size viewport and one without a target are skipped.
+    app.world_mut().spawn((
+        Camera3d::default(),
+        Camera {
+            viewport: Some(Viewport {
+                physical_size: UVec2::ZERO,
+                ..default()
+            }),
+            ..default()
+        },
+        Transform::from_xyz(0.0, 0.0, 3.0),
+    ));
+    app.world_mut()
+        .spawn((Camera3d::default(), Transform::from_xyz(0.0, 0.0, 3.0)));
+    app.update();
+    assert_eq!(state(&app, tree).views, 0);
+    // Two real cameras: the nearest sets the smallest error, the farthest the largest.
+    app.world_mut().spawn(camera(0.5));
+    app.world_mut().spawn(camera(400.0));
+    app.update();
+    let s = state(&app, tree);
+    assert_eq!(s.views, 2);
+    assert!((s.min_spatial_error - paper_error(0.5, 1.0)).abs() < 1e-6);
+    assert!((s.max_spatial_error - paper_error(400.0, 1.0)).abs() < 1e-4);
+    assert!(s.prisms_visible && s.lines_visible);
+    // A camera inside the tree: error 0, finest detail, no panic.
+    app.world_mut().spawn(camera(0.0));
+    app.update();
+    assert_eq!(state(&app, tree).min_spatial_error, 0.0);
+}
+
+#[test]
+fn orthographic_error_does_not_depend_on_distance() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    let mut ortho = OrthographicProjection::default_3d();
+    ortho.scaling_mode = bevy::camera::ScalingMode::Fixed {
+        width: 8.0,
+        height: 6.0,
+    };
+    ortho.update(960.0, HEIGHT_PX as f32);
+    let cam = app
+        .world_mut()
+        .spawn((
+            Camera3d::default(),
+            Camera {
+                viewport: Some(Viewport {
+                    physical_size: UVec2::new(960, HEIGHT_PX),
+                    ..default()
+                }),
+                ..default()
+            },
+            Projection::Orthographic(ortho),
+            Transform::from_xyz(0.0, 0.0, 10.0),
+        ))
+        .id();
+    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let near = state(&app, tree).min_spatial_error;
+    // One pixel of a 6 m tall view over 720 pixels.
+    assert!((near - 6.0 / HEIGHT_PX as f32).abs() < 1e-6, "{near}");
+    app.world_mut().get_mut::<Transform>(cam).unwrap().translation.z = 100.0;
+    app.update();
+    assert_eq!(state(&app, tree).min_spatial_error, near);
+}
+
+#[derive(Resource, Default)]
+struct MeshEvents(usize);
+
+fn count_mesh_events(mut events: MessageReader<AssetEvent<Mesh>>, mut count: ResMut<MeshEvents>) {
+    count.0 += events.read().count();
+}
+
+#[test]
+fn no_mesh_asset_churn_and_no_orphans() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    app.init_resource::<MeshEvents>().add_systems(Last, count_mesh_events);
+    let cam = app.world_mut().spawn(camera(3.0)).id();
+    let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let mut trees = vec![tree];
+    for i in 0..99 {
+        trees.push(
+            app.world_mut()
+                .spawn((ConiferFoliage(handle.clone()), Transform::from_xyz(i as f32, 0.0, -5.0)))
+                .id(),
+        );
+    }
+    app.update();
+    app.update();
+    let warm = app.world().resource::<MeshEvents>().0;
+    // The camera flies through the stand for 120 frames, changing every
+    // tree's representation: no mesh is created or modified.
+    for frame in 0..120 {
+        app.world_mut().get_mut::<Transform>(cam).unwrap().translation =
+            Vec3::new(frame as f32, 2.0, 3.0 + frame as f32 * 2.0);
+        app.update();
+    }
+    assert_eq!(
+        app.world().resource::<MeshEvents>().0,
+        warm,
+        "mesh asset events after warm-up"
+    );
+    let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
+    assert_eq!(parts, 300);
+
+    // Churn: despawn everything, respawn, despawn again, drop the handle.
+    for tree in trees.drain(..) {
+        app.world_mut().despawn(tree);
+    }
+    app.update();
+    for i in 0..50 {
+        trees.push(
+            app.world_mut()
+                .spawn((ConiferFoliage(handle.clone()), Transform::from_xyz(i as f32, 0.0, 0.0)))
+                .id(),
+        );
+    }
+    app.update();
+    for tree in trees.drain(..) {
+        app.world_mut().despawn(tree);
+    }
+    drop(handle);
+    for _ in 0..3 {
+        app.update();
+    }
+    let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
+    assert_eq!(parts, 0, "no orphaned part entities");
+    assert_eq!(
+        app.world().resource::<Assets<ConiferSpecies>>().len(),
+        0,
+        "species unloaded"
+    );
+    assert_eq!(
+        app.world().resource::<Assets<Mesh>>().len(),
+        0,
+        "its meshes went with it"
+    );
+    assert_eq!(app.world().resource::<Assets<ShaderBuffer>>().len(), 0);
+    assert!(app.world().resource::<SpeciesMaterials>().is_empty());
+}
+
+#[test]
+fn a_corrupted_record_fails_to_load_with_its_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    write_tree(dir.path(), "spruce.conifer");
+    let mut bytes = std::fs::read(dir.path().join("spruce.conifer")).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0x40;
+    std::fs::write(dir.path().join("broken.conifer"), &bytes).unwrap();
+    let mut app = app(dir.path());
+    let handle: Handle<ConiferSpecies> = app.world().resource::<AssetServer>().load("broken.conifer");
+    let mut failure = None;
+    for _ in 0..200 {
+        app.update();
+        if let LoadState::Failed(error) = app.world().resource::<AssetServer>().load_state(&handle) {
+            failure = Some(error.to_string());
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let failure = failure.expect("load fails");
+    assert!(failure.contains("checksum"), "{failure}");
+}

@@ -1,0 +1,125 @@
+//! Real renders through the plugin, headless (Mesa's lavapipe is enough):
+//! a tree close up shows opaque prisms, far away translucent lines; two
+//! cameras at different distances in one frame each get their own LOD.
+//! Pictures go to `target/test-output/render/`.
+#![cfg(feature = "plugin")]
+
+use bevy::asset::LoadState;
+use bevy::prelude::*;
+use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::prelude::*;
+use std::path::PathBuf;
+
+const SIZE: u32 = 384;
+
+fn output_dir() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A renderer with one small pine loaded; returns it, the tree's crown centre.
+fn scene(dir: &std::path::Path) -> (HeadlessRenderer, Vec3) {
+    let tree = generate(
+        Species::ScotsPine,
+        &GenerateOptions {
+            seed: 2,
+            target_needles: Some(20000),
+        },
+    );
+    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    write_record(&record, &dir.join("pine.conifer")).unwrap();
+    let (lo, hi) = bevy_conifer_lod::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip])).unwrap();
+    let crown = (lo + hi) * 0.5;
+    let mut renderer = HeadlessRenderer::new(&dir.to_string_lossy());
+    let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
+    renderer
+        .world_mut()
+        .spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+    renderer.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 8000.0,
+            ..default()
+        },
+        Transform::from_xyz(3.0, 6.0, 5.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    for _ in 0..600 {
+        renderer.update().unwrap();
+        match renderer.world().resource::<AssetServer>().load_state(&handle) {
+            LoadState::Loaded => {
+                // Let meshes, buffers and pipelines reach the GPU.
+                for _ in 0..4 {
+                    renderer.update().unwrap();
+                }
+                return (renderer, crown);
+            }
+            LoadState::Failed(e) => panic!("{e}"),
+            _ => std::thread::sleep(std::time::Duration::from_millis(2)),
+        }
+    }
+    panic!("record did not load");
+}
+
+fn camera(renderer: &mut HeadlessRenderer, crown: Vec3, distance: f32) -> (Entity, Handle<Image>) {
+    let target = renderer.render_target(SIZE, SIZE);
+    let transform = Transform::from_translation(crown + Vec3::new(0.0, 0.0, distance)).looking_at(crown, Vec3::Y);
+    let entity = renderer
+        .world_mut()
+        .spawn((
+            HeadlessRenderer::camera_bundle(&target, transform, 45f32.to_radians()),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::NONE),
+                ..default()
+            },
+            // Keep the output linear in coverage: no tonemapping curve on alpha or colour.
+            bevy::core_pipeline::tonemapping::Tonemapping::None,
+        ))
+        .id();
+    (entity, target)
+}
+
+/// `(opaque needle, partial)` pixel counts: opaque pixels of needle colour
+/// (green over red; the bark is red over green), and translucent pixels.
+fn coverage(image: &image::RgbaImage) -> (usize, usize) {
+    let opaque = image.pixels().filter(|p| p[3] == 255 && p[1] >= p[0]).count();
+    let partial = image.pixels().filter(|p| p[3] > 0 && p[3] < 255).count();
+    (opaque, partial)
+}
+
+#[test]
+fn close_prisms_far_lines_and_two_cameras() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = output_dir();
+    let (mut renderer, crown) = scene(dir.path());
+
+    let mut results = Vec::new();
+    // At 384 px and 45°, a pixel is 1.3 mm at 0.6 m (prisms: 2R ≥ 1.4 mm),
+    // 8.6 mm at 4 m (original lines) and 0.13 m at 60 m (merged lines).
+    for distance in [0.6f32, 4.0, 60.0] {
+        let (camera, target) = camera(&mut renderer, crown, distance);
+        let image = renderer.capture(&target, 20).unwrap();
+        image.save(out.join(format!("pine_{distance}m.png"))).unwrap();
+        renderer.world_mut().despawn(camera);
+        let (opaque, partial) = coverage(&image);
+        println!("{distance} m: {opaque} opaque, {partial} partial pixels");
+        results.push((opaque, partial));
+    }
+    let (near, _, far) = (results[0], results[1], results[2]);
+    assert!(near.0 > 500, "close view shows opaque needle prisms: {near:?}");
+    assert!(far.0 + far.1 > 30, "far view is not empty: {far:?}");
+    assert!(far.1 > 4 * far.0, "far view is mostly translucent lines: {far:?}");
+
+    // Two cameras, one frame.
+    let (_, near_target) = camera(&mut renderer, crown, 0.6);
+    let (_, far_target) = camera(&mut renderer, crown, 60.0);
+    let mut images = renderer.capture_all(&[near_target, far_target], 20).unwrap();
+    let far_image = images.pop().unwrap();
+    let near_image = images.pop().unwrap();
+    near_image.save(out.join("two_cameras_near.png")).unwrap();
+    far_image.save(out.join("two_cameras_far.png")).unwrap();
+    let (near2, far2) = (coverage(&near_image), coverage(&far_image));
+    assert!(near2.0 > 500, "{near2:?}");
+    assert!(far2.1 > 4 * far2.0 && far2.1 > 30, "{far2:?}");
+}
