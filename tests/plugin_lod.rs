@@ -261,55 +261,91 @@ fn count_mesh_events(mut events: MessageReader<AssetEvent<Mesh>>, mut count: Res
 
 #[test]
 fn no_mesh_asset_churn_and_no_orphans() {
+    // 1,000 trees of 4 species, a camera flying through them.
     let dir = tempfile::tempdir().unwrap();
-    let crown = write_tree(dir.path(), "spruce.conifer");
     let mut app = app(dir.path());
     app.init_resource::<MeshEvents>().add_systems(Last, count_mesh_events);
     let cam = app.world_mut().spawn(camera(3.0)).id();
-    let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
-    let mut trees = vec![tree];
-    for i in 0..99 {
-        trees.push(
-            app.world_mut()
-                .spawn((ConiferFoliage(handle.clone()), Transform::from_xyz(i as f32, 0.0, -5.0)))
-                .id(),
+    let mut handles = Vec::new();
+    for species in Species::ALL {
+        let tree = generate(
+            species,
+            &GenerateOptions {
+                seed: 5,
+                target_needles: Some(3000),
+            },
         );
+        let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+        let name = format!("{species}.conifer");
+        write_record(&record, &dir.path().join(&name)).unwrap();
+        handles.push(spawn_tree(&mut app, &name, Vec3::ZERO).1);
+    }
+    for i in 0..996 {
+        let (x, z) = ((i % 40) as f32 * 4.0, (i / 40) as f32 * -4.0);
+        let foliage = ConiferFoliage(handles[i % 4].clone());
+        app.world_mut().spawn((foliage, Transform::from_xyz(x, 0.0, z)));
     }
     app.update();
     app.update();
     let warm = app.world().resource::<MeshEvents>().0;
-    // The camera flies through the stand for 120 frames, changing every
-    // tree's representation: no mesh is created or modified.
+    let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
+    assert_eq!(parts, 3 * 1000);
+    // The camera flies through the stand for 120 frames, changing the
+    // representation of most trees: no mesh is created or modified.
+    let snapshot = |app: &mut App| -> Vec<(bool, bool)> {
+        let mut states: Vec<(Entity, bool, bool)> = app
+            .world_mut()
+            .query::<(Entity, &ConiferLodState)>()
+            .iter(app.world())
+            .map(|(e, s)| (e, s.prisms_visible, s.lines_visible))
+            .collect();
+        states.sort_by_key(|s| s.0);
+        states.into_iter().map(|(_, p, l)| (p, l)).collect()
+    };
+    let mut previous = snapshot(&mut app);
+    let mut changes = 0;
     for frame in 0..120 {
         app.world_mut().get_mut::<Transform>(cam).unwrap().translation =
-            Vec3::new(frame as f32, 2.0, 3.0 + frame as f32 * 2.0);
+            Vec3::new(frame as f32 * 1.3, 1.5, 3.0 - frame as f32 * 0.9);
         app.update();
+        let now = snapshot(&mut app);
+        changes += now.iter().zip(&previous).filter(|(a, b)| a != b).count();
+        previous = now;
     }
     assert_eq!(
         app.world().resource::<MeshEvents>().0,
         warm,
         "mesh asset events after warm-up"
     );
-    let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
-    assert_eq!(parts, 300);
+    println!("{changes} representation changes along the flight");
+    assert!(changes > 0, "the flight must change some tree's representation");
 
-    // Churn: despawn everything, respawn, despawn again, drop the handle.
-    for tree in trees.drain(..) {
+    // Churn: despawn everything, respawn, despawn again, drop the handles.
+    let all: Vec<Entity> = app
+        .world_mut()
+        .query_filtered::<Entity, With<ConiferFoliage>>()
+        .iter(app.world())
+        .collect();
+    for tree in all {
         app.world_mut().despawn(tree);
     }
     app.update();
     for i in 0..50 {
-        trees.push(
-            app.world_mut()
-                .spawn((ConiferFoliage(handle.clone()), Transform::from_xyz(i as f32, 0.0, 0.0)))
-                .id(),
-        );
+        app.world_mut().spawn((
+            ConiferFoliage(handles[i % 4].clone()),
+            Transform::from_xyz(i as f32, 0.0, 0.0),
+        ));
     }
     app.update();
-    for tree in trees.drain(..) {
+    let all: Vec<Entity> = app
+        .world_mut()
+        .query_filtered::<Entity, With<ConiferFoliage>>()
+        .iter(app.world())
+        .collect();
+    for tree in all {
         app.world_mut().despawn(tree);
     }
-    drop(handle);
+    drop(handles);
     for _ in 0..3 {
         app.update();
     }

@@ -400,7 +400,7 @@ pub(super) fn cut(args: &CutArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn check_view(view: &ViewArgs) -> anyhow::Result<()> {
+pub(super) fn check_view(view: &ViewArgs) -> anyhow::Result<()> {
     if !(view.distance.is_finite() && view.distance >= 0.0) {
         bail!("--distance must be a finite number ≥ 0, got {}", view.distance);
     }

@@ -46,18 +46,13 @@ const MAX_FRAMES: u32 = 600;
 
 pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
     let (width, height) = super::commands::parse_size(&args.size)?;
-    if !(args.distance.is_finite() && args.distance >= 0.0) {
-        bail!("--distance must be a finite number ≥ 0, got {}", args.distance);
-    }
-    if !(args.fov_deg > 0.0 && args.fov_deg < 180.0) {
-        bail!("--fov-deg must be in (0, 180), got {}", args.fov_deg);
-    }
-    if !(args.pixel_error > 0.0 && args.pixel_error.is_finite()) {
-        bail!("--pixel-error must be > 0, got {}", args.pixel_error);
-    }
-    if !(args.transition > 0.0 && args.transition <= 1.0) {
-        bail!("--transition must be in (0, 1], got {}", args.transition);
-    }
+    super::commands::check_view(&super::ViewArgs {
+        distance: args.distance,
+        fov_deg: args.fov_deg,
+        height_px: height as f32,
+        pixel_error: args.pixel_error,
+        transition: args.transition,
+    })?;
     let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
     let file = std::fs::canonicalize(&args.file)?;
     let root = file

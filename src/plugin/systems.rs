@@ -125,7 +125,7 @@ fn make_materials(
 
 /// Spawns the prism, line and wood parts of trees whose species has loaded
 /// (again when the species handle or the override changes).
-#[allow(clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)] // a Bevy system's parameters
 pub(super) fn spawn_parts(
     mut commands: Commands,
     trees: Query<
@@ -258,6 +258,7 @@ struct ViewLod {
 
 /// Computes every tree's [`ConiferLodState`] over the active cameras and
 /// hides the parts that cannot draw anything at its errors.
+#[allow(clippy::type_complexity)] // a Bevy query
 pub(super) fn select_lod(
     cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     mut trees: Query<(
