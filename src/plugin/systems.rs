@@ -266,7 +266,7 @@ pub(super) fn select_lod(
         &GlobalTransform,
         Option<&ConiferLodOverride>,
         &mut ConiferLodState,
-        Option<&ConiferParts>,
+        Option<Ref<ConiferParts>>,
     )>,
     mut parts: Query<&mut Visibility, With<ConiferPart>>,
     species_assets: Res<Assets<ConiferSpecies>>,
@@ -295,8 +295,9 @@ pub(super) fn select_lod(
             .and_then(|o| o.pixel_error)
             .unwrap_or(settings.pixel_error)
             .max(0.0);
-        let (scale, _, _) = transform.to_scale_rotation_translation();
-        let scale = ((scale.x.abs() + scale.y.abs() + scale.z.abs()) / 3.0).max(1e-6);
+        // Mean axis scale: the columns' lengths (cheaper than a decomposition).
+        let m = transform.affine().matrix3;
+        let scale = ((m.x_axis.length() + m.y_axis.length() + m.z_axis.length()) / 3.0).max(1e-6);
         let center = transform.transform_point(species.crown_center);
         let (mut min_e, mut max_e) = (f32::INFINITY, 0.0f32);
         for view in &views {
@@ -321,8 +322,14 @@ pub(super) fn select_lod(
             prisms_visible: any_view && min_e < species.max_line_error,
             lines_visible: any_view && settings.enabled && max_e >= species.min_line_error,
         };
+        let parts_changed = state.prisms_visible != new_state.prisms_visible
+            || state.lines_visible != new_state.lines_visible
+            || (state.views == 0) != (new_state.views == 0);
         state.set_if_neq(new_state);
-        if let Some(tree_parts) = tree_parts {
+        // Parts are touched only when what they show changes (and once
+        // when they appear).
+        let Some(tree_parts) = tree_parts else { continue };
+        if parts_changed || tree_parts.is_changed() {
             for (part, shown) in [
                 (tree_parts.prisms, new_state.prisms_visible),
                 (tree_parts.lines, new_state.lines_visible),
