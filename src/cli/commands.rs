@@ -429,29 +429,36 @@ pub(super) fn parse_size(size: &str) -> anyhow::Result<(u32, u32)> {
     }
 }
 
-pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
-    let (width, height) = parse_size(&args.size)?;
+/// Checks a picture's options; returns its size and view.
+pub(super) fn picture_view(picture: &super::PictureArgs) -> anyhow::Result<(u32, u32, ViewArgs)> {
+    let (width, height) = parse_size(&picture.size)?;
     let view = ViewArgs {
-        distance: args.distance,
-        fov_deg: args.fov_deg,
+        distance: picture.distance,
+        fov_deg: picture.fov_deg,
         height_px: height as f32,
-        pixel_error: args.pixel_error,
-        transition: args.transition,
+        pixel_error: picture.pixel_error,
+        transition: picture.transition,
     };
     check_view(&view)?;
+    Ok((width, height, view))
+}
+
+pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
+    let (width, height, view) = picture_view(&args.picture)?;
+    let picture = &args.picture;
     let (record, _) = load(&args.file)?;
-    let e = view_params(&view).spatial_error(args.distance);
+    let e = view_params(&view).spatial_error(picture.distance);
     let (lo, hi) = record.bounds();
     let centre = (lo + hi) * 0.5;
     let camera = PreviewCamera {
-        eye: centre + Vec3::Z * args.distance.max(1e-3),
+        eye: centre + Vec3::Z * picture.distance.max(1e-3),
         target: centre,
-        vertical_fov: args.fov_deg.to_radians(),
+        vertical_fov: picture.fov_deg.to_radians(),
         width,
         height,
     };
     let started = Instant::now();
-    let primitives = cut_primitives(&record, &record.cut(e), args.transition);
+    let primitives = cut_primitives(&record, &record.cut(e), picture.transition);
     let [r, g, b, _] = record.material.wood_color;
     let wood = mesh_triangles(&record.wood_mesh, [r, g, b]);
     let image = render_preview_scene(&primitives, &wood, &camera, &PreviewOptions::default());

@@ -128,6 +128,18 @@ pub struct CutArgs {
 pub struct PreviewArgs {
     /// The record.
     pub file: PathBuf,
+    /// The picture.
+    #[command(flatten)]
+    pub picture: PictureArgs,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// How a picture of a record is taken (`conifer preview`, `conifer render`):
+/// the camera looks at the crown's centre from `distance` metres along +Z.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PictureArgs {
     /// Distance from the camera to the tree's centre, metres.
     #[arg(long)]
     pub distance: f32,
@@ -140,12 +152,9 @@ pub struct PreviewArgs {
     /// Pixel error ε.
     #[arg(long, default_value_t = 1.0)]
     pub pixel_error: f32,
-    /// Transition coefficient δ.
+    /// Transition coefficient δ in (0, 1].
     #[arg(long, default_value_t = 1.0)]
     pub transition: f32,
-    /// Output PNG.
-    #[arg(short, long)]
-    pub output: PathBuf,
 }
 
 /// Arguments of `conifer export`.

@@ -15,21 +15,9 @@ use std::time::Instant;
 pub struct RenderArgs {
     /// The record.
     pub file: PathBuf,
-    /// Distance from the camera to the crown's centre, metres.
-    #[arg(long)]
-    pub distance: f32,
-    /// Image size, WIDTHxHEIGHT pixels.
-    #[arg(long, default_value = "512x512")]
-    pub size: String,
-    /// Vertical field of view, degrees.
-    #[arg(long, default_value_t = 45.0)]
-    pub fov_deg: f32,
-    /// Pixel error ε.
-    #[arg(long, default_value_t = 1.0)]
-    pub pixel_error: f32,
-    /// Transition coefficient δ in (0, 1].
-    #[arg(long, default_value_t = 1.0)]
-    pub transition: f32,
+    /// The picture.
+    #[command(flatten)]
+    pub picture: super::PictureArgs,
     /// Colour needles by representation (prisms blue, original lines green, merged lines yellow-red).
     #[arg(long)]
     pub overlay: bool,
@@ -45,14 +33,8 @@ pub struct RenderArgs {
 const MAX_FRAMES: u32 = 600;
 
 pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
-    let (width, height) = super::commands::parse_size(&args.size)?;
-    super::commands::check_view(&super::ViewArgs {
-        distance: args.distance,
-        fov_deg: args.fov_deg,
-        height_px: height as f32,
-        pixel_error: args.pixel_error,
-        transition: args.transition,
-    })?;
+    let picture = &args.picture;
+    let (width, height, _) = super::commands::picture_view(picture)?;
     let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
     let file = std::fs::canonicalize(&args.file)?;
     let root = file
@@ -70,8 +52,8 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
     {
         let world = renderer.world_mut();
         *world.resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
-            pixel_error: args.pixel_error,
-            transition: args.transition,
+            pixel_error: picture.pixel_error,
+            transition: picture.transition,
             line_opacity: if args.paper {
                 LineOpacity::Paper
             } else {
@@ -83,12 +65,12 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
     }
     let target = renderer.render_target(width, height);
     let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load(name);
-    let eye = crown + Vec3::Z * args.distance.max(1e-3);
+    let eye = crown + Vec3::Z * picture.distance.max(1e-3);
     renderer.world_mut().spawn((
         HeadlessRenderer::camera_bundle(
             &target,
             Transform::from_translation(eye).looking_at(crown, Vec3::Y),
-            args.fov_deg.to_radians(),
+            picture.fov_deg.to_radians(),
         ),
         Camera {
             clear_color: ClearColorConfig::Custom(Color::srgb(0.92, 0.93, 0.95)),
@@ -126,17 +108,17 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
 
     let view = ViewParams {
-        vertical_fov: args.fov_deg.to_radians(),
+        vertical_fov: picture.fov_deg.to_radians(),
         viewport_height_px: height as f32,
-        pixel_error: PixelError(args.pixel_error),
+        pixel_error: PixelError(picture.pixel_error),
     };
-    let e = view.spatial_error(args.distance);
+    let e = view.spatial_error(picture.distance);
     let stats = record.cut_stats(&record.cut(e));
     println!(
         "{}",
         serde_json::json!({
             "output": args.output,
-            "distance": args.distance,
+            "distance": picture.distance,
             "spatial_error": e,
             "prisms": stats.prisms,
             "lines_original": stats.lines_original,
