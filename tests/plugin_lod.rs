@@ -44,8 +44,7 @@ fn write_tree(dir: &std::path::Path, name: &str) -> Vec3 {
     );
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
     write_record(&record, &dir.join(name)).unwrap();
-    let (lo, hi) = bevy_conifer_lod::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip])).unwrap();
-    (lo + hi) * 0.5
+    record.crown_center()
 }
 
 fn camera(distance: f32) -> impl Bundle {

@@ -31,8 +31,7 @@ fn scene(dir: &std::path::Path) -> (HeadlessRenderer, Vec3) {
     );
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
     write_record(&record, &dir.join("pine.conifer")).unwrap();
-    let (lo, hi) = bevy_conifer_lod::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip])).unwrap();
-    let crown = (lo + hi) * 0.5;
+    let crown = record.crown_center();
     let mut renderer = HeadlessRenderer::new(&dir.to_string_lossy());
     let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
     renderer

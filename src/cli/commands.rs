@@ -343,7 +343,7 @@ pub struct CutReport {
     pub mean_original_line_opacity: Option<f32>,
 }
 
-fn view_params(view: &ViewArgs) -> ViewParams {
+pub(super) fn view_params(view: &ViewArgs) -> ViewParams {
     ViewParams {
         vertical_fov: view.fov_deg.to_radians(),
         viewport_height_px: view.height_px,

@@ -1,6 +1,5 @@
 //! `conifer render`: a record drawn through the Bevy plugin, headless.
 
-use crate::model::metric::{PixelError, ViewParams};
 use crate::model::read_record;
 use crate::plugin::headless::HeadlessRenderer;
 use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, LineOpacity};
@@ -34,7 +33,7 @@ const MAX_FRAMES: u32 = 600;
 
 pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
     let picture = &args.picture;
-    let (width, height, _) = super::commands::picture_view(picture)?;
+    let (width, height, view) = super::commands::picture_view(picture)?;
     let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
     let file = std::fs::canonicalize(&args.file)?;
     let root = file
@@ -47,8 +46,7 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
         .unwrap_or_default();
 
     let mut renderer = HeadlessRenderer::new(&root);
-    let crown = crate::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip]))
-        .map_or(Vec3::ZERO, |(a, b)| (a + b) * 0.5);
+    let crown = record.crown_center();
     {
         let world = renderer.world_mut();
         *world.resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
@@ -107,12 +105,7 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
         .save(&args.output)
         .with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
 
-    let view = ViewParams {
-        vertical_fov: picture.fov_deg.to_radians(),
-        viewport_height_px: height as f32,
-        pixel_error: PixelError(picture.pixel_error),
-    };
-    let e = view.spatial_error(picture.distance);
+    let e = super::commands::view_params(&view).spatial_error(picture.distance);
     let stats = record.cut_stats(&record.cut(e));
     println!(
         "{}",

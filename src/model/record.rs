@@ -358,6 +358,13 @@ impl LodRecord {
         self.ranges
     }
 
+    /// Centre of the needles' bounding box: where a viewer's distance to the
+    /// tree is measured.
+    pub fn crown_center(&self) -> Vec3 {
+        super::needle::bounds(self.needles.iter().flat_map(|x| [x.base, x.tip]))
+            .map_or(Vec3::ZERO, |(lo, hi)| (lo + hi) * 0.5)
+    }
+
     /// Axis-aligned bounds of the foliage and wood, `(min, max)`.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         let points = self.needles.iter().flat_map(|x| [x.base, x.tip]);

@@ -116,15 +116,13 @@ impl SpeciesMeshes {
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();
         let margin = Vec3::splat(ranges.original_lines.max * 0.5);
-        let crown = crate::model::bounds(record.needles.iter().flat_map(|n| [n.base, n.tip]))
-            .map_or(Vec3::ZERO, |(a, b)| (a + b) * 0.5);
         Ok(Self {
             needles: ShaderBuffer::from(prisms.needles.clone()),
             prisms: prism_mesh(&prisms),
             lines: line_mesh(lines),
             wood: wood_mesh(&record.wood, &record.wood_mesh, 8),
             aabb: Aabb::from_min_max(lo - margin, hi + margin),
-            crown_center: crown,
+            crown_center: record.crown_center(),
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
         })
