@@ -14,9 +14,7 @@ use bevy::prelude::*;
 use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake};
-use bevy_conifer_lod::plugin::SpeciesMeshes;
 use bevy_conifer_lod::prelude::*;
-use std::sync::Arc;
 use std::time::Instant;
 
 const FRAMES: usize = 60;
@@ -33,26 +31,12 @@ fn species_assets(app: &mut App) -> Vec<Handle<ConiferSpecies>> {
                 },
             );
             let record = bake(&tree, &BakeOptions::default(), &()).expect("bakes");
-            let parts = SpeciesMeshes::build(&record).expect("fits the GPU layout");
             let world = app.world_mut();
-            let mut meshes = world.resource_mut::<Assets<Mesh>>();
-            let (prisms, lines, wood) = (
-                meshes.add(parts.prisms),
-                meshes.add(parts.lines),
-                meshes.add(parts.wood),
-            );
-            let needles = world.resource_mut::<Assets<ShaderBuffer>>().add(parts.needles);
-            world.resource_mut::<Assets<ConiferSpecies>>().add(ConiferSpecies {
-                record: Arc::new(record),
-                prisms,
-                lines,
-                wood,
-                needles,
-                aabb: parts.aabb,
-                crown_center: parts.crown_center,
-                max_line_error: parts.max_line_error,
-                min_line_error: parts.min_line_error,
-            })
+            let species = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
+                ConiferSpecies::from_record(record, &mut meshes, &mut buffers).expect("fits the GPU layout")
+            });
+            world.resource_mut::<Assets<ConiferSpecies>>().add(species)
         })
         .collect()
 }

@@ -21,6 +21,7 @@
 //! * [`preview`]: a small CPU rasterizer for preview pictures.
 //! * [`import`]: trees from glTF files (needles found, split, fitted, grouped).
 //! * [`export`]: glTF files of LOD cuts and of tree inputs.
+//! * [`scatter`]: blue-noise placement of trees on terrain.
 //! * `plugin` (feature `plugin`): the Bevy plugin.
 #![deny(missing_docs)]
 
@@ -29,6 +30,7 @@ pub mod generate;
 pub mod import;
 pub mod model;
 pub mod preview;
+pub mod scatter;
 
 #[cfg(feature = "cli")]
 pub mod cli;
@@ -39,7 +41,7 @@ pub mod plugin;
 #[cfg(feature = "plugin")]
 pub mod prelude {
     pub use crate::plugin::{
-        ConiferFoliage, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet, ConiferLodSettings, ConiferLodState,
-        ConiferSpecies, LineOpacity,
+        ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
+        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferSpecies, LineOpacity, spawn_forest,
     };
 }

@@ -11,7 +11,8 @@ use bevy::prelude::*;
 use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake, write_record};
-use bevy_conifer_lod::plugin::{ConiferPart, ConiferParts, SpeciesMaterials};
+use bevy_conifer_lod::model::gpu_layout::{KIND_WOOD_LINE, line_bands, line_visible};
+use bevy_conifer_lod::plugin::{ConiferPart, ConiferParts, MAX_LINE_BANDS, SpeciesMaterials};
 use bevy_conifer_lod::prelude::*;
 
 const HEIGHT_PX: u32 = 720;
@@ -134,11 +135,32 @@ fn error_matches_the_formula_and_representation_follows_distance() {
         saw.0 |= s.prisms_visible && !s.lines_visible;
         saw.1 |= s.prisms_visible && s.lines_visible;
         saw.2 |= !s.prisms_visible && s.lines_visible;
-        // Hidden parts follow the state.
-        let parts = *app.world().get::<ConiferParts>(tree).unwrap();
+        // Hidden parts follow the state, and the shown line bands hold the
+        // whole cut (the vertex shader draws exactly the cut's lines from them).
+        let parts = app.world().get::<ConiferParts>(tree).unwrap().clone();
         let hidden = |e: Entity| *app.world().get::<Visibility>(e).unwrap() == Visibility::Hidden;
         assert_eq!(hidden(parts.prisms), !s.prisms_visible);
-        assert_eq!(hidden(parts.lines), !s.lines_visible);
+        assert_eq!(parts.lines.len(), species.lines.len());
+        assert_eq!(parts.lines.iter().all(|&e| hidden(e)), !s.lines_visible);
+        let bands = line_bands(&species.record, MAX_LINE_BANDS);
+        let (mut drawn, mut processed) = (0u64, 0u64);
+        for (band, &entity) in bands.iter().zip(&parts.lines) {
+            let visible_lines = band
+                .buffers
+                .lod
+                .chunks(2)
+                .filter(|l| l[0][3] != KIND_WOOD_LINE && line_visible(l[0], expected))
+                .count() as u64;
+            if hidden(entity) {
+                assert_eq!(visible_lines, 0, "{distance} m: a hidden band holds cut lines");
+            } else {
+                drawn += visible_lines;
+                processed += band.buffers.line_count() as u64;
+            }
+        }
+        let cut = species.record.cut(expected);
+        assert_eq!(drawn, species.record.cut_stats(&cut).line_segments, "{distance} m");
+        assert!(processed >= drawn);
     }
     assert_eq!(
         saw,
@@ -288,7 +310,23 @@ fn no_mesh_asset_churn_and_no_orphans() {
     app.update();
     let warm = app.world().resource::<MeshEvents>().0;
     let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
-    assert_eq!(parts, 3 * 1000);
+    let species = app.world().resource::<Assets<ConiferSpecies>>();
+    let parts_per_tree: Vec<usize> = handles.iter().map(|h| 2 + species.get(h).unwrap().lines.len()).collect();
+    assert_eq!(parts, (0..1000).map(|i| parts_per_tree[i % 4]).sum::<usize>());
+    // Batching: every tree of a species draws the same meshes (one per part)
+    // and, without overrides, one material per part kind.
+    let meshes: std::collections::HashSet<AssetId<Mesh>> = app
+        .world_mut()
+        .query::<&Mesh3d>()
+        .iter(app.world())
+        .map(|m| m.0.id())
+        .collect();
+    assert_eq!(meshes.len(), parts_per_tree.iter().sum::<usize>());
+    println!(
+        "1000 trees of 4 species: {} distinct meshes ({:?} parts per tree)",
+        meshes.len(),
+        parts_per_tree
+    );
     // The camera flies through the stand for 120 frames, changing the
     // representation of most trees: no mesh is created or modified.
     let snapshot = |app: &mut App| -> Vec<(bool, bool)> {

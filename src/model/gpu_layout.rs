@@ -26,7 +26,8 @@ use std::f32::consts::TAU;
 
 /// `kind` of an original line in [`LineBuffers::lod`].
 pub const KIND_ORIGINAL_LINE: f32 = 0.0;
-/// `kind` of a merged line in [`LineBuffers::lod`].
+/// `kind` of a merged line in [`LineBuffers::lod`] ([`line_bands`] stores
+/// the merge depth instead, also ≥ 1).
 pub const KIND_MERGED_LINE: f32 = 1.0;
 
 /// Vertex arrays of all lines (original and merged) of a record.
@@ -52,24 +53,13 @@ impl LineBuffers {
 /// merged lines, sorted by parent error descending within each part, so that
 /// coarse views touch a prefix.
 pub fn line_buffers(record: &LodRecord) -> LineBuffers {
-    let mut nodes: Vec<u32> = (0..record.node_count() as u32).collect();
-    let n = record.needle_count() as u32;
-    nodes.sort_by(|&a, &b| {
-        (a >= n)
-            .cmp(&(b >= n))
-            .then(record.parent_error(b).total_cmp(&record.parent_error(a)))
-            .then(a.cmp(&b))
-    });
     let mut buffers = LineBuffers::default();
-    for node in nodes {
+    for node in drawn_line_nodes(record) {
         let error = record.node_error(node);
         let parent_error = record.parent_error(node).min(f32::MAX);
-        if parent_error <= error {
-            continue; // never in any cut
-        }
         let [(a, na), (b, nb)] = record.node_ends(node);
         let length = a.distance(b).max(1e-9);
-        let (width, kind) = if node < n {
+        let (width, kind) = if (node as usize) < record.needle_count() {
             (2.0 * record.needles[node as usize].radius, KIND_ORIGINAL_LINE)
         } else {
             (record.node_needle_area(node) / length, KIND_MERGED_LINE)
@@ -81,6 +71,145 @@ pub fn line_buffers(record: &LodRecord) -> LineBuffers {
         }
     }
     buffers
+}
+
+/// The nodes [`line_buffers`] draws, in its order: original lines, then
+/// merged lines, each by parent error descending; nodes whose parent error
+/// is not above their own (never in a cut) are left out.
+fn drawn_line_nodes(record: &LodRecord) -> Vec<u32> {
+    let mut nodes: Vec<u32> = (0..record.node_count() as u32).collect();
+    let n = record.needle_count() as u32;
+    nodes.sort_by(|&a, &b| {
+        (a >= n)
+            .cmp(&(b >= n))
+            .then(record.parent_error(b).total_cmp(&record.parent_error(a)))
+            .then(a.cmp(&b))
+    });
+    nodes.retain(|&node| record.parent_error(node).min(f32::MAX) > record.node_error(node));
+    nodes
+}
+
+/// Merge depth of every node: 0 for an original line, one more than its
+/// deepest child for a merged line.
+pub fn merge_depths(record: &LodRecord) -> Vec<u32> {
+    let mut depth = vec![0u32; record.node_count()];
+    // Children come before their parents, so one pass in node order suffices.
+    for node in 0..record.node_count() as u32 {
+        let parent = record.parent(node);
+        if parent != super::record::NO_PARENT {
+            depth[parent as usize] = depth[parent as usize].max(depth[node as usize] + 1);
+        }
+    }
+    depth
+}
+
+/// A slice of a record's lines whose parent errors fall in one geometric
+/// band, drawn as its own mesh so that a view draws (and runs the vertex
+/// shader on) only the bands that can hold part of its cut.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LineBand {
+    /// The band's lines, as in [`line_buffers`], with the merged lines'
+    /// `kind` set to their merge depth (≥ 1).
+    pub buffers: LineBuffers,
+    /// Smallest error of the band's lines.
+    pub min_error: f32,
+    /// Largest parent error of the band's lines (`f32::MAX` for roots).
+    pub max_parent_error: f32,
+}
+
+impl LineBand {
+    /// Whether some line of the band can be in the cut for a spatial error
+    /// in `[min_e, max_e]` (conservative: `false` means nothing is drawn).
+    pub fn may_draw(&self, min_e: f32, max_e: f32) -> bool {
+        min_e < self.max_parent_error && max_e >= self.min_error
+    }
+}
+
+/// The lines of `record` split into at most `max_bands` bands by parent
+/// error, geometrically spaced (ratio ≥ 2) from the smallest line error up,
+/// plus a wood line per wood segment (`kind` [`KIND_WOOD_LINE`], drawn for
+/// `2·r_max ≤ e < 2·r_max·WOOD_LINE_FADE`).
+///
+/// Every line of [`line_buffers`] is in exactly one band. At spatial error
+/// `e` the lines of a band whose parent errors lie below `e` are all too
+/// fine and the band is skipped; bands above hold only the cut's ancestors,
+/// so a view processes a small multiple of its cut instead of every line.
+pub fn line_bands(record: &LodRecord, max_bands: usize) -> Vec<LineBand> {
+    let all = line_buffers(record);
+    let max_bands = max_bands.max(1);
+    let depths = merge_depths(record);
+    let lines = all.line_count();
+    if lines == 0 && record.wood.is_empty() {
+        return Vec::new();
+    }
+    let lod = |line: usize| all.lod[2 * line];
+    let base = (0..lines).map(|l| lod(l)[0]).fold(f32::INFINITY, f32::min);
+    let base = if base.is_finite() { base.max(1e-9) } else { 1e-3 };
+    let top = (0..lines)
+        .map(|l| lod(l)[1])
+        .filter(|&p| p < f32::MAX)
+        .fold(base, f32::max);
+    let span = (top / base).max(1.0);
+    let ratio = span.powf(1.0 / max_bands as f32).max(2.0);
+    let band_of = |parent_error: f32| -> usize {
+        if parent_error >= f32::MAX {
+            return max_bands - 1;
+        }
+        let k = ((parent_error / base).max(1.0).ln() / ratio.ln()).floor();
+        (k.max(0.0) as usize).min(max_bands - 1)
+    };
+    let nodes = drawn_line_nodes(record);
+    debug_assert_eq!(nodes.len(), lines);
+    let mut bands = vec![
+        LineBand {
+            min_error: f32::INFINITY,
+            max_parent_error: 0.0,
+            ..Default::default()
+        };
+        max_bands
+    ];
+    for (line, &node) in nodes.iter().enumerate() {
+        let [error, parent_error, width, kind] = lod(line);
+        let band = &mut bands[band_of(parent_error)];
+        band.min_error = band.min_error.min(error);
+        band.max_parent_error = band.max_parent_error.max(parent_error);
+        let kind = if kind == KIND_MERGED_LINE {
+            depths[node as usize].max(1) as f32
+        } else {
+            kind
+        };
+        for v in [2 * line, 2 * line + 1] {
+            band.buffers.positions.push(all.positions[v]);
+            band.buffers.normals.push(all.normals[v]);
+            band.buffers.lod.push([error, parent_error, width, kind]);
+        }
+    }
+    // Wood: a segment thinner than the error is a line of its mean
+    // diameter, fading out (coverage 2r/e) until it is dropped at
+    // WOOD_LINE_FADE times its error.
+    for segment in &record.wood {
+        let error = line_error(segment.start_radius.max(segment.end_radius));
+        if error.is_nan() || error <= 0.0 || segment.start == segment.end {
+            continue;
+        }
+        let parent_error = error * WOOD_LINE_FADE;
+        let band = &mut bands[band_of(parent_error)];
+        band.min_error = band.min_error.min(error);
+        band.max_parent_error = band.max_parent_error.max(parent_error);
+        let normal = (segment.end - segment.start).normalize_or_zero().any_orthonormal_vector();
+        for p in [segment.start, segment.end] {
+            band.buffers.positions.push(p.to_array());
+            band.buffers.normals.push(normal.to_array());
+            band.buffers.lod.push([
+                error,
+                parent_error,
+                segment.start_radius + segment.end_radius,
+                KIND_WOOD_LINE,
+            ]);
+        }
+    }
+    bands.retain(|band| band.buffers.line_count() > 0);
+    bands
 }
 
 /// Whether a line vertex with `lod = [error, parent_error, ..]` is drawn at
@@ -102,7 +231,8 @@ pub const NEEDLE_SHIFT: u32 = 8;
 /// `Lmax`-slot prisms whose vertices are codes.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PrismBuffers {
-    /// Three `vec4`s per needle: `(base, R)`, `(tip, 0)`, `(normal, 0)`.
+    /// Three `vec4`s per needle: `(base, R)`, `(tip, R_tip)`, `(normal, 0)`
+    /// (`R_tip = R` for a needle; wood segments taper).
     pub needles: Vec<[f32; 4]>,
     /// Vertex codes: `needle << 8 | cap << 7 | tip << 6 | slot`.
     pub codes: Vec<u32>,
@@ -118,10 +248,49 @@ pub const MAX_PRISM_NEEDLES: usize = 1 << 24;
 /// The prism buffers of `record` (`None` with more than
 /// [`MAX_PRISM_NEEDLES`] needles).
 pub fn prism_buffers(record: &LodRecord) -> Option<PrismBuffers> {
-    if record.needle_count() > MAX_PRISM_NEEDLES {
+    let cylinders = record
+        .needles
+        .iter()
+        .map(|n| (n.base, n.tip, n.radius, n.radius, n.normal));
+    prism_buffers_of(cylinders, record.needle_count(), record.max_sides)
+}
+
+/// Factor between a wood line's error (`2·r_max`) and the error where it is
+/// dropped: there its coverage `2r/e` is below 1/64 (about 4 of 255 grey
+/// levels on a one-pixel line), so it leaves without a visible pop.
+pub const WOOD_LINE_FADE: f32 = 64.0;
+
+/// `kind` of a wood line (a branch segment thinner than the error) in
+/// [`line_bands`].
+pub const KIND_WOOD_LINE: f32 = -1.0;
+
+/// The record's wood segments as `Lmax`-slot prisms, in the layout of
+/// [`prism_buffers`] (the tip's `w` holds the tip radius: segments taper).
+/// A segment is a prism while `e < 2·r_max` and a wood line above.
+/// `None` with more than [`MAX_PRISM_NEEDLES`] segments.
+pub fn wood_prism_buffers(record: &LodRecord) -> Option<PrismBuffers> {
+    let cylinders = record.wood.iter().map(|w| {
+        let axis = (w.end - w.start).normalize_or_zero();
+        let normal = if axis == Vec3::ZERO {
+            Vec3::X
+        } else {
+            axis.any_orthonormal_vector()
+        };
+        (w.start, w.end, w.start_radius, w.end_radius, normal)
+    });
+    prism_buffers_of(cylinders, record.wood.len(), record.max_sides)
+}
+
+/// Prism buffers of `count` (tapered) cylinders `(base, tip, base radius,
+/// tip radius, normal)`.
+fn prism_buffers_of(
+    cylinders: impl Iterator<Item = (Vec3, Vec3, f32, f32, Vec3)>,
+    count: usize,
+    max_sides: u8,
+) -> Option<PrismBuffers> {
+    if count > MAX_PRISM_NEEDLES {
         return None;
     }
-    let max_sides = record.max_sides;
     let m = max_sides as u32;
     // The index pattern of one prism with Lmax sides, from the CPU tessellator.
     let unit = Needle {
@@ -138,17 +307,13 @@ pub fn prism_buffers(record: &LodRecord) -> Option<PrismBuffers> {
         max_sides,
         ..Default::default()
     };
-    buffers.needles.reserve(3 * record.needle_count());
-    buffers.codes.reserve(per_needle as usize * record.needle_count());
-    buffers.indices.reserve(pattern.indices.len() * record.needle_count());
-    for (i, needle) in record.needles.iter().enumerate() {
-        buffers
-            .needles
-            .push([needle.base.x, needle.base.y, needle.base.z, needle.radius]);
-        buffers.needles.push([needle.tip.x, needle.tip.y, needle.tip.z, 0.0]);
-        buffers
-            .needles
-            .push([needle.normal.x, needle.normal.y, needle.normal.z, 0.0]);
+    buffers.needles.reserve(3 * count);
+    buffers.codes.reserve(per_needle as usize * count);
+    buffers.indices.reserve(pattern.indices.len() * count);
+    for (i, (base, tip, base_radius, tip_radius, normal)) in cylinders.enumerate() {
+        buffers.needles.push([base.x, base.y, base.z, base_radius]);
+        buffers.needles.push([tip.x, tip.y, tip.z, tip_radius]);
+        buffers.needles.push([normal.x, normal.y, normal.z, 0.0]);
         let first = buffers.codes.len() as u32;
         // append_prism's vertex order: base ring, tip ring, base cap, tip cap.
         for flags in [0, TIP_BIT, CAP_BIT, CAP_BIT | TIP_BIT] {
@@ -197,7 +362,7 @@ pub fn shader_prism_sides(radius: f32, e: f32, max_sides: u8) -> Option<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{BakeOptions, TreeInput, bake};
+    use crate::model::{BakeOptions, TreeInput, WoodSegment, bake};
 
     fn record() -> LodRecord {
         let mut needles = Vec::new();
@@ -215,9 +380,18 @@ mod tests {
                 });
             }
         }
+        let wood = (0..6)
+            .map(|k| WoodSegment {
+                start: Vec3::Y * k as f32 * 0.3,
+                end: Vec3::Y * (k + 1) as f32 * 0.3,
+                start_radius: 0.05 / (k + 1) as f32,
+                end_radius: 0.05 / (k + 2) as f32,
+            })
+            .collect();
         bake(
             &TreeInput {
                 needles,
+                wood,
                 ..Default::default()
             },
             &BakeOptions::default(),
@@ -251,6 +425,82 @@ mod tests {
                 .iter()
                 .filter(|n| shader_prism_sides(n.radius, e, record.max_sides).is_some());
             assert_eq!(prisms.count() as u64, stats.prisms, "e = {e}");
+        }
+    }
+
+    #[test]
+    fn bands_partition_the_lines_and_keep_the_cut() {
+        let record = record();
+        let all = line_buffers(&record);
+        for max_bands in [1, 3, 12] {
+            let bands = line_bands(&record, max_bands);
+            assert!(!bands.is_empty() && bands.len() <= max_bands);
+            let total: usize = bands.iter().map(|b| b.buffers.line_count()).sum();
+            assert_eq!(total, all.line_count() + record.wood.len());
+            let mut probes: Vec<f32> = all.lod.iter().flat_map(|l| [l[0], l[1].min(1e30)]).collect();
+            probes.extend([0.0, 1e30]);
+            for e in probes {
+                let cut_lines = record.cut_stats(&record.cut(e)).line_segments;
+                let mut drawn = 0u64;
+                for band in &bands {
+                    let in_band = band
+                        .buffers
+                        .lod
+                        .chunks(2)
+                        .filter(|p| p[0][3] != KIND_WOOD_LINE && line_visible(p[0], e))
+                        .count() as u64;
+                    // A band that may not draw draws nothing.
+                    if !band.may_draw(e, e) {
+                        assert_eq!(in_band, 0, "e = {e}");
+                    }
+                    drawn += in_band;
+                }
+                assert_eq!(drawn, cut_lines, "e = {e}");
+            }
+        }
+    }
+
+    #[test]
+    fn wood_is_a_prism_below_its_error_and_a_fading_line_above() {
+        let record = record();
+        let prisms = wood_prism_buffers(&record).unwrap();
+        assert_eq!(prisms.needles.len(), 3 * record.wood.len());
+        let per_segment = prisms.codes.len() / record.wood.len();
+        assert_eq!(per_segment, prism_buffers(&record).unwrap().codes.len() / record.needle_count());
+        let bands = line_bands(&record, 6);
+        for (k, segment) in record.wood.iter().enumerate() {
+            // Tapered: the tip's w holds the end radius.
+            assert_eq!(prisms.needles[3 * k][3], segment.start_radius);
+            assert_eq!(prisms.needles[3 * k + 1][3], segment.end_radius);
+            let error = line_error(segment.start_radius.max(segment.end_radius));
+            let drawn_at = |e: f32| {
+                bands
+                    .iter()
+                    .flat_map(|b| b.buffers.lod.chunks(2).map(|p| p[0]))
+                    .filter(|lod| lod[3] == KIND_WOOD_LINE && lod[0] == error && line_visible(*lod, e))
+                    .count()
+            };
+            assert_eq!(drawn_at(error * 0.99), 0);
+            assert_eq!(drawn_at(error), 1);
+            assert_eq!(drawn_at(error * (WOOD_LINE_FADE - 1.0)), 1);
+            assert_eq!(drawn_at(error * WOOD_LINE_FADE), 0);
+        }
+    }
+
+    #[test]
+    fn merged_lines_carry_their_depth() {
+        let record = record();
+        let depths = merge_depths(&record);
+        let n = record.needle_count();
+        assert!(depths[..n].iter().all(|&d| d == 0));
+        for (k, line) in record.merged.iter().enumerate() {
+            let [a, b] = line.children.map(|c| depths[c as usize]);
+            assert_eq!(depths[n + k], a.max(b) + 1);
+        }
+        for band in line_bands(&record, 4) {
+            for lod in &band.buffers.lod {
+                assert!(lod[3] == KIND_ORIGINAL_LINE || lod[3] == KIND_WOOD_LINE || lod[3] >= 1.0);
+            }
         }
     }
 

@@ -6,10 +6,12 @@
 //! * [`prism`]: prism tessellation of a needle.
 //! * [`merge`]: the two-level line merging and its cost function.
 //! * [`record`]: the LOD record (merge forest, error ranges) and the cut.
+//! * [`cut_count`]: the cut's primitive counts at any error without a traversal.
 //! * [`file`]: the binary record file.
 //! * [`gpu_layout`]: the GPU-ready arrays of a record and the CPU reference of the shader.
 
 pub mod bake;
+pub mod cut_count;
 pub mod file;
 pub mod gpu_layout;
 pub mod merge;
@@ -19,6 +21,7 @@ pub mod prism;
 pub mod record;
 
 pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, bake};
+pub use cut_count::{CutCounter, CutCounts};
 pub use file::{RecordError, decode_record, encode_record, read_record, write_record};
 pub use merge::{MergeOptions, MergeWeights, PartnerSearch};
 pub use metric::{PixelError, ViewParams, spatial_error};

@@ -1,7 +1,8 @@
 //! The species asset: a `.conifer` record turned into GPU-ready meshes.
 
 use super::material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE};
-use crate::model::gpu_layout::{LineBuffers, PrismBuffers, line_buffers, prism_buffers};
+use crate::model::gpu_layout::{LineBand, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers};
+use crate::model::metric::line_error;
 use crate::model::prism::TriangleMesh;
 use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
 use bevy::asset::io::Reader;
@@ -21,10 +22,23 @@ pub struct ConiferSpecies {
     /// Every needle as an `Lmax`-slot prism (vertex codes; the needles are in
     /// `needles`). Drawn opaque.
     pub prisms: Handle<Mesh>,
-    /// Every original and merged line (`LineList`). Drawn blended.
-    pub lines: Handle<Mesh>,
-    /// Trunk and branches.
-    pub wood: Handle<Mesh>,
+    /// Every original and merged line (`LineList`), split into bands by
+    /// parent error so a tree draws only the bands its cut can use. Drawn
+    /// blended.
+    pub lines: Vec<SpeciesLineBand>,
+    /// Trunk and branches (the record's wood segments) as `Lmax`-slot
+    /// tapered prisms, chosen per vertex like the needles: a segment is a
+    /// prism while `e < 2·r_max`, then a fading wood line in `lines`.
+    /// `None` without wood segments.
+    pub wood_prisms: Option<Handle<Mesh>>,
+    /// The wood segments for `wood_prisms`' vertex shader.
+    pub wood_segments: Handle<ShaderBuffer>,
+    /// Imported wood triangles (glTF trees), an ordinary mesh; `None` if
+    /// the record has none.
+    pub wood: Option<Handle<Mesh>>,
+    /// Largest wood segment error `2·r_max`: no wood prism is drawn at or
+    /// above it.
+    pub max_wood_error: f32,
     /// Needle cylinders for the prism mesh's vertex shader.
     pub needles: Handle<ShaderBuffer>,
     /// Tree-local bounds of needles and wood, widened by the largest needle radius.
@@ -35,7 +49,31 @@ pub struct ConiferSpecies {
     pub max_line_error: f32,
     /// Smallest line error `2R`: no line is drawn below it.
     pub min_line_error: f32,
+    /// Deepest merge level of the lines (0 without merged lines).
+    pub max_merge_depth: u32,
 }
+
+/// One band of a species' lines (see [`line_bands`]).
+#[derive(Debug, Clone)]
+pub struct SpeciesLineBand {
+    /// The band's `LineList` mesh.
+    pub mesh: Handle<Mesh>,
+    /// Smallest error of its lines: at a smaller spatial error it draws nothing.
+    pub min_error: f32,
+    /// Largest parent error of its lines: at this spatial error or above it
+    /// draws nothing.
+    pub max_parent_error: f32,
+}
+
+impl SpeciesLineBand {
+    /// Whether the band can draw a line for a spatial error in `[min_e, max_e]`.
+    pub fn may_draw(&self, min_e: f32, max_e: f32) -> bool {
+        min_e < self.max_parent_error && max_e >= self.min_error
+    }
+}
+
+/// Most line bands a species is split into.
+pub const MAX_LINE_BANDS: usize = 12;
 
 /// Why a `.conifer` file did not load as a [`ConiferSpecies`].
 #[derive(Debug, thiserror::Error)]
@@ -70,17 +108,7 @@ impl AssetLoader for ConiferRecordLoader {
         reader.read_to_end(&mut bytes).await?;
         let record = decode_record(&bytes)?;
         let parts = SpeciesMeshes::build(&record)?;
-        Ok(ConiferSpecies {
-            prisms: load_context.add_labeled_asset("prisms", parts.prisms),
-            lines: load_context.add_labeled_asset("lines", parts.lines),
-            wood: load_context.add_labeled_asset("wood", parts.wood),
-            needles: load_context.add_labeled_asset("needles", parts.needles),
-            aabb: parts.aabb,
-            crown_center: parts.crown_center,
-            max_line_error: parts.max_line_error,
-            min_line_error: parts.min_line_error,
-            record: Arc::new(record),
-        })
+        Ok(parts.into_species(record, load_context))
     }
 
     fn extensions(&self) -> &[&str] {
@@ -88,14 +116,35 @@ impl AssetLoader for ConiferRecordLoader {
     }
 }
 
+impl ConiferSpecies {
+    /// A species from a record made in code (e.g. baked at build time or
+    /// at startup), its meshes added to `meshes` and `buffers`. Add the
+    /// result to `Assets<ConiferSpecies>` and spawn [`super::ConiferFoliage`]
+    /// with the handle.
+    pub fn from_record(
+        record: LodRecord,
+        meshes: &mut Assets<Mesh>,
+        buffers: &mut Assets<ShaderBuffer>,
+    ) -> Result<Self, ConiferLoadError> {
+        let parts = SpeciesMeshes::build(&record)?;
+        Ok(parts.into_species(record, &mut (meshes, buffers)))
+    }
+}
+
 /// The GPU-ready parts of a record, before they become assets.
 pub struct SpeciesMeshes {
     /// Prism mesh (vertex codes).
     pub prisms: Mesh,
-    /// Line mesh.
-    pub lines: Mesh,
-    /// Wood mesh.
-    pub wood: Mesh,
+    /// Line band meshes, with their error bounds (empty buffers).
+    pub lines: Vec<(Mesh, LineBand)>,
+    /// Wood segment prisms (vertex codes), if any.
+    pub wood_prisms: Option<Mesh>,
+    /// Wood segment storage buffer.
+    pub wood_segments: ShaderBuffer,
+    /// Imported wood triangles, if any.
+    pub wood: Option<Mesh>,
+    /// Largest `2·r_max` of the wood segments.
+    pub max_wood_error: f32,
     /// Needle storage buffer.
     pub needles: ShaderBuffer,
     /// Bounds.
@@ -106,26 +155,105 @@ pub struct SpeciesMeshes {
     pub max_line_error: f32,
     /// Smallest `2R`.
     pub min_line_error: f32,
+    /// Deepest merge level.
+    pub max_merge_depth: u32,
 }
 
 impl SpeciesMeshes {
     /// Builds the meshes and buffer of `record`.
     pub fn build(record: &LodRecord) -> Result<Self, ConiferLoadError> {
         let prisms = prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.needle_count()))?;
-        let lines = line_buffers(record);
+        let wood = wood_prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.wood.len()))?;
+        let lines = line_bands(record, MAX_LINE_BANDS)
+            .into_iter()
+            .map(|mut band| {
+                let mesh = line_mesh(std::mem::take(&mut band.buffers));
+                (mesh, band)
+            })
+            .collect();
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();
         let margin = Vec3::splat(ranges.original_lines.max * 0.5);
         Ok(Self {
             needles: ShaderBuffer::from(prisms.needles.clone()),
             prisms: prism_mesh(&prisms),
-            lines: line_mesh(lines),
-            wood: wood_mesh(&record.wood, &record.wood_mesh, 8),
+            lines,
+            wood_prisms: (!record.wood.is_empty()).then(|| prism_mesh(&wood)),
+            wood_segments: ShaderBuffer::from(if wood.needles.is_empty() {
+                // A storage binding cannot be empty.
+                vec![[0.0f32; 4]; 3]
+            } else {
+                wood.needles
+            }),
+            wood: (record.wood_mesh.triangle_count() > 0).then(|| wood_mesh(&[], &record.wood_mesh, 8)),
+            max_wood_error: record
+                .wood
+                .iter()
+                .map(|w| line_error(w.start_radius.max(w.end_radius)))
+                .fold(0.0, f32::max),
             aabb: Aabb::from_min_max(lo - margin, hi + margin),
             crown_center: record.crown_center(),
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
+            max_merge_depth: merge_depths(record).into_iter().max().unwrap_or(0),
         })
+    }
+}
+
+/// Where the meshes and buffer of a species become assets: the loader's
+/// labelled sub-assets, or the asset collections directly.
+trait SpeciesAssetSink {
+    fn add_mesh(&mut self, label: String, mesh: Mesh) -> Handle<Mesh>;
+    fn add_buffer(&mut self, label: &str, buffer: ShaderBuffer) -> Handle<ShaderBuffer>;
+}
+
+impl SpeciesAssetSink for LoadContext<'_> {
+    fn add_mesh(&mut self, label: String, mesh: Mesh) -> Handle<Mesh> {
+        self.add_labeled_asset(label, mesh)
+    }
+    fn add_buffer(&mut self, label: &str, buffer: ShaderBuffer) -> Handle<ShaderBuffer> {
+        self.add_labeled_asset(label.to_string(), buffer)
+    }
+}
+
+impl SpeciesAssetSink for (&mut Assets<Mesh>, &mut Assets<ShaderBuffer>) {
+    fn add_mesh(&mut self, _label: String, mesh: Mesh) -> Handle<Mesh> {
+        self.0.add(mesh)
+    }
+    fn add_buffer(&mut self, _label: &str, buffer: ShaderBuffer) -> Handle<ShaderBuffer> {
+        self.1.add(buffer)
+    }
+}
+
+impl SpeciesMeshes {
+    /// The species asset, its meshes (labelled `prisms`, `lines0`…,
+    /// `wood_prisms`, `wood`) and buffers (`needles`, `wood_segments`)
+    /// added to `sink`.
+    fn into_species(self, record: LodRecord, sink: &mut impl SpeciesAssetSink) -> ConiferSpecies {
+        ConiferSpecies {
+            prisms: sink.add_mesh("prisms".to_string(), self.prisms),
+            lines: self
+                .lines
+                .into_iter()
+                .enumerate()
+                .map(|(k, (mesh, band))| SpeciesLineBand {
+                    mesh: sink.add_mesh(format!("lines{k}"), mesh),
+                    min_error: band.min_error,
+                    max_parent_error: band.max_parent_error,
+                })
+                .collect(),
+            wood_prisms: self.wood_prisms.map(|mesh| sink.add_mesh("wood_prisms".to_string(), mesh)),
+            wood_segments: sink.add_buffer("wood_segments", self.wood_segments),
+            wood: self.wood.map(|mesh| sink.add_mesh("wood".to_string(), mesh)),
+            max_wood_error: self.max_wood_error,
+            needles: sink.add_buffer("needles", self.needles),
+            aabb: self.aabb,
+            crown_center: self.crown_center,
+            max_line_error: self.max_line_error,
+            min_line_error: self.min_line_error,
+            max_merge_depth: self.max_merge_depth,
+            record: Arc::new(record),
+        }
     }
 }
 
@@ -142,8 +270,10 @@ fn line_mesh(buffers: LineBuffers) -> Mesh {
         .with_inserted_attribute(ATTRIBUTE_LINE_LOD, buffers.lod)
 }
 
-/// Trunk and branches: the record's wood segments as open truncated cones of
-/// `sides` sides with smooth normals, plus its imported wood triangles.
+/// Trunk and branches as one ordinary mesh: the wood segments as open
+/// truncated cones of `sides` sides with smooth normals, plus imported wood
+/// triangles (the plugin draws segments as LOD prisms and uses this only
+/// for imported triangles).
 pub fn wood_mesh(segments: &[WoodSegment], triangles: &TriangleMesh, sides: u32) -> Mesh {
     let mut positions: Vec<[f32; 3]> = triangles.positions.iter().map(|p| p.to_array()).collect();
     let mut normals: Vec<[f32; 3]> = triangles.normals.iter().map(|n| n.to_array()).collect();

@@ -25,6 +25,9 @@ const TAU: f32 = 6.28318530717959;
 struct ConiferLod {
     // tree-local centre of the crown (xyz), w unused
     center: vec4<f32>,
+    // the LOD camera: world position (xyz); error slope 2/(P11·H) in w,
+    // negative for an orthographic camera, 0 for none
+    lod_camera: vec4<f32>,
     // pixel error ε
     pixel_error: f32,
     // transition coefficient δ, scaling original lines' opacity
@@ -37,8 +40,11 @@ struct ConiferLod {
     lod_enabled: u32,
     // 1: colour by representation (debug overlay)
     debug_colors: u32,
-    _padding_a: u32,
+    // deepest merge level of the lines (debug colours)
+    max_merge_depth: u32,
     _padding_b: u32,
+    // wood colour over needle colour, for wood lines
+    wood_tint: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(100) var<uniform> conifer: ConiferLod;
@@ -67,7 +73,20 @@ fn instance_spatial_error(world_from_local: mat4x4<f32>) -> f32 {
         distance = length(center - view.world_position);
     }
     let height = max(view.viewport.w, 1.0);
-    let world_error = max(conifer.pixel_error, 0.0) * distance * 2.0 / (view.clip_from_view[1][1] * height);
+    var world_error = max(conifer.pixel_error, 0.0) * distance * 2.0 / (view.clip_from_view[1][1] * height);
+#ifdef PREPASS_PIPELINE
+    // Shadow (and prepass) views draw no finer than the LOD camera sees the
+    // tree: a shadow map texel smaller than the camera's pixel would pull
+    // in needles nobody sees, at full vertex cost.
+    let slope = conifer.lod_camera.w;
+    if slope != 0.0 {
+        var camera_distance = 1.0;
+        if slope > 0.0 {
+            camera_distance = length(center - conifer.lod_camera.xyz);
+        }
+        world_error = max(world_error, max(conifer.pixel_error, 0.0) * camera_distance * abs(slope));
+    }
+#endif
     return world_error / max(scale, 1e-6);
 }
 
@@ -135,7 +154,7 @@ fn finish(
 }
 
 // Debug colours: prisms blue → cyan by side count, original lines green,
-// merged lines yellow → red by error.
+// merged lines yellow → red by merge depth.
 fn debug_color(kind: f32, amount: f32) -> vec4<f32> {
     if kind < 0.0 {
         return vec4<f32>(0.1, 0.3 + 0.7 * amount, 1.0, 1.0);
@@ -158,9 +177,11 @@ fn vertex(vertex: ConiferVertex) -> VertexOutput {
     let at_tip = (code & 64u) != 0u;
     let cap = (code & 128u) != 0u;
     let base_radius = needles[needle * 3u];
-    let tip = needles[needle * 3u + 1u].xyz;
     let needle_normal = needles[needle * 3u + 2u].xyz;
-    let radius = base_radius.w;
+    let tip_data = needles[needle * 3u + 1u];
+    // Needles are cylinders (tip radius = base radius); wood segments taper.
+    let tip = tip_data.xyz;
+    let radius = max(base_radius.w, tip_data.w);
     if e >= 2.0 * radius {
         return culled();
     }
@@ -195,7 +216,8 @@ fn vertex(vertex: ConiferVertex) -> VertexOutput {
     if conifer.debug_colors != 0u {
         color = debug_color(-1.0, f32(max_sides - sides) / max(f32(max_sides - 3u), 1.0));
     }
-    return finish(end + radial * radius, normal, vertex.instance_index, world_from_local, color, false);
+    let end_radius = select(base_radius.w, tip_data.w, at_tip);
+    return finish(end + radial * end_radius, normal, vertex.instance_index, world_from_local, color, false);
 #else
     let lod = vertex.lod;
     if conifer.lod_enabled == 0u || !(lod.x <= e && e < lod.y) {
@@ -216,9 +238,17 @@ fn vertex(vertex: ConiferVertex) -> VertexOutput {
         alpha = alpha * conifer.transition;
     }
     var color = vec4<f32>(1.0, 1.0, 1.0, alpha);
+    if lod.w < -0.5 {
+        // A wood line (kind −1): the wood's colour over the needles' base colour.
+        color = vec4<f32>(conifer.wood_tint.rgb, alpha);
+    }
     if conifer.debug_colors != 0u {
-        let amount = clamp(log2(max(lod.x, 1e-6) / max(e, 1e-6)) / -6.0, 0.0, 1.0);
-        color = debug_color(lod.w, 1.0 - amount);
+        // kind: 0 for an original line, the merge depth (≥ 1) for a merged one.
+        let depth = (lod.w - 1.0) / max(f32(conifer.max_merge_depth) - 1.0, 1.0);
+        color = debug_color(lod.w, clamp(depth, 0.0, 1.0));
+        if lod.w < -0.5 {
+            color = vec4<f32>(0.45, 0.3, 0.15, 1.0);
+        }
         color.a = alpha;
     }
     return finish(vertex.position, vertex.normal, vertex.instance_index, world_from_local, color, true);

@@ -42,6 +42,13 @@ impl HeadlessRenderer {
     /// Builds the app: Bevy's default plugins without winit or a window, the
     /// conifer plugin, assets read from `asset_root`.
     pub fn new(asset_root: &str) -> Self {
+        Self::with_setup(asset_root, |_| {})
+    }
+
+    /// Like [`HeadlessRenderer::new`], with `setup` adding the caller's
+    /// plugins, resources and systems (an example's scene) before the app is
+    /// finished.
+    pub fn with_setup(asset_root: &str, setup: impl FnOnce(&mut App)) -> Self {
         let mut app = App::new();
         app.add_plugins(
             DefaultPlugins
@@ -61,6 +68,7 @@ impl HeadlessRenderer {
                 .disable::<WinitPlugin>(),
         )
         .add_plugins(ConiferLodPlugin);
+        setup(&mut app);
         app.finish();
         app.cleanup();
         Self {

@@ -31,6 +31,11 @@ pub type ConiferMaterial = ExtendedMaterial<StandardMaterial, ConiferLodExtensio
 pub struct ConiferLodUniform {
     /// Tree-local centre of the crown; the distance `D` is measured to it.
     pub center: Vec4,
+    /// The LOD camera (the first active camera): world position in xyz;
+    /// in w its error slope `2/(P₁₁·H)`, negated for an orthographic
+    /// camera, 0 without one. Shadow and prepass views draw no finer than
+    /// this camera sees the tree.
+    pub lod_camera: Vec4,
     /// Pixel error ε.
     pub pixel_error: f32,
     /// Transition coefficient δ.
@@ -43,10 +48,12 @@ pub struct ConiferLodUniform {
     pub lod_enabled: u32,
     /// 1: colour by representation.
     pub debug_colors: u32,
-    /// Padding to 16 bytes.
-    pub padding_a: u32,
+    /// Deepest merge level of the record's lines (for debug colours).
+    pub max_merge_depth: u32,
     /// Padding to 16 bytes.
     pub padding_b: u32,
+    /// Wood colour over needle colour (the vertex colour of wood lines).
+    pub wood_tint: Vec4,
 }
 
 /// The LOD part of [`ConiferMaterial`]: the uniform block and the needles'

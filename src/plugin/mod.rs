@@ -20,14 +20,16 @@
 //!
 //! ## How it draws
 //!
-//! A [`ConiferSpecies`] asset holds two meshes shared by all its instances:
-//! every needle as an `Lmax`-slot prism and every original and merged line,
-//! with each primitive's error interval as vertex data. The vertex shader
+//! A [`ConiferSpecies`] asset holds meshes shared by all its instances:
+//! every needle as an `Lmax`-slot prism, and every original and merged line,
+//! with each primitive's error interval as vertex data (the lines split into
+//! a few bands by parent error). The vertex shader
 //! computes each instance's spatial error for the view being drawn (so each
 //! camera, and each shadow view, gets its own LOD) and keeps exactly the
 //! paper's cut. The CPU does no traversal and never touches a mesh after
-//! load; per frame it only hides a species' prism or line part on instances
-//! where no primitive of that part can be in the cut, and records each
+//! load; per frame it only hides a species' prism part or line bands on
+//! instances where no primitive of that part can be in the cut (so a far
+//! tree runs the vertex shader on little more than its cut), and records each
 //! instance's [`ConiferLodState`].
 //!
 //! ## System sets
@@ -38,12 +40,16 @@
 //! [`ConiferLodSet::Select`] (per-instance spatial error and part visibility).
 
 mod asset;
+mod debug;
 pub mod headless;
 mod material;
 mod systems;
 
-pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, SpeciesMeshes, wood_mesh};
+pub use asset::{
+    ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshes, wood_mesh,
+};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
+pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats};
 pub use systems::{SpeciesMaterials, view_error_slope};
 
 use bevy::asset::AssetApp;
@@ -183,20 +189,26 @@ pub struct ConiferLodState {
     pub views: u32,
     /// Whether any needle can be a prism in some view.
     pub prisms_visible: bool,
+    /// Whether any wood segment can be a prism in some view.
+    pub wood_prisms_visible: bool,
     /// Whether any line can be drawn in some view.
     pub lines_visible: bool,
+    /// Bit `k` set: line band `k` of the species can draw in some view.
+    pub line_bands: u32,
 }
 
 /// The mesh entities of a tree (its children), spawned once its species
 /// has loaded.
-#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Component, Clone, Debug, PartialEq, Eq)]
 pub struct ConiferParts {
     /// The prism part.
     pub prisms: Entity,
-    /// The line part.
-    pub lines: Entity,
-    /// The wood part.
-    pub wood: Entity,
+    /// The line parts, one per band of [`ConiferSpecies::lines`].
+    pub lines: Vec<Entity>,
+    /// The wood segment prisms (trunk and branches), if the species has wood.
+    pub wood_prisms: Option<Entity>,
+    /// Imported wood triangles, if the species has them.
+    pub wood: Option<Entity>,
 }
 
 /// Marks a mesh entity spawned by the plugin as part of a tree.
@@ -204,8 +216,39 @@ pub struct ConiferParts {
 pub enum ConiferPart {
     /// Prisms.
     Prisms,
-    /// Lines.
+    /// Lines of one band.
     Lines,
-    /// Wood.
+    /// Wood segment prisms.
+    WoodPrisms,
+    /// Imported wood triangles.
     Wood,
+}
+
+/// The transform of a scatter placement: at its position, turned by its yaw
+/// about +Y, scaled uniformly.
+pub fn placement_transform(placement: &crate::scatter::Placement) -> Transform {
+    Transform::from_translation(placement.position)
+        .with_rotation(Quat::from_rotation_y(placement.yaw))
+        .with_scale(Vec3::splat(placement.scale))
+}
+
+/// Spawns a tree per placement of a [`crate::scatter::Scatter`]: species
+/// `species[placement.species]` (placements whose index is out of range are
+/// skipped), at [`placement_transform`]. Returns the trees spawned.
+pub fn spawn_forest(
+    commands: &mut Commands,
+    placements: &[crate::scatter::Placement],
+    species: &[Handle<ConiferSpecies>],
+) -> Vec<Entity> {
+    placements
+        .iter()
+        .filter_map(|placement| {
+            let handle = species.get(placement.species)?;
+            Some(
+                commands
+                    .spawn((ConiferFoliage(handle.clone()), placement_transform(placement)))
+                    .id(),
+            )
+        })
+        .collect()
 }

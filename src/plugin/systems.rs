@@ -6,6 +6,7 @@ use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferLodState, ConiferPart, ConiferParts, ConiferSpecies,
     LineOpacity,
 };
+use bevy::light::Cascades;
 use bevy::pbr::ExtendedMaterial;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -41,6 +42,7 @@ impl MaterialKey {
 struct MaterialSet {
     prisms: Handle<ConiferMaterial>,
     lines: Handle<ConiferMaterial>,
+    wood_prisms: Handle<ConiferMaterial>,
     wood: Handle<StandardMaterial>,
 }
 
@@ -63,9 +65,10 @@ impl SpeciesMaterials {
     }
 }
 
-fn lod_uniform(species: &ConiferSpecies, settings: &ConiferLodSettings) -> ConiferLodUniform {
+fn lod_uniform(species: &ConiferSpecies, settings: &ConiferLodSettings, lod_camera: Vec4) -> ConiferLodUniform {
     ConiferLodUniform {
         center: species.crown_center.extend(1.0),
+        lod_camera,
         pixel_error: settings.pixel_error.max(0.0),
         transition: settings.transition.clamp(0.0, 1.0),
         max_sides: species.record.max_sides as u32,
@@ -75,9 +78,18 @@ fn lod_uniform(species: &ConiferSpecies, settings: &ConiferLodSettings) -> Conif
         },
         lod_enabled: settings.enabled as u32,
         debug_colors: settings.debug_colors as u32,
-        padding_a: 0,
+        max_merge_depth: species.max_merge_depth,
+        wood_tint: wood_tint(&species.record.material),
         padding_b: 0,
     }
+}
+
+/// Wood colour over needle colour: the line material's base colour is the
+/// needles', and a wood line's vertex colour scales it to the wood's.
+fn wood_tint(material: &crate::model::FoliageMaterial) -> Vec4 {
+    let [nr, ng, nb, _] = material.needle_color;
+    let [wr, wg, wb, _] = material.wood_color;
+    Vec4::new(wr / nr.max(1e-3), wg / ng.max(1e-3), wb / nb.max(1e-3), 1.0)
 }
 
 fn make_materials(
@@ -100,7 +112,7 @@ fn make_materials(
         ..default()
     };
     let extension = ConiferLodExtension {
-        lod: lod_uniform(species, settings),
+        lod: lod_uniform(species, settings, Vec4::ZERO),
         needles: species.needles.clone(),
     };
     let prisms = conifer_materials.add(ExtendedMaterial {
@@ -113,14 +125,27 @@ fn make_materials(
             cull_mode: None,
             ..base
         },
-        extension,
+        extension: extension.clone(),
     });
-    let wood = standard_materials.add(StandardMaterial {
+    let wood_base = StandardMaterial {
         base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], m.wood_color[3]),
         perceptual_roughness: 0.9,
         ..default()
+    };
+    let wood_prisms = conifer_materials.add(ExtendedMaterial {
+        base: wood_base.clone(),
+        extension: ConiferLodExtension {
+            needles: species.wood_segments.clone(),
+            ..extension
+        },
     });
-    MaterialSet { prisms, lines, wood }
+    let wood = standard_materials.add(wood_base);
+    MaterialSet {
+        prisms,
+        lines,
+        wood_prisms,
+        wood,
+    }
 }
 
 /// Spawns the prism, line and wood parts of trees whose species has loaded
@@ -152,7 +177,8 @@ pub(super) fn spawn_parts(
             continue;
         };
         if let Some(parts) = parts {
-            for part in [parts.prisms, parts.lines, parts.wood] {
+            let wood = parts.wood_prisms.into_iter().chain(parts.wood);
+            for part in parts.lines.iter().copied().chain([parts.prisms]).chain(wood) {
                 commands.entity(part).try_despawn();
             }
         }
@@ -172,7 +198,12 @@ pub(super) fn spawn_parts(
             let mut child = commands.spawn((
                 Mesh3d(mesh.clone()),
                 Transform::IDENTITY,
-                Visibility::Inherited,
+                // Hidden until select_lod has seen a view.
+                if matches!(part, ConiferPart::Wood) {
+                    Visibility::Inherited
+                } else {
+                    Visibility::Hidden
+                },
                 aabb,
                 part,
                 ChildOf(entity),
@@ -181,6 +212,7 @@ pub(super) fn spawn_parts(
                 match part {
                     ConiferPart::Prisms => child.insert(MeshMaterial3d(set.prisms.clone())),
                     ConiferPart::Lines => child.insert(MeshMaterial3d(set.lines.clone())),
+                    ConiferPart::WoodPrisms => child.insert(MeshMaterial3d(set.wood_prisms.clone())),
                     ConiferPart::Wood => child.insert(MeshMaterial3d(set.wood.clone())),
                 };
             }
@@ -188,40 +220,88 @@ pub(super) fn spawn_parts(
         };
         let parts = ConiferParts {
             prisms: spawn(&species.prisms, ConiferPart::Prisms),
-            lines: spawn(&species.lines, ConiferPart::Lines),
-            wood: spawn(&species.wood, ConiferPart::Wood),
+            lines: species
+                .lines
+                .iter()
+                .map(|band| spawn(&band.mesh, ConiferPart::Lines))
+                .collect(),
+            wood_prisms: species
+                .wood_prisms
+                .as_ref()
+                .map(|mesh| spawn(mesh, ConiferPart::WoodPrisms)),
+            wood: species.wood.as_ref().map(|mesh| spawn(mesh, ConiferPart::Wood)),
         };
         commands.entity(entity).insert(parts);
     }
 }
 
-/// Writes the settings into every material when they change (a material
-/// asset edit, never a mesh edit).
+/// Writes the settings and the LOD camera into every material when they
+/// change (a small uniform edit, never a mesh edit).
 pub(super) fn sync_materials(
     settings: Res<ConiferLodSettings>,
     materials: Res<SpeciesMaterials>,
     species_assets: Res<Assets<ConiferSpecies>>,
+    cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     conifer_materials: Option<ResMut<Assets<ConiferMaterial>>>,
 ) {
     let Some(mut conifer_materials) = conifer_materials else {
         return;
     };
-    if !settings.is_changed() {
-        return;
-    }
+    let lod_camera = lod_camera(&cameras).map_or(Vec4::ZERO, |view| {
+        let slope = if view.perspective { view.slope } else { -view.slope };
+        view.position.extend(slope)
+    });
     for (key, set) in &materials.sets {
         let Some(species) = species_assets.get(key.species) else {
             continue;
         };
-        let uniform = lod_uniform(species, &key.settings(&settings));
-        for handle in [&set.prisms, &set.lines] {
-            if let Some(mut material) = conifer_materials.get_mut(handle)
-                && material.extension.lod != uniform
+        let settings = key.settings(&settings);
+        let uniform = lod_uniform(species, &settings, lod_camera);
+        let m = &species.record.material;
+        let [needle, wood] = [m.needle_color, m.wood_color].map(|[r, g, b, a]| {
+            // Debug colours replace the base colour (they are multiplied by it).
+            if settings.debug_colors {
+                Color::WHITE
+            } else {
+                Color::linear_rgba(r, g, b, a)
+            }
+        });
+        for (handle, base_color) in [(&set.prisms, needle), (&set.lines, needle), (&set.wood_prisms, wood)] {
+            // Compare before taking the asset mutably: an unchanged material
+            // is not re-uploaded.
+            if conifer_materials
+                .get(handle)
+                .is_some_and(|m| m.extension.lod != uniform || m.base.base_color != base_color)
+                && let Some(mut material) = conifer_materials.get_mut(handle)
             {
                 material.extension.lod = uniform;
+                material.base.base_color = base_color;
             }
         }
     }
+}
+
+/// The camera whose view bounds the detail of shadow views: the active
+/// camera of lowest order with a usable viewport.
+fn lod_camera(cameras: &Query<(&Camera, &GlobalTransform, &Projection)>) -> Option<ViewLod> {
+    cameras
+        .iter()
+        .filter(|(camera, _, _)| camera.is_active)
+        .filter_map(|(camera, transform, projection)| Some((camera.order, view_lod(camera, transform, projection)?)))
+        .min_by_key(|(order, _)| *order)
+        .map(|(_, view)| view)
+}
+
+fn view_lod(camera: &Camera, transform: &GlobalTransform, projection: &Projection) -> Option<ViewLod> {
+    let height = camera.physical_viewport_size()?.y as f32;
+    // The projection the camera system hands to the renderer (a sub-camera
+    // view only crops it, which keeps P₁₁ per pixel).
+    let (slope, perspective) = view_error_slope(&projection.get_clip_from_view(), height)?;
+    Some(ViewLod {
+        position: transform.translation(),
+        slope,
+        perspective,
+    })
 }
 
 /// Drops the materials of species that were unloaded.
@@ -256,11 +336,21 @@ struct ViewLod {
     perspective: bool,
 }
 
+/// One directional-light shadow cascade: an orthographic view whose
+/// spatial error is its texel size (`ε · texel`); the shader gives it its
+/// own cut, so the CPU keeps the line bands it needs visible.
+struct ShadowLod {
+    clip_from_world: Mat4,
+    texel_size: f32,
+}
+
 /// Computes every tree's [`ConiferLodState`] over the active cameras and
-/// hides the parts that cannot draw anything at its errors.
-#[allow(clippy::type_complexity)] // a Bevy query
+/// hides the parts that cannot draw anything at its errors (for the cameras
+/// or the directional lights' shadow cascades).
+#[allow(clippy::type_complexity, clippy::too_many_arguments)] // a Bevy system
 pub(super) fn select_lod(
     cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
+    lights: Query<(&DirectionalLight, &Cascades)>,
     mut trees: Query<(
         &ConiferFoliage,
         &GlobalTransform,
@@ -275,16 +365,17 @@ pub(super) fn select_lod(
     let views: Vec<ViewLod> = cameras
         .iter()
         .filter(|(camera, _, _)| camera.is_active)
-        .filter_map(|(camera, transform, projection)| {
-            let height = camera.physical_viewport_size()?.y as f32;
-            // The projection the camera system hands to the renderer (a
-            // sub-camera view only crops it, which keeps P₁₁ per pixel).
-            let (slope, perspective) = view_error_slope(&projection.get_clip_from_view(), height)?;
-            Some(ViewLod {
-                position: transform.translation(),
-                slope,
-                perspective,
-            })
+        .filter_map(|(camera, transform, projection)| view_lod(camera, transform, projection))
+        .collect();
+    let shadow_camera = lod_camera(&cameras);
+    let shadows: Vec<ShadowLod> = lights
+        .iter()
+        .filter(|(light, _)| light.shadow_maps_enabled)
+        .flat_map(|(_, cascades)| cascades.cascades.values().flatten())
+        .filter(|cascade| cascade.texel_size.is_finite() && cascade.texel_size > 0.0)
+        .map(|cascade| ShadowLod {
+            clip_from_world: cascade.clip_from_world,
+            texel_size: cascade.texel_size,
         })
         .collect();
     for (foliage, transform, over, mut state, tree_parts) in &mut trees {
@@ -315,32 +406,67 @@ pub(super) fn select_lod(
             max_e = max_e.max(e);
         }
         let any_view = !views.is_empty();
+        let mut line_bands = 0u32;
+        if any_view && settings.enabled {
+            let (mut band_min_e, mut band_max_e) = (min_e, max_e);
+            // The shader's shadow error: the texel's, but no finer than the
+            // LOD camera's.
+            let camera_e = shadow_camera.as_ref().map_or(0.0, |view| {
+                let distance = if view.perspective {
+                    center.distance(view.position)
+                } else {
+                    1.0
+                };
+                pixel_error * distance * view.slope / scale
+            });
+            for shadow in &shadows {
+                let ndc = shadow.clip_from_world.project_point3(center);
+                if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
+                    let e = (pixel_error * shadow.texel_size / scale).max(camera_e);
+                    band_min_e = band_min_e.min(e);
+                    band_max_e = band_max_e.max(e);
+                }
+            }
+            for (k, band) in species.lines.iter().enumerate().take(32) {
+                if band.may_draw(band_min_e, band_max_e) {
+                    line_bands |= 1 << k;
+                }
+            }
+        }
         let new_state = ConiferLodState {
             min_spatial_error: min_e,
             max_spatial_error: if any_view { max_e } else { f32::INFINITY },
             views: views.len() as u32,
             prisms_visible: any_view && min_e < species.max_line_error,
-            lines_visible: any_view && settings.enabled && max_e >= species.min_line_error,
+            wood_prisms_visible: any_view && min_e < species.max_wood_error,
+            lines_visible: line_bands != 0,
+            line_bands,
         };
         let parts_changed = state.prisms_visible != new_state.prisms_visible
-            || state.lines_visible != new_state.lines_visible
-            || (state.views == 0) != (new_state.views == 0);
+            || state.wood_prisms_visible != new_state.wood_prisms_visible
+            || state.line_bands != new_state.line_bands;
         state.set_if_neq(new_state);
         // Parts are touched only when what they show changes (and once
         // when they appear).
         let Some(tree_parts) = tree_parts else { continue };
         if parts_changed || tree_parts.is_changed() {
-            for (part, shown) in [
-                (tree_parts.prisms, new_state.prisms_visible),
-                (tree_parts.lines, new_state.lines_visible),
-            ] {
+            let bands = tree_parts
+                .lines
+                .iter()
+                .enumerate()
+                .map(|(k, &part)| (part, k < 32 && line_bands & (1 << k) != 0));
+            let wood = tree_parts.wood_prisms.map(|part| (part, new_state.wood_prisms_visible));
+            for (part, shown) in [(tree_parts.prisms, new_state.prisms_visible)]
+                .into_iter()
+                .chain(wood)
+                .chain(bands)
+            {
                 if let Ok(mut visibility) = parts.get_mut(part) {
-                    let wanted = if shown || !any_view {
+                    visibility.set_if_neq(if shown {
                         Visibility::Inherited
                     } else {
                         Visibility::Hidden
-                    };
-                    visibility.set_if_neq(wanted);
+                    });
                 }
             }
         }
@@ -355,7 +481,9 @@ impl Default for ConiferLodState {
             max_spatial_error: f32::INFINITY,
             views: 0,
             prisms_visible: false,
+            wood_prisms_visible: false,
             lines_visible: false,
+            line_bands: 0,
         }
     }
 }

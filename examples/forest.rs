@@ -1,0 +1,429 @@
+//! The main job: a few thousand conifers of four species scattered on a
+//! procedural, lit, fogged terrain, every one drawn with continuous LOD.
+//!
+//! ```text
+//! cargo run --example forest                       # a window, fly through
+//! cargo run --example forest -- --headless --frames 8 --screenshot forest.png
+//! ```
+//!
+//! Keys: `WASD` move, `Q`/`E` down/up, `Shift` faster, right mouse button +
+//! drag to look; `[`/`]` pixel error ε ÷/× 1.25; `,`/`.` transition δ −/+
+//! 0.1; `F3` (or `O`) the LOD debug overlay; `L` LOD on/off (off: every
+//! needle a full prism, to feel the difference); `P` the paper's line
+//! opacity vs ours.
+//!
+//! The trees are the shipped records under `assets/trees/`; the scatter is
+//! [`bevy_conifer_lod::scatter::Scatter`] (blue noise, clearings from a
+//! density noise, no trees on slopes over 32°).
+
+use bevy::camera::RenderTarget;
+use bevy::input::mouse::AccumulatedMouseMotion;
+use bevy::light::CascadeShadowConfigBuilder;
+use bevy::mesh::{Indices, PrimitiveTopology};
+use bevy::prelude::*;
+use bevy::asset::{LoadState, RenderAssetUsages};
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::prelude::*;
+use bevy_conifer_lod::scatter::{HeightMap, Scatter};
+use clap::Parser;
+use std::path::PathBuf;
+
+/// The four shipped species, and their share of the forest.
+const SPECIES: [(&str, f32); 4] = [
+    ("trees/scots-pine.conifer", 4.0),
+    ("trees/norway-spruce.conifer", 3.0),
+    ("trees/eastern-white-pine.conifer", 2.0),
+    ("trees/lawson-cypress.conifer", 1.0),
+];
+
+/// Half the side of the terrain, metres.
+const HALF_SIZE: f32 = 300.0;
+
+#[derive(Parser, Debug, Clone, Resource)]
+#[command(about = "A conifer forest on procedural terrain, with continuous LOD")]
+struct Args {
+    /// Render without a window (software Vulkan is enough) and exit.
+    #[arg(long)]
+    headless: bool,
+    /// Frames to render in headless mode after the trees have loaded.
+    #[arg(long, default_value_t = 4)]
+    frames: u32,
+    /// Where headless mode writes its picture.
+    #[arg(long, default_value = "target/forest.png")]
+    screenshot: PathBuf,
+    /// Picture size in headless mode, WIDTHxHEIGHT.
+    #[arg(long, default_value = "960x540")]
+    size: String,
+    /// Minimum spacing between trees, metres (fewer trees when larger).
+    #[arg(long, default_value_t = 6.0)]
+    spacing: f32,
+    /// Scatter seed.
+    #[arg(long, default_value_t = 7)]
+    seed: u64,
+    /// Pixel error ε.
+    #[arg(long, default_value_t = 1.0)]
+    pixel_error: f32,
+    /// No shadow maps (faster on a software renderer).
+    #[arg(long)]
+    no_shadows: bool,
+    /// Start with the debug overlay on.
+    #[arg(long)]
+    overlay: bool,
+    /// Start with LOD off (all prisms).
+    #[arg(long)]
+    lod_off: bool,
+    /// Camera: `overview` (above the valley), `ground` (eye level in the
+    /// trees) or `x,y,z:x,y,z` (eye and target).
+    #[arg(long, default_value = "overview")]
+    view: String,
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args = Args::parse();
+    let (eye, target) = camera_view(&args.view)?;
+    if !args.headless {
+        App::new()
+            .add_plugins((DefaultPlugins, ConiferLodPlugin, ConiferLodDebugPlugin))
+            .insert_resource(args)
+            .insert_resource(CameraStart { eye, target })
+            .add_systems(Startup, setup)
+            .add_systems(Update, (fly_camera, keys))
+            .run();
+        return Ok(());
+    }
+    let (width, height) = args
+        .size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .filter(|&(w, h)| w > 0 && h > 0)
+        .ok_or_else(|| format!("--size {}: expected WIDTHxHEIGHT", args.size))?;
+    let frames = args.frames;
+    let screenshot = args.screenshot.clone();
+    let assets = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
+    let mut renderer = HeadlessRenderer::with_setup(assets, |app| {
+        app.add_plugins(ConiferLodDebugPlugin)
+            .insert_resource(args)
+            .insert_resource(CameraStart { eye, target })
+            .add_systems(Startup, setup);
+    });
+    let image = renderer.render_target(width, height);
+    renderer.world_mut().insert_resource(HeadlessTarget(image.clone()));
+    // Load, then let meshes and pipelines reach the GPU.
+    let begin = std::time::Instant::now();
+    let mut loaded = false;
+    for _ in 0..2000 {
+        renderer.update()?;
+        let server = renderer.world().resource::<AssetServer>();
+        let states: Vec<LoadState> = renderer
+            .world()
+            .resource::<SpeciesHandles>()
+            .0
+            .iter()
+            .map(|h| server.load_state(h))
+            .collect();
+        if let Some(LoadState::Failed(error)) = states.iter().find(|s| matches!(s, LoadState::Failed(_))) {
+            return Err(format!("a tree record failed to load: {error}").into());
+        }
+        if states.iter().all(|s| matches!(s, LoadState::Loaded)) {
+            loaded = true;
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    if !loaded {
+        return Err("the tree records did not load".into());
+    }
+    let started = std::time::Instant::now();
+    for _ in 0..frames.max(4) {
+        let frame = std::time::Instant::now();
+        renderer.update()?;
+        eprintln!("frame {:.0} ms", frame.elapsed().as_secs_f64() * 1e3);
+    }
+    eprintln!("loaded after {:.1} s", (started - begin).as_secs_f64());
+    let picture = renderer.capture(&image, 20)?;
+    if let Some(dir) = screenshot.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    picture.save(&screenshot)?;
+    let stats = *renderer.world().resource::<ConiferLodStats>();
+    let trees = renderer
+        .world_mut()
+        .query::<&ConiferFoliage>()
+        .iter(renderer.world())
+        .count();
+    println!(
+        "{{\"screenshot\": {:?}, \"trees\": {trees}, \"visible\": {}, \"prisms\": {}, \"triangles\": {}, \"lines\": {}, \"plugin_cpu_ms\": {:.3}}}",
+        screenshot.display().to_string(),
+        stats.visible_instances,
+        stats.prisms,
+        stats.triangles,
+        stats.lines,
+        stats.plugin_cpu_ms
+    );
+    Ok(())
+}
+
+/// Where the camera starts.
+#[derive(Resource, Clone, Copy)]
+struct CameraStart {
+    eye: Vec3,
+    target: Vec3,
+}
+
+/// In headless mode, the image the camera renders into.
+#[derive(Resource)]
+struct HeadlessTarget(Handle<Image>);
+
+/// The species records being loaded.
+#[derive(Resource)]
+struct SpeciesHandles(Vec<Handle<ConiferSpecies>>);
+
+fn camera_view(view: &str) -> Result<(Vec3, Vec3), String> {
+    let ground = |x: f32, z: f32| Vec3::new(x, terrain_height(Vec2::new(x, z)), z);
+    match view {
+        "overview" => Ok((ground(-30.0, 260.0) + Vec3::Y * 30.0, ground(20.0, 60.0) + Vec3::Y * 4.0)),
+        "ground" => Ok((ground(-6.0, 120.0) + Vec3::Y * 2.0, ground(10.0, 60.0) + Vec3::Y * 6.0)),
+        custom => {
+            let parse = |s: &str| -> Option<Vec3> {
+                let v: Vec<f32> = s.split(',').map(|x| x.trim().parse().ok()).collect::<Option<_>>()?;
+                (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
+            };
+            custom
+                .split_once(':')
+                .and_then(|(a, b)| Some((parse(a)?, parse(b)?)))
+                .ok_or_else(|| format!("--view {custom}: expected overview, ground or x,y,z:x,y,z"))
+        }
+    }
+}
+
+/// Hash of a lattice point to `[0, 1)`.
+fn lattice(x: i32, z: i32, seed: u32) -> f32 {
+    let mut h = (x as u32).wrapping_mul(0x8da6_b343) ^ (z as u32).wrapping_mul(0xd816_3841) ^ seed.wrapping_mul(0xcb1a_b31f);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0x5bd1_e995);
+    h ^= h >> 15;
+    (h >> 8) as f32 / 16_777_216.0
+}
+
+/// Smooth value noise in `[0, 1)`, period 1 per lattice cell.
+fn value_noise(p: Vec2, seed: u32) -> f32 {
+    let (i, f) = (p.floor(), p - p.floor());
+    let (x, z) = (i.x as i32, i.y as i32);
+    let s = f * f * (Vec2::splat(3.0) - 2.0 * f);
+    let a = lattice(x, z, seed) + (lattice(x + 1, z, seed) - lattice(x, z, seed)) * s.x;
+    let b = lattice(x, z + 1, seed) + (lattice(x + 1, z + 1, seed) - lattice(x, z + 1, seed)) * s.x;
+    a + (b - a) * s.y
+}
+
+/// Fractal sum of `octaves` octaves of value noise, in about `[0, 1)`.
+fn fbm(p: Vec2, octaves: u32, seed: u32) -> f32 {
+    let (mut sum, mut amplitude, mut frequency, mut total) = (0.0, 1.0, 1.0, 0.0);
+    for octave in 0..octaves {
+        sum += amplitude * value_noise(p * frequency, seed + octave);
+        total += amplitude;
+        amplitude *= 0.5;
+        frequency *= 2.03;
+    }
+    sum / total
+}
+
+/// The terrain: rolling hills around a shallow valley along z.
+fn terrain_height(p: Vec2) -> f32 {
+    let hills = fbm(p / 140.0, 5, 11) * 60.0 - 30.0;
+    let valley = (p.x / 120.0).powi(2).min(1.0) * 18.0;
+    hills + valley
+}
+
+/// Tree density: clearings where a low-frequency noise dips.
+fn tree_density(p: Vec2) -> f32 {
+    ((fbm(p / 90.0, 3, 29) - 0.35) * 4.0).clamp(0.0, 1.0)
+}
+
+fn terrain_mesh(map: &HeightMap) -> Mesh {
+    let (columns, rows) = (map.columns, map.rows);
+    let mut positions = Vec::with_capacity(columns * rows);
+    let mut normals = Vec::with_capacity(columns * rows);
+    let mut colors = Vec::with_capacity(columns * rows);
+    let step = (map.max - map.min) / Vec2::new((columns - 1) as f32, (rows - 1) as f32);
+    for j in 0..rows {
+        for i in 0..columns {
+            let h = map.get(i, j);
+            let dx = (map.get(i + 1, j) - map.get(i.saturating_sub(1), j)) / (2.0 * step.x);
+            let dz = (map.get(i, j + 1) - map.get(i, j.saturating_sub(1))) / (2.0 * step.y);
+            let normal = Vec3::new(-dx, 1.0, -dz).normalize();
+            let p = map.min + step * Vec2::new(i as f32, j as f32);
+            positions.push([p.x, h, p.y]);
+            normals.push(normal.to_array());
+            // Grass on the flats, earth and rock on the slopes.
+            let steep = (1.0 - normal.y).clamp(0.0, 0.3) / 0.3;
+            let grass = Vec3::new(0.085, 0.12, 0.045);
+            let rock = Vec3::new(0.2, 0.18, 0.15);
+            let c = grass.lerp(rock, steep) * (0.85 + 0.3 * value_noise(p / 7.0, 3));
+            colors.push([c.x, c.y, c.z, 1.0]);
+        }
+    }
+    let mut indices = Vec::with_capacity((columns - 1) * (rows - 1) * 6);
+    for j in 0..rows - 1 {
+        for i in 0..columns - 1 {
+            let a = (j * columns + i) as u32;
+            let (b, c, d) = (a + 1, a + columns as u32, a + columns as u32 + 1);
+            indices.extend_from_slice(&[a, c, b, b, c, d]);
+        }
+    }
+    Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::RENDER_WORLD)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, colors)
+        .with_inserted_indices(Indices::U32(indices))
+}
+
+#[allow(clippy::too_many_arguments)] // a Bevy system
+fn setup(
+    mut commands: Commands,
+    args: Res<Args>,
+    start: Res<CameraStart>,
+    target: Option<Res<HeadlessTarget>>,
+    asset_server: Res<AssetServer>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut settings: ResMut<ConiferLodSettings>,
+    mut debug: ResMut<ConiferLodDebug>,
+) {
+    settings.pixel_error = args.pixel_error;
+    settings.enabled = !args.lod_off;
+    debug.enabled = args.overlay;
+    debug.always_collect_stats = args.headless;
+
+    let map = HeightMap::from_fn(
+        241,
+        241,
+        Vec2::splat(-HALF_SIZE),
+        Vec2::splat(HALF_SIZE),
+        terrain_height,
+    );
+    commands.spawn((
+        Mesh3d(meshes.add(terrain_mesh(&map))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            perceptual_roughness: 0.95,
+            ..default()
+        })),
+    ));
+
+    let species: Vec<Handle<ConiferSpecies>> = SPECIES.iter().map(|(path, _)| asset_server.load(*path)).collect();
+    let weights: Vec<f32> = SPECIES.iter().map(|(_, w)| *w).collect();
+    let placements = Scatter::new(Vec2::splat(-HALF_SIZE + 5.0), Vec2::splat(HALF_SIZE - 5.0), args.spacing)
+        .density(tree_density)
+        .height(map)
+        .max_slope_deg(32.0)
+        // The presets are young trees (2–5 m); a forest's are taller.
+        .scale_range(2.2, 3.6)
+        .species_weights(&weights)
+        .seed(args.seed)
+        .place();
+    spawn_forest(&mut commands, &placements, &species);
+    info!("{} trees", placements.len());
+    commands.insert_resource(SpeciesHandles(species));
+
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 7_000.0,
+            shadow_maps_enabled: !args.no_shadows,
+            ..default()
+        },
+        Transform::from_xyz(-0.5, 1.0, 0.35).looking_at(Vec3::ZERO, Vec3::Y),
+        CascadeShadowConfigBuilder {
+            num_cascades: 3,
+            maximum_distance: 160.0,
+            first_cascade_far_bound: 25.0,
+            ..default()
+        }
+        .build(),
+    ));
+    commands.insert_resource(GlobalAmbientLight {
+        color: Color::srgb(0.75, 0.85, 1.0),
+        brightness: 350.0,
+        ..default()
+    });
+    let sky = Color::srgb(0.55, 0.66, 0.8);
+    let mut camera = commands.spawn((
+        Camera3d::default(),
+        Camera {
+            clear_color: ClearColorConfig::Custom(sky),
+            ..default()
+        },
+        Projection::Perspective(PerspectiveProjection {
+            fov: 50f32.to_radians(),
+            far: 2000.0,
+            ..default()
+        }),
+        Transform::from_translation(start.eye).looking_at(start.target, Vec3::Y),
+        DistanceFog {
+            color: sky,
+            falloff: FogFalloff::from_visibility_colors(1200.0, Color::srgb(0.45, 0.52, 0.6), sky),
+            ..default()
+        },
+    ));
+    // The stats panel draws on this camera, also when it renders to an image.
+    camera.insert(IsDefaultUiCamera);
+    if let Some(target) = target {
+        camera.insert(RenderTarget::from(target.0.clone()));
+    }
+}
+
+fn fly_camera(
+    time: Res<Time>,
+    keys: Res<ButtonInput<KeyCode>>,
+    buttons: Res<ButtonInput<MouseButton>>,
+    motion: Res<AccumulatedMouseMotion>,
+    mut camera: Single<&mut Transform, With<Camera3d>>,
+) {
+    let speed = if keys.pressed(KeyCode::ShiftLeft) { 60.0 } else { 12.0 } * time.delta_secs();
+    let (forward, right) = (camera.forward().as_vec3(), camera.right().as_vec3());
+    let mut step = Vec3::ZERO;
+    for (key, direction) in [
+        (KeyCode::KeyW, forward),
+        (KeyCode::KeyS, -forward),
+        (KeyCode::KeyD, right),
+        (KeyCode::KeyA, -right),
+        (KeyCode::KeyE, Vec3::Y),
+        (KeyCode::KeyQ, -Vec3::Y),
+    ] {
+        if keys.pressed(key) {
+            step += direction;
+        }
+    }
+    camera.translation += step.normalize_or_zero() * speed;
+    if buttons.pressed(MouseButton::Right) && motion.delta != Vec2::ZERO {
+        let (yaw, pitch, _) = camera.rotation.to_euler(EulerRot::YXZ);
+        let yaw = yaw - motion.delta.x * 0.003;
+        let pitch = (pitch - motion.delta.y * 0.003).clamp(-1.5, 1.5);
+        camera.rotation = Quat::from_euler(EulerRot::YXZ, yaw, pitch, 0.0);
+    }
+}
+
+fn keys(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<ConiferLodSettings>, mut debug: ResMut<ConiferLodDebug>) {
+    if keys.just_pressed(KeyCode::BracketRight) {
+        settings.pixel_error = (settings.pixel_error * 1.25).min(64.0);
+    }
+    if keys.just_pressed(KeyCode::BracketLeft) {
+        settings.pixel_error = (settings.pixel_error / 1.25).max(0.05);
+    }
+    if keys.just_pressed(KeyCode::Period) {
+        settings.transition = (settings.transition + 0.1).min(1.0);
+    }
+    if keys.just_pressed(KeyCode::Comma) {
+        settings.transition = (settings.transition - 0.1).max(0.1);
+    }
+    if keys.just_pressed(KeyCode::KeyL) {
+        settings.enabled = !settings.enabled;
+    }
+    if keys.just_pressed(KeyCode::KeyP) {
+        settings.line_opacity = match settings.line_opacity {
+            LineOpacity::Paper => LineOpacity::AreaPreserving,
+            LineOpacity::AreaPreserving => LineOpacity::Paper,
+        };
+    }
+    if keys.just_pressed(KeyCode::F3) || keys.just_pressed(KeyCode::KeyO) {
+        debug.enabled = !debug.enabled;
+    }
+}
