@@ -54,7 +54,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let target = renderer.render_target(384, 384);
     let eye = crown + Vec3::new(0.0, 0.5, 9.0);
     renderer.world_mut().spawn((
-        HeadlessRenderer::camera_bundle(&target, Transform::from_translation(eye).looking_at(crown, Vec3::Y), 0.8),
+        HeadlessRenderer::camera_bundle(
+            &target,
+            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
+            0.8,
+        ),
         Camera {
             clear_color: ClearColorConfig::Custom(Color::srgb(0.92, 0.93, 0.95)),
             ..default()

@@ -38,6 +38,9 @@ struct Args {
     /// Camera height above the crown centre, metres.
     #[arg(long, default_value_t = 0.0)]
     height: f32,
+    /// Vertical field of view, degrees (small: a telephoto close-up).
+    #[arg(long, default_value_t = 45.0)]
+    fov_deg: f32,
     /// Pixel error ε.
     #[arg(long, default_value_t = 1.0)]
     pixel_error: f32,
@@ -66,7 +69,8 @@ struct Orbit {
 
 impl Orbit {
     fn transform(&self) -> Transform {
-        let eye = self.center + Vec3::new(self.angle.sin(), 0.0, self.angle.cos()) * self.distance + Vec3::Y * self.height;
+        let eye =
+            self.center + Vec3::new(self.angle.sin(), 0.0, self.angle.cos()) * self.distance + Vec3::Y * self.height;
         Transform::from_translation(eye).looking_at(self.center + Vec3::Y * self.height, Vec3::Y)
     }
 }
@@ -192,7 +196,7 @@ fn setup(
             ..default()
         },
         Projection::Perspective(PerspectiveProjection {
-            fov: 45f32.to_radians(),
+            fov: args.fov_deg.clamp(1.0, 170.0).to_radians(),
             near: 0.01,
             ..default()
         }),

@@ -419,7 +419,10 @@ mod tests {
                 .len() as f32;
             // Binomial thinning: within 4 standard deviations.
             let sigma = (full * density * (1.0 - density)).sqrt();
-            assert!((n - density * full).abs() <= 4.0 * sigma + 1.0, "{density}: {n} of {full}");
+            assert!(
+                (n - density * full).abs() <= 4.0 * sigma + 1.0,
+                "{density}: {n} of {full}"
+            );
         }
         // A density map: nothing where it is zero.
         let map = HeightMap::from_fn(201, 3, Vec2::ZERO, area, |p| if p.x < 100.0 { 1.0 } else { 0.0 });
@@ -427,7 +430,11 @@ mod tests {
             .density(move |p| map.sample(p).unwrap_or(0.0))
             .place();
         assert!(trees.iter().all(|t| t.position.x < 100.0));
-        assert!((trees.len() as f32 - 0.5 * full).abs() < 0.05 * full, "{} of {full}", trees.len());
+        assert!(
+            (trees.len() as f32 - 0.5 * full).abs() < 0.05 * full,
+            "{} of {full}",
+            trees.len()
+        );
     }
 
     #[test]
@@ -475,7 +482,11 @@ mod tests {
         assert!(Scatter::new(Vec2::ZERO, Vec2::ZERO, 1.0).place().is_empty());
         assert!(Scatter::new(Vec2::ZERO, Vec2::splat(10.0), 0.0).place().is_empty());
         assert!(Scatter::new(Vec2::ZERO, Vec2::splat(10.0), f32::NAN).place().is_empty());
-        assert!(Scatter::new(Vec2::ZERO, Vec2::splat(f32::INFINITY), 1.0).place().is_empty());
+        assert!(
+            Scatter::new(Vec2::ZERO, Vec2::splat(f32::INFINITY), 1.0)
+                .place()
+                .is_empty()
+        );
         assert!(Scatter::new(Vec2::ZERO, Vec2::splat(1e6), 0.01).place().is_empty());
         assert!(
             Scatter::new(Vec2::ZERO, Vec2::splat(10.0), 1.0)

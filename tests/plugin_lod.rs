@@ -7,11 +7,12 @@
 
 use bevy::asset::{AssetPlugin, LoadState};
 use bevy::camera::{CameraProjection, Viewport};
+use bevy::ecs::system::RunSystemOnce;
 use bevy::prelude::*;
 use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
-use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake, write_record};
 use bevy_conifer_lod::model::gpu_layout::{KIND_WOOD_LINE, line_bands, line_visible};
+use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake, write_record};
 use bevy_conifer_lod::plugin::{ConiferPart, ConiferParts, MAX_LINE_BANDS, SpeciesMaterials};
 use bevy_conifer_lod::prelude::*;
 
@@ -311,7 +312,10 @@ fn no_mesh_asset_churn_and_no_orphans() {
     let warm = app.world().resource::<MeshEvents>().0;
     let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
     let species = app.world().resource::<Assets<ConiferSpecies>>();
-    let parts_per_tree: Vec<usize> = handles.iter().map(|h| 2 + species.get(h).unwrap().lines.len()).collect();
+    let parts_per_tree: Vec<usize> = handles
+        .iter()
+        .map(|h| 2 + species.get(h).unwrap().lines.len())
+        .collect();
     assert_eq!(parts, (0..1000).map(|i| parts_per_tree[i % 4]).sum::<usize>());
     // Batching: every tree of a species draws the same meshes (one per part)
     // and, without overrides, one material per part kind.
@@ -423,4 +427,103 @@ fn a_corrupted_record_fails_to_load_with_its_reason() {
     }
     let failure = failure.expect("load fails");
     assert!(failure.contains("checksum"), "{failure}");
+}
+
+#[test]
+fn debug_overlay_switches_colours_and_counts_the_cut() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    app.add_plugins(ConiferLodDebugPlugin);
+    app.world_mut().spawn(camera(6.0));
+    let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
+    // A second tree far behind: two instances, two different cuts.
+    let far = app
+        .world_mut()
+        .spawn((
+            ConiferFoliage(handle.clone()),
+            Transform::from_translation(-crown - Vec3::Z * 80.0),
+        ))
+        .id();
+    app.update();
+    assert!(!app.world().resource::<ConiferLodSettings>().debug_colors);
+    app.world_mut().resource_mut::<ConiferLodDebug>().enabled = true;
+    // No renderer here: mark every part as seen, as visibility checking would.
+    let parts: Vec<Entity> = app
+        .world_mut()
+        .query_filtered::<Entity, With<ConiferPart>>()
+        .iter(app.world())
+        .collect();
+    for part in parts {
+        *app.world_mut().get_mut::<ViewVisibility>(part).unwrap() = ViewVisibility::VISIBLE;
+    }
+    app.update();
+    assert!(
+        app.world().resource::<ConiferLodSettings>().debug_colors,
+        "overlay turns debug colours on"
+    );
+    let stats = *app.world().resource::<ConiferLodStats>();
+    let species = app
+        .world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(&handle)
+        .unwrap()
+        .clone();
+    let mut expected = (0, 0, 0, 0);
+    for entity in [tree, far] {
+        let cut = species.record.cut(state(&app, entity).min_spatial_error);
+        let s = species.record.cut_stats(&cut);
+        expected.0 += s.prisms;
+        expected.1 += s.triangles;
+        expected.2 += s.lines_original;
+        expected.3 += s.lines_merged;
+    }
+    assert_eq!((stats.instances, stats.visible_instances), (2, 2));
+    assert_eq!(
+        (stats.prisms, stats.triangles, stats.lines_original, stats.lines_merged),
+        expected
+    );
+    assert_eq!(stats.lines, expected.2 + expected.3);
+    assert_eq!(stats.pixel_error, 1.0);
+    app.world_mut().resource_mut::<ConiferLodDebug>().enabled = false;
+    app.update();
+    assert!(!app.world().resource::<ConiferLodSettings>().debug_colors);
+}
+
+#[test]
+fn scattered_forest_spawns_one_tree_per_placement() {
+    use bevy_conifer_lod::plugin::placement_transform;
+    use bevy_conifer_lod::scatter::Scatter;
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    let (_, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let placements = Scatter::new(Vec2::ZERO, Vec2::splat(60.0), 5.0)
+        .height(|p: Vec2| 0.1 * p.x)
+        .scale_range(0.8, 1.2)
+        .species_weights(&[1.0, 1.0])
+        .seed(4)
+        .place();
+    // Species 1 has no handle: those placements are skipped.
+    let spawned = app
+        .world_mut()
+        .run_system_once(move |mut commands: Commands| {
+            spawn_forest(&mut commands, &placements, std::slice::from_ref(&handle))
+        })
+        .unwrap();
+    app.update();
+    let placements = Scatter::new(Vec2::ZERO, Vec2::splat(60.0), 5.0)
+        .height(|p: Vec2| 0.1 * p.x)
+        .scale_range(0.8, 1.2)
+        .species_weights(&[1.0, 1.0])
+        .seed(4)
+        .place();
+    let kept: Vec<_> = placements.iter().filter(|p| p.species == 0).collect();
+    assert_eq!(spawned.len(), kept.len());
+    assert!(!kept.is_empty() && kept.len() < placements.len());
+    for (entity, placement) in spawned.iter().zip(kept) {
+        let transform = *app.world().get::<Transform>(*entity).unwrap();
+        assert_eq!(transform, placement_transform(placement));
+        assert!(app.world().get::<ConiferParts>(*entity).is_some(), "parts spawned");
+    }
 }

@@ -198,3 +198,31 @@ fn reading_a_missing_file_is_an_io_error() {
         Err(RecordError::Io(_))
     ));
 }
+
+#[test]
+fn shipped_tree_records_load_with_the_current_format() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees");
+    let mut names = Vec::new();
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "conifer") {
+            let bytes = std::fs::read(&path).unwrap();
+            // Header: magic, then the format version (u32, little-endian).
+            assert_eq!(bytes[..8], MAGIC, "{}", path.display());
+            assert_eq!(
+                u32::from_le_bytes(bytes[8..12].try_into().unwrap()),
+                FORMAT_VERSION,
+                "{}: re-bake the shipped records after a format change",
+                path.display()
+            );
+            let record = read_record(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(record.needle_count() >= 30_000 && !record.wood.is_empty());
+            names.push(path.file_stem().unwrap().to_string_lossy().into_owned());
+        }
+    }
+    names.sort();
+    assert_eq!(
+        names,
+        ["eastern-white-pine", "lawson-cypress", "norway-spruce", "scots-pine"]
+    );
+}

@@ -122,3 +122,48 @@ fn close_prisms_far_lines_and_two_cameras() {
     assert!(near2.0 > 500, "{near2:?}");
     assert!(far2.1 > 4 * far2.0 && far2.1 > 30, "{far2:?}");
 }
+
+/// Pixels by dominant channel among drawn pixels: `(blue, green, warm)`,
+/// warm meaning red above blue (merged lines run yellow → red).
+fn hues(image: &image::RgbaImage) -> (usize, usize, usize) {
+    let (mut blue, mut green, mut warm) = (0, 0, 0);
+    for p in image.pixels().filter(|p| p[3] > 0) {
+        let [r, g, b] = [p[0] as i32, p[1] as i32, p[2] as i32];
+        if b > r + 20 && b >= g {
+            blue += 1;
+        } else if g > r + 20 && g > b + 20 {
+            green += 1;
+        } else if r > b + 40 {
+            warm += 1;
+        }
+    }
+    (blue, green, warm)
+}
+
+#[test]
+fn overlay_colours_each_representation() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = output_dir();
+    let (mut renderer, crown) = scene(dir.path());
+    renderer.world_mut().resource_mut::<ConiferLodSettings>().debug_colors = true;
+    let mut found = Vec::new();
+    for distance in [0.6f32, 4.0, 60.0] {
+        let (camera, target) = camera(&mut renderer, crown, distance);
+        let image = renderer.capture(&target, 20).unwrap();
+        image.save(out.join(format!("overlay_{distance}m.png"))).unwrap();
+        renderer.world_mut().despawn(camera);
+        let (blue, green, warm) = hues(&image);
+        println!("{distance} m: {blue} blue (prisms), {green} green (lines), {warm} warm (merged lines, wood)");
+        found.push((blue, green, warm));
+    }
+    let [close, middle, far] = [found[0], found[1], found[2]];
+    assert!(
+        close.0 > 500 && close.0 > 2 * (close.1 + close.2),
+        "prisms blue: {close:?}"
+    );
+    assert!(
+        middle.1 > 500 && middle.1 > 2 * (middle.0 + middle.2),
+        "original lines green: {middle:?}"
+    );
+    assert!(far.2 > 20 && far.2 > 2 * (far.0 + far.1), "merged lines warm: {far:?}");
+}

@@ -102,7 +102,8 @@ impl CutCounter {
             let sides = prism_sides(relative_error(e, prisms[start]), self.max_sides);
             // Side counts grow with the radius: the run of this count ends
             // at the first needle with more sides.
-            let end = start + prisms[start..].partition_point(|&r| prism_sides(relative_error(e, r), self.max_sides) <= sides);
+            let end = start
+                + prisms[start..].partition_point(|&r| prism_sides(relative_error(e, r), self.max_sides) <= sides);
             triangles += (end - start) as u64 * prism_triangle_count(sides) as u64;
             start = end;
         }
@@ -136,7 +137,13 @@ mod tests {
             let counter = CutCounter::new(&record);
             let mut probes: Vec<f32> = (0..record.node_count() as u32)
                 .step_by(7)
-                .flat_map(|k| [record.node_error(k), record.node_error(k) * 1.0001, record.node_error(k) * 0.6])
+                .flat_map(|k| {
+                    [
+                        record.node_error(k),
+                        record.node_error(k) * 1.0001,
+                        record.node_error(k) * 0.6,
+                    ]
+                })
                 .collect();
             probes.extend([0.0, -1.0, 1e-5, 1e9, f32::INFINITY]);
             for e in probes {

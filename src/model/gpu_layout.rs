@@ -89,6 +89,19 @@ fn drawn_line_nodes(record: &LodRecord) -> Vec<u32> {
     nodes
 }
 
+/// Bands the plugin splits a species' lines into ([`line_bands`]).
+pub const LINE_BANDS: usize = 12;
+
+/// Lines the vertex shader runs on at spatial error `e`: those of every band
+/// that [`LineBand::may_draw`] (the plugin hides the others), out of all.
+pub fn lines_processed(bands: &[LineBand], e: f32) -> u64 {
+    bands
+        .iter()
+        .filter(|band| band.may_draw(e, e))
+        .map(|band| band.buffers.line_count() as u64)
+        .sum()
+}
+
 /// Merge depth of every node: 0 for an original line, one more than its
 /// deepest child for a merged line.
 pub fn merge_depths(record: &LodRecord) -> Vec<u32> {
@@ -196,7 +209,9 @@ pub fn line_bands(record: &LodRecord, max_bands: usize) -> Vec<LineBand> {
         let band = &mut bands[band_of(parent_error)];
         band.min_error = band.min_error.min(error);
         band.max_parent_error = band.max_parent_error.max(parent_error);
-        let normal = (segment.end - segment.start).normalize_or_zero().any_orthonormal_vector();
+        let normal = (segment.end - segment.start)
+            .normalize_or_zero()
+            .any_orthonormal_vector();
         for p in [segment.start, segment.end] {
             band.buffers.positions.push(p.to_array());
             band.buffers.normals.push(normal.to_array());
@@ -466,7 +481,10 @@ mod tests {
         let prisms = wood_prism_buffers(&record).unwrap();
         assert_eq!(prisms.needles.len(), 3 * record.wood.len());
         let per_segment = prisms.codes.len() / record.wood.len();
-        assert_eq!(per_segment, prism_buffers(&record).unwrap().codes.len() / record.needle_count());
+        assert_eq!(
+            per_segment,
+            prism_buffers(&record).unwrap().codes.len() / record.needle_count()
+        );
         let bands = line_bands(&record, 6);
         for (k, segment) in record.wood.iter().enumerate() {
             // Tapered: the tip's w holds the end radius.

@@ -1,7 +1,9 @@
 //! The species asset: a `.conifer` record turned into GPU-ready meshes.
 
 use super::material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE};
-use crate::model::gpu_layout::{LineBand, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers};
+use crate::model::gpu_layout::{
+    LineBand, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers,
+};
 use crate::model::metric::line_error;
 use crate::model::prism::TriangleMesh;
 use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
@@ -73,7 +75,7 @@ impl SpeciesLineBand {
 }
 
 /// Most line bands a species is split into.
-pub const MAX_LINE_BANDS: usize = 12;
+pub const MAX_LINE_BANDS: usize = crate::model::gpu_layout::LINE_BANDS;
 
 /// Why a `.conifer` file did not load as a [`ConiferSpecies`].
 #[derive(Debug, thiserror::Error)]
@@ -242,7 +244,9 @@ impl SpeciesMeshes {
                     max_parent_error: band.max_parent_error,
                 })
                 .collect(),
-            wood_prisms: self.wood_prisms.map(|mesh| sink.add_mesh("wood_prisms".to_string(), mesh)),
+            wood_prisms: self
+                .wood_prisms
+                .map(|mesh| sink.add_mesh("wood_prisms".to_string(), mesh)),
             wood_segments: sink.add_buffer("wood_segments", self.wood_segments),
             wood: self.wood.map(|mesh| sink.add_mesh("wood".to_string(), mesh)),
             max_wood_error: self.max_wood_error,

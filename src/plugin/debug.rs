@@ -19,8 +19,8 @@
 //! ```
 
 use super::{
-    ConiferFoliage, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState, ConiferParts, ConiferSpecies,
-    view_error_slope,
+    ConiferFoliage, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState, ConiferParts,
+    ConiferSpecies, view_error_slope,
 };
 use crate::model::CutCounter;
 use bevy::camera::visibility::VisibilitySystems;
@@ -140,7 +140,10 @@ impl SpeciesDistances {
         let merging_starts = ranges.merged_lines.map_or(f32::INFINITY, |r| r.min);
         // Bisection on a log scale: the cut's size falls as the error grows.
         let target = (record.needle_count() as u64 / 10).max(1);
-        let (mut lo, mut hi) = (ranges.original_lines.min.max(1e-6), ranges.original_lines.max.max(1e-6) * 1e4);
+        let (mut lo, mut hi) = (
+            ranges.original_lines.min.max(1e-6),
+            ranges.original_lines.max.max(1e-6) * 1e4,
+        );
         for _ in 0..40 {
             let mid = (lo * hi).sqrt();
             if counter.count(mid).primitives() > target {
@@ -176,7 +179,11 @@ fn stop_timer(mut timer: ResMut<PluginTimer>, time: Res<Time>) {
     let dt = time.delta_secs();
     if dt > 0.0 {
         let fps = 1.0 / dt;
-        timer.fps = if timer.fps > 0.0 { timer.fps * 0.9 + fps * 0.1 } else { fps };
+        timer.fps = if timer.fps > 0.0 {
+            timer.fps * 0.9 + fps * 0.1
+        } else {
+            fps
+        };
     }
 }
 
@@ -273,9 +280,15 @@ fn draw_gizmos(
         .collect();
     nearest.sort_by(|a, b| a.0.total_cmp(&b.0));
     for &(_, centre, scale, foliage, pixel_error) in nearest.iter().take(debug.gizmo_trees) {
-        let Some(species) = species_assets.get(&foliage.0) else { continue };
+        let Some(species) = species_assets.get(&foliage.0) else {
+            continue;
+        };
         let half = Vec3::from(species.aabb.half_extents) * scale;
-        gizmos.sphere(Isometry3d::from_translation(centre), half.length(), Color::srgb(0.9, 0.9, 0.9));
+        gizmos.sphere(
+            Isometry3d::from_translation(centre),
+            half.length(),
+            Color::srgb(0.9, 0.9, 0.9),
+        );
         let bands = counters
             .0
             .entry(foliage.0.id())

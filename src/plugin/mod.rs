@@ -48,8 +48,8 @@ mod systems;
 pub use asset::{
     ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshes, wood_mesh,
 };
-pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats};
+pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
 pub use systems::{SpeciesMaterials, view_error_slope};
 
 use bevy::asset::AssetApp;

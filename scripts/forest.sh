@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# The main job: the forest demo. With a display it opens a window (fly
+# camera, keys in examples/forest.rs); without one it renders headless on
+# Mesa's software Vulkan (installed if missing) to target/forest.png.
+# Extra arguments go to the example, e.g. `--spacing 10` or `--overlay`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# The same build directory and features as `.ci/test`, so one build serves both.
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/bevy_conifer_lod/target}"
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-$(mktemp -d)}"
+
+have_vulkan() { ls /usr/share/vulkan/icd.d/*.json >/dev/null 2>&1; }
+if ! have_vulkan; then
+    echo "== installing mesa-vulkan-drivers (software Vulkan)"
+    SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq mesa-vulkan-drivers >/dev/null
+fi
+
+if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ]; then
+    exec cargo run --all-features --example forest -- "$@"
+fi
+echo "== no display: rendering headless to target/forest.png (a software renderer takes a few minutes)"
+exec cargo run --all-features --example forest -- --headless --size 800x450 --spacing 7 \
+    --screenshot target/forest.png "$@"
