@@ -1,8 +1,10 @@
 //! CPU cost of the plugin per frame, no rendering: `MinimalPlugins` plus the
 //! plugin, trees of 4 species scattered on a grid, a camera flying through.
-//! Prints one JSON object per instance count with the plugin's systems'
-//! time per frame (the `PostUpdate` schedule with and without the plugin's
-//! sets, difference of medians) and per instance.
+//! Prints one JSON object per instance count: the plugin's whole cost per
+//! frame (median frame time with and without the plugin's sets, so the
+//! part entities' share of Bevy's transform and visibility work counts too)
+//! and per instance, and the plugin's own systems' time
+//! (`ConiferLodCpuTime`, median).
 //!
 //! ```text
 //! cargo bench --features plugin --bench plugin_runtime [-- 100 1000 10000 100000]
@@ -14,6 +16,7 @@ use bevy::prelude::*;
 use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake};
+use bevy_conifer_lod::plugin::ConiferLodCpuTime;
 use bevy_conifer_lod::prelude::*;
 use std::time::Instant;
 
@@ -41,7 +44,9 @@ fn species_assets(app: &mut App) -> Vec<Handle<ConiferSpecies>> {
         .collect()
 }
 
-fn run(instances: usize, with_plugin_systems: bool) -> f64 {
+/// Median frame time, and median of the plugin's own systems' time
+/// ([`ConiferLodCpuTime`]), both in ms.
+fn run(instances: usize, with_plugin_systems: bool) -> (f64, f64) {
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, AssetPlugin::default(), TransformPlugin))
         .init_asset::<Mesh>()
@@ -80,6 +85,7 @@ fn run(instances: usize, with_plugin_systems: bool) -> f64 {
         app.update();
     }
     let mut frame_ms = Vec::with_capacity(FRAMES);
+    let mut systems_ms = Vec::with_capacity(FRAMES);
     for frame in 0..FRAMES {
         let t = frame as f32 / FRAMES as f32;
         app.world_mut().get_mut::<Transform>(camera).unwrap().translation =
@@ -87,9 +93,12 @@ fn run(instances: usize, with_plugin_systems: bool) -> f64 {
         let started = Instant::now();
         app.update();
         frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
+        let own = app.world().get_resource::<ConiferLodCpuTime>().map_or(0.0, |t| t.last_frame.as_secs_f64());
+        systems_ms.push(own * 1e3);
     }
     frame_ms.sort_by(f64::total_cmp);
-    frame_ms[FRAMES / 2]
+    systems_ms.sort_by(f64::total_cmp);
+    (frame_ms[FRAMES / 2], systems_ms[FRAMES / 2])
 }
 
 fn main() {
@@ -100,8 +109,8 @@ fn main() {
         counts
     };
     for instances in counts {
-        let with = run(instances, true);
-        let without = run(instances, false);
+        let (with, systems) = run(instances, true);
+        let (without, _) = run(instances, false);
         let plugin_ms = (with - without).max(0.0);
         println!(
             "{}",
@@ -111,6 +120,8 @@ fn main() {
                 "frame_ms_without_plugin": without,
                 "cpu_ms_per_frame": plugin_ms,
                 "ns_per_instance": plugin_ms * 1e6 / instances as f64,
+                "systems_ms_per_frame": systems,
+                "systems_ns_per_instance": systems * 1e6 / instances as f64,
             })
         );
     }

@@ -19,14 +19,13 @@
 //! ```
 
 use super::{
-    ConiferFoliage, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState, ConiferParts,
-    ConiferSpecies, view_error_slope,
+    ConiferFoliage, ConiferLodCpuTime, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState,
+    ConiferParts, ConiferSpecies, view_error_slope,
 };
 use crate::model::CutCounter;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
-use std::time::{Duration, Instant};
 
 /// Adds the debug overlay, driven by the [`ConiferLodDebug`] resource (off
 /// by default), and keeps [`ConiferLodStats`] up to date while it is on.
@@ -40,12 +39,11 @@ impl Plugin for ConiferLodDebugPlugin {
         app.init_resource::<ConiferLodDebug>()
             .init_resource::<ConiferLodStats>()
             .init_resource::<SpeciesCounters>()
-            .init_resource::<PluginTimer>()
+            .init_resource::<FrameRate>()
             .add_systems(
                 PostUpdate,
                 (
-                    start_timer.before(ConiferLodSet::Prepare),
-                    stop_timer.after(ConiferLodSet::Select),
+                    measure_frame_rate.after(ConiferLodSet::Select),
                     (sync_debug_colors, collect_stats, update_panel)
                         .chain()
                         .after(VisibilitySystems::CheckVisibility),
@@ -111,7 +109,7 @@ pub struct ConiferLodStats {
     pub lines: u64,
     /// The global pixel error ε.
     pub pixel_error: f32,
-    /// Wall time of the plugin's system sets last frame, milliseconds.
+    /// Time of the plugin's systems last frame ([`ConiferLodCpuTime`]), milliseconds.
     pub plugin_cpu_ms: f32,
     /// Frames per second, smoothed.
     pub fps: f32,
@@ -161,21 +159,13 @@ impl SpeciesDistances {
     }
 }
 
+/// Frames per second, smoothed.
 #[derive(Resource, Default)]
-struct PluginTimer {
-    started: Option<Instant>,
-    last: Duration,
+struct FrameRate {
     fps: f32,
 }
 
-fn start_timer(mut timer: ResMut<PluginTimer>) {
-    timer.started = Some(Instant::now());
-}
-
-fn stop_timer(mut timer: ResMut<PluginTimer>, time: Res<Time>) {
-    if let Some(started) = timer.started.take() {
-        timer.last = started.elapsed();
-    }
+fn measure_frame_rate(mut timer: ResMut<FrameRate>, time: Res<Time>) {
     let dt = time.delta_secs();
     if dt > 0.0 {
         let fps = 1.0 / dt;
@@ -206,7 +196,8 @@ fn collect_stats(
     species_assets: Res<Assets<ConiferSpecies>>,
     mut counters: ResMut<SpeciesCounters>,
     settings: Res<ConiferLodSettings>,
-    timer: Res<PluginTimer>,
+    timer: Res<FrameRate>,
+    cpu_time: Res<ConiferLodCpuTime>,
     mut stats: ResMut<ConiferLodStats>,
 ) {
     if !(debug.enabled || debug.always_collect_stats) {
@@ -214,7 +205,7 @@ fn collect_stats(
     }
     let mut next = ConiferLodStats {
         pixel_error: settings.pixel_error,
-        plugin_cpu_ms: timer.last.as_secs_f32() * 1e3,
+        plugin_cpu_ms: cpu_time.last_frame.as_secs_f32() * 1e3,
         fps: timer.fps,
         ..default()
     };

@@ -50,7 +50,7 @@ pub use asset::{
 };
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
-pub use systems::{SpeciesMaterials, view_error_slope};
+pub use systems::{ConiferLodCpuTime, SpeciesMaterials, view_error_slope};
 
 use bevy::asset::AssetApp;
 use bevy::camera::visibility::VisibilitySystems;
@@ -72,6 +72,7 @@ impl Plugin for ConiferLodPlugin {
             .init_asset_loader::<ConiferRecordLoader>()
             .init_resource::<ConiferLodSettings>()
             .init_resource::<SpeciesMaterials>()
+            .init_resource::<ConiferLodCpuTime>()
             .configure_sets(
                 PostUpdate,
                 (ConiferLodSet::Prepare, ConiferLodSet::Select)

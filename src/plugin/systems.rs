@@ -11,6 +11,41 @@ use bevy::pbr::ExtendedMaterial;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
 
+/// Wall time of the plugin's own systems (both sets), measured inside them.
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+pub struct ConiferLodCpuTime {
+    /// The plugin's systems' time in the last complete frame.
+    pub last_frame: std::time::Duration,
+    accumulating: std::time::Duration,
+}
+
+/// Adds the time until it is dropped to [`ConiferLodCpuTime`]; the last
+/// system of the frame publishes the sum.
+struct CpuTimer<'a> {
+    time: &'a mut ConiferLodCpuTime,
+    started: std::time::Instant,
+    publish: bool,
+}
+
+impl<'a> CpuTimer<'a> {
+    fn start(time: &'a mut ConiferLodCpuTime, publish: bool) -> Self {
+        Self {
+            time,
+            started: std::time::Instant::now(),
+            publish,
+        }
+    }
+}
+
+impl Drop for CpuTimer<'_> {
+    fn drop(&mut self) {
+        self.time.accumulating += self.started.elapsed();
+        if self.publish {
+            self.time.last_frame = self.time.accumulating;
+        }
+    }
+}
+
 /// Materials are shared by every tree of a species with the same override.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 struct MaterialKey {
@@ -171,7 +206,9 @@ pub(super) fn spawn_parts(
     mut materials: ResMut<SpeciesMaterials>,
     mut conifer_materials: Option<ResMut<Assets<ConiferMaterial>>>,
     mut standard_materials: Option<ResMut<Assets<StandardMaterial>>>,
+    mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
+    let _timer = CpuTimer::start(&mut cpu_time, false);
     for (entity, foliage, over, parts) in &trees {
         let Some(species) = species_assets.get(&foliage.0) else {
             continue;
@@ -243,7 +280,9 @@ pub(super) fn sync_materials(
     species_assets: Res<Assets<ConiferSpecies>>,
     cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     conifer_materials: Option<ResMut<Assets<ConiferMaterial>>>,
+    mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
+    let _timer = CpuTimer::start(&mut cpu_time, false);
     let Some(mut conifer_materials) = conifer_materials else {
         return;
     };
@@ -308,7 +347,10 @@ fn view_lod(camera: &Camera, transform: &GlobalTransform, projection: &Projectio
 pub(super) fn release_unused_materials(
     mut events: MessageReader<AssetEvent<ConiferSpecies>>,
     mut materials: ResMut<SpeciesMaterials>,
+    mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
+    cpu_time.accumulating = std::time::Duration::ZERO;
+    let _timer = CpuTimer::start(&mut cpu_time, false);
     for event in events.read() {
         if let AssetEvent::Removed { id } | AssetEvent::Unused { id } = event {
             materials.sets.retain(|key, _| key.species != *id);
@@ -361,7 +403,9 @@ pub(super) fn select_lod(
     mut parts: Query<&mut Visibility, With<ConiferPart>>,
     species_assets: Res<Assets<ConiferSpecies>>,
     settings: Res<ConiferLodSettings>,
+    mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
+    let _timer = CpuTimer::start(&mut cpu_time, true);
     let views: Vec<ViewLod> = cameras
         .iter()
         .filter(|(camera, _, _)| camera.is_active)
