@@ -93,7 +93,10 @@ fn run(instances: usize, with_plugin_systems: bool) -> (f64, f64) {
         let started = Instant::now();
         app.update();
         frame_ms.push(started.elapsed().as_secs_f64() * 1e3);
-        let own = app.world().get_resource::<ConiferLodCpuTime>().map_or(0.0, |t| t.last_frame.as_secs_f64());
+        let own = app
+            .world()
+            .get_resource::<ConiferLodCpuTime>()
+            .map_or(0.0, |t| t.last_frame.as_secs_f64());
         systems_ms.push(own * 1e3);
     }
     frame_ms.sort_by(f64::total_cmp);

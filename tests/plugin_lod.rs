@@ -359,7 +359,10 @@ fn no_mesh_asset_churn_and_no_orphans() {
         "mesh asset events after warm-up"
     );
     println!("{changes} representation changes along the flight");
-    let cpu = app.world().resource::<bevy_conifer_lod::plugin::ConiferLodCpuTime>().last_frame;
+    let cpu = app
+        .world()
+        .resource::<bevy_conifer_lod::plugin::ConiferLodCpuTime>()
+        .last_frame;
     assert!(cpu > std::time::Duration::ZERO, "the plugin times its systems");
     println!("plugin systems, last frame: {cpu:?} for 1,000 trees");
     assert!(changes > 0, "the flight must change some tree's representation");
