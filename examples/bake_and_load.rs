@@ -79,8 +79,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             _ => std::thread::sleep(std::time::Duration::from_millis(5)),
         }
     }
+    // Let the tree's parts, meshes and pipelines reach the GPU.
+    for _ in 0..4 {
+        renderer.update()?;
+    }
     let picture = renderer.capture(&target, 20)?;
     picture.save(out.join("tree.png"))?;
-    println!("rendered {}", out.join("tree.png").display());
+    // The background is a flat colour: the tree is whatever differs from it.
+    let background = *picture.get_pixel(0, 0);
+    let tree_pixels = picture.pixels().filter(|p| **p != background).count();
+    println!(
+        "rendered {} ({tree_pixels} tree pixels)",
+        out.join("tree.png").display()
+    );
+    if tree_pixels < 500 {
+        return Err(format!("the tree did not render: {tree_pixels} pixels differ from the background").into());
+    }
     Ok(())
 }

@@ -143,6 +143,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     picture.save(&screenshot)?;
     let stats = *renderer.world().resource::<ConiferLodStats>();
+    if stats.visible_instances == 0 || stats.lines + stats.triangles == 0 {
+        return Err(format!("no tree was drawn: {stats:?}").into());
+    }
     let trees = renderer
         .world_mut()
         .query::<&ConiferFoliage>()

@@ -123,6 +123,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     picture.save(&args.screenshot)?;
     let stats = *renderer.world().resource::<ConiferLodStats>();
+    if stats.visible_instances == 0 || stats.lines + stats.triangles == 0 {
+        return Err(format!("the tree was not drawn: {stats:?}").into());
+    }
     println!(
         "{{\"screenshot\": {:?}, \"distance\": {}, \"prisms\": {}, \"triangles\": {}, \"lines_original\": {}, \"lines_merged\": {}}}",
         args.screenshot.display().to_string(),
