@@ -25,9 +25,6 @@ const TAU: f32 = 6.28318530717959;
 struct ConiferLod {
     // tree-local centre of the crown (xyz), w unused
     center: vec4<f32>,
-    // the LOD camera: world position (xyz); error slope 2/(P11·H) in w,
-    // negative for an orthographic camera, 0 for none
-    lod_camera: vec4<f32>,
     // pixel error ε
     pixel_error: f32,
     // transition coefficient δ, scaling original lines' opacity
@@ -73,20 +70,7 @@ fn instance_spatial_error(world_from_local: mat4x4<f32>) -> f32 {
         distance = length(center - view.world_position);
     }
     let height = max(view.viewport.w, 1.0);
-    var world_error = max(conifer.pixel_error, 0.0) * distance * 2.0 / (view.clip_from_view[1][1] * height);
-#ifdef PREPASS_PIPELINE
-    // Shadow (and prepass) views draw no finer than the LOD camera sees the
-    // tree: a shadow map texel smaller than the camera's pixel would pull
-    // in needles nobody sees, at full vertex cost.
-    let slope = conifer.lod_camera.w;
-    if slope != 0.0 {
-        var camera_distance = 1.0;
-        if slope > 0.0 {
-            camera_distance = length(center - conifer.lod_camera.xyz);
-        }
-        world_error = max(world_error, max(conifer.pixel_error, 0.0) * camera_distance * abs(slope));
-    }
-#endif
+    let world_error = max(conifer.pixel_error, 0.0) * distance * 2.0 / (view.clip_from_view[1][1] * height);
     return world_error / max(scale, 1e-6);
 }
 

@@ -31,11 +31,6 @@ pub type ConiferMaterial = ExtendedMaterial<StandardMaterial, ConiferLodExtensio
 pub struct ConiferLodUniform {
     /// Tree-local centre of the crown; the distance `D` is measured to it.
     pub center: Vec4,
-    /// The LOD camera (the first active camera): world position in xyz;
-    /// in w its error slope `2/(P₁₁·H)`, negated for an orthographic
-    /// camera, 0 without one. Shadow and prepass views draw no finer than
-    /// this camera sees the tree.
-    pub lod_camera: Vec4,
     /// Pixel error ε.
     pub pixel_error: f32,
     /// Transition coefficient δ.

@@ -100,10 +100,9 @@ impl SpeciesMaterials {
     }
 }
 
-fn lod_uniform(species: &ConiferSpecies, settings: &ConiferLodSettings, lod_camera: Vec4) -> ConiferLodUniform {
+fn lod_uniform(species: &ConiferSpecies, settings: &ConiferLodSettings) -> ConiferLodUniform {
     ConiferLodUniform {
         center: species.crown_center.extend(1.0),
-        lod_camera,
         pixel_error: settings.pixel_error.max(0.0),
         transition: settings.transition.clamp(0.0, 1.0),
         max_sides: species.record.max_sides as u32,
@@ -127,6 +126,18 @@ fn wood_tint(material: &crate::model::FoliageMaterial) -> Vec4 {
     Vec4::new(wr / nr.max(1e-3), wg / ng.max(1e-3), wb / nb.max(1e-3), 1.0)
 }
 
+/// Base colours of the needles and the wood; white under debug colours,
+/// which the shader's vertex colour would otherwise be multiplied by.
+fn base_colors(material: &crate::model::FoliageMaterial, debug_colors: bool) -> [Color; 2] {
+    [material.needle_color, material.wood_color].map(|[r, g, b, a]| {
+        if debug_colors {
+            Color::WHITE
+        } else {
+            Color::linear_rgba(r, g, b, a)
+        }
+    })
+}
+
 fn make_materials(
     species: &ConiferSpecies,
     settings: &ConiferLodSettings,
@@ -134,12 +145,7 @@ fn make_materials(
     standard_materials: &mut Assets<StandardMaterial>,
 ) -> MaterialSet {
     let m = &species.record.material;
-    let needle_color = Color::linear_rgba(
-        m.needle_color[0],
-        m.needle_color[1],
-        m.needle_color[2],
-        m.needle_color[3],
-    );
+    let [needle_color, wood_color] = base_colors(m, settings.debug_colors);
     let base = StandardMaterial {
         base_color: needle_color,
         perceptual_roughness: m.roughness,
@@ -147,7 +153,7 @@ fn make_materials(
         ..default()
     };
     let extension = ConiferLodExtension {
-        lod: lod_uniform(species, settings, Vec4::ZERO),
+        lod: lod_uniform(species, settings),
         needles: species.needles.clone(),
     };
     let prisms = conifer_materials.add(ExtendedMaterial {
@@ -163,7 +169,7 @@ fn make_materials(
         extension: extension.clone(),
     });
     let wood_base = StandardMaterial {
-        base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], m.wood_color[3]),
+        base_color: wood_color,
         perceptual_roughness: 0.9,
         ..default()
     };
@@ -272,13 +278,13 @@ pub(super) fn spawn_parts(
     }
 }
 
-/// Writes the settings and the LOD camera into every material when they
-/// change (a small uniform edit, never a mesh edit).
+/// Writes the settings into every material when they change (a small
+/// uniform edit, never a mesh edit). Never per frame: an edited material
+/// makes Bevy re-specialize every entity that uses it.
 pub(super) fn sync_materials(
     settings: Res<ConiferLodSettings>,
     materials: Res<SpeciesMaterials>,
     species_assets: Res<Assets<ConiferSpecies>>,
-    cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     conifer_materials: Option<ResMut<Assets<ConiferMaterial>>>,
     mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
@@ -286,25 +292,16 @@ pub(super) fn sync_materials(
     let Some(mut conifer_materials) = conifer_materials else {
         return;
     };
-    let lod_camera = lod_camera(&cameras).map_or(Vec4::ZERO, |view| {
-        let slope = if view.perspective { view.slope } else { -view.slope };
-        view.position.extend(slope)
-    });
+    if !settings.is_changed() {
+        return;
+    }
     for (key, set) in &materials.sets {
         let Some(species) = species_assets.get(key.species) else {
             continue;
         };
         let settings = key.settings(&settings);
-        let uniform = lod_uniform(species, &settings, lod_camera);
-        let m = &species.record.material;
-        let [needle, wood] = [m.needle_color, m.wood_color].map(|[r, g, b, a]| {
-            // Debug colours replace the base colour (they are multiplied by it).
-            if settings.debug_colors {
-                Color::WHITE
-            } else {
-                Color::linear_rgba(r, g, b, a)
-            }
-        });
+        let uniform = lod_uniform(species, &settings);
+        let [needle, wood] = base_colors(&species.record.material, settings.debug_colors);
         for (handle, base_color) in [(&set.prisms, needle), (&set.lines, needle), (&set.wood_prisms, wood)] {
             // Compare before taking the asset mutably: an unchanged material
             // is not re-uploaded.
@@ -318,17 +315,6 @@ pub(super) fn sync_materials(
             }
         }
     }
-}
-
-/// The camera whose view bounds the detail of shadow views: the active
-/// camera of lowest order with a usable viewport.
-fn lod_camera(cameras: &Query<(&Camera, &GlobalTransform, &Projection)>) -> Option<ViewLod> {
-    cameras
-        .iter()
-        .filter(|(camera, _, _)| camera.is_active)
-        .filter_map(|(camera, transform, projection)| Some((camera.order, view_lod(camera, transform, projection)?)))
-        .min_by_key(|(order, _)| *order)
-        .map(|(_, view)| view)
 }
 
 fn view_lod(camera: &Camera, transform: &GlobalTransform, projection: &Projection) -> Option<ViewLod> {
@@ -411,7 +397,6 @@ pub(super) fn select_lod(
         .filter(|(camera, _, _)| camera.is_active)
         .filter_map(|(camera, transform, projection)| view_lod(camera, transform, projection))
         .collect();
-    let shadow_camera = lod_camera(&cameras);
     let shadows: Vec<ShadowLod> = lights
         .iter()
         .filter(|(light, _)| light.shadow_maps_enabled)
@@ -453,20 +438,12 @@ pub(super) fn select_lod(
         let mut line_bands = 0u32;
         if any_view && settings.enabled {
             let (mut band_min_e, mut band_max_e) = (min_e, max_e);
-            // The shader's shadow error: the texel's, but no finer than the
-            // LOD camera's.
-            let camera_e = shadow_camera.as_ref().map_or(0.0, |view| {
-                let distance = if view.perspective {
-                    center.distance(view.position)
-                } else {
-                    1.0
-                };
-                pixel_error * distance * view.slope / scale
-            });
+            // A shadow cascade's error is its texel's (the shader's
+            // orthographic case): keep the bands it needs for trees it covers.
             for shadow in &shadows {
                 let ndc = shadow.clip_from_world.project_point3(center);
                 if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
-                    let e = (pixel_error * shadow.texel_size / scale).max(camera_e);
+                    let e = pixel_error * shadow.texel_size / scale;
                     band_min_e = band_min_e.min(e);
                     band_max_e = band_max_e.max(e);
                 }
