@@ -141,6 +141,16 @@ fn error_matches_the_formula_and_representation_follows_distance() {
         let parts = app.world().get::<ConiferParts>(tree).unwrap().clone();
         let hidden = |e: Entity| *app.world().get::<Visibility>(e).unwrap() == Visibility::Hidden;
         assert_eq!(hidden(parts.prisms), !s.prisms_visible);
+        // Trunk and branches: prisms while the thickest segment is above the error.
+        assert_eq!(s.wood_prisms_visible, expected < species.max_wood_error, "{distance} m");
+        assert_eq!(
+            hidden(parts.wood_prisms.expect("generated trees have wood")),
+            !s.wood_prisms_visible
+        );
+        assert!(
+            species.max_wood_error > species.max_line_error,
+            "the trunk is thicker than a needle"
+        );
         assert_eq!(parts.lines.len(), species.lines.len());
         assert_eq!(parts.lines.iter().all(|&e| hidden(e)), !s.lines_visible);
         let bands = line_bands(&species.record, MAX_LINE_BANDS);
