@@ -23,7 +23,7 @@ if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ]; then
 fi
 if [ "$#" -eq 0 ]; then
     # A lighter forest than the README's (800x450, --spacing 7): a software
-    # renderer draws it in a couple of minutes.
+    # renderer draws it in a few minutes.
     set -- --size 640x360 --spacing 9 --screenshot target/forest.png
 fi
 echo "== no display: rendering headless ($*)"
