@@ -200,6 +200,9 @@ fn camera_view(view: &str) -> Result<(Vec3, Vec3), String> {
     }
 }
 
+// The terrain and the clearings need only a smooth, seeded noise: thirty
+// lines of value noise here rather than a noise crate in every build.
+
 /// Hash of a lattice point to `[0, 1)`.
 fn lattice(x: i32, z: i32, seed: u32) -> f32 {
     let mut h =
