@@ -87,7 +87,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .insert_resource(args)
             .insert_resource(CameraStart { eye, target })
             .add_systems(Startup, setup)
-            .add_systems(Update, (fly_camera, keys))
+            .add_systems(Update, (fly_camera, conifer_lod_keys))
             .run();
         return Ok(());
     }
@@ -410,32 +410,5 @@ fn fly_camera(
         let yaw = yaw - motion.delta.x * 0.003;
         let pitch = (pitch - motion.delta.y * 0.003).clamp(-1.5, 1.5);
         camera.rotation = Quat::from_euler(EulerRot::YXZ, yaw, pitch, 0.0);
-    }
-}
-
-fn keys(keys: Res<ButtonInput<KeyCode>>, mut settings: ResMut<ConiferLodSettings>, mut debug: ResMut<ConiferLodDebug>) {
-    if keys.just_pressed(KeyCode::BracketRight) {
-        settings.pixel_error = (settings.pixel_error * 1.25).min(64.0);
-    }
-    if keys.just_pressed(KeyCode::BracketLeft) {
-        settings.pixel_error = (settings.pixel_error / 1.25).max(0.05);
-    }
-    if keys.just_pressed(KeyCode::Period) {
-        settings.transition = (settings.transition + 0.1).min(1.0);
-    }
-    if keys.just_pressed(KeyCode::Comma) {
-        settings.transition = (settings.transition - 0.1).max(0.1);
-    }
-    if keys.just_pressed(KeyCode::KeyL) {
-        settings.enabled = !settings.enabled;
-    }
-    if keys.just_pressed(KeyCode::KeyP) {
-        settings.line_opacity = match settings.line_opacity {
-            LineOpacity::Paper => LineOpacity::AreaPreserving,
-            LineOpacity::AreaPreserving => LineOpacity::Paper,
-        };
-    }
-    if keys.just_pressed(KeyCode::F3) || keys.just_pressed(KeyCode::KeyO) {
-        debug.enabled = !debug.enabled;
     }
 }

@@ -8,9 +8,9 @@
 //! ```
 //!
 //! Keys: `W`/`S` (or the mouse wheel) closer/farther, `A`/`D` orbit, `R`/`F`
-//! up/down along the trunk; `[`/`]` pixel error ε ÷/× 1.25; `F3` (or `O`)
-//! the overlay (colours by representation, distance rings, stats); `L` LOD
-//! on/off. The tree is baked at startup from a procedural preset (about a
+//! up/down along the trunk; and the keys of `conifer_lod_keys`: `[`/`]`
+//! pixel error ε ÷/× 1.25, `,`/`.` δ, `F3` (or `O`) the overlay (colours by
+//! representation, distance rings, stats), `L` LOD on/off, `P` paper opacity. The tree is baked at startup from a procedural preset (about a
 //! second), so any preset and needle count can be tried.
 
 use bevy::input::mouse::AccumulatedMouseScroll;
@@ -101,7 +101,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .insert_resource(TreeRecord(Some(record)))
             .insert_resource(scene_args)
             .add_systems(Startup, setup)
-            .add_systems(Update, (controls, follow_orbit).chain());
+            .add_systems(Update, ((controls, follow_orbit).chain(), conifer_lod_keys));
     };
     if !args.headless {
         let mut app = App::new();
@@ -217,8 +217,6 @@ fn controls(
     keys: Res<ButtonInput<KeyCode>>,
     scroll: Res<AccumulatedMouseScroll>,
     mut orbit: ResMut<Orbit>,
-    mut settings: ResMut<ConiferLodSettings>,
-    mut debug: ResMut<ConiferLodDebug>,
 ) {
     let dt = time.delta_secs();
     let mut zoom = -scroll.delta.y * 0.1;
@@ -242,18 +240,6 @@ fn controls(
     }
     if keys.pressed(KeyCode::KeyF) {
         orbit.height -= dt * 2.0;
-    }
-    if keys.just_pressed(KeyCode::BracketRight) {
-        settings.pixel_error = (settings.pixel_error * 1.25).min(64.0);
-    }
-    if keys.just_pressed(KeyCode::BracketLeft) {
-        settings.pixel_error = (settings.pixel_error / 1.25).max(0.05);
-    }
-    if keys.just_pressed(KeyCode::KeyL) {
-        settings.enabled = !settings.enabled;
-    }
-    if keys.just_pressed(KeyCode::F3) || keys.just_pressed(KeyCode::KeyO) {
-        debug.enabled = !debug.enabled;
     }
 }
 

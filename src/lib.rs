@@ -42,6 +42,7 @@ pub mod plugin;
 pub mod prelude {
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
-        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferSpecies, LineOpacity, spawn_forest,
+        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferSpecies, LineOpacity, conifer_lod_keys,
+        spawn_forest,
     };
 }

@@ -543,3 +543,38 @@ fn scattered_forest_spawns_one_tree_per_placement() {
         assert!(app.world().get::<ConiferParts>(*entity).is_some(), "parts spawned");
     }
 }
+
+#[test]
+fn lod_keys_change_the_settings_and_the_overlay() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut app = app(dir.path());
+    app.add_plugins(ConiferLodDebugPlugin)
+        .init_resource::<ButtonInput<KeyCode>>()
+        .add_systems(Update, conifer_lod_keys);
+    let press = |app: &mut App, key: KeyCode| {
+        let mut input = app.world_mut().resource_mut::<ButtonInput<KeyCode>>();
+        input.press(key);
+        app.update();
+        let mut input = app.world_mut().resource_mut::<ButtonInput<KeyCode>>();
+        input.release(key);
+        input.clear();
+    };
+    press(&mut app, KeyCode::BracketRight);
+    assert_eq!(app.world().resource::<ConiferLodSettings>().pixel_error, 1.25);
+    press(&mut app, KeyCode::BracketLeft);
+    press(&mut app, KeyCode::BracketLeft);
+    assert!((app.world().resource::<ConiferLodSettings>().pixel_error - 0.8).abs() < 1e-6);
+    press(&mut app, KeyCode::Comma);
+    assert!((app.world().resource::<ConiferLodSettings>().transition - 0.9).abs() < 1e-6);
+    press(&mut app, KeyCode::KeyL);
+    assert!(!app.world().resource::<ConiferLodSettings>().enabled);
+    press(&mut app, KeyCode::KeyP);
+    assert_eq!(
+        app.world().resource::<ConiferLodSettings>().line_opacity,
+        LineOpacity::Paper
+    );
+    press(&mut app, KeyCode::F3);
+    assert!(app.world().resource::<ConiferLodDebug>().enabled);
+    app.update();
+    assert!(app.world().resource::<ConiferLodSettings>().debug_colors);
+}

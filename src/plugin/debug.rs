@@ -20,7 +20,7 @@
 
 use super::{
     ConiferFoliage, ConiferLodCpuTime, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState,
-    ConiferParts, ConiferSpecies, view_error_slope,
+    ConiferParts, ConiferSpecies, LineOpacity, view_error_slope,
 };
 use crate::model::CutCounter;
 use bevy::camera::visibility::VisibilitySystems;
@@ -360,4 +360,40 @@ fn update_panel(
             ..default()
         },
     ));
+}
+
+/// Keyboard control of the LOD, for examples and tools; add it to `Update`
+/// yourself (`app.add_systems(Update, conifer_lod_keys)`): `[`/`]` pixel
+/// error ε ÷/× 1.25 (0.05–64), `,`/`.` transition δ −/+ 0.1 (0.1–1), `L`
+/// LOD on/off, `P` paper vs area-preserving line opacity, `F3` or `O` the
+/// debug overlay.
+pub fn conifer_lod_keys(
+    keys: Res<ButtonInput<KeyCode>>,
+    mut settings: ResMut<ConiferLodSettings>,
+    mut debug: ResMut<ConiferLodDebug>,
+) {
+    if keys.just_pressed(KeyCode::BracketRight) {
+        settings.pixel_error = (settings.pixel_error * 1.25).min(64.0);
+    }
+    if keys.just_pressed(KeyCode::BracketLeft) {
+        settings.pixel_error = (settings.pixel_error / 1.25).max(0.05);
+    }
+    if keys.just_pressed(KeyCode::Period) {
+        settings.transition = (settings.transition + 0.1).min(1.0);
+    }
+    if keys.just_pressed(KeyCode::Comma) {
+        settings.transition = (settings.transition - 0.1).max(0.1);
+    }
+    if keys.just_pressed(KeyCode::KeyL) {
+        settings.enabled = !settings.enabled;
+    }
+    if keys.just_pressed(KeyCode::KeyP) {
+        settings.line_opacity = match settings.line_opacity {
+            LineOpacity::Paper => LineOpacity::AreaPreserving,
+            LineOpacity::AreaPreserving => LineOpacity::Paper,
+        };
+    }
+    if keys.just_pressed(KeyCode::F3) || keys.just_pressed(KeyCode::KeyO) {
+        debug.enabled = !debug.enabled;
+    }
 }

@@ -48,7 +48,7 @@ mod systems;
 pub use asset::{
     ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshes, wood_mesh,
 };
-pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats};
+pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
 pub use systems::{ConiferLodCpuTime, SpeciesMaterials, view_error_slope};
 
