@@ -9,7 +9,6 @@
 //! ```
 //! Writes `target/bake_and_load/tree.conifer` and `target/bake_and_load/tree.png`.
 
-use bevy::asset::LoadState;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::import::{ImportOptions, import_gltf};
@@ -71,18 +70,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
         Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    for _ in 0..1000 {
-        renderer.update()?;
-        match renderer.world().resource::<AssetServer>().load_state(&handle) {
-            LoadState::Loaded => break,
-            LoadState::Failed(error) => return Err(error.into()),
-            _ => std::thread::sleep(std::time::Duration::from_millis(5)),
-        }
-    }
-    // Let the tree's parts, meshes and pipelines reach the GPU.
-    for _ in 0..4 {
-        renderer.update()?;
-    }
+    renderer.load(&[handle.untyped()], 1000)?;
     let picture = renderer.capture(&target, 20)?;
     picture.save(out.join("tree.png"))?;
     // The background is a flat colour: the tree is whatever differs from it.

@@ -16,7 +16,7 @@
 //! [`bevy_conifer_lod::scatter::Scatter`] (blue noise, clearings from a
 //! density noise, no trees on slopes over 32°).
 
-use bevy::asset::{LoadState, RenderAssetUsages};
+use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::input::mouse::AccumulatedMouseMotion;
 use bevy::light::CascadeShadowConfigBuilder;
@@ -45,8 +45,9 @@ struct Args {
     /// Render without a window (software Vulkan is enough) and exit.
     #[arg(long)]
     headless: bool,
-    /// Frames to render in headless mode after the trees have loaded.
-    #[arg(long, default_value_t = 4)]
+    /// Extra frames to render in headless mode once the trees have loaded
+    /// and settled, before the screenshot.
+    #[arg(long, default_value_t = 0)]
     frames: u32,
     /// Where headless mode writes its picture.
     #[arg(long, default_value = "target/forest.png")]
@@ -108,33 +109,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     });
     let image = renderer.render_target(width, height);
     renderer.world_mut().insert_resource(HeadlessTarget(image.clone()));
-    // Load, then let meshes and pipelines reach the GPU.
+    // Startup scatters the trees and starts loading their records; then
+    // wait for them and let meshes and pipelines reach the GPU.
     let begin = std::time::Instant::now();
-    let mut loaded = false;
-    for _ in 0..2000 {
-        renderer.update()?;
-        let server = renderer.world().resource::<AssetServer>();
-        let states: Vec<LoadState> = renderer
-            .world()
-            .resource::<SpeciesHandles>()
-            .0
-            .iter()
-            .map(|h| server.load_state(h))
-            .collect();
-        if let Some(LoadState::Failed(error)) = states.iter().find(|s| matches!(s, LoadState::Failed(_))) {
-            return Err(format!("a tree record failed to load: {error}").into());
-        }
-        if states.iter().all(|s| matches!(s, LoadState::Loaded)) {
-            loaded = true;
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    if !loaded {
-        return Err("the tree records did not load".into());
-    }
+    renderer.update()?;
+    let handles: Vec<UntypedHandle> = renderer
+        .world()
+        .resource::<SpeciesHandles>()
+        .0
+        .iter()
+        .map(|h| h.clone().untyped())
+        .collect();
+    renderer.load(&handles, 2000)?;
     let loaded_after = begin.elapsed();
-    for _ in 0..frames.max(2) {
+    for _ in 0..frames {
         renderer.update()?;
     }
     let picture = renderer.capture(&image, 20)?;

@@ -4,7 +4,6 @@
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
-use bevy::asset::LoadState;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
@@ -44,21 +43,8 @@ fn scene(dir: &std::path::Path) -> (HeadlessRenderer, Vec3) {
         },
         Transform::from_xyz(3.0, 6.0, 5.0).looking_at(Vec3::ZERO, Vec3::Y),
     ));
-    for _ in 0..600 {
-        renderer.update().unwrap();
-        match renderer.world().resource::<AssetServer>().load_state(&handle) {
-            LoadState::Loaded => {
-                // Let meshes, buffers and pipelines reach the GPU.
-                for _ in 0..4 {
-                    renderer.update().unwrap();
-                }
-                return (renderer, crown);
-            }
-            LoadState::Failed(e) => panic!("{e}"),
-            _ => std::thread::sleep(std::time::Duration::from_millis(2)),
-        }
-    }
-    panic!("record did not load");
+    renderer.load(&[handle.untyped()], 600).unwrap();
+    (renderer, crown)
 }
 
 fn camera(renderer: &mut HeadlessRenderer, crown: Vec3, distance: f32) -> (Entity, Handle<Image>) {

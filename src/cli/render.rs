@@ -3,8 +3,7 @@
 use crate::model::read_record;
 use crate::plugin::headless::HeadlessRenderer;
 use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, LineOpacity};
-use anyhow::{Context, bail};
-use bevy::asset::LoadState;
+use anyhow::Context;
 use bevy::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -80,19 +79,10 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
         .world_mut()
         .spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
 
-    for frame in 0.. {
-        renderer.update()?;
-        match renderer.world().resource::<AssetServer>().load_state(&handle) {
-            LoadState::Loaded => break,
-            LoadState::Failed(error) => bail!("{}: {error}", args.file.display()),
-            _ if frame >= MAX_FRAMES => bail!("{}: record did not load in {MAX_FRAMES} frames", args.file.display()),
-            _ => std::thread::sleep(std::time::Duration::from_millis(2)),
-        }
-    }
-    // Warm up (pipelines, buffers), then time steady frames.
-    for _ in 0..2 {
-        renderer.update()?;
-    }
+    renderer
+        .load(&[handle.clone().untyped()], MAX_FRAMES)
+        .with_context(|| format!("{}: cannot load the record", args.file.display()))?;
+    // Time steady frames.
     let mut frame_ms = Vec::new();
     for _ in 0..3 {
         let started = Instant::now();

@@ -8,7 +8,7 @@
 
 use super::ConiferLodPlugin;
 use bevy::app::SubApps;
-use bevy::asset::RenderAssetUsages;
+use bevy::asset::{LoadState, RenderAssetUsages};
 use bevy::camera::RenderTarget;
 use bevy::prelude::*;
 use bevy::render::RenderPlugin;
@@ -31,6 +31,12 @@ pub enum HeadlessError {
     /// The GPU device could not be polled.
     #[error("device poll failed: {0}")]
     Poll(String),
+    /// An asset failed to load.
+    #[error("{0}")]
+    LoadFailed(String),
+    /// The assets did not load within the frames allowed.
+    #[error("assets did not load in {0} frames")]
+    NotLoaded(u32),
 }
 
 /// A Bevy app with the conifer plugin, rendering to images, driven by hand.
@@ -85,6 +91,37 @@ impl HeadlessRenderer {
     pub fn world(&self) -> &World {
         self.apps.main.world()
     }
+
+    /// Renders frames until every asset of `handles` has loaded (at most
+    /// `max_frames`), then [`HeadlessRenderer::SETTLE_FRAMES`] more, so that
+    /// the trees' parts, meshes, buffers and pipelines reach the GPU before
+    /// a capture.
+    pub fn load(&mut self, handles: &[UntypedHandle], max_frames: u32) -> Result<(), HeadlessError> {
+        for _ in 0..max_frames {
+            self.update()?;
+            let server = self.world().resource::<AssetServer>();
+            let mut all_loaded = true;
+            for handle in handles {
+                match server.load_state(handle) {
+                    LoadState::Loaded => {}
+                    LoadState::Failed(error) => return Err(HeadlessError::LoadFailed(error.to_string())),
+                    _ => all_loaded = false,
+                }
+            }
+            if all_loaded {
+                for _ in 0..Self::SETTLE_FRAMES {
+                    self.update()?;
+                }
+                return Ok(());
+            }
+            // Loading runs on other threads: give them time.
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        Err(HeadlessError::NotLoaded(max_frames))
+    }
+
+    /// Frames run after loading before a picture is worth taking.
+    pub const SETTLE_FRAMES: u32 = 3;
 
     /// A new sRGB image to render into.
     pub fn render_target(&mut self, width: u32, height: u32) -> Handle<Image> {
