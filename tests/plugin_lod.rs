@@ -578,3 +578,57 @@ fn lod_keys_change_the_settings_and_the_overlay() {
     app.update();
     assert!(app.world().resource::<ConiferLodSettings>().debug_colors);
 }
+
+#[test]
+fn shadow_cascades_keep_the_parts_they_need() {
+    use bevy::light::cascade::{Cascade, Cascades};
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    app.world_mut().spawn(camera(300.0));
+    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
+    app.update();
+    let far = state(&app, tree);
+    assert!(
+        !far.prisms_visible && !far.wood_prisms_visible,
+        "the camera alone sees no prism at 300 m"
+    );
+    // A directional light whose one cascade covers the tree with 1 mm texels.
+    let clip_from_world = Mat4::orthographic_rh(-5.0, 5.0, -5.0, 5.0, -50.0, 50.0);
+    let cascade = Cascade {
+        world_from_cascade: Mat4::IDENTITY,
+        clip_from_cascade: clip_from_world,
+        clip_from_world,
+        texel_size: 0.001,
+    };
+    let mut cascades = Cascades::default();
+    cascades.cascades.insert(Entity::PLACEHOLDER, vec![cascade]);
+    let light = app
+        .world_mut()
+        .spawn((
+            DirectionalLight {
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            cascades,
+        ))
+        .id();
+    app.update();
+    let lit = state(&app, tree);
+    assert!(lit.wood_prisms_visible, "the trunk casts its shadow as prisms");
+    assert!(
+        lit.line_bands.count_ones() > far.line_bands.count_ones(),
+        "finer bands for the shadow"
+    );
+    assert_eq!(
+        lit.min_spatial_error, far.min_spatial_error,
+        "the camera's error is unchanged"
+    );
+    // Without shadow maps the light changes nothing.
+    app.world_mut()
+        .get_mut::<DirectionalLight>(light)
+        .unwrap()
+        .shadow_maps_enabled = false;
+    app.update();
+    assert_eq!(state(&app, tree), far);
+}

@@ -188,13 +188,16 @@ pub struct ConiferLodState {
     pub max_spatial_error: f32,
     /// Cameras that see this tree's LOD.
     pub views: u32,
-    /// Whether any needle can be a prism in some view.
+    /// Whether any needle can be a prism in some view (a camera, or a
+    /// directional light's shadow cascade covering the tree).
     pub prisms_visible: bool,
-    /// Whether any wood segment can be a prism in some view.
+    /// Whether any wood segment can be a prism in some view (cameras and
+    /// shadow cascades).
     pub wood_prisms_visible: bool,
     /// Whether any line can be drawn in some view.
     pub lines_visible: bool,
-    /// Bit `k` set: line band `k` of the species can draw in some view.
+    /// Bit `k` set: line band `k` of the species can draw in some view
+    /// (cameras and shadow cascades).
     pub line_bands: u32,
 }
 

@@ -435,21 +435,25 @@ pub(super) fn select_lod(
             max_e = max_e.max(e);
         }
         let any_view = !views.is_empty();
-        let mut line_bands = 0u32;
+        // The errors the parts must serve: the cameras', and those of the
+        // shadow cascades covering the tree (a cascade's error is its
+        // texel's, the shader's orthographic case), so that a tree casts its
+        // shadow at the cascade's detail even where the camera sees it coarser.
+        let (mut part_min_e, mut part_max_e) = (min_e, max_e);
         if any_view && settings.enabled {
-            let (mut band_min_e, mut band_max_e) = (min_e, max_e);
-            // A shadow cascade's error is its texel's (the shader's
-            // orthographic case): keep the bands it needs for trees it covers.
             for shadow in &shadows {
                 let ndc = shadow.clip_from_world.project_point3(center);
                 if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
                     let e = pixel_error * shadow.texel_size / scale;
-                    band_min_e = band_min_e.min(e);
-                    band_max_e = band_max_e.max(e);
+                    part_min_e = part_min_e.min(e);
+                    part_max_e = part_max_e.max(e);
                 }
             }
+        }
+        let mut line_bands = 0u32;
+        if any_view && settings.enabled {
             for (k, band) in species.lines.iter().enumerate().take(32) {
-                if band.may_draw(band_min_e, band_max_e) {
+                if band.may_draw(part_min_e, part_max_e) {
                     line_bands |= 1 << k;
                 }
             }
@@ -458,8 +462,8 @@ pub(super) fn select_lod(
             min_spatial_error: min_e,
             max_spatial_error: if any_view { max_e } else { f32::INFINITY },
             views: views.len() as u32,
-            prisms_visible: any_view && min_e < species.max_line_error,
-            wood_prisms_visible: any_view && min_e < species.max_wood_error,
+            prisms_visible: any_view && part_min_e < species.max_line_error,
+            wood_prisms_visible: any_view && part_min_e < species.max_wood_error,
             lines_visible: line_bands != 0,
             line_bands,
         };
