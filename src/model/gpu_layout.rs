@@ -18,7 +18,7 @@
 //!   A prism is drawn while `e < 2R` (below its line's error).
 
 use super::metric::{line_error, prism_sides, relative_error};
-use super::needle::Needle;
+use super::needle::{Needle, WoodSegment};
 use super::prism::{TriangleMesh, append_prism};
 use super::record::LodRecord;
 use glam::Vec3;
@@ -93,11 +93,11 @@ fn drawn_line_nodes(record: &LodRecord) -> Vec<u32> {
 pub const LINE_BANDS: usize = 12;
 
 /// Lines the vertex shader runs on at spatial error `e`: those of every band
-/// that [`LineBand::may_draw`] (the plugin hides the others), out of all.
+/// that [`BandErrors::may_draw`] (the plugin hides the others), out of all.
 pub fn lines_processed(bands: &[LineBand], e: f32) -> u64 {
     bands
         .iter()
-        .filter(|band| band.may_draw(e, e))
+        .filter(|band| band.errors.may_draw(e, e))
         .map(|band| band.buffers.line_count() as u64)
         .sum()
 }
@@ -124,13 +124,45 @@ pub struct LineBand {
     /// The band's lines, as in [`line_buffers`], with the merged lines'
     /// `kind` set to their merge depth (≥ 1).
     pub buffers: LineBuffers,
+    /// The span of its lines' error intervals.
+    pub errors: BandErrors,
+}
+
+impl LineBand {
+    /// Appends a line (its two ends, position and normal, and its
+    /// `[error, parent_error, width, kind]`), widening the band's span.
+    fn push_line(&mut self, ends: [(Vec3, Vec3); 2], lod: [f32; 4]) {
+        self.errors.min_error = self.errors.min_error.min(lod[0]);
+        self.errors.max_parent_error = self.errors.max_parent_error.max(lod[1]);
+        for (position, normal) in ends {
+            self.buffers.positions.push(position.to_array());
+            self.buffers.normals.push(normal.to_array());
+            self.buffers.lod.push(lod);
+        }
+    }
+}
+
+/// The span of a band's error intervals: what the CPU needs to know whether
+/// a band can draw anything at a spatial error.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BandErrors {
     /// Smallest error of the band's lines.
     pub min_error: f32,
     /// Largest parent error of the band's lines (`f32::MAX` for roots).
     pub max_parent_error: f32,
 }
 
-impl LineBand {
+impl Default for BandErrors {
+    /// The empty span: draws at no error.
+    fn default() -> Self {
+        Self {
+            min_error: f32::INFINITY,
+            max_parent_error: 0.0,
+        }
+    }
+}
+
+impl BandErrors {
     /// Whether some line of the band can be in the cut for a spatial error
     /// in `[min_e, max_e]` (conservative: `false` means nothing is drawn).
     pub fn may_draw(&self, min_e: f32, max_e: f32) -> bool {
@@ -173,55 +205,38 @@ pub fn line_bands(record: &LodRecord, max_bands: usize) -> Vec<LineBand> {
     };
     let nodes = drawn_line_nodes(record);
     debug_assert_eq!(nodes.len(), lines);
-    let mut bands = vec![
-        LineBand {
-            min_error: f32::INFINITY,
-            max_parent_error: 0.0,
-            ..Default::default()
-        };
-        max_bands
-    ];
+    let mut bands = vec![LineBand::default(); max_bands];
     for (line, &node) in nodes.iter().enumerate() {
         let [error, parent_error, width, kind] = lod(line);
-        let band = &mut bands[band_of(parent_error)];
-        band.min_error = band.min_error.min(error);
-        band.max_parent_error = band.max_parent_error.max(parent_error);
         let kind = if kind == KIND_MERGED_LINE {
             depths[node as usize].max(1) as f32
         } else {
             kind
         };
-        for v in [2 * line, 2 * line + 1] {
-            band.buffers.positions.push(all.positions[v]);
-            band.buffers.normals.push(all.normals[v]);
-            band.buffers.lod.push([error, parent_error, width, kind]);
-        }
+        let end = |v: usize| (Vec3::from(all.positions[v]), Vec3::from(all.normals[v]));
+        bands[band_of(parent_error)].push_line([end(2 * line), end(2 * line + 1)], [error, parent_error, width, kind]);
     }
     // Wood: a segment thinner than the error is a line of its mean
     // diameter, fading out (coverage 2r/e) until it is dropped at
     // WOOD_LINE_FADE times its error.
     for segment in &record.wood {
-        let error = line_error(segment.start_radius.max(segment.end_radius));
+        let error = wood_segment_error(segment);
         if error.is_nan() || error <= 0.0 || segment.start == segment.end {
             continue;
         }
         let parent_error = error * WOOD_LINE_FADE;
-        let band = &mut bands[band_of(parent_error)];
-        band.min_error = band.min_error.min(error);
-        band.max_parent_error = band.max_parent_error.max(parent_error);
         let normal = (segment.end - segment.start)
             .normalize_or_zero()
             .any_orthonormal_vector();
-        for p in [segment.start, segment.end] {
-            band.buffers.positions.push(p.to_array());
-            band.buffers.normals.push(normal.to_array());
-            band.buffers.lod.push([
+        bands[band_of(parent_error)].push_line(
+            [(segment.start, normal), (segment.end, normal)],
+            [
                 error,
                 parent_error,
                 segment.start_radius + segment.end_radius,
                 KIND_WOOD_LINE,
-            ]);
-        }
+            ],
+        );
     }
     bands.retain(|band| band.buffers.line_count() > 0);
     bands
@@ -274,6 +289,11 @@ pub fn prism_buffers(record: &LodRecord) -> Option<PrismBuffers> {
 /// dropped: there its coverage `2r/e` is below 1/64 (about 4 of 255 grey
 /// levels on a one-pixel line), so it leaves without a visible pop.
 pub const WOOD_LINE_FADE: f32 = 64.0;
+
+/// A wood segment's error `2·r_max`: it is a prism below, a wood line from it on.
+pub fn wood_segment_error(segment: &WoodSegment) -> f32 {
+    line_error(segment.start_radius.max(segment.end_radius))
+}
 
 /// `kind` of a wood line (a branch segment thinner than the error) in
 /// [`line_bands`].
@@ -465,7 +485,7 @@ mod tests {
                         .filter(|p| p[0][3] != KIND_WOOD_LINE && line_visible(p[0], e))
                         .count() as u64;
                     // A band that may not draw draws nothing.
-                    if !band.may_draw(e, e) {
+                    if !band.errors.may_draw(e, e) {
                         assert_eq!(in_band, 0, "e = {e}");
                     }
                     drawn += in_band;

@@ -2,9 +2,9 @@
 
 use super::material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE};
 use crate::model::gpu_layout::{
-    LineBand, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers,
+    BandErrors, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers,
+    wood_segment_error,
 };
-use crate::model::metric::line_error;
 use crate::model::prism::TriangleMesh;
 use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
 use bevy::asset::io::Reader;
@@ -60,18 +60,8 @@ pub struct ConiferSpecies {
 pub struct SpeciesLineBand {
     /// The band's `LineList` mesh.
     pub mesh: Handle<Mesh>,
-    /// Smallest error of its lines: at a smaller spatial error it draws nothing.
-    pub min_error: f32,
-    /// Largest parent error of its lines: at this spatial error or above it
-    /// draws nothing.
-    pub max_parent_error: f32,
-}
-
-impl SpeciesLineBand {
-    /// Whether the band can draw a line for a spatial error in `[min_e, max_e]`.
-    pub fn may_draw(&self, min_e: f32, max_e: f32) -> bool {
-        min_e < self.max_parent_error && max_e >= self.min_error
-    }
+    /// The span of its lines' error intervals: whether it can draw at an error.
+    pub errors: BandErrors,
 }
 
 /// Most line bands a species is split into.
@@ -137,8 +127,8 @@ impl ConiferSpecies {
 pub struct SpeciesMeshes {
     /// Prism mesh (vertex codes).
     pub prisms: Mesh,
-    /// Line band meshes, with their error bounds (empty buffers).
-    pub lines: Vec<(Mesh, LineBand)>,
+    /// Line band meshes, with their error spans.
+    pub lines: Vec<(Mesh, BandErrors)>,
     /// Wood segment prisms (vertex codes), if any.
     pub wood_prisms: Option<Mesh>,
     /// Wood segment storage buffer.
@@ -168,10 +158,7 @@ impl SpeciesMeshes {
         let wood = wood_prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.wood.len()))?;
         let lines = line_bands(record, MAX_LINE_BANDS)
             .into_iter()
-            .map(|mut band| {
-                let mesh = line_mesh(std::mem::take(&mut band.buffers));
-                (mesh, band)
-            })
+            .map(|band| (line_mesh(band.buffers), band.errors))
             .collect();
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();
@@ -188,11 +175,7 @@ impl SpeciesMeshes {
                 wood.needles
             }),
             wood: (record.wood_mesh.triangle_count() > 0).then(|| wood_mesh(&[], &record.wood_mesh, 8)),
-            max_wood_error: record
-                .wood
-                .iter()
-                .map(|w| line_error(w.start_radius.max(w.end_radius)))
-                .fold(0.0, f32::max),
+            max_wood_error: record.wood.iter().map(wood_segment_error).fold(0.0, f32::max),
             aabb: Aabb::from_min_max(lo - margin, hi + margin),
             crown_center: record.crown_center(),
             max_line_error: ranges.original_lines.max,
@@ -238,10 +221,9 @@ impl SpeciesMeshes {
                 .lines
                 .into_iter()
                 .enumerate()
-                .map(|(k, (mesh, band))| SpeciesLineBand {
+                .map(|(k, (mesh, errors))| SpeciesLineBand {
                     mesh: sink.add_mesh(format!("lines{k}"), mesh),
-                    min_error: band.min_error,
-                    max_parent_error: band.max_parent_error,
+                    errors,
                 })
                 .collect(),
             wood_prisms: self

@@ -453,7 +453,7 @@ pub(super) fn select_lod(
         let mut line_bands = 0u32;
         if any_view && settings.enabled {
             for (k, band) in species.lines.iter().enumerate().take(32) {
-                if band.may_draw(part_min_e, part_max_e) {
+                if band.errors.may_draw(part_min_e, part_max_e) {
                     line_bands |= 1 << k;
                 }
             }
