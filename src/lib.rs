@@ -23,6 +23,10 @@
 //! * [`export`]: glTF files of LOD cuts and of tree inputs.
 //! * [`scatter`]: blue-noise placement of trees on terrain.
 //! * `plugin` (feature `plugin`): the Bevy plugin.
+//! * `bench` (feature `eval`): `conifer bench`, cost against needles,
+//!   instances and views.
+//! * `eval` (feature `eval`): `conifer eval`, the plugin measured against a
+//!   supersampled reference and its peers.
 #![deny(missing_docs)]
 
 pub mod export;
@@ -32,8 +36,12 @@ pub mod model;
 pub mod preview;
 pub mod scatter;
 
+#[cfg(feature = "eval")]
+pub mod bench;
 #[cfg(feature = "cli")]
 pub mod cli;
+#[cfg(feature = "eval")]
+pub mod eval;
 #[cfg(feature = "plugin")]
 pub mod plugin;
 

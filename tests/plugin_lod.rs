@@ -194,7 +194,7 @@ fn settings_and_overrides_take_effect_next_frame() {
     assert!((after / before - 2.0).abs() < 1e-5, "{before} → {after}");
     app.world_mut().entity_mut(tree).insert(ConiferLodOverride {
         pixel_error: Some(0.5),
-        transition: None,
+        ..default()
     });
     app.update();
     assert!((state(&app, tree).min_spatial_error / before - 0.5).abs() < 1e-5);
@@ -206,6 +206,64 @@ fn settings_and_overrides_take_effect_next_frame() {
         s.prisms_visible && !s.lines_visible,
         "LOD off draws every needle as a prism"
     );
+}
+
+#[test]
+fn opacity_override_gets_its_own_materials_and_parts_take_the_render_layers() {
+    use bevy::camera::visibility::RenderLayers;
+    use bevy_conifer_lod::plugin::ConiferMaterial;
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    // Material assets without a renderer: the plugin makes its materials.
+    app.init_asset::<ConiferMaterial>().init_asset::<StandardMaterial>();
+    app.world_mut().spawn(camera(30.0));
+    let (ours, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let paper = app
+        .world_mut()
+        .spawn((
+            ConiferFoliage(handle),
+            ConiferLodOverride {
+                line_opacity: Some(LineOpacity::Paper),
+                ..default()
+            },
+            RenderLayers::layer(3),
+        ))
+        .id();
+    for _ in 0..3 {
+        app.update();
+    }
+    // The global default is area-preserving (rule 1); the override is the paper's (rule 0).
+    let rule = |tree: Entity| {
+        let parts = app.world().get::<ConiferParts>(tree).expect("parts spawned");
+        let material = app
+            .world()
+            .get::<MeshMaterial3d<ConiferMaterial>>(parts.lines[0])
+            .expect("line material");
+        app.world()
+            .resource::<Assets<ConiferMaterial>>()
+            .get(&material.0)
+            .unwrap()
+            .extension
+            .lod
+            .opacity_rule
+    };
+    assert_eq!((rule(ours), rule(paper)), (1, 0));
+    assert_eq!(app.world().resource::<SpeciesMaterials>().len(), 2);
+    // Every part of the layered tree is on its layer; the other tree's parts have none.
+    let parts = app.world().get::<ConiferParts>(paper).unwrap().clone();
+    let all: Vec<Entity> = parts
+        .lines
+        .iter()
+        .copied()
+        .chain([parts.prisms])
+        .chain(parts.wood_prisms)
+        .collect();
+    for part in all {
+        assert_eq!(app.world().get::<RenderLayers>(part), Some(&RenderLayers::layer(3)));
+    }
+    let ours_parts = app.world().get::<ConiferParts>(ours).unwrap();
+    assert!(app.world().get::<RenderLayers>(ours_parts.prisms).is_none());
 }
 
 #[test]

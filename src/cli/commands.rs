@@ -64,7 +64,11 @@ struct BakeReport<'a> {
     bytes_per_needle: f64,
     generate_seconds: f64,
     bake_seconds: f64,
+    /// The bake split into merge level 1, level 2 and the record.
+    stages: crate::model::StageSeconds,
     write_seconds: f64,
+    /// Peak resident memory of the process (Linux `VmHWM`), if known.
+    peak_bytes: Option<u64>,
     /// What the glTF import found (glTF input only).
     #[serde(skip_serializing_if = "Option::is_none")]
     import: Option<&'a ImportReport>,
@@ -132,7 +136,10 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         }
     };
     let bars = BakeBars::new();
-    let mut record = crate::model::bake(&input, &options, &bars).with_context(|| format!("baking {}", input.name))?;
+    let timer = crate::model::StageTimer::new(&bars);
+    let bake_started = Instant::now();
+    let mut record = crate::model::bake(&input, &options, &timer).with_context(|| format!("baking {}", input.name))?;
+    let stages = timer.seconds(bake_started.elapsed().as_secs_f64());
     bars.groups.finish_and_clear();
     bars.tree.finish_and_clear();
     record.bake.source = match (&args.preset, &args.input) {
@@ -152,7 +159,9 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         bytes_per_needle: bytes as f64 / record.needle_count() as f64,
         generate_seconds,
         bake_seconds: record.bake.bake_seconds.unwrap_or(0.0),
+        stages,
         write_seconds: write_started.elapsed().as_secs_f64(),
+        peak_bytes: peak_resident_bytes(),
         import: import_report.as_ref(),
     };
     if args.json {
@@ -170,6 +179,15 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Peak resident memory of this process so far (`VmHWM` of
+/// `/proc/self/status`); `None` where that is not available.
+pub fn peak_resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// The import summary, on stderr.

@@ -3,7 +3,11 @@
 //! Kept in the library (behind the `cli` feature) so integration tests can
 //! run the same code paths the binary runs.
 
+#[cfg(feature = "eval")]
+mod bench;
 mod commands;
+#[cfg(feature = "eval")]
+mod eval;
 #[cfg(feature = "plugin")]
 mod render;
 
@@ -38,6 +42,15 @@ pub enum Command {
     /// Render a record through the Bevy plugin, headless, to a PNG.
     #[cfg(feature = "plugin")]
     Render(render::RenderArgs),
+    /// Measure image quality, popping, primitives and frame time of the plugin
+    /// against the paper's configuration and the peers (raw, bevy-lod,
+    /// sampling), headless, against a supersampled reference.
+    #[cfg(feature = "eval")]
+    Eval(eval::EvalArgs),
+    /// Benchmarks: bake scaling, record sizes, cut time, plugin CPU time per
+    /// instance, and a rendered forest against raw meshes and Bevy LODs.
+    #[cfg(feature = "eval")]
+    Bench(bench::BenchArgs),
 }
 
 /// Arguments of `conifer bake`.
@@ -192,5 +205,9 @@ where
         Command::Export(args) => commands::export(&args),
         #[cfg(feature = "plugin")]
         Command::Render(args) => render::render(&args),
+        #[cfg(feature = "eval")]
+        Command::Eval(args) => eval::eval(&args),
+        #[cfg(feature = "eval")]
+        Command::Bench(args) => bench::bench(&args),
     }
 }

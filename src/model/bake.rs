@@ -75,6 +75,65 @@ impl BakeProgress for () {
     fn progress(&self, _: BakeStage, _: usize, _: usize) {}
 }
 
+/// A [`BakeProgress`] that passes reports on to another and notes when each
+/// stage last reported, so a bake's time splits into merge level 1 (groups),
+/// level 2 (whole tree) and the rest (validation, record assembly).
+pub struct StageTimer<'a> {
+    inner: &'a dyn BakeProgress,
+    start: Instant,
+    last: std::sync::Mutex<[Option<f64>; 2]>,
+}
+
+/// Seconds of a bake's stages, from a [`StageTimer`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageSeconds {
+    /// Level 1: merging inside phyllotaxy groups (with the needle sort before it).
+    pub merge_groups: f64,
+    /// Level 2: merging across the tree.
+    pub merge_tree: f64,
+    /// The rest of the bake: validation and building the record.
+    pub record: f64,
+}
+
+impl<'a> StageTimer<'a> {
+    /// Starts the clock now; reports go on to `inner`.
+    pub fn new(inner: &'a dyn BakeProgress) -> Self {
+        Self {
+            inner,
+            start: Instant::now(),
+            last: std::sync::Mutex::new([None, None]),
+        }
+    }
+
+    /// The split of `total` seconds (the whole bake, timed by the caller
+    /// from [`StageTimer::new`]): each stage ends at its last report. A
+    /// stage that never reported (no groups, one line) takes no time.
+    pub fn seconds(&self, total: f64) -> StageSeconds {
+        let last = *self.last.lock().unwrap_or_else(|e| e.into_inner());
+        let groups_end = last[0].unwrap_or(0.0);
+        let tree_end = last[1].unwrap_or(groups_end).max(groups_end);
+        StageSeconds {
+            merge_groups: groups_end,
+            merge_tree: tree_end - groups_end,
+            record: (total - tree_end).max(0.0),
+        }
+    }
+}
+
+impl BakeProgress for StageTimer<'_> {
+    fn progress(&self, stage: BakeStage, done: usize, total: usize) {
+        let now = self.start.elapsed().as_secs_f64();
+        let slot = match stage {
+            BakeStage::MergeGroups => 0,
+            BakeStage::MergeTree => 1,
+        };
+        if let Ok(mut last) = self.last.lock() {
+            last[slot] = Some(last[slot].map_or(now, |t: f64| t.max(now)));
+        }
+        self.inner.progress(stage, done, total);
+    }
+}
+
 struct Adapter<'a>(&'a dyn BakeProgress);
 
 impl MergeProgress for Adapter<'_> {
@@ -143,4 +202,38 @@ pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgres
     )?;
     record.bake.bake_seconds = Some(start.elapsed().as_secs_f64());
     Ok(record)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generate::{GenerateOptions, Species, generate};
+
+    #[test]
+    fn stage_timer_splits_the_bake_in_order() {
+        let tree = generate(
+            Species::NorwaySpruce,
+            &GenerateOptions {
+                seed: 3,
+                target_needles: Some(4000),
+            },
+        );
+        let timer = StageTimer::new(&());
+        let record = bake(&tree, &BakeOptions::default(), &timer).unwrap();
+        let total = timer.start.elapsed().as_secs_f64();
+        let s = timer.seconds(total);
+        assert!(!record.merged.is_empty());
+        assert!(s.merge_groups > 0.0 && s.merge_tree > 0.0 && s.record >= 0.0, "{s:?}");
+        assert!((s.merge_groups + s.merge_tree + s.record - total).abs() < 1e-9);
+        // Nothing reported: everything is the record stage.
+        let idle = StageTimer::new(&());
+        assert_eq!(
+            idle.seconds(2.0),
+            StageSeconds {
+                merge_groups: 0.0,
+                merge_tree: 0.0,
+                record: 2.0
+            }
+        );
+    }
 }

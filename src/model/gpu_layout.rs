@@ -242,6 +242,97 @@ pub fn line_bands(record: &LodRecord, max_bands: usize) -> Vec<LineBand> {
     bands
 }
 
+/// Bytes a species occupies in GPU buffers, as the plugin uploads it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct GpuBytes {
+    /// Needle prisms: the per-needle storage buffer, vertex codes and indices.
+    pub prisms: u64,
+    /// Line bands: position, normal and `[error, parent_error, width, kind]`
+    /// per vertex, two vertices per line.
+    pub lines: u64,
+    /// Wood prisms: the per-segment storage buffer, codes and indices.
+    pub wood: u64,
+}
+
+impl GpuBytes {
+    /// All of it.
+    pub fn total(&self) -> u64 {
+        self.prisms + self.lines + self.wood
+    }
+}
+
+/// The GPU footprint of `record`'s buffers ([`prism_buffers`],
+/// [`line_bands`] with [`LINE_BANDS`], [`wood_prism_buffers`]).
+pub fn gpu_bytes(record: &LodRecord) -> GpuBytes {
+    let prism_bytes = |b: &PrismBuffers| (b.needles.len() * 16 + b.codes.len() * 4 + b.indices.len() * 4) as u64;
+    let lines = line_bands(record, LINE_BANDS)
+        .iter()
+        .map(|band| (band.buffers.positions.len() * (12 + 12 + 16)) as u64)
+        .sum();
+    GpuBytes {
+        prisms: prism_buffers(record).as_ref().map_or(0, prism_bytes),
+        lines,
+        wood: wood_prism_buffers(record).as_ref().map_or(0, prism_bytes),
+    }
+}
+
+/// A random order of `count` items (a permutation of `0..count` from a
+/// seeded stream): item `i` is kept by a sample of `k` when `order[i] < k`,
+/// so samples of growing size are nested and a dolly does not reshuffle.
+pub fn sampling_order(count: usize, seed: u64) -> Vec<u32> {
+    use rand::SeedableRng;
+    use rand::seq::SliceRandom;
+    let mut ranks: Vec<u32> = (0..count as u32).collect();
+    let mut stream = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    ranks.shuffle(&mut stream);
+    ranks
+}
+
+/// The paper's rejected alternative to merging (§3): a random sample of the
+/// original lines, `keep` of the record's needles (those with
+/// `order[i] < keep`), each drawn once it is a line (`2R ≤ e`) and never
+/// merged, its width (hence opacity) scaled by `needles / keep` so that the
+/// sample covers as much as all lines would. Wood lines are added as in
+/// [`line_bands`], so only the needles differ from the LOD's lines.
+///
+/// `order` must have one entry per needle ([`sampling_order`]); `keep` is
+/// clamped to `1..=needles`.
+pub fn sampled_line_band(record: &LodRecord, order: &[u32], keep: usize) -> LineBand {
+    let needles = record.needle_count();
+    let keep = keep.clamp(1, needles.max(1));
+    let scale = needles as f32 / keep as f32;
+    let mut band = LineBand::default();
+    for (i, needle) in record.needles.iter().enumerate() {
+        if order.get(i).is_none_or(|&rank| rank as usize >= keep) {
+            continue;
+        }
+        let error = line_error(needle.radius);
+        band.push_line(
+            [(needle.base, needle.normal), (needle.tip, needle.normal)],
+            [error, f32::MAX, error * scale, KIND_ORIGINAL_LINE],
+        );
+    }
+    for segment in &record.wood {
+        let error = wood_segment_error(segment);
+        if error.is_nan() || error <= 0.0 || segment.start == segment.end {
+            continue;
+        }
+        let normal = (segment.end - segment.start)
+            .normalize_or_zero()
+            .any_orthonormal_vector();
+        band.push_line(
+            [(segment.start, normal), (segment.end, normal)],
+            [
+                error,
+                error * WOOD_LINE_FADE,
+                segment.start_radius + segment.end_radius,
+                KIND_WOOD_LINE,
+            ],
+        );
+    }
+    band
+}
+
 /// Whether a line vertex with `lod = [error, parent_error, ..]` is drawn at
 /// spatial error `e` (the shader's test).
 pub fn line_visible(lod: [f32; 4], e: f32) -> bool {
@@ -579,5 +670,65 @@ mod tests {
                 assert!(gpu_indices.iter().all(|&k| (k as usize) / per_needle == i));
             }
         }
+    }
+
+    #[test]
+    fn sampled_band_keeps_a_nested_sample_with_scaled_width() {
+        let record = record();
+        let n = record.needle_count();
+        let order = sampling_order(n, 7);
+        let mut sorted = order.clone();
+        sorted.sort_unstable();
+        assert_eq!(sorted, (0..n as u32).collect::<Vec<_>>(), "a permutation");
+        assert_eq!(order, sampling_order(n, 7), "deterministic");
+        let wood_lines = record.wood.len();
+        let small = sampled_line_band(&record, &order, n / 4);
+        let large = sampled_line_band(&record, &order, n / 2);
+        assert_eq!(small.buffers.line_count(), n / 4 + wood_lines);
+        assert_eq!(large.buffers.line_count(), n / 2 + wood_lines);
+        // Nested: every needle line of the small sample is in the large one.
+        let needle_lines = |band: &LineBand| -> Vec<[f32; 3]> {
+            (0..band.buffers.line_count())
+                .filter(|&l| band.buffers.lod[2 * l][3] == KIND_ORIGINAL_LINE)
+                .map(|l| band.buffers.positions[2 * l])
+                .collect()
+        };
+        let big = needle_lines(&large);
+        assert!(needle_lines(&small).iter().all(|p| big.contains(p)));
+        // Width scaled by needles / keep; drawn from the line error on, never merged.
+        for l in 0..small.buffers.line_count() {
+            let [error, parent, width, kind] = small.buffers.lod[2 * l];
+            if kind == KIND_ORIGINAL_LINE {
+                assert_eq!(parent, f32::MAX);
+                assert!((width - error * 4.0).abs() <= 1e-6 * width);
+            }
+        }
+        // Keep is clamped: 0 keeps one needle, more than all keeps all.
+        assert_eq!(
+            sampled_line_band(&record, &order, 0).buffers.line_count(),
+            1 + wood_lines
+        );
+        assert_eq!(
+            sampled_line_band(&record, &order, 10 * n).buffers.line_count(),
+            n + wood_lines
+        );
+    }
+
+    #[test]
+    fn gpu_bytes_add_up_the_buffers() {
+        let record = record();
+        let bytes = gpu_bytes(&record);
+        let prisms = prism_buffers(&record).unwrap();
+        assert_eq!(
+            bytes.prisms,
+            (prisms.needles.len() * 16 + prisms.codes.len() * 4 + prisms.indices.len() * 4) as u64
+        );
+        let lines: usize = line_bands(&record, LINE_BANDS)
+            .iter()
+            .map(|b| b.buffers.line_count())
+            .sum();
+        assert_eq!(bytes.lines, (lines * 2 * 40) as u64);
+        assert!(bytes.wood > 0);
+        assert_eq!(bytes.total(), bytes.prisms + bytes.lines + bytes.wood);
     }
 }

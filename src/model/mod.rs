@@ -20,7 +20,7 @@ pub mod needle;
 pub mod prism;
 pub mod record;
 
-pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, bake};
+pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake};
 pub use cut_count::{CutCounter, CutCounts};
 pub use file::{RecordError, decode_record, encode_record, read_record, write_record};
 pub use merge::{MergeOptions, MergeWeights, PartnerSearch};

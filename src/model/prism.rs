@@ -3,7 +3,7 @@
 //! than stored.
 
 use super::metric::MIN_PRISM_SIDES;
-use super::needle::Needle;
+use super::needle::{Needle, WoodSegment};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::TAU;
@@ -58,6 +58,35 @@ impl TriangleMesh {
         self.positions.extend_from_slice(&other.positions);
         self.normals.extend_from_slice(&other.normals);
         self.indices.extend(other.indices.iter().map(|&i| first + i));
+    }
+}
+
+/// Appends the open truncated cone of a wood segment with `sides` sides
+/// (at least 3) and smooth normals tilted by the taper. A degenerate
+/// segment appends nothing.
+pub fn append_wood_segment(mesh: &mut TriangleMesh, segment: &WoodSegment, sides: u32) {
+    let sides = sides.max(MIN_PRISM_SIDES as u32);
+    let axis = segment.end - segment.start;
+    let Some(direction) = axis.try_normalize() else {
+        return;
+    };
+    let u = direction.any_orthonormal_vector();
+    let v = direction.cross(u);
+    // The cone's normal tilts by the slope of its radius.
+    let slope = (segment.start_radius - segment.end_radius) / axis.length();
+    let first = mesh.positions.len() as u32;
+    for (centre, radius) in [(segment.start, segment.start_radius), (segment.end, segment.end_radius)] {
+        for k in 0..sides {
+            let angle = TAU * k as f32 / sides as f32;
+            let radial = u * angle.cos() + v * angle.sin();
+            mesh.positions.push(centre + radial * radius);
+            mesh.normals.push((radial + direction * slope).normalize());
+        }
+    }
+    for k in 0..sides {
+        let next = (k + 1) % sides;
+        let (b0, b1, t0, t1) = (first + k, first + next, first + sides + k, first + sides + next);
+        mesh.indices.extend_from_slice(&[b0, b1, t1, b0, t1, t0]);
     }
 }
 

@@ -5,7 +5,7 @@ use crate::model::gpu_layout::{
     BandErrors, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers,
     wood_segment_error,
 };
-use crate::model::prism::TriangleMesh;
+use crate::model::prism::{TriangleMesh, append_wood_segment};
 use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
 use bevy::asset::io::Reader;
 use bevy::asset::{AssetLoader, LoadContext, RenderAssetUsages};
@@ -249,7 +249,9 @@ fn prism_mesh(buffers: &PrismBuffers) -> Mesh {
         .with_inserted_indices(Indices::U32(buffers.indices.clone()))
 }
 
-fn line_mesh(buffers: LineBuffers) -> Mesh {
+/// A band's line buffers as the plugin's line mesh (`LineList` with the
+/// per-vertex `[error, parent_error, width, kind]` attribute).
+pub fn line_mesh(buffers: LineBuffers) -> Mesh {
     Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
         .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, buffers.positions)
         .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, buffers.normals)
@@ -261,38 +263,20 @@ fn line_mesh(buffers: LineBuffers) -> Mesh {
 /// triangles (the plugin draws segments as LOD prisms and uses this only
 /// for imported triangles).
 pub fn wood_mesh(segments: &[WoodSegment], triangles: &TriangleMesh, sides: u32) -> Mesh {
-    let mut positions: Vec<[f32; 3]> = triangles.positions.iter().map(|p| p.to_array()).collect();
-    let mut normals: Vec<[f32; 3]> = triangles.normals.iter().map(|n| n.to_array()).collect();
-    let mut indices: Vec<u32> = triangles.indices.clone();
-    positions.reserve(segments.len() * 2 * sides as usize);
-    normals.reserve(segments.len() * 2 * sides as usize);
-    indices.reserve(segments.len() * 6 * sides as usize);
+    let mut mesh = triangles.clone();
     for segment in segments {
-        let axis = segment.end - segment.start;
-        let Some(direction) = axis.try_normalize() else {
-            continue;
-        };
-        let u = direction.any_orthonormal_vector();
-        let v = direction.cross(u);
-        // The cone's normal tilts by the slope of its radius.
-        let slope = (segment.start_radius - segment.end_radius) / axis.length();
-        let first = positions.len() as u32;
-        for (centre, radius) in [(segment.start, segment.start_radius), (segment.end, segment.end_radius)] {
-            for k in 0..sides {
-                let angle = std::f32::consts::TAU * k as f32 / sides as f32;
-                let radial = u * angle.cos() + v * angle.sin();
-                positions.push((centre + radial * radius).to_array());
-                normals.push((radial + direction * slope).normalize().to_array());
-            }
-        }
-        for k in 0..sides {
-            let next = (k + 1) % sides;
-            let (b0, b1, t0, t1) = (first + k, first + next, first + sides + k, first + sides + next);
-            indices.extend_from_slice(&[b0, b1, t1, b0, t1, t0]);
-        }
+        append_wood_segment(&mut mesh, segment, sides);
     }
+    triangle_mesh(&mesh)
+}
+
+/// A model [`TriangleMesh`] as a Bevy triangle-list mesh (positions,
+/// normals, `u32` indices), for the render world only.
+pub fn triangle_mesh(mesh: &TriangleMesh) -> Mesh {
+    let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.to_array()).collect();
+    let normals: Vec<[f32; 3]> = mesh.normals.iter().map(|n| n.to_array()).collect();
     Mesh::new(PrimitiveTopology::TriangleList, RenderAssetUsages::RENDER_WORLD)
         .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
         .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-        .with_inserted_indices(Indices::U32(indices))
+        .with_inserted_indices(Indices::U32(mesh.indices.clone()))
 }

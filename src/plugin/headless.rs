@@ -39,6 +39,40 @@ pub enum HeadlessError {
     NotLoaded(u32),
 }
 
+/// Screenshots asked for by [`HeadlessRenderer::request_screenshots`].
+pub struct PendingScreenshots {
+    slots: Vec<Arc<Mutex<Option<Image>>>>,
+}
+
+impl PendingScreenshots {
+    /// The pictures, in the order of the targets, once all have arrived
+    /// (`None` before).
+    pub fn take(&self) -> Result<Option<Vec<image::RgbaImage>>, HeadlessError> {
+        let ready = self
+            .slots
+            .iter()
+            .all(|slot| slot.lock().unwrap_or_else(|e| e.into_inner()).is_some());
+        if !ready {
+            return Ok(None);
+        }
+        self.slots
+            .iter()
+            .map(|slot| {
+                let image = slot
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .take()
+                    .ok_or_else(|| HeadlessError::Format("screenshot taken twice".into()))?;
+                let dynamic = image
+                    .try_into_dynamic()
+                    .map_err(|e| HeadlessError::Format(e.to_string()))?;
+                Ok(dynamic.to_rgba8())
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Some)
+    }
+}
+
 /// A Bevy app with the conifer plugin, rendering to images, driven by hand.
 pub struct HeadlessRenderer {
     apps: SubApps,
@@ -56,8 +90,14 @@ impl HeadlessRenderer {
     /// finished.
     pub fn with_setup(asset_root: &str, setup: impl FnOnce(&mut App)) -> Self {
         let mut app = App::new();
+        // A second renderer in one process keeps the first one's logger.
+        let logger_set = bevy::log::tracing::dispatcher::has_been_set();
+        let mut plugins = DefaultPlugins.build();
+        if logger_set {
+            plugins = plugins.disable::<bevy::log::LogPlugin>();
+        }
         app.add_plugins(
-            DefaultPlugins
+            plugins
                 .set(WindowPlugin {
                     primary_window: None,
                     exit_condition: ExitCondition::DontExit,
@@ -168,31 +208,32 @@ impl HeadlessRenderer {
         targets: &[Handle<Image>],
         max_frames: u32,
     ) -> Result<Vec<image::RgbaImage>, HeadlessError> {
+        let pending = self.request_screenshots(targets);
+        for _ in 0..max_frames {
+            self.update()?;
+            if let Some(images) = pending.take()? {
+                return Ok(images);
+            }
+        }
+        Err(HeadlessError::NoScreenshot(max_frames))
+    }
+
+    /// Asks for screenshots of `targets` from the next frame rendered,
+    /// without waiting: run [`HeadlessRenderer::update`] (the frame) and
+    /// poll the result with [`PendingScreenshots::take`]. The pictures
+    /// arrive a frame or two later, so a camera can move on meanwhile and a
+    /// sequence costs about one frame per picture.
+    pub fn request_screenshots(&mut self, targets: &[Handle<Image>]) -> PendingScreenshots {
         let slots: Vec<Arc<Mutex<Option<Image>>>> = targets.iter().map(|_| Arc::default()).collect();
         for (target, slot) in targets.iter().zip(&slots) {
             let sink = slot.clone();
             self.world_mut().spawn(Screenshot::image(target.clone())).observe(
                 move |captured: On<ScreenshotCaptured>| {
-                    *sink.lock().expect("screenshot slot") = Some(captured.image.clone());
+                    *sink.lock().unwrap_or_else(|e| e.into_inner()) = Some(captured.image.clone());
                 },
             );
         }
-        for _ in 0..max_frames {
-            self.update()?;
-            if slots.iter().all(|slot| slot.lock().expect("screenshot slot").is_some()) {
-                return slots
-                    .iter()
-                    .map(|slot| {
-                        let image = slot.lock().expect("screenshot slot").take().expect("checked above");
-                        let dynamic = image
-                            .try_into_dynamic()
-                            .map_err(|e| HeadlessError::Format(e.to_string()))?;
-                        Ok(dynamic.to_rgba8())
-                    })
-                    .collect();
-            }
-        }
-        Err(HeadlessError::NoScreenshot(max_frames))
+        PendingScreenshots { slots }
     }
 
     /// A camera rendering into `target`.

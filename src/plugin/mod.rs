@@ -46,7 +46,8 @@ mod material;
 mod systems;
 
 pub use asset::{
-    ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshes, wood_mesh,
+    ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshes, line_mesh,
+    triangle_mesh, wood_mesh,
 };
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
@@ -111,7 +112,7 @@ pub enum ConiferLodSet {
 }
 
 /// How merged (and original) lines get their opacity.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Reflect)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 pub enum LineOpacity {
     /// The paper: `T = 2/ρ` (`2R/e`) for an original line; a merged line,
     /// read as a cylinder of radius `e(X)/2`, gets `e(X)/e`.
@@ -163,6 +164,9 @@ impl ConiferLodSettings {
 }
 
 /// A tree: spawn it with a `Transform` and it is drawn with continuous LOD.
+///
+/// Its mesh parts are child entities; they take the tree's `RenderLayers`
+/// (if any) when they are spawned.
 #[derive(Component, Clone, Debug, PartialEq, Eq)]
 #[require(Transform, Visibility, ConiferLodState)]
 pub struct ConiferFoliage(pub Handle<ConiferSpecies>);
@@ -175,6 +179,9 @@ pub struct ConiferLodOverride {
     pub pixel_error: Option<f32>,
     /// Transition coefficient δ for this tree.
     pub transition: Option<f32>,
+    /// Line opacity rule for this tree (`conifer eval` draws the paper's and
+    /// ours side by side this way).
+    pub line_opacity: Option<LineOpacity>,
 }
 
 /// What a tree's LOD is this frame, over every active camera (written by

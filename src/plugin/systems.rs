@@ -6,6 +6,7 @@ use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferLodState, ConiferPart, ConiferParts, ConiferSpecies,
     LineOpacity,
 };
+use bevy::camera::visibility::RenderLayers;
 use bevy::light::Cascades;
 use bevy::pbr::ExtendedMaterial;
 use bevy::platform::collections::HashMap;
@@ -52,6 +53,7 @@ struct MaterialKey {
     species: AssetId<ConiferSpecies>,
     pixel_error_bits: Option<u32>,
     transition_bits: Option<u32>,
+    line_opacity: Option<LineOpacity>,
 }
 
 impl MaterialKey {
@@ -60,6 +62,7 @@ impl MaterialKey {
             species,
             pixel_error_bits: over.and_then(|o| o.pixel_error).map(f32::to_bits),
             transition_bits: over.and_then(|o| o.transition).map(f32::to_bits),
+            line_opacity: over.and_then(|o| o.line_opacity),
         }
     }
 
@@ -67,6 +70,7 @@ impl MaterialKey {
         ConiferLodSettings {
             pixel_error: self.pixel_error_bits.map_or(global.pixel_error, f32::from_bits),
             transition: self.transition_bits.map_or(global.transition, f32::from_bits),
+            line_opacity: self.line_opacity.unwrap_or(global.line_opacity),
             ..*global
         }
     }
@@ -200,6 +204,7 @@ pub(super) fn spawn_parts(
             &ConiferFoliage,
             Option<&ConiferLodOverride>,
             Option<&ConiferParts>,
+            Option<&RenderLayers>,
         ),
         Or<(
             Without<ConiferParts>,
@@ -215,7 +220,7 @@ pub(super) fn spawn_parts(
     mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
     let _timer = CpuTimer::start(&mut cpu_time, false);
-    for (entity, foliage, over, parts) in &trees {
+    for (entity, foliage, over, parts, layers) in &trees {
         let Some(species) = species_assets.get(&foliage.0) else {
             continue;
         };
@@ -251,6 +256,9 @@ pub(super) fn spawn_parts(
                 part,
                 ChildOf(entity),
             ));
+            if let Some(layers) = layers {
+                child.insert(layers.clone());
+            }
             if let Some(set) = &set {
                 match part {
                     ConiferPart::Prisms => child.insert(MeshMaterial3d(set.prisms.clone())),

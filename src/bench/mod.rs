@@ -1,0 +1,597 @@
+//! `conifer bench`: how cost grows with needles, instances and views,
+//! measured and printed as figures (feature `eval`).
+//!
+//! * Bake: a child `conifer bake --json` per size (so each peak memory is
+//!   its own), split into generate, merge level 1, level 2, record and write,
+//!   and the growth exponent of a log-log fit.
+//! * Record: bytes per needle on disk and in GPU buffers, load time.
+//! * Cut: the paper's CPU traversal, with and without the three-part start.
+//! * [`runtime`]: the plugin's CPU time per frame, no rendering.
+//! * [`forest`]: a rendered forest, the plugin against raw meshes and
+//!   meshoptimizer LODs under `VisibilityRange`.
+
+pub mod forest;
+pub mod runtime;
+
+use crate::generate::{GenerateOptions, Species, generate};
+use crate::model::record::CutStrategy;
+use crate::model::{BakeOptions, LodRecord, PixelError, ViewParams, bake, decode_record};
+use forest::{ForestMethod, forest_frame_ms};
+use runtime::RuntimeFigures;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// One record per procedural species at about `needles` needles (seed 0).
+pub fn species_records(needles: usize) -> Vec<LodRecord> {
+    Species::ALL
+        .into_iter()
+        .map(|species| {
+            let tree = generate(
+                species,
+                &GenerateOptions {
+                    seed: 0,
+                    target_needles: Some(needles),
+                },
+            );
+            bake(&tree, &BakeOptions::default(), &()).expect("procedural trees bake")
+        })
+        .collect()
+}
+
+/// What [`run`] measures.
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    /// The `conifer` executable that runs the bakes.
+    pub conifer: PathBuf,
+    /// Needle counts baked (the Scots pine preset scaled).
+    pub bake_needles: Vec<usize>,
+    /// Directory of the shipped `.conifer` records (bytes per needle, load time).
+    pub records_dir: PathBuf,
+    /// Needles of the tree whose cut is timed.
+    pub cut_needles: usize,
+    /// Instance counts of the run-time benchmark.
+    pub instances: Vec<usize>,
+    /// Frames per run-time measurement.
+    pub runtime_frames: usize,
+    /// Trees of the rendered forest.
+    pub forest_instances: usize,
+    /// Needles per tree of the rendered forest.
+    pub forest_needles: usize,
+    /// Picture of the rendered forest.
+    pub forest_size: (u32, u32),
+    /// Frames timed per forest method.
+    pub forest_frames: usize,
+    /// Where plots and pictures go.
+    pub out_dir: PathBuf,
+    /// Parts to run (`bake`, `records`, `cuts`, `runtime`, `forest`); empty
+    /// runs them all.
+    pub only: Vec<String>,
+}
+
+impl BenchOptions {
+    fn runs(&self, part: &str) -> bool {
+        self.only.is_empty() || self.only.iter().any(|p| p == part)
+    }
+}
+
+impl BenchOptions {
+    /// The full run (BENCHMARKS.md's figures).
+    pub fn full(conifer: PathBuf, records_dir: PathBuf, out_dir: PathBuf) -> Self {
+        Self {
+            conifer,
+            bake_needles: vec![10_000, 30_000, 100_000, 300_000, 1_000_000],
+            records_dir,
+            cut_needles: 50_000,
+            instances: vec![100, 1_000, 10_000, 100_000],
+            runtime_frames: 60,
+            forest_instances: 1_000,
+            forest_needles: 5_000,
+            forest_size: (640, 360),
+            forest_frames: 3,
+            out_dir,
+            only: Vec::new(),
+        }
+    }
+
+    /// A CI-sized run: every part, small.
+    pub fn quick(conifer: PathBuf, records_dir: PathBuf, out_dir: PathBuf) -> Self {
+        Self {
+            bake_needles: vec![5_000, 10_000, 20_000],
+            cut_needles: 10_000,
+            instances: vec![100, 1_000],
+            runtime_frames: 10,
+            forest_instances: 36,
+            forest_needles: 2_000,
+            forest_size: (256, 144),
+            forest_frames: 1,
+            ..Self::full(conifer, records_dir, out_dir)
+        }
+    }
+}
+
+/// Seconds of one bake's stages.
+#[derive(Clone, Copy, Debug, Default, Serialize, serde::Deserialize)]
+pub struct BakeStages {
+    /// Generating the procedural tree (or importing).
+    pub generate: f64,
+    /// Merge level 1 (inside groups).
+    pub merge_groups: f64,
+    /// Merge level 2 (across the tree).
+    pub merge_tree: f64,
+    /// Validation and record assembly.
+    pub record: f64,
+    /// Encoding and writing the file.
+    pub write: f64,
+}
+
+/// One bake.
+#[derive(Clone, Debug, Serialize)]
+pub struct BakeFigures {
+    /// Needles baked.
+    pub needles: usize,
+    /// Bake seconds (merge levels and record; generation and writing are
+    /// in `stages`).
+    pub seconds: f64,
+    /// Needles per bake second.
+    pub needles_per_second: f64,
+    /// Peak resident memory of the bake process, bytes.
+    pub peak_bytes: Option<u64>,
+    /// The split.
+    pub stages: BakeStages,
+    /// Record file bytes.
+    pub file_bytes: u64,
+}
+
+/// One species' record.
+#[derive(Clone, Debug, Serialize)]
+pub struct RecordFigures {
+    /// Needles.
+    pub needles: usize,
+    /// File bytes.
+    pub file_bytes: u64,
+    /// File bytes per needle.
+    pub disk_bytes_per_needle: f64,
+    /// GPU buffer bytes (prisms, line bands, wood prisms).
+    pub gpu_bytes: u64,
+    /// GPU bytes per needle.
+    pub gpu_bytes_per_needle: f64,
+    /// Median time to decode and validate the file from memory, ms.
+    pub decode_ms: f64,
+    /// Median time to build the GPU-ready meshes from the record, ms.
+    pub build_ms: f64,
+}
+
+/// Cut timings.
+#[derive(Clone, Debug, Serialize)]
+pub struct CutFigures {
+    /// Needles of the tree.
+    pub needles: usize,
+    /// Viewing distances, metres (1080 px, 45°, ε = 1).
+    pub distances: Vec<f32>,
+    /// The cut's primitives at each distance.
+    pub primitives: Vec<u64>,
+    /// Median µs per cut, the paper's traversal with the three-part start.
+    pub three_part_start: Vec<f64>,
+    /// Median µs per cut, the traversal from the roots.
+    pub from_roots: Vec<f64>,
+    /// Median µs of `CutCounter::count` (counts only, what the overlay uses).
+    pub counts_only: Vec<f64>,
+}
+
+/// Rendered forest frame times.
+#[derive(Clone, Debug, Serialize)]
+pub struct RenderRatio {
+    /// `raw` frame time over `ours`.
+    pub raw_over_ours: f64,
+    /// `bevy-lod` frame time over `ours`.
+    pub bevylod_over_ours: f64,
+    /// Median frame ms, the plugin.
+    pub ours_ms: f64,
+    /// Median frame ms, raw meshes.
+    pub raw_ms: f64,
+    /// Median frame ms, meshoptimizer LODs with `VisibilityRange`.
+    pub bevylod_ms: f64,
+    /// Trees.
+    pub instances: usize,
+    /// Needles per tree.
+    pub needles_per_tree: usize,
+    /// Picture width.
+    pub width: u32,
+    /// Picture height.
+    pub height: u32,
+    /// The renderer (lavapipe: only ratios mean anything).
+    pub adapter: String,
+}
+
+/// Everything `conifer bench --json` prints.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    /// The machine: CPU, cores, memory.
+    pub machine: String,
+    /// Build profile of the measuring binary.
+    pub profile: String,
+    /// Bakes by size.
+    pub bake: Vec<BakeFigures>,
+    /// Slope of log(bake seconds) over log(needles), least squares.
+    pub bake_exponent: f64,
+    /// Shipped records by species.
+    pub bytes_per_needle: BTreeMap<String, RecordFigures>,
+    /// CPU cut selection.
+    pub cut_us: Option<CutFigures>,
+    /// The plugin's CPU time per frame, no rendering.
+    pub runtime: Vec<RuntimeFigures>,
+    /// The rendered forest.
+    pub render_ratio: Option<RenderRatio>,
+    /// The GPU machine's figures, or why there are none.
+    pub gpu: String,
+    /// Files written (plots, forest pictures).
+    pub files: Vec<PathBuf>,
+}
+
+/// Why the benchmark failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// A bake child failed.
+    #[error("bake of {needles} needles failed: {message}")]
+    Bake {
+        /// Needles.
+        needles: usize,
+        /// What went wrong.
+        message: String,
+    },
+    /// A record could not be read.
+    #[error("{0}: {1}")]
+    Record(PathBuf, String),
+    /// Rendering failed.
+    #[error(transparent)]
+    Render(#[from] crate::eval::scene::EvalError),
+    /// A plot failed.
+    #[error(transparent)]
+    Plot(#[from] crate::eval::plot::PlotError),
+    /// The output directory could not be made.
+    #[error("{0}: {1}")]
+    OutDir(PathBuf, std::io::Error),
+}
+
+/// Slope of the least-squares line through `(ln x, ln y)`; 0 with fewer than
+/// two usable points.
+pub fn log_log_slope(points: &[(f64, f64)]) -> f64 {
+    let logs: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| *x > 0.0 && *y > 0.0 && x.is_finite() && y.is_finite())
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
+    let n = logs.len() as f64;
+    if logs.len() < 2 {
+        return 0.0;
+    }
+    let (mx, my) = (
+        logs.iter().map(|p| p.0).sum::<f64>() / n,
+        logs.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxx: f64 = logs.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = logs.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    if sxx > 0.0 { sxy / sxx } else { 0.0 }
+}
+
+/// Median µs of `f` over at least 5 runs and at least 50 ms.
+fn time_us(mut f: impl FnMut()) -> f64 {
+    let mut times = Vec::new();
+    let started = Instant::now();
+    while times.len() < 5 || (started.elapsed().as_secs_f64() < 0.05 && times.len() < 10_000) {
+        let t = Instant::now();
+        f();
+        times.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    crate::eval::measure::median(&times)
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split(':').nth(1))
+                .map(|s| s.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let memory = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("MemTotal"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or_else(
+            || "unknown memory".into(),
+            |kb| format!("{:.0} GiB", kb / 1024.0 / 1024.0),
+        );
+    format!("{cpu}, {cores} cores, {memory}, no GPU (software Vulkan: Mesa lavapipe)")
+}
+
+fn bake_child(conifer: &Path, needles: usize, dir: &Path) -> Result<BakeFigures, BenchError> {
+    let output_file = dir.join(format!("bench_{needles}.conifer"));
+    let fail = |message: String| BenchError::Bake { needles, message };
+    let output = std::process::Command::new(conifer)
+        .args([
+            "bake",
+            "--preset",
+            "scots-pine",
+            "--needles",
+            &needles.to_string(),
+            "--json",
+            "-o",
+        ])
+        .arg(&output_file)
+        .output()
+        .map_err(|e| fail(format!("cannot run {}: {e}", conifer.display())))?;
+    let _ = std::fs::remove_file(&output_file);
+    if !output.status.success() {
+        return Err(fail(String::from_utf8_lossy(&output.stderr).into_owned()));
+    }
+    let json: serde_json::Value =
+        serde_json::from_slice(&output.stdout).map_err(|e| fail(format!("bad JSON from the bake: {e}")))?;
+    let number = |key: &str| json.get(key).and_then(serde_json::Value::as_f64).unwrap_or(0.0);
+    let stage = |key: &str| {
+        json.get("stages")
+            .and_then(|s| s.get(key))
+            .and_then(serde_json::Value::as_f64)
+            .unwrap_or(0.0)
+    };
+    let seconds = number("bake_seconds");
+    let baked = number("needles") as usize;
+    Ok(BakeFigures {
+        needles: baked,
+        seconds,
+        needles_per_second: if seconds > 0.0 { baked as f64 / seconds } else { 0.0 },
+        peak_bytes: json.get("peak_bytes").and_then(serde_json::Value::as_u64),
+        stages: BakeStages {
+            generate: number("generate_seconds"),
+            merge_groups: stage("merge_groups"),
+            merge_tree: stage("merge_tree"),
+            record: stage("record"),
+            write: number("write_seconds"),
+        },
+        file_bytes: number("bytes") as u64,
+    })
+}
+
+fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
+    let bytes = std::fs::read(path).map_err(|e| BenchError::Record(path.to_path_buf(), e.to_string()))?;
+    let record = decode_record(&bytes).map_err(|e| BenchError::Record(path.to_path_buf(), e.to_string()))?;
+    let decode_ms = time_us(|| {
+        std::hint::black_box(decode_record(std::hint::black_box(&bytes)).ok());
+    }) / 1e3;
+    let build_ms = time_us(|| {
+        std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record).ok());
+    }) / 1e3;
+    let gpu = crate::model::gpu_layout::gpu_bytes(&record).total();
+    let needles = record.needle_count().max(1);
+    Ok(RecordFigures {
+        needles: record.needle_count(),
+        file_bytes: bytes.len() as u64,
+        disk_bytes_per_needle: bytes.len() as f64 / needles as f64,
+        gpu_bytes: gpu,
+        gpu_bytes_per_needle: gpu as f64 / needles as f64,
+        decode_ms,
+        build_ms,
+    })
+}
+
+/// Distances of the cut benchmark, metres.
+pub const CUT_DISTANCES: [f32; 5] = [5.0, 20.0, 50.0, 150.0, 400.0];
+
+fn cut_figures(needles: usize) -> CutFigures {
+    let tree = generate(
+        Species::ScotsPine,
+        &GenerateOptions {
+            seed: 0,
+            target_needles: Some(needles),
+        },
+    );
+    let record = bake(&tree, &BakeOptions::default(), &()).expect("the preset bakes");
+    let view = ViewParams {
+        pixel_error: PixelError(1.0),
+        ..ViewParams::default()
+    };
+    let counter = crate::model::CutCounter::new(&record);
+    let mut figures = CutFigures {
+        needles: record.needle_count(),
+        distances: CUT_DISTANCES.to_vec(),
+        primitives: Vec::new(),
+        three_part_start: Vec::new(),
+        from_roots: Vec::new(),
+        counts_only: Vec::new(),
+    };
+    for distance in CUT_DISTANCES {
+        let e = view.spatial_error(distance);
+        figures.primitives.push(counter.count(e).primitives());
+        for (three_part_start, out) in [(true, &mut figures.three_part_start), (false, &mut figures.from_roots)] {
+            let strategy = CutStrategy::Traversal { three_part_start };
+            out.push(time_us(|| {
+                std::hint::black_box(record.cut_with(std::hint::black_box(e), strategy));
+            }));
+        }
+        figures.counts_only.push(time_us(|| {
+            std::hint::black_box(counter.count(std::hint::black_box(e)));
+        }));
+    }
+    figures
+}
+
+/// Runs every benchmark of `options`; `progress` hears a line per stage.
+pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<BenchReport, BenchError> {
+    std::fs::create_dir_all(&options.out_dir).map_err(|e| BenchError::OutDir(options.out_dir.clone(), e))?;
+    let mut files = Vec::new();
+
+    let mut bakes = Vec::new();
+    for &needles in options.bake_needles.iter().filter(|_| options.runs("bake")) {
+        progress(&format!("bake {needles} needles"));
+        bakes.push(bake_child(&options.conifer, needles, &options.out_dir)?);
+    }
+    let bake_exponent = log_log_slope(&bakes.iter().map(|b| (b.needles as f64, b.seconds)).collect::<Vec<_>>());
+
+    progress("records");
+    let mut records = BTreeMap::new();
+    for species in Species::ALL.into_iter().filter(|_| options.runs("records")) {
+        let path = options.records_dir.join(format!("{}.conifer", species.name()));
+        if path.is_file() {
+            records.insert(species.name().to_string(), record_figures(&path)?);
+        }
+    }
+
+    progress("cuts");
+    let cut_us = options.runs("cuts").then(|| cut_figures(options.cut_needles));
+
+    let mut runtime = Vec::new();
+    let runtime_records = if options.runs("runtime") {
+        species_records(5_000)
+    } else {
+        Vec::new()
+    };
+    for &instances in options.instances.iter().filter(|_| options.runs("runtime")) {
+        progress(&format!("run time, {instances} trees"));
+        runtime.push(runtime::runtime(&runtime_records, instances, options.runtime_frames));
+    }
+
+    let render_ratio = if options.runs("forest") {
+        Some(forest_figures(options, &mut files, progress)?)
+    } else {
+        None
+    };
+
+    progress("plots");
+    files.extend(write_plots(&options.out_dir, &bakes, &runtime)?);
+
+    Ok(BenchReport {
+        machine: machine(),
+        profile: if cfg!(debug_assertions) { "debug" } else { "release" }.into(),
+        bake: bakes,
+        bake_exponent,
+        bytes_per_needle: records,
+        cut_us,
+        runtime,
+        render_ratio,
+        gpu: "no GPU machine was lent to this session (the device tool's status: not drawn); no absolute GPU figures"
+            .into(),
+        files,
+    })
+}
+
+fn forest_figures(
+    options: &BenchOptions,
+    files: &mut Vec<PathBuf>,
+    progress: &mut dyn FnMut(&str),
+) -> Result<RenderRatio, BenchError> {
+    let forest_records = species_records(options.forest_needles);
+    let mut forest_ms = BTreeMap::new();
+    for (name, method) in [
+        ("ours", ForestMethod::Ours),
+        ("raw", ForestMethod::Raw),
+        ("bevy-lod", ForestMethod::BevyLod),
+    ] {
+        progress(&format!("rendered forest, {name}, {} trees", options.forest_instances));
+        let picture = options.out_dir.join(format!("forest_{name}.png"));
+        let ms = forest_frame_ms(
+            &forest_records,
+            method,
+            options.forest_instances,
+            options.forest_size,
+            options.forest_frames,
+            Some(&picture),
+        )?;
+        files.push(picture);
+        forest_ms.insert(name, ms);
+    }
+    let ours = forest_ms["ours"].max(1e-9);
+    Ok(RenderRatio {
+        raw_over_ours: forest_ms["raw"] / ours,
+        bevylod_over_ours: forest_ms["bevy-lod"] / ours,
+        ours_ms: forest_ms["ours"],
+        raw_ms: forest_ms["raw"],
+        bevylod_ms: forest_ms["bevy-lod"],
+        instances: options.forest_instances,
+        needles_per_tree: forest_records.iter().map(LodRecord::needle_count).sum::<usize>() / forest_records.len(),
+        width: options.forest_size.0,
+        height: options.forest_size.1,
+        adapter: "Mesa lavapipe (software Vulkan, CPU)".into(),
+    })
+}
+
+fn write_plots(dir: &Path, bakes: &[BakeFigures], runtime: &[RuntimeFigures]) -> Result<Vec<PathBuf>, BenchError> {
+    use crate::eval::plot::{Axes, Series, line_plot};
+    let series = |name: &str, f: &dyn Fn(&BakeFigures) -> f64| Series {
+        name: name.into(),
+        points: bakes.iter().map(|b| (b.needles as f64, f(b))).collect(),
+    };
+    let bake_path = dir.join("bake_time_vs_needles.png");
+    line_plot(
+        &bake_path,
+        &Axes {
+            title: "bake time vs needles (log-log)",
+            x_label: "needles",
+            y_label: "seconds",
+            log_x: true,
+            log_y: true,
+        },
+        &[
+            series("bake (both merge levels + record)", &|b| b.seconds),
+            series("merge level 1 (groups)", &|b| b.stages.merge_groups),
+            series("merge level 2 (tree)", &|b| b.stages.merge_tree),
+            series("generate", &|b| b.stages.generate),
+            series("write", &|b| b.stages.write),
+        ],
+        720,
+        440,
+    )?;
+    let runtime_path = dir.join("runtime_vs_instances.png");
+    line_plot(
+        &runtime_path,
+        &Axes {
+            title: "plugin CPU time per instance per frame",
+            x_label: "instances",
+            y_label: "ns per instance",
+            log_x: true,
+            log_y: false,
+        },
+        &[
+            Series {
+                name: "plugin systems".into(),
+                points: runtime
+                    .iter()
+                    .map(|r| (r.instances as f64, r.systems_ns_per_instance))
+                    .collect(),
+            },
+            Series {
+                name: "whole cost (with - without plugin)".into(),
+                points: runtime
+                    .iter()
+                    .map(|r| (r.instances as f64, r.ns_per_instance))
+                    .collect(),
+            },
+        ],
+        720,
+        440,
+    )?;
+    Ok(vec![bake_path, runtime_path])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_log_slope_recovers_power_laws() {
+        let linear: Vec<(f64, f64)> = [1e4, 1e5, 1e6].iter().map(|&n| (n, 3e-6 * n)).collect();
+        assert!((log_log_slope(&linear) - 1.0).abs() < 1e-9);
+        let quadratic: Vec<(f64, f64)> = [10.0, 20.0, 40.0].iter().map(|&n| (n, n * n)).collect();
+        assert!((log_log_slope(&quadratic) - 2.0).abs() < 1e-9);
+        assert_eq!(log_log_slope(&[(1.0, 1.0)]), 0.0);
+        assert_eq!(log_log_slope(&[(0.0, 1.0), (-1.0, 2.0)]), 0.0);
+    }
+}

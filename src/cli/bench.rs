@@ -1,0 +1,83 @@
+//! `conifer bench`: the whole-app figures of BENCHMARKS.md as one JSON object.
+
+use crate::bench::{BenchOptions, run};
+use anyhow::Context;
+use std::path::PathBuf;
+
+/// Arguments of `conifer bench`.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// A CI-sized run (about 2 minutes): every part, small. A smoke test of
+    /// the harness, not figures to quote.
+    #[arg(long)]
+    pub quick: bool,
+    /// Directory of the shipped records (bytes per needle, load time).
+    #[arg(long, default_value = "assets/trees")]
+    pub records: PathBuf,
+    /// Directory for plots and forest pictures.
+    #[arg(long, default_value = "target/bench")]
+    pub out: PathBuf,
+    /// Run only these parts (bake, records, cuts, runtime, forest).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Print one JSON object on stdout (otherwise a summary).
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
+    let conifer = std::env::current_exe().context("cannot find the conifer executable for the bake runs")?;
+    const PARTS: [&str; 5] = ["bake", "records", "cuts", "runtime", "forest"];
+    if let Some(bad) = args.only.iter().find(|p| !PARTS.contains(&p.as_str())) {
+        anyhow::bail!("--only {bad:?}: the parts are {}", PARTS.join(", "));
+    }
+    let mut options = if args.quick {
+        BenchOptions::quick(conifer, args.records.clone(), args.out.clone())
+    } else {
+        BenchOptions::full(conifer, args.records.clone(), args.out.clone())
+    };
+    options.only = args.only.clone();
+    let report = run(&options, &mut |line| eprintln!("bench: {line}")).context("benchmark failed")?;
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!("machine: {} ({} build)", report.machine, report.profile);
+    for b in &report.bake {
+        println!(
+            "bake {:>9} needles: {:8.3} s ({:.0} needles/s), peak {:.0} MB",
+            b.needles,
+            b.seconds,
+            b.needles_per_second,
+            b.peak_bytes.unwrap_or(0) as f64 / 1e6
+        );
+    }
+    println!("bake exponent (log-log): {:.3}", report.bake_exponent);
+    for (name, r) in &report.bytes_per_needle {
+        println!(
+            "{name}: {:.1} B/needle on disk, {:.1} B/needle on the GPU, decode {:.1} ms, build {:.1} ms",
+            r.disk_bytes_per_needle, r.gpu_bytes_per_needle, r.decode_ms, r.build_ms
+        );
+    }
+    for r in &report.runtime {
+        println!(
+            "{:>7} trees: systems {:.3} ms ({:.0} ns/tree), whole {:.3} ms ({:.0} ns/tree)",
+            r.instances, r.systems_ms_per_frame, r.systems_ns_per_instance, r.cpu_ms_per_frame, r.ns_per_instance
+        );
+    }
+    if let Some(c) = &report.cut_us {
+        for (k, d) in c.distances.iter().enumerate() {
+            println!(
+                "cut at {d:>5} m ({} primitives): {:.1} us with the three-part start, {:.1} us from the roots, {:.2} us counts only",
+                c.primitives[k], c.three_part_start[k], c.from_roots[k], c.counts_only[k]
+            );
+        }
+    }
+    if let Some(r) = &report.render_ratio {
+        println!(
+            "forest of {} trees: ours {:.0} ms, raw {:.0} ms ({:.1}x), bevy-lod {:.0} ms ({:.1}x)",
+            r.instances, r.ours_ms, r.raw_ms, r.raw_over_ours, r.bevylod_ms, r.bevylod_over_ours
+        );
+    }
+    Ok(())
+}

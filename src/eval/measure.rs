@@ -1,0 +1,405 @@
+//! Image measures of `conifer eval`, free of Bevy: box-filtered
+//! supersampling, the tree's screen box, coverage and colour errors,
+//! picture change along a dolly, and popping statistics.
+//!
+//! Pictures are RGBA8 renders of one tree over a plain background whose
+//! alpha channel is the tree's coverage (the clear colour has alpha 0, and
+//! blending accumulates `a + (1 − a)·dst`), while the colour channels are
+//! already composited over the background.
+
+use glam::{Mat4, Vec3, Vec4Swizzles};
+use image::RgbaImage;
+
+/// A pixel rectangle `[x0, x1) × [y0, y1)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct PixelRect {
+    /// First column.
+    pub x0: u32,
+    /// First row.
+    pub y0: u32,
+    /// One past the last column.
+    pub x1: u32,
+    /// One past the last row.
+    pub y1: u32,
+}
+
+impl PixelRect {
+    /// The whole of a `width × height` image.
+    pub fn full(width: u32, height: u32) -> Self {
+        Self {
+            x0: 0,
+            y0: 0,
+            x1: width,
+            y1: height,
+        }
+    }
+
+    /// Pixels inside (0 when empty).
+    pub fn area(&self) -> u64 {
+        u64::from(self.x1.saturating_sub(self.x0)) * u64::from(self.y1.saturating_sub(self.y0))
+    }
+
+    /// The smallest rectangle holding both.
+    pub fn union(&self, other: &PixelRect) -> PixelRect {
+        PixelRect {
+            x0: self.x0.min(other.x0),
+            y0: self.y0.min(other.y0),
+            x1: self.x1.max(other.x1),
+            y1: self.y1.max(other.y1),
+        }
+    }
+
+    /// Every pixel inside, row by row.
+    pub fn pixels(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+}
+
+/// The screen rectangle of the box `[min, max]` seen from `eye` looking at
+/// `target` (up +Y) with vertical field of view `fov_y` on a
+/// `width × height` picture, widened by one pixel and clamped to the
+/// picture. A box reaching behind the camera gets the whole picture.
+pub fn screen_rect(min: Vec3, max: Vec3, eye: Vec3, target: Vec3, fov_y: f32, width: u32, height: u32) -> PixelRect {
+    let full = PixelRect::full(width, height);
+    if width == 0 || height == 0 || !(min.is_finite() && max.is_finite() && eye.is_finite()) {
+        return full;
+    }
+    let view = Mat4::look_at_rh(eye, target, Vec3::Y);
+    let projection = Mat4::perspective_rh(fov_y, width as f32 / height as f32, 1e-3, 1e6);
+    let clip_from_world = projection * view;
+    let (mut lo, mut hi) = (glam::Vec2::splat(f32::INFINITY), glam::Vec2::splat(f32::NEG_INFINITY));
+    for k in 0..8 {
+        let corner = Vec3::new(
+            if k & 1 == 0 { min.x } else { max.x },
+            if k & 2 == 0 { min.y } else { max.y },
+            if k & 4 == 0 { min.z } else { max.z },
+        );
+        let clip = clip_from_world * corner.extend(1.0);
+        if clip.w <= 1e-6 {
+            return full;
+        }
+        let ndc = clip.xy() / clip.w;
+        let pixel = glam::Vec2::new((ndc.x + 1.0) * 0.5 * width as f32, (1.0 - ndc.y) * 0.5 * height as f32);
+        lo = lo.min(pixel);
+        hi = hi.max(pixel);
+    }
+    let clamp = |v: f32, limit: u32| (v.max(0.0) as u32).min(limit);
+    PixelRect {
+        x0: clamp(lo.x.floor() - 1.0, width),
+        y0: clamp(lo.y.floor() - 1.0, height),
+        x1: clamp(hi.x.ceil() + 1.0, width),
+        y1: clamp(hi.y.ceil() + 1.0, height),
+    }
+}
+
+fn srgb_to_linear(value: u8) -> f32 {
+    let c = f32::from(value) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+fn linear_to_srgb(value: f32) -> u8 {
+    let c = value.clamp(0.0, 1.0);
+    let s = if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
+/// `image` reduced by `factor` in each direction with a box filter (the mean
+/// of each `factor × factor` block), colour averaged in linear light, alpha
+/// averaged as it is. The size is rounded down; `factor` 0 or 1 returns a
+/// copy.
+pub fn downsample(image: &RgbaImage, factor: u32) -> RgbaImage {
+    if factor <= 1 {
+        return image.clone();
+    }
+    let (width, height) = (image.width() / factor, image.height() / factor);
+    let lut: Vec<f32> = (0..=255u8).map(srgb_to_linear).collect();
+    let samples = (factor * factor) as f32;
+    RgbaImage::from_fn(width, height, |x, y| {
+        let mut sum = [0.0f32; 4];
+        for dy in 0..factor {
+            for dx in 0..factor {
+                let p = image.get_pixel(x * factor + dx, y * factor + dy).0;
+                for c in 0..3 {
+                    sum[c] += lut[p[c] as usize];
+                }
+                sum[3] += f32::from(p[3]);
+            }
+        }
+        image::Rgba([
+            linear_to_srgb(sum[0] / samples),
+            linear_to_srgb(sum[1] / samples),
+            linear_to_srgb(sum[2] / samples),
+            (sum[3] / samples).round() as u8,
+        ])
+    })
+}
+
+fn check_sizes(a: &RgbaImage, b: &RgbaImage, rect: &PixelRect) -> Result<(), MeasureError> {
+    if a.dimensions() != b.dimensions() {
+        return Err(MeasureError::SizeMismatch(a.dimensions(), b.dimensions()));
+    }
+    if rect.x1 > a.width() || rect.y1 > a.height() {
+        return Err(MeasureError::RectOutside);
+    }
+    if rect.area() == 0 {
+        return Err(MeasureError::EmptyRect);
+    }
+    Ok(())
+}
+
+/// Why two pictures cannot be compared.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum MeasureError {
+    /// The pictures differ in size.
+    #[error("pictures differ in size: {0:?} and {1:?}")]
+    SizeMismatch((u32, u32), (u32, u32)),
+    /// The rectangle reaches outside the pictures.
+    #[error("the rectangle reaches outside the pictures")]
+    RectOutside,
+    /// The rectangle holds no pixel.
+    #[error("the rectangle is empty")]
+    EmptyRect,
+}
+
+/// Mean absolute difference of coverage (alpha / 255) over `rect`, in [0, 1].
+pub fn coverage_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) -> Result<f64, MeasureError> {
+    check_sizes(reference, test, rect)?;
+    let sum: u64 = rect
+        .pixels()
+        .map(|(x, y)| u64::from(reference.get_pixel(x, y).0[3].abs_diff(test.get_pixel(x, y).0[3])))
+        .sum();
+    Ok(sum as f64 / (255.0 * rect.area() as f64))
+}
+
+/// Mean absolute difference of the RGB channels over `rect`, 0–255.
+pub fn color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) -> Result<f64, MeasureError> {
+    check_sizes(reference, test, rect)?;
+    let sum: u64 = rect
+        .pixels()
+        .map(|(x, y)| {
+            let (a, b) = (reference.get_pixel(x, y).0, test.get_pixel(x, y).0);
+            (0..3).map(|c| u64::from(a[c].abs_diff(b[c]))).sum::<u64>()
+        })
+        .sum();
+    Ok(sum as f64 / (3.0 * rect.area() as f64))
+}
+
+/// Mean coverage (alpha / 255) over `rect`: 0 for a blank render.
+pub fn mean_coverage(image: &RgbaImage, rect: &PixelRect) -> f64 {
+    if rect.area() == 0 || rect.x1 > image.width() || rect.y1 > image.height() {
+        return 0.0;
+    }
+    let sum: u64 = rect.pixels().map(|(x, y)| u64::from(image.get_pixel(x, y).0[3])).sum();
+    sum as f64 / (255.0 * rect.area() as f64)
+}
+
+/// The RGB pixels of `rect`, tightly packed (FLIP's input).
+pub fn crop_rgb(image: &RgbaImage, rect: &PixelRect) -> Vec<u8> {
+    rect.pixels()
+        .flat_map(|(x, y)| {
+            let p = image.get_pixel(x, y).0;
+            [p[0], p[1], p[2]]
+        })
+        .collect()
+}
+
+/// Popping along a dolly: per step, how much more a method's picture
+/// changed than the reference's did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Popping {
+    /// Largest excess change over the steps, 0–255 scale.
+    pub max: f64,
+    /// 99th percentile of the excess change, 0–255 scale.
+    pub p99: f64,
+}
+
+/// Popping statistics of `method_changes[i]` (mean absolute change of the
+/// method's picture at step `i` from step `i − 1`) against
+/// `reference_changes[i]` (the same for the reference): the excess
+/// `method − reference` per step, its maximum and 99th percentile. Steps
+/// beyond the shorter list are ignored; no steps give zeros.
+pub fn popping(method_changes: &[f64], reference_changes: &[f64]) -> Popping {
+    let mut excess: Vec<f64> = method_changes
+        .iter()
+        .zip(reference_changes)
+        .map(|(m, r)| m - r)
+        .filter(|d| d.is_finite())
+        .collect();
+    if excess.is_empty() {
+        return Popping::default();
+    }
+    excess.sort_by(f64::total_cmp);
+    Popping {
+        max: *excess.last().expect("not empty"),
+        p99: percentile_sorted(&excess, 0.99),
+    }
+}
+
+/// The `q`-quantile of sorted `values` (nearest rank); 0 for none.
+pub fn percentile_sorted(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let rank = (q.clamp(0.0, 1.0) * values.len() as f64).ceil() as usize;
+    values[rank.clamp(1, values.len()) - 1]
+}
+
+/// The median of `values` (mean of the middle two for an even count); 0
+/// for none.
+pub fn median(values: &[f64]) -> f64 {
+    let mut sorted: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    if n % 2 == 1 {
+        sorted[n / 2]
+    } else {
+        0.5 * (sorted[n / 2 - 1] + sorted[n / 2])
+    }
+}
+
+/// Distances of a geometric dolly of `steps` pictures from `near` to `far`
+/// (both included; at least 2 steps; `near` and `far` positive).
+pub fn dolly_distances(near: f32, far: f32, steps: usize) -> Vec<f32> {
+    let steps = steps.max(2);
+    let (near, far) = (near.max(1e-3), far.max(1e-3));
+    let ratio = (far / near).ln();
+    (0..steps)
+        .map(|k| near * (ratio * k as f32 / (steps - 1) as f32).exp())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use image::Rgba;
+
+    fn flat(width: u32, height: u32, pixel: [u8; 4]) -> RgbaImage {
+        RgbaImage::from_pixel(width, height, Rgba(pixel))
+    }
+
+    #[test]
+    fn downsample_averages_blocks_in_linear_light() {
+        // Half black, half white columns: linear mean 0.5 → sRGB 188.
+        let image = RgbaImage::from_fn(4, 4, |x, _| {
+            if x % 2 == 0 {
+                Rgba([0, 0, 0, 0])
+            } else {
+                Rgba([255, 255, 255, 255])
+            }
+        });
+        let small = downsample(&image, 2);
+        assert_eq!(small.dimensions(), (2, 2));
+        for p in small.pixels() {
+            assert_eq!(p.0, [188, 188, 188, 128]);
+        }
+        assert_eq!(downsample(&image, 1), image);
+    }
+
+    #[test]
+    fn errors_of_known_pictures() {
+        let a = flat(4, 4, [100, 100, 100, 255]);
+        let mut b = flat(4, 4, [100, 100, 100, 255]);
+        let rect = PixelRect::full(4, 4);
+        assert_eq!(coverage_error(&a, &b, &rect).unwrap(), 0.0);
+        assert_eq!(color_error(&a, &b, &rect).unwrap(), 0.0);
+        // One pixel of 16 fully uncovered and 60 levels darker in one channel.
+        b.put_pixel(0, 0, Rgba([40, 100, 100, 0]));
+        assert!((coverage_error(&a, &b, &rect).unwrap() - 1.0 / 16.0).abs() < 1e-12);
+        assert!((color_error(&a, &b, &rect).unwrap() - 60.0 / 48.0).abs() < 1e-12);
+        // A rectangle without that pixel sees no error.
+        let inner = PixelRect {
+            x0: 1,
+            y0: 1,
+            x1: 4,
+            y1: 4,
+        };
+        assert_eq!(coverage_error(&a, &b, &inner).unwrap(), 0.0);
+        assert_eq!(
+            coverage_error(&a, &flat(3, 3, [0; 4]), &rect),
+            Err(MeasureError::SizeMismatch((4, 4), (3, 3)))
+        );
+        let empty = PixelRect {
+            x0: 2,
+            y0: 2,
+            x1: 2,
+            y1: 3,
+        };
+        assert_eq!(color_error(&a, &b, &empty), Err(MeasureError::EmptyRect));
+        let outside = PixelRect {
+            x0: 0,
+            y0: 0,
+            x1: 5,
+            y1: 4,
+        };
+        assert_eq!(color_error(&a, &b, &outside), Err(MeasureError::RectOutside));
+        assert!((mean_coverage(&b, &rect) - 15.0 / 16.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn screen_rect_of_a_centred_box() {
+        // A 2 m cube 10 m away, 90° field of view: it spans half of the
+        // frustum's width at its near face (distance 9 m → ±9 m visible).
+        let rect = screen_rect(
+            Vec3::splat(-1.0),
+            Vec3::splat(1.0),
+            Vec3::new(0.0, 0.0, 10.0),
+            Vec3::ZERO,
+            90f32.to_radians(),
+            180,
+            180,
+        );
+        // Near face at z = 1 (9 m away): ±1/9 of the half-width 90 px = ±10 px,
+        // so [80, 100] widened by a pixel (plus float rounding up).
+        assert_eq!((rect.x0, rect.y0), (79, 79));
+        assert!(
+            (101..=102).contains(&rect.x1) && (101..=102).contains(&rect.y1),
+            "{rect:?}"
+        );
+        // A box around the eye gives the whole picture.
+        let around = screen_rect(
+            Vec3::splat(-20.0),
+            Vec3::splat(20.0),
+            Vec3::new(0.0, 0.0, 10.0),
+            Vec3::ZERO,
+            1.0,
+            64,
+            32,
+        );
+        assert_eq!(around, PixelRect::full(64, 32));
+    }
+
+    #[test]
+    fn popping_is_the_excess_change() {
+        let reference = [1.0, 1.0, 1.0, 1.0];
+        let smooth = [1.1, 0.9, 1.0, 1.2];
+        let pops = [1.0, 1.0, 9.0, 1.0];
+        let p = popping(&smooth, &reference);
+        assert!((p.max - 0.2).abs() < 1e-9);
+        let p = popping(&pops, &reference);
+        assert_eq!(p.max, 8.0);
+        assert_eq!(p.p99, 8.0);
+        assert_eq!(popping(&[], &[]), Popping::default());
+        assert_eq!(percentile_sorted(&[1.0, 2.0, 3.0, 4.0], 0.5), 2.0);
+        assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&[4.0, 1.0, 2.0, 3.0]), 2.5);
+    }
+
+    #[test]
+    fn dolly_is_geometric_and_includes_both_ends() {
+        let d = dolly_distances(10.0, 1000.0, 3);
+        assert_eq!(d.len(), 3);
+        assert!((d[0] - 10.0).abs() < 1e-4 && (d[1] - 100.0).abs() < 1e-2 && (d[2] - 1000.0).abs() < 1e-1);
+        assert_eq!(dolly_distances(5.0, 50.0, 0).len(), 2);
+    }
+}

@@ -1,0 +1,500 @@
+//! `conifer eval`: image quality, popping, primitive count and frame cost
+//! of the plugin against the paper's configuration and the peers, in one
+//! headless run (feature `eval`).
+//!
+//! * [`measure`]: the image measures (Bevy-free).
+//! * [`decimate`]: the raw needle mesh and meshoptimizer LODs.
+//! * [`scene`]: every method and the reference in one Bevy app.
+//! * [`plot`]: PNG plots and the contact sheet.
+//!
+//! [`evaluate`] runs it all and returns an [`EvalReport`], the JSON that
+//! `conifer eval --json` prints.
+
+pub mod decimate;
+pub mod measure;
+pub mod plot;
+pub mod scene;
+
+use measure::{PixelRect, Popping};
+use scene::{DrawCounts, EvalError, EvalScene, EvalView, LodLevelInfo, Method};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What [`evaluate`] measures.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// Methods compared with the reference.
+    pub methods: Vec<Method>,
+    /// Distances (metres from the crown centre) of the still pictures.
+    pub distances: Vec<f32>,
+    /// Picture size, field of view, ε, δ and reference supersampling.
+    pub view: EvalView,
+    /// Pictures along the dolly (geometric, from the nearest to the farthest
+    /// distance).
+    pub dolly_steps: usize,
+    /// Frames timed per method and distance.
+    pub timed_frames: usize,
+    /// Where the pictures and plots go (`None`: nothing written).
+    pub out_dir: Option<PathBuf>,
+}
+
+/// One method at one distance.
+#[derive(Clone, Debug, Serialize)]
+pub struct DistanceReport {
+    /// Metres from the crown centre.
+    pub distance: f32,
+    /// Mean absolute coverage difference from the reference over the tree's
+    /// screen box, in [0, 1].
+    pub coverage_error: f64,
+    /// Mean absolute RGB difference from the reference over the same box, 0–255.
+    pub color_error: f64,
+    /// Mean FLIP error (NVIDIA's perceptual difference, `nv-flip`) over the
+    /// same box, in [0, 1].
+    pub perceptual: f64,
+    /// Triangles drawn (needles and wood).
+    pub triangles: u64,
+    /// Lines drawn (needles and wood).
+    pub lines: u64,
+    /// Triangles plus lines.
+    pub primitives: u64,
+    /// Primitives of the needles alone (the paper's Table 1 measure).
+    pub needle_primitives: u64,
+    /// Median frame time with only this method's camera active, ms.
+    pub frame_ms: f64,
+    /// Mean coverage of the picture over the box (0: blank).
+    pub mean_coverage: f64,
+}
+
+/// One method over every distance and the dolly.
+#[derive(Clone, Debug, Serialize)]
+pub struct MethodReport {
+    /// One entry per distance.
+    pub distances: Vec<DistanceReport>,
+    /// Largest excess picture change over the reference's along the dolly, 0–255.
+    pub popping_max: f64,
+    /// 99th percentile of that excess, 0–255.
+    pub popping_p99: f64,
+    /// Mean absolute picture change per dolly step, 0–255.
+    pub dolly_change: Vec<f64>,
+}
+
+/// The reference at one distance.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceDistance {
+    /// Metres from the crown centre.
+    pub distance: f32,
+    /// Triangles of the raw geometry.
+    pub triangles: u64,
+    /// Median frame time of the supersampled picture, ms.
+    pub frame_ms: f64,
+    /// Mean coverage over the tree's box.
+    pub mean_coverage: f64,
+    /// The tree's screen box on the methods' pictures.
+    pub screen_box: PixelRect,
+}
+
+/// The reference's part of the report.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceReport {
+    /// What the reference is.
+    pub description: String,
+    /// Samples per pixel along each axis.
+    pub supersampling: u32,
+    /// One entry per distance.
+    pub distances: Vec<ReferenceDistance>,
+    /// Mean absolute picture change per dolly step, 0–255.
+    pub dolly_change: Vec<f64>,
+}
+
+/// Everything `conifer eval --json` prints.
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalReport {
+    /// Each method's figures, by name.
+    pub methods: BTreeMap<String, MethodReport>,
+    /// The ground truth.
+    pub reference: ReferenceReport,
+    /// Name of the perceptual measure.
+    pub perceptual_measure: String,
+    /// Picture width, pixels.
+    pub width: u32,
+    /// Picture height, pixels.
+    pub height: u32,
+    /// Vertical field of view, degrees.
+    pub fov_deg: f32,
+    /// Pixel error ε.
+    pub pixel_error: f32,
+    /// Transition δ.
+    pub transition: f32,
+    /// Needles of the tree.
+    pub needles: usize,
+    /// Distances of the dolly's pictures.
+    pub dolly_distances: Vec<f32>,
+    /// The `bevy-lod` chain.
+    pub bevy_lod_levels: Vec<LodLevelInfo>,
+    /// Methods whose picture was blank at some distance (`name@distance`).
+    pub blank: Vec<String>,
+    /// Files written.
+    pub files: Vec<PathBuf>,
+}
+
+impl EvalReport {
+    /// What CI refuses: `ours` worse than `paper` on coverage error (at any
+    /// distance) or on popping, or a blank render. Empty when all is well.
+    pub fn check(&self) -> Vec<String> {
+        let mut failures: Vec<String> = self.blank.iter().map(|b| format!("blank render: {b}")).collect();
+        if let (Some(ours), Some(paper)) = (self.methods.get("ours"), self.methods.get("paper")) {
+            for (o, p) in ours.distances.iter().zip(&paper.distances) {
+                if o.coverage_error > p.coverage_error {
+                    failures.push(format!(
+                        "ours' coverage error {:.4} is above paper's {:.4} at {} m",
+                        o.coverage_error, p.coverage_error, o.distance
+                    ));
+                }
+            }
+            if ours.popping_max > paper.popping_max {
+                failures.push(format!(
+                    "ours' popping {:.3} is above paper's {:.3}",
+                    ours.popping_max, paper.popping_max
+                ));
+            }
+        }
+        failures
+    }
+}
+
+/// Why an evaluation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum EvaluateError {
+    /// The scene failed.
+    #[error(transparent)]
+    Scene(#[from] EvalError),
+    /// Two pictures could not be compared.
+    #[error(transparent)]
+    Measure(#[from] measure::MeasureError),
+    /// A picture or plot could not be written.
+    #[error(transparent)]
+    Plot(#[from] plot::PlotError),
+    /// A picture could not be written.
+    #[error("{0}: {1}")]
+    Write(PathBuf, image::ImageError),
+    /// The output directory could not be made.
+    #[error("{0}: {1}")]
+    OutDir(PathBuf, std::io::Error),
+    /// No distance to evaluate.
+    #[error("no distances given")]
+    NoDistances,
+}
+
+/// Mean FLIP error of `test` against `reference` over `rect`.
+pub fn flip_error(
+    reference: &image::RgbaImage,
+    test: &image::RgbaImage,
+    rect: &PixelRect,
+) -> Result<f64, measure::MeasureError> {
+    // Sizes and the box are checked by the colour measure's rules.
+    measure::color_error(reference, test, rect)?;
+    let (w, h) = (rect.x1 - rect.x0, rect.y1 - rect.y0);
+    let a = nv_flip::FlipImageRgb8::with_data(w, h, &measure::crop_rgb(reference, rect));
+    let b = nv_flip::FlipImageRgb8::with_data(w, h, &measure::crop_rgb(test, rect));
+    let map = nv_flip::flip(a, b, nv_flip::DEFAULT_PIXELS_PER_DEGREE);
+    Ok(f64::from(nv_flip::FlipPool::from_image(&map).mean()))
+}
+
+/// A render whose mean coverage over the tree's box is below this is blank.
+pub const BLANK_COVERAGE: f64 = 1e-4;
+
+/// Renders `record` by every method of `options` and the reference, at every
+/// distance and along the dolly; measures, writes the pictures and plots
+/// (if `options.out_dir`), and returns the report. `progress` hears a line
+/// per stage.
+pub fn evaluate(
+    record: crate::model::LodRecord,
+    options: &EvalOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<EvalReport, EvaluateError> {
+    let mut distances: Vec<f32> = options
+        .distances
+        .iter()
+        .copied()
+        .filter(|d| d.is_finite() && *d > 0.0)
+        .collect();
+    distances.sort_by(f32::total_cmp);
+    if distances.is_empty() {
+        return Err(EvaluateError::NoDistances);
+    }
+    if let Some(dir) = &options.out_dir {
+        std::fs::create_dir_all(dir).map_err(|e| EvaluateError::OutDir(dir.clone(), e))?;
+    }
+    let needles = record.needle_count();
+    progress("building the scene (raw mesh, meshoptimizer LODs, plugin)");
+    let mut scene = EvalScene::new(record, &options.methods, options.view)?;
+    let methods = scene.methods().to_vec();
+    let mut files = Vec::new();
+    let mut blank = Vec::new();
+    let mut reports: BTreeMap<Method, Vec<DistanceReport>> = BTreeMap::new();
+    let mut reference_distances = Vec::new();
+    let mut sheet_rows: Vec<Vec<image::RgbaImage>> = Vec::new();
+
+    let write = |image: &image::RgbaImage, name: String, files: &mut Vec<PathBuf>| -> Result<(), EvaluateError> {
+        if let Some(dir) = &options.out_dir {
+            let path = dir.join(name);
+            image.save(&path).map_err(|e| EvaluateError::Write(path.clone(), e))?;
+            files.push(path);
+        }
+        Ok(())
+    };
+
+    for &distance in &distances {
+        progress(&format!("distance {distance} m"));
+        scene.set_distance(distance);
+        let frame = scene.capture()?;
+        let rect = scene.screen_rect(distance);
+        let label = format_distance(distance);
+        write(&frame.reference, format!("ref_{label}.png"), &mut files)?;
+        let mut row = vec![crop(&frame.reference, &rect)];
+        for (method, picture) in &frame.methods {
+            write(picture, format!("{}_{label}.png", method.name()), &mut files)?;
+            row.push(crop(picture, &rect));
+            let coverage = measure::mean_coverage(picture, &rect);
+            if coverage < BLANK_COVERAGE {
+                blank.push(format!("{}@{distance}", method.name()));
+            }
+            let counts: DrawCounts = scene.counts(*method, distance);
+            reports.entry(*method).or_default().push(DistanceReport {
+                distance,
+                coverage_error: measure::coverage_error(&frame.reference, picture, &rect)?,
+                color_error: measure::color_error(&frame.reference, picture, &rect)?,
+                perceptual: flip_error(&frame.reference, picture, &rect)?,
+                triangles: counts.triangles,
+                lines: counts.lines,
+                primitives: counts.primitives(),
+                needle_primitives: counts.needle_primitives,
+                frame_ms: 0.0,
+                mean_coverage: coverage,
+            });
+        }
+        sheet_rows.push(row);
+        // Frame times, one camera at a time.
+        for &method in &methods {
+            let ms = scene.frame_ms(Some(method), options.timed_frames)?;
+            if let Some(last) = reports.get_mut(&method).and_then(|r| r.last_mut()) {
+                last.frame_ms = ms;
+            }
+        }
+        reference_distances.push(ReferenceDistance {
+            distance,
+            triangles: scene.counts(Method::Raw, distance).triangles,
+            frame_ms: scene.frame_ms(None, options.timed_frames.min(2))?,
+            mean_coverage: measure::mean_coverage(&frame.reference, &rect),
+            screen_box: rect,
+        });
+    }
+
+    // The dolly.
+    let dolly = measure::dolly_distances(distances[0], distances[distances.len() - 1], options.dolly_steps);
+    progress(&format!("dolly of {} steps", dolly.len()));
+    let mut previous: Option<scene::EvalFrame> = None;
+    let mut changes: BTreeMap<Method, Vec<f64>> = BTreeMap::new();
+    let mut reference_changes = Vec::new();
+    let mut failure: Option<measure::MeasureError> = None;
+    let rects: Vec<PixelRect> = dolly.iter().map(|&d| scene.screen_rect(d)).collect();
+    scene.capture_sequence(&dolly, |step, frame| {
+        if let Some(before) = &previous {
+            // The nearer (previous) step's box holds both pictures of the tree.
+            let rect = rects[step - 1].union(&rects[step]);
+            let mut measure = || -> Result<(), measure::MeasureError> {
+                reference_changes.push(measure::color_error(&before.reference, &frame.reference, &rect)?);
+                for ((method, now), (_, then)) in frame.methods.iter().zip(&before.methods) {
+                    changes
+                        .entry(*method)
+                        .or_default()
+                        .push(measure::color_error(then, now, &rect)?);
+                }
+                Ok(())
+            };
+            if let Err(e) = measure() {
+                failure.get_or_insert(e);
+            }
+        }
+        previous = Some(frame);
+        if step % 25 == 24 {
+            progress(&format!("dolly step {}/{}", step + 1, dolly.len()));
+        }
+    })?;
+    if let Some(e) = failure {
+        return Err(e.into());
+    }
+
+    let mut method_reports = BTreeMap::new();
+    for &method in &methods {
+        let dolly_change = changes.remove(&method).unwrap_or_default();
+        let Popping { max, p99 } = measure::popping(&dolly_change, &reference_changes);
+        method_reports.insert(
+            method.name().to_string(),
+            MethodReport {
+                distances: reports.remove(&method).unwrap_or_default(),
+                popping_max: max,
+                popping_p99: p99,
+                dolly_change,
+            },
+        );
+    }
+
+    if let Some(dir) = &options.out_dir {
+        progress("contact sheet and plots");
+        let mut columns = vec!["reference".to_string()];
+        columns.extend(methods.iter().map(|m| m.name().to_string()));
+        let rows: Vec<String> = distances.iter().map(|d| format!("{d:.1} m")).collect();
+        let path = dir.join("contact_sheet.png");
+        plot::contact_sheet(&path, &columns, &rows, &sheet_rows, 200)?;
+        files.push(path);
+        files.extend(write_plots(dir, &method_reports, &reference_changes, &dolly)?);
+    }
+
+    Ok(EvalReport {
+        methods: method_reports,
+        reference: ReferenceReport {
+            description: format!(
+                "every needle an Lmax-sided prism (Lmax = {}), wood as cones, rendered at {s}x{s} pixels per pixel with 4x MSAA and box-filtered",
+                scene.record().max_sides,
+                s = options.view.supersampling
+            ),
+            supersampling: options.view.supersampling,
+            distances: reference_distances,
+            dolly_change: reference_changes,
+        },
+        perceptual_measure: "FLIP mean (nv-flip, NVIDIA FLIP LDR, 67 pixels per degree)".into(),
+        width: options.view.width,
+        height: options.view.height,
+        fov_deg: options.view.fov_deg,
+        pixel_error: options.view.pixel_error,
+        transition: options.view.transition,
+        needles,
+        dolly_distances: dolly,
+        bevy_lod_levels: scene.lod_levels().to_vec(),
+        blank,
+        files,
+    })
+}
+
+/// `12.22` → `12.22m`, for file names.
+fn format_distance(distance: f32) -> String {
+    let text = format!("{distance:.2}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    format!("{text}m")
+}
+
+fn crop(image: &image::RgbaImage, rect: &PixelRect) -> image::RgbaImage {
+    let (w, h) = (rect.x1.saturating_sub(rect.x0), rect.y1.saturating_sub(rect.y0));
+    // A square around the box's centre, so every cell keeps the tree's proportions.
+    let side = w.max(h).max(1).min(image.width().min(image.height()));
+    let cx = (rect.x0 + rect.x1) / 2;
+    let cy = (rect.y0 + rect.y1) / 2;
+    let x0 = cx.saturating_sub(side / 2).min(image.width() - side);
+    let y0 = cy.saturating_sub(side / 2).min(image.height() - side);
+    image::imageops::crop_imm(image, x0, y0, side, side).to_image()
+}
+
+fn write_plots(
+    dir: &Path,
+    reports: &BTreeMap<String, MethodReport>,
+    reference_changes: &[f64],
+    dolly: &[f32],
+) -> Result<Vec<PathBuf>, EvaluateError> {
+    use plot::{Axes, Series, line_plot};
+    let per_distance = |value: &dyn Fn(&DistanceReport) -> f64| -> Vec<Series> {
+        reports
+            .iter()
+            .map(|(name, r)| Series {
+                name: name.clone(),
+                points: r.distances.iter().map(|d| (f64::from(d.distance), value(d))).collect(),
+            })
+            .collect()
+    };
+    let mut files = Vec::new();
+    let plots: [(&str, &str, &str, bool, Vec<Series>); 4] = [
+        (
+            "coverage_error.png",
+            "coverage error vs distance",
+            "coverage error",
+            false,
+            per_distance(&|d| d.coverage_error),
+        ),
+        (
+            "color_error.png",
+            "colour error vs distance",
+            "mean |dRGB| (0-255)",
+            false,
+            per_distance(&|d| d.color_error),
+        ),
+        (
+            "primitives.png",
+            "primitives vs distance",
+            "triangles + lines",
+            true,
+            per_distance(&|d| d.primitives as f64),
+        ),
+        (
+            "frame_ms.png",
+            "frame time vs distance (lavapipe: ratios only)",
+            "ms",
+            true,
+            per_distance(&|d| d.frame_ms),
+        ),
+    ];
+    for (file, title, y_label, log_y, series) in plots {
+        let path = dir.join(file);
+        line_plot(
+            &path,
+            &Axes {
+                title,
+                x_label: "distance (m)",
+                y_label,
+                log_x: true,
+                log_y,
+            },
+            &series,
+            720,
+            440,
+        )?;
+        files.push(path);
+    }
+    let mut series: Vec<Series> = reports
+        .iter()
+        .map(|(name, r)| Series {
+            name: name.clone(),
+            points: r
+                .dolly_change
+                .iter()
+                .zip(reference_changes)
+                .zip(dolly.iter().skip(1))
+                .map(|((m, r), d)| (f64::from(*d), m - r))
+                .collect(),
+        })
+        .collect();
+    series.push(Series {
+        name: "reference (raw change)".into(),
+        points: reference_changes
+            .iter()
+            .zip(dolly.iter().skip(1))
+            .map(|(r, d)| (f64::from(*d), *r))
+            .collect(),
+    });
+    let path = dir.join("popping.png");
+    line_plot(
+        &path,
+        &Axes {
+            title: "popping along the dolly: change minus the reference's change",
+            x_label: "distance (m)",
+            y_label: "mean |dRGB| excess (0-255)",
+            log_x: true,
+            log_y: false,
+        },
+        &series,
+        720,
+        440,
+    )?;
+    files.push(path);
+    Ok(files)
+}

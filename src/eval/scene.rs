@@ -1,0 +1,796 @@
+//! The scene `conifer eval` renders: one tree, drawn by every method at
+//! once, each on its own render layer seen by its own camera, plus the
+//! supersampled reference, all in one headless Bevy app.
+//!
+//! * `paper` and `ours`: the plugin (a [`ConiferFoliage`]) with the paper's
+//!   line opacity and with the plugin's defaults.
+//! * `raw`: every needle as an `Lmax`-sided prism and the wood as cones, one
+//!   ordinary `StandardMaterial` mesh each, no LOD. The reference is the same
+//!   geometry rendered `supersampling²` times larger and box-filtered down.
+//! * `bevy-lod`: the raw mesh plus four meshoptimizer simplifications
+//!   (50/25/12/6 %), switched by Bevy's `VisibilityRange` with its dithered
+//!   crossfade, each level entering where its simplification error reaches
+//!   the pixel error.
+//! * `sampling`: the plugin's prisms and wood, and instead of merged lines a
+//!   random sample of the original lines, as many as `ours` draws at that
+//!   distance, their opacity scaled up by the sampling factor.
+
+use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
+use crate::model::gpu_layout::{BandErrors, WOOD_LINE_FADE, sampled_line_band, sampling_order, wood_segment_error};
+use crate::model::metric::{line_error, prism_sides};
+use crate::model::prism::{TriangleMesh, append_wood_segment, prism_triangle_count};
+use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
+use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
+use crate::plugin::{
+    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity,
+    SpeciesLineBand, line_mesh, triangle_mesh,
+};
+use bevy::camera::visibility::{RenderLayers, VisibilityRange};
+use bevy::prelude::*;
+use bevy::render::storage::ShaderBuffer;
+use image::RgbaImage;
+use std::time::Instant;
+
+/// A way of drawing the tree that `conifer eval` compares.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Method {
+    /// The paper's configuration: its line opacity `T = 2/ρ`, δ as given,
+    /// the paper's merge weights (the bake's default).
+    Paper,
+    /// The plugin's defaults (area-preserving merged-line opacity, wood LOD).
+    Ours,
+    /// The raw needle geometry, no LOD.
+    Raw,
+    /// meshoptimizer LODs switched by Bevy's `VisibilityRange`.
+    BevyLod,
+    /// A random sample of original lines at `ours`' primitive budget.
+    Sampling,
+}
+
+impl Method {
+    /// Every method, in report order.
+    pub const ALL: [Method; 5] = [
+        Method::Paper,
+        Method::Ours,
+        Method::Raw,
+        Method::BevyLod,
+        Method::Sampling,
+    ];
+
+    /// The method's name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Paper => "paper",
+            Method::Ours => "ours",
+            Method::Raw => "raw",
+            Method::BevyLod => "bevy-lod",
+            Method::Sampling => "sampling",
+        }
+    }
+
+    /// The method called `name`.
+    pub fn from_name(name: &str) -> Option<Method> {
+        Method::ALL.into_iter().find(|m| m.name() == name.trim())
+    }
+
+    fn layer(self) -> usize {
+        1 + self as usize
+    }
+}
+
+/// The picture every method is rendered at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvalView {
+    /// Width, pixels.
+    pub width: u32,
+    /// Height, pixels.
+    pub height: u32,
+    /// Vertical field of view, degrees.
+    pub fov_deg: f32,
+    /// Pixel error ε.
+    pub pixel_error: f32,
+    /// Transition coefficient δ.
+    pub transition: f32,
+    /// Reference supersampling per axis (at least 4 for the issue's
+    /// "4×4 per pixel").
+    pub supersampling: u32,
+}
+
+impl EvalView {
+    /// The LOD model's view parameters for this picture.
+    pub fn params(&self) -> ViewParams {
+        ViewParams {
+            vertical_fov: self.fov_deg.to_radians(),
+            viewport_height_px: self.height as f32,
+            pixel_error: PixelError(self.pixel_error),
+        }
+    }
+}
+
+/// Primitives a method draws at one distance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct DrawCounts {
+    /// Triangles (needles and wood).
+    pub triangles: u64,
+    /// Line segments (needles and wood).
+    pub lines: u64,
+    /// Triangles and lines of the needles only (the paper's Table 1 measure).
+    pub needle_primitives: u64,
+}
+
+impl DrawCounts {
+    /// Triangles plus lines (the paper counts a line like a polygon).
+    pub fn primitives(&self) -> u64 {
+        self.triangles + self.lines
+    }
+}
+
+/// One level of the `bevy-lod` chain.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct LodLevelInfo {
+    /// Needle triangles kept over the raw mesh's.
+    pub ratio: f32,
+    /// meshoptimizer's error, metres.
+    pub error: f32,
+    /// Whether the vertex-clustering simplifier was needed.
+    pub sloppy: bool,
+    /// Distance from the crown where the level fades in (the start of its
+    /// crossfade margin is 10 % nearer).
+    pub enters_at: f32,
+    /// Triangles of the level (needles and wood).
+    pub triangles: u64,
+    /// Needle triangles of the level.
+    pub needle_triangles: u64,
+}
+
+/// Margin of a `bevy-lod` crossfade, as a fraction of the switch distance
+/// on each side.
+const CROSSFADE_MARGIN: f32 = 0.1;
+
+struct View {
+    camera: Entity,
+    target: Handle<Image>,
+}
+
+struct SamplingState {
+    mesh: Handle<Mesh>,
+    order: Vec<u32>,
+    keep: usize,
+    /// Needle line errors `2R`, sorted.
+    line_errors: Vec<f32>,
+}
+
+/// Why the scene could not be built or rendered.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// The record cannot become a species.
+    #[error(transparent)]
+    Species(#[from] ConiferLoadError),
+    /// Rendering failed.
+    #[error(transparent)]
+    Render(#[from] HeadlessError),
+    /// The record has no needles.
+    #[error("the record has no needles")]
+    NoNeedles,
+    /// A picture could not be written.
+    #[error("{0}: {1}")]
+    Picture(String, String),
+    /// A zero-sized picture.
+    #[error("the picture has no pixels ({0}×{1})")]
+    EmptyPicture(u32, u32),
+}
+
+/// Pictures of one frame: each method's and the reference (box-filtered
+/// to the methods' size).
+pub struct EvalFrame {
+    /// The reference.
+    pub reference: RgbaImage,
+    /// Each method's picture, in the scene's method order.
+    pub methods: Vec<(Method, RgbaImage)>,
+}
+
+/// The headless app with every method's tree and camera.
+pub struct EvalScene {
+    renderer: HeadlessRenderer,
+    record: std::sync::Arc<LodRecord>,
+    view: EvalView,
+    methods: Vec<Method>,
+    views: Vec<(Method, View)>,
+    reference: View,
+    counter: CutCounter,
+    raw_counts: DrawCounts,
+    levels: Vec<LodLevelInfo>,
+    sampling: Option<SamplingState>,
+    distance: f32,
+}
+
+/// Background of every picture (alpha 0: the alpha channel is coverage).
+pub const BACKGROUND: [f32; 3] = [0.92, 0.93, 0.95];
+
+impl EvalScene {
+    /// Builds the scene for `record` with `methods` (the reference is always
+    /// there), loads it and lets it reach the GPU.
+    pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
+        if record.needle_count() == 0 {
+            return Err(EvalError::NoNeedles);
+        }
+        if view.width == 0 || view.height == 0 {
+            return Err(EvalError::EmptyPicture(view.width, view.height));
+        }
+        let mut renderer = HeadlessRenderer::new(".");
+        *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
+            pixel_error: view.pixel_error,
+            transition: view.transition,
+            ..ConiferLodSettings::default()
+        };
+        let species = renderer
+            .world_mut()
+            .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
+                ConiferSpecies::from_record(record, &mut meshes, &mut buffers)
+            })?;
+        let record = species.record.clone();
+        let mut methods: Vec<Method> = methods.to_vec();
+        methods.sort();
+        methods.dedup();
+
+        let all_layers = RenderLayers::from_layers(&[0, 1, 2, 3, 4, 5, 6]);
+        let world = renderer.world_mut();
+        world.spawn((
+            DirectionalLight {
+                illuminance: 9_000.0,
+                shadow_maps_enabled: false,
+                ..default()
+            },
+            Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
+            all_layers.clone(),
+        ));
+        world.insert_resource(GlobalAmbientLight {
+            brightness: 600.0,
+            ..default()
+        });
+
+        // The plugin's methods.
+        let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species.clone());
+        for (method, opacity) in [
+            (Method::Paper, LineOpacity::Paper),
+            (Method::Ours, LineOpacity::AreaPreserving),
+        ] {
+            if methods.contains(&method) {
+                world.spawn((
+                    ConiferFoliage(species_handle.clone()),
+                    ConiferLodOverride {
+                        line_opacity: Some(opacity),
+                        ..default()
+                    },
+                    Transform::IDENTITY,
+                    RenderLayers::layer(method.layer()),
+                ));
+            }
+        }
+
+        // Raw geometry (always: the reference draws it).
+        let (needle_material, wood_material) = raw_materials(world, &record);
+        let raw = RawTree::new(&record);
+        let raw_counts = DrawCounts {
+            triangles: (raw.needles.triangle_count() + raw.wood.triangle_count()) as u64,
+            lines: 0,
+            needle_primitives: raw.needles.triangle_count() as u64,
+        };
+        let spawn_mesh = |world: &mut World, mesh: &TriangleMesh, material: &Handle<StandardMaterial>, layer: usize| {
+            let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
+            world
+                .spawn((
+                    Mesh3d(handle),
+                    MeshMaterial3d(material.clone()),
+                    Transform::IDENTITY,
+                    RenderLayers::layer(layer),
+                ))
+                .id()
+        };
+        spawn_mesh(world, &raw.needles, &needle_material, Method::Raw.layer());
+        spawn_mesh(world, &raw.wood, &wood_material, Method::Raw.layer());
+
+        // bevy-lod: the raw level and four simplifications.
+        let params = view.params();
+        let crown = record.crown_center();
+        let mut levels = Vec::new();
+        if methods.contains(&Method::BevyLod) {
+            let chain = bevy_lod_chain(&raw);
+            let enters = enter_distances(&chain, params.error_per_distance());
+            // VisibilityRange measures from the camera to the entity's origin
+            // (the tree's foot); eval's camera looks at the crown along +Z.
+            let to_origin = |d: f32| (crown + Vec3::Z * d).length();
+            for (k, level) in chain.iter().enumerate() {
+                let range = visibility_range(&enters, k, to_origin);
+                for (mesh, material) in [
+                    (&level.needles.mesh, &needle_material),
+                    (&level.wood.mesh, &wood_material),
+                ] {
+                    let entity = spawn_mesh(world, mesh, material, Method::BevyLod.layer());
+                    world.entity_mut(entity).insert(range.clone());
+                }
+                levels.push(LodLevelInfo {
+                    ratio: level.needles.ratio,
+                    error: level.error(),
+                    sloppy: level.needles.sloppy || level.wood.sloppy,
+                    enters_at: enters[k],
+                    triangles: (level.needles.mesh.triangle_count() + level.wood.mesh.triangle_count()) as u64,
+                    needle_triangles: level.needles.mesh.triangle_count() as u64,
+                });
+            }
+        }
+
+        // sampling: the plugin's species with one band of sampled lines.
+        let mut sampling = None;
+        if methods.contains(&Method::Sampling) {
+            let order = sampling_order(record.needle_count(), 0x5A3D);
+            let keep = record.needle_count();
+            let band = sampled_line_band(&record, &order, keep);
+            let mesh = world.resource_mut::<Assets<Mesh>>().add(line_mesh(band.buffers));
+            let mut sampled = species.clone();
+            sampled.lines = vec![SpeciesLineBand {
+                mesh: mesh.clone(),
+                errors: BandErrors {
+                    min_error: 0.0,
+                    max_parent_error: f32::MAX,
+                },
+            }];
+            let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(sampled);
+            world.spawn((
+                ConiferFoliage(handle),
+                Transform::IDENTITY,
+                RenderLayers::layer(Method::Sampling.layer()),
+            ));
+            let mut line_errors: Vec<f32> = record.needles.iter().map(|n| line_error(n.radius)).collect();
+            line_errors.sort_by(f32::total_cmp);
+            sampling = Some(SamplingState {
+                mesh,
+                order,
+                keep,
+                line_errors,
+            });
+        }
+
+        // Cameras: one per method, and the reference's.
+        let mut views = Vec::new();
+        let camera = |renderer: &mut HeadlessRenderer, width: u32, height: u32, layer: usize, order: isize| {
+            let target = renderer.render_target(width, height);
+            let [r, g, b] = BACKGROUND;
+            let camera = renderer
+                .world_mut()
+                .spawn((
+                    HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, view.fov_deg.to_radians()),
+                    Camera {
+                        clear_color: ClearColorConfig::Custom(Color::srgba(r, g, b, 0.0)),
+                        order,
+                        ..default()
+                    },
+                    RenderLayers::layer(layer),
+                ))
+                .id();
+            View { camera, target }
+        };
+        for (k, &method) in methods.iter().enumerate() {
+            views.push((
+                method,
+                camera(&mut renderer, view.width, view.height, method.layer(), k as isize),
+            ));
+        }
+        let s = view.supersampling.max(1);
+        let reference = camera(
+            &mut renderer,
+            view.width * s,
+            view.height * s,
+            Method::Raw.layer(),
+            methods.len() as isize,
+        );
+        // The reference keeps Bevy's 4× MSAA on top of its supersampling:
+        // needles a hundredth of a pixel wide need many samples per pixel
+        // before the coverage converges (see `conifer eval`'s docs).
+        let counter = CutCounter::new(&record);
+        let mut scene = Self {
+            renderer,
+            record,
+            view,
+            methods,
+            views,
+            reference,
+            counter,
+            raw_counts,
+            levels,
+            sampling,
+            distance: 1.0,
+        };
+        scene.set_distance(10.0);
+        // Let species, meshes and pipelines reach the GPU.
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+            scene.renderer.update()?;
+        }
+        Ok(scene)
+    }
+
+    /// The record drawn.
+    pub fn record(&self) -> &LodRecord {
+        &self.record
+    }
+
+    /// The methods drawn, in report order.
+    pub fn methods(&self) -> &[Method] {
+        &self.methods
+    }
+
+    /// The `bevy-lod` chain (empty without that method).
+    pub fn lod_levels(&self) -> &[LodLevelInfo] {
+        &self.levels
+    }
+
+    /// The picture settings.
+    pub fn view(&self) -> &EvalView {
+        &self.view
+    }
+
+    /// Where the cameras are: `distance` metres from the crown centre, on +Z,
+    /// looking at it.
+    pub fn eye(&self, distance: f32) -> Vec3 {
+        self.record.crown_center() + Vec3::Z * distance
+    }
+
+    /// Moves every camera to `distance` from the crown and updates the
+    /// sampled lines for it.
+    pub fn set_distance(&mut self, distance: f32) {
+        let distance = if distance.is_finite() { distance.max(1e-3) } else { 1.0 };
+        self.distance = distance;
+        let crown = self.record.crown_center();
+        let transform = Transform::from_translation(self.eye(distance)).looking_at(crown, Vec3::Y);
+        let cameras: Vec<Entity> = self
+            .views
+            .iter()
+            .map(|(_, v)| v.camera)
+            .chain([self.reference.camera])
+            .collect();
+        for camera in cameras {
+            if let Some(mut t) = self.renderer.world_mut().get_mut::<Transform>(camera) {
+                *t = transform;
+            }
+        }
+        let keep = self.sampling_keep(distance);
+        if let Some(sampling) = &mut self.sampling
+            && keep != sampling.keep
+        {
+            sampling.keep = keep;
+            let band = sampled_line_band(&self.record, &sampling.order, keep);
+            let handle = sampling.mesh.clone();
+            if let Some(mut mesh) = self
+                .renderer
+                .world_mut()
+                .resource_mut::<Assets<Mesh>>()
+                .get_mut(&handle)
+            {
+                *mesh = line_mesh(band.buffers);
+            }
+        }
+    }
+
+    /// Needles the `sampling` method keeps at `distance`: the fraction of
+    /// `ours`' needle lines over the needles that are lines there.
+    fn sampling_keep(&self, distance: f32) -> usize {
+        let e = self.view.params().spatial_error(distance);
+        let Some(sampling) = &self.sampling else {
+            return 0;
+        };
+        let candidates = sampling.line_errors.partition_point(|&err| err <= e);
+        let budget = self.counter.count(e).lines() as usize;
+        let needles = self.record.needle_count();
+        if candidates == 0 || budget >= candidates {
+            return needles;
+        }
+        ((needles as f64 * budget as f64 / candidates as f64).round() as usize).clamp(1, needles)
+    }
+
+    /// Primitives `method` draws at `distance` (the reference draws the raw
+    /// geometry).
+    pub fn counts(&self, method: Method, distance: f32) -> DrawCounts {
+        let e = self.view.params().spatial_error(distance);
+        let (wood_triangles, wood_lines) = wood_counts(&self.record, e);
+        match method {
+            Method::Paper | Method::Ours => {
+                let cut = self.counter.count(e);
+                DrawCounts {
+                    triangles: cut.triangles + wood_triangles,
+                    lines: cut.lines() + wood_lines,
+                    needle_primitives: cut.primitives(),
+                }
+            }
+            Method::Raw => self.raw_counts,
+            Method::BevyLod => {
+                let to_origin = |d: f32| (self.record.crown_center() + Vec3::Z * d).length();
+                let here = to_origin(distance);
+                let mut counts = DrawCounts::default();
+                for (k, level) in self.levels.iter().enumerate() {
+                    let start = if k == 0 {
+                        0.0
+                    } else {
+                        to_origin(level.enters_at * (1.0 - CROSSFADE_MARGIN))
+                    };
+                    let end = self.levels.get(k + 1).map_or(f32::INFINITY, |next| {
+                        to_origin(next.enters_at * (1.0 + CROSSFADE_MARGIN))
+                    });
+                    if here >= start && here < end {
+                        counts.triangles += level.triangles;
+                        counts.needle_primitives += level.needle_triangles;
+                    }
+                }
+                counts
+            }
+            Method::Sampling => {
+                let cut = self.counter.count(e);
+                let keep = self.sampling_keep(distance);
+                let sampled = self.sampling.as_ref().map_or(0, |s| {
+                    self.record
+                        .needles
+                        .iter()
+                        .zip(&s.order)
+                        .filter(|(n, rank)| (**rank as usize) < keep && line_error(n.radius) <= e)
+                        .count() as u64
+                });
+                DrawCounts {
+                    triangles: cut.triangles + wood_triangles,
+                    lines: sampled + wood_lines,
+                    needle_primitives: cut.triangles + sampled,
+                }
+            }
+        }
+    }
+
+    /// The tree's screen rectangle at `distance` on the methods' pictures.
+    pub fn screen_rect(&self, distance: f32) -> super::measure::PixelRect {
+        let (lo, hi) = self.record.bounds();
+        super::measure::screen_rect(
+            lo,
+            hi,
+            self.eye(distance),
+            self.record.crown_center(),
+            self.view.fov_deg.to_radians(),
+            self.view.width,
+            self.view.height,
+        )
+    }
+
+    fn set_active(&mut self, only: Option<Entity>) {
+        let cameras: Vec<Entity> = self
+            .views
+            .iter()
+            .map(|(_, v)| v.camera)
+            .chain([self.reference.camera])
+            .collect();
+        for camera in cameras {
+            if let Some(mut c) = self.renderer.world_mut().get_mut::<Camera>(camera) {
+                c.is_active = only.is_none_or(|o| o == camera);
+            }
+        }
+    }
+
+    /// Renders one frame with every camera and returns the pictures.
+    pub fn capture(&mut self) -> Result<EvalFrame, EvalError> {
+        self.set_active(None);
+        // The frame that takes the screenshot also runs the LOD selection
+        // and uploads the sampled lines for the cameras' new place.
+        let mut targets: Vec<Handle<Image>> = self.views.iter().map(|(_, v)| v.target.clone()).collect();
+        targets.push(self.reference.target.clone());
+        let mut images = self.renderer.capture_all(&targets, 10)?;
+        let reference = super::measure::downsample(&images.pop().expect("reference"), self.view.supersampling.max(1));
+        Ok(EvalFrame {
+            reference,
+            methods: self.methods.iter().copied().zip(images).collect(),
+        })
+    }
+
+    /// Pictures at each of `distances` in turn (a dolly), one frame each:
+    /// the screenshot of a step is read back while the next renders.
+    /// `on_frame` gets each step's index and pictures, in order.
+    pub fn capture_sequence(
+        &mut self,
+        distances: &[f32],
+        mut on_frame: impl FnMut(usize, EvalFrame),
+    ) -> Result<(), EvalError> {
+        self.set_active(None);
+        let mut targets: Vec<Handle<Image>> = self.views.iter().map(|(_, v)| v.target.clone()).collect();
+        targets.push(self.reference.target.clone());
+        let mut pending = std::collections::VecDeque::new();
+        let mut deliver =
+            |scene: &Self, pending: &mut std::collections::VecDeque<(usize, _)>| -> Result<(), EvalError> {
+                while let Some((step, request)) = pending.front() {
+                    let request: &crate::plugin::headless::PendingScreenshots = request;
+                    let Some(mut images) = request.take()? else {
+                        break;
+                    };
+                    let reference =
+                        super::measure::downsample(&images.pop().expect("reference"), scene.view.supersampling.max(1));
+                    on_frame(
+                        *step,
+                        EvalFrame {
+                            reference,
+                            methods: scene.methods.iter().copied().zip(images).collect(),
+                        },
+                    );
+                    pending.pop_front();
+                }
+                Ok(())
+            };
+        for (step, &distance) in distances.iter().enumerate() {
+            self.set_distance(distance);
+            pending.push_back((step, self.renderer.request_screenshots(&targets)));
+            self.renderer.update()?;
+            deliver(self, &mut pending)?;
+        }
+        for _ in 0..10 {
+            if pending.is_empty() {
+                break;
+            }
+            self.renderer.update()?;
+            deliver(self, &mut pending)?;
+        }
+        if pending.is_empty() {
+            Ok(())
+        } else {
+            Err(EvalError::Render(HeadlessError::NoScreenshot(10)))
+        }
+    }
+
+    /// Median wall time of `frames` frames with only `method`'s camera
+    /// active (`None`: the reference's), milliseconds.
+    pub fn frame_ms(&mut self, method: Option<Method>, frames: usize) -> Result<f64, EvalError> {
+        let camera = match method {
+            Some(m) => self.views.iter().find(|(v, _)| *v == m).map(|(_, v)| v.camera),
+            None => Some(self.reference.camera),
+        };
+        self.set_active(camera);
+        // A warm-up frame after switching cameras.
+        self.renderer.update()?;
+        let mut times = Vec::new();
+        for _ in 0..frames.max(1) {
+            let started = Instant::now();
+            self.renderer.update()?;
+            times.push(started.elapsed().as_secs_f64() * 1e3);
+        }
+        self.set_active(None);
+        Ok(super::measure::median(&times))
+    }
+}
+
+/// A tree's raw geometry: every needle an `Lmax`-sided prism, the wood
+/// segments cones of `Lmax` sides (plus imported wood triangles).
+pub struct RawTree {
+    /// The needles.
+    pub needles: TriangleMesh,
+    /// The wood.
+    pub wood: TriangleMesh,
+}
+
+impl RawTree {
+    /// The raw geometry of `record`.
+    pub fn new(record: &LodRecord) -> Self {
+        let mut wood = record.wood_mesh.clone();
+        for segment in &record.wood {
+            append_wood_segment(&mut wood, segment, u32::from(record.max_sides));
+        }
+        Self {
+            needles: raw_needle_mesh(record),
+            wood,
+        }
+    }
+}
+
+/// One level of the `bevy-lod` chain: needles and wood simplified alike.
+pub struct ChainLevel {
+    /// The needles.
+    pub needles: DecimatedLevel,
+    /// The wood.
+    pub wood: DecimatedLevel,
+}
+
+impl ChainLevel {
+    /// The level's geometric error, metres (the larger of its two meshes').
+    pub fn error(&self) -> f32 {
+        self.needles.error.max(self.wood.error)
+    }
+}
+
+/// Triangle ratios of the `bevy-lod` levels after the raw one.
+pub const BEVY_LOD_RATIOS: [f32; 4] = [0.5, 0.25, 0.12, 0.06];
+
+/// The `bevy-lod` chain of `raw`: itself, then [`BEVY_LOD_RATIOS`] of it
+/// by meshoptimizer.
+pub fn bevy_lod_chain(raw: &RawTree) -> Vec<ChainLevel> {
+    let unchanged = |mesh: &TriangleMesh| DecimatedLevel {
+        mesh: mesh.clone(),
+        ratio: 1.0,
+        error: 0.0,
+        sloppy: false,
+    };
+    let mut chain = vec![ChainLevel {
+        needles: unchanged(&raw.needles),
+        wood: unchanged(&raw.wood),
+    }];
+    for ratio in BEVY_LOD_RATIOS {
+        chain.push(ChainLevel {
+            needles: decimate(&raw.needles, ratio),
+            wood: decimate(&raw.wood, ratio),
+        });
+    }
+    chain
+}
+
+/// Distance at which each level of `chain` enters: where its error reaches
+/// the pixel error (`error / error_per_distance`), never before the level
+/// above it.
+pub fn enter_distances(chain: &[ChainLevel], error_per_distance: f32) -> Vec<f32> {
+    let mut enters: Vec<f32> = Vec::with_capacity(chain.len());
+    for level in chain {
+        let previous = enters.last().copied().unwrap_or(0.0);
+        enters.push((level.error() / error_per_distance.max(1e-12)).max(previous));
+    }
+    enters
+}
+
+/// The `VisibilityRange` of level `k` for levels entering at `enters`,
+/// with a dithered crossfade of ±10 % around each switch; `to_range` maps
+/// a crown distance to the distance Bevy measures (camera to the entity's
+/// origin).
+pub fn visibility_range(enters: &[f32], k: usize, to_range: impl Fn(f32) -> f32) -> VisibilityRange {
+    let start = enters[k];
+    let end = enters.get(k + 1).copied().unwrap_or(f32::INFINITY);
+    VisibilityRange {
+        start_margin: if k == 0 {
+            0.0..0.0
+        } else {
+            to_range(start * (1.0 - CROSSFADE_MARGIN))..to_range(start * (1.0 + CROSSFADE_MARGIN))
+        },
+        end_margin: if end.is_finite() {
+            to_range(end * (1.0 - CROSSFADE_MARGIN))..to_range(end * (1.0 + CROSSFADE_MARGIN))
+        } else {
+            f32::MAX..f32::MAX
+        },
+        use_aabb: false,
+    }
+}
+
+/// The `StandardMaterial`s of a raw tree: the needles' and the wood's
+/// colours, as the plugin's own materials use them.
+pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardMaterial>, Handle<StandardMaterial>) {
+    let m = &record.material;
+    let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+    let needles = materials.add(StandardMaterial {
+        base_color: Color::linear_rgba(m.needle_color[0], m.needle_color[1], m.needle_color[2], 1.0),
+        perceptual_roughness: m.roughness,
+        reflectance: m.reflectance,
+        ..default()
+    });
+    let wood = materials.add(StandardMaterial {
+        base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], 1.0),
+        perceptual_roughness: 0.9,
+        ..default()
+    });
+    (needles, wood)
+}
+
+/// Wood triangles and lines the plugin draws at spatial error `e`: a
+/// segment is a prism of `prism_sides(e / r_max)` sides while `e < 2·r_max`,
+/// then a line until `WOOD_LINE_FADE` times that.
+pub fn wood_counts(record: &LodRecord, e: f32) -> (u64, u64) {
+    let (mut triangles, mut lines) = (0u64, 0u64);
+    for segment in &record.wood {
+        let error = wood_segment_error(segment);
+        if error.is_nan() || error <= 0.0 {
+            continue;
+        }
+        if e < error {
+            let radius = segment.start_radius.max(segment.end_radius);
+            triangles += u64::from(prism_triangle_count(prism_sides(e / radius, record.max_sides)));
+        } else if e < error * WOOD_LINE_FADE {
+            lines += 1;
+        }
+    }
+    (triangles, lines)
+}
