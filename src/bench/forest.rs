@@ -46,14 +46,15 @@ fn place(i: usize, side: usize) -> Transform {
 
 /// Median frame time (ms) of `frames` frames of a forest of `instances`
 /// trees (the `records` cycled) drawn by `method`, `width × height`, seen
-/// from above one corner of the grid; with `picture`, a screenshot of it
-/// is saved there afterwards.
+/// from above one corner of the grid, with Bevy's 4× MSAA or without; with
+/// `picture`, a screenshot of it is saved there afterwards.
 pub fn forest_frame_ms(
     records: &[LodRecord],
     method: ForestMethod,
     instances: usize,
     (width, height): (u32, u32),
     frames: usize,
+    msaa: bool,
     picture: Option<&std::path::Path>,
 ) -> Result<f64, EvalError> {
     if width == 0 || height == 0 {
@@ -156,9 +157,10 @@ pub fn forest_frame_ms(
             clear_color: ClearColorConfig::Custom(Color::srgb(0.72, 0.8, 0.9)),
             ..default()
         },
+        if msaa { Msaa::Sample4 } else { Msaa::Off },
     ));
     // Upload, specialize and settle.
-    for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
         renderer.update()?;
     }
     let mut times = Vec::new();

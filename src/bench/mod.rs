@@ -89,7 +89,7 @@ impl BenchOptions {
             forest_instances: 1_000,
             forest_needles: 5_000,
             forest_size: (640, 360),
-            forest_frames: 3,
+            forest_frames: 2,
             out_dir,
             only: Vec::new(),
         }
@@ -193,6 +193,11 @@ pub struct RenderRatio {
     pub raw_ms: f64,
     /// Median frame ms, meshoptimizer LODs with `VisibilityRange`.
     pub bevylod_ms: f64,
+    /// The plugin without MSAA, ms: lavapipe rasterizes MSAA lines slowly,
+    /// so this shows how much of `ours_ms` is that (raw meshes barely change).
+    pub ours_no_msaa_ms: f64,
+    /// `bevy-lod` without MSAA, ms.
+    pub bevylod_no_msaa_ms: f64,
     /// Trees.
     pub instances: usize,
     /// Needles per tree.
@@ -490,10 +495,12 @@ fn forest_figures(
 ) -> Result<RenderRatio, BenchError> {
     let forest_records = species_records(options.forest_needles);
     let mut forest_ms = BTreeMap::new();
-    for (name, method) in [
-        ("ours", ForestMethod::Ours),
-        ("raw", ForestMethod::Raw),
-        ("bevy-lod", ForestMethod::BevyLod),
+    for (name, method, msaa) in [
+        ("ours", ForestMethod::Ours, true),
+        ("raw", ForestMethod::Raw, true),
+        ("bevy-lod", ForestMethod::BevyLod, true),
+        ("ours-no-msaa", ForestMethod::Ours, false),
+        ("bevy-lod-no-msaa", ForestMethod::BevyLod, false),
     ] {
         progress(&format!("rendered forest, {name}, {} trees", options.forest_instances));
         let picture = options.out_dir.join(format!("forest_{name}.png"));
@@ -503,9 +510,12 @@ fn forest_figures(
             options.forest_instances,
             options.forest_size,
             options.forest_frames,
-            Some(&picture),
+            msaa,
+            msaa.then_some(picture.as_path()),
         )?;
-        files.push(picture);
+        if msaa {
+            files.push(picture);
+        }
         forest_ms.insert(name, ms);
     }
     let ours = forest_ms["ours"].max(1e-9);
@@ -515,6 +525,8 @@ fn forest_figures(
         ours_ms: forest_ms["ours"],
         raw_ms: forest_ms["raw"],
         bevylod_ms: forest_ms["bevy-lod"],
+        ours_no_msaa_ms: forest_ms["ours-no-msaa"],
+        bevylod_no_msaa_ms: forest_ms["bevy-lod-no-msaa"],
         instances: options.forest_instances,
         needles_per_tree: forest_records.iter().map(LodRecord::needle_count).sum::<usize>() / forest_records.len(),
         width: options.forest_size.0,

@@ -111,6 +111,8 @@ pub fn line_plot(path: &Path, axes: &Axes, series: &[Series], width: u32, height
                 let mut chart = $chart;
                 chart
                     .configure_mesh()
+                    .x_labels(6)
+                    .y_labels(8)
                     .x_desc(axes.x_label)
                     .y_desc(axes.y_label)
                     .label_style((FONT, 14))
@@ -130,6 +132,7 @@ pub fn line_plot(path: &Path, axes: &Axes, series: &[Series], width: u32, height
                 }
                 chart
                     .configure_series_labels()
+                    .position(SeriesLabelPosition::UpperLeft)
                     .label_font((FONT, 14))
                     .background_style(WHITE.mix(0.85))
                     .border_style(BLACK)
