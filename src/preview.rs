@@ -516,7 +516,8 @@ impl Canvas {
     }
 }
 
-fn srgb_to_linear(value: u8) -> f32 {
+/// An 8-bit sRGB value in linear light, [0, 1].
+pub(crate) fn srgb_to_linear(value: u8) -> f32 {
     let c = f32::from(value) / 255.0;
     if c <= 0.04045 {
         c / 12.92
@@ -525,7 +526,8 @@ fn srgb_to_linear(value: u8) -> f32 {
     }
 }
 
-fn linear_to_srgb(value: f32) -> u8 {
+/// Linear light (clamped to [0, 1]) as an 8-bit sRGB value.
+pub(crate) fn linear_to_srgb(value: f32) -> u8 {
     let c = value.clamp(0.0, 1.0);
     let encoded = if c <= 0.003_130_8 {
         c * 12.92

@@ -74,18 +74,7 @@ pub fn forest_frame_ms(
     let side = (instances as f32).sqrt().ceil().max(1.0) as usize;
     let extent = side as f32 * TREE_SPACING;
     let world = renderer.world_mut();
-    world.spawn((
-        DirectionalLight {
-            illuminance: 9_000.0,
-            shadow_maps_enabled: false,
-            ..default()
-        },
-        Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
-    ));
-    world.insert_resource(GlobalAmbientLight {
-        brightness: 600.0,
-        ..default()
-    });
+    HeadlessRenderer::spawn_lights(world);
     // Per species: what each tree spawns.
     type Parts = Vec<(
         Handle<Mesh>,

@@ -74,7 +74,7 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
             ..default()
         },
     ));
-    spawn_lights(renderer.world_mut());
+    HeadlessRenderer::spawn_lights(renderer.world_mut());
     renderer
         .world_mut()
         .spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
@@ -112,20 +112,4 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
         })
     );
     Ok(())
-}
-
-/// A sun, a fill light and ambient light, as the README pictures use.
-pub fn spawn_lights(world: &mut World) {
-    world.spawn((
-        DirectionalLight {
-            illuminance: 9_000.0,
-            shadow_maps_enabled: false,
-            ..default()
-        },
-        Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
-    ));
-    world.insert_resource(GlobalAmbientLight {
-        brightness: 600.0,
-        ..default()
-    });
 }

@@ -7,6 +7,7 @@
 //! blending accumulates `a + (1 − a)·dst`), while the colour channels are
 //! already composited over the background.
 
+use crate::preview::{linear_to_srgb, srgb_to_linear};
 use glam::{Mat4, Vec3, Vec4Swizzles};
 use image::RgbaImage;
 
@@ -90,25 +91,6 @@ pub fn screen_rect(min: Vec3, max: Vec3, eye: Vec3, target: Vec3, fov_y: f32, wi
         x1: clamp(hi.x.ceil() + 1.0, width),
         y1: clamp(hi.y.ceil() + 1.0, height),
     }
-}
-
-fn srgb_to_linear(value: u8) -> f32 {
-    let c = f32::from(value) / 255.0;
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-fn linear_to_srgb(value: f32) -> u8 {
-    let c = value.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 {
-        c * 12.92
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
 }
 
 /// `image` reduced by `factor` in each direction with a box filter (the mean

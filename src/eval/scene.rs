@@ -236,19 +236,8 @@ impl EvalScene {
 
         let all_layers = RenderLayers::from_layers(&[0, 1, 2, 3, 4, 5, 6]);
         let world = renderer.world_mut();
-        world.spawn((
-            DirectionalLight {
-                illuminance: 9_000.0,
-                shadow_maps_enabled: false,
-                ..default()
-            },
-            Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
-            all_layers.clone(),
-        ));
-        world.insert_resource(GlobalAmbientLight {
-            brightness: 600.0,
-            ..default()
-        });
+        let sun = HeadlessRenderer::spawn_lights(world);
+        world.entity_mut(sun).insert(all_layers);
 
         // The plugin's methods.
         let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species.clone());
@@ -443,13 +432,7 @@ impl EvalScene {
         self.distance = distance;
         let crown = self.record.crown_center();
         let transform = Transform::from_translation(self.eye(distance)).looking_at(crown, Vec3::Y);
-        let cameras: Vec<Entity> = self
-            .views
-            .iter()
-            .map(|(_, v)| v.camera)
-            .chain([self.reference.camera])
-            .collect();
-        for camera in cameras {
+        for camera in self.cameras() {
             if let Some(mut t) = self.renderer.world_mut().get_mut::<Transform>(camera) {
                 *t = transform;
             }
@@ -557,14 +540,17 @@ impl EvalScene {
         )
     }
 
-    fn set_active(&mut self, only: Option<Entity>) {
-        let cameras: Vec<Entity> = self
-            .views
+    /// Every camera: the methods' and the reference's.
+    fn cameras(&self) -> Vec<Entity> {
+        self.views
             .iter()
             .map(|(_, v)| v.camera)
             .chain([self.reference.camera])
-            .collect();
-        for camera in cameras {
+            .collect()
+    }
+
+    fn set_active(&mut self, only: Option<Entity>) {
+        for camera in self.cameras() {
             if let Some(mut c) = self.renderer.world_mut().get_mut::<Camera>(camera) {
                 c.is_active = only.is_none_or(|o| o == camera);
             }

@@ -236,6 +236,26 @@ impl HeadlessRenderer {
         PendingScreenshots { slots }
     }
 
+    /// A sun (9,000 lux from above one side, no shadow maps) and ambient
+    /// light, as `conifer render`, `conifer eval`, `conifer bench` and the
+    /// README pictures use; returns the sun.
+    pub fn spawn_lights(world: &mut World) -> Entity {
+        world.insert_resource(GlobalAmbientLight {
+            brightness: 600.0,
+            ..default()
+        });
+        world
+            .spawn((
+                DirectionalLight {
+                    illuminance: 9_000.0,
+                    shadow_maps_enabled: false,
+                    ..default()
+                },
+                Transform::from_xyz(4.0, 8.0, 6.0).looking_at(Vec3::ZERO, Vec3::Y),
+            ))
+            .id()
+    }
+
     /// A camera rendering into `target`.
     pub fn camera_bundle(target: &Handle<Image>, transform: Transform, vertical_fov: f32) -> impl Bundle {
         (
