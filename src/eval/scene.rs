@@ -201,7 +201,6 @@ pub struct EvalScene {
     raw_counts: DrawCounts,
     levels: Vec<LodLevelInfo>,
     sampling: Option<SamplingState>,
-    distance: f32,
 }
 
 /// Background of every picture (alpha 0: the alpha channel is coverage).
@@ -389,7 +388,6 @@ impl EvalScene {
             raw_counts,
             levels,
             sampling,
-            distance: 1.0,
         };
         scene.set_distance(10.0);
         // Let species, meshes and pipelines reach the GPU.
@@ -429,7 +427,6 @@ impl EvalScene {
     /// sampled lines for it.
     pub fn set_distance(&mut self, distance: f32) {
         let distance = if distance.is_finite() { distance.max(1e-3) } else { 1.0 };
-        self.distance = distance;
         let crown = self.record.crown_center();
         let transform = Transform::from_translation(self.eye(distance)).looking_at(crown, Vec3::Y);
         for camera in self.cameras() {
