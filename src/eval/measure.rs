@@ -124,7 +124,9 @@ pub fn downsample(image: &RgbaImage, factor: u32) -> RgbaImage {
     })
 }
 
-fn check_sizes(a: &RgbaImage, b: &RgbaImage, rect: &PixelRect) -> Result<(), MeasureError> {
+/// Whether `a` and `b` can be compared over `rect`: the same size, and
+/// `rect` inside them and not empty.
+pub fn check_sizes(a: &RgbaImage, b: &RgbaImage, rect: &PixelRect) -> Result<(), MeasureError> {
     if a.dimensions() != b.dimensions() {
         return Err(MeasureError::SizeMismatch(a.dimensions(), b.dimensions()));
     }

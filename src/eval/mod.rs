@@ -192,8 +192,7 @@ pub fn flip_error(
     test: &image::RgbaImage,
     rect: &PixelRect,
 ) -> Result<f64, measure::MeasureError> {
-    // Sizes and the box are checked by the colour measure's rules.
-    measure::color_error(reference, test, rect)?;
+    measure::check_sizes(reference, test, rect)?;
     let (w, h) = (rect.x1 - rect.x0, rect.y1 - rect.y0);
     let a = nv_flip::FlipImageRgb8::with_data(w, h, &measure::crop_rgb(reference, rect));
     let b = nv_flip::FlipImageRgb8::with_data(w, h, &measure::crop_rgb(test, rect));
