@@ -1,11 +1,15 @@
 //! The bake: from a [`TreeInput`] to a [`LodRecord`] (paper, §4–5.1).
 
 use super::file::snap_normal;
-use super::merge::{MergeLevel, MergeOptions, MergeProgress, merge_tree};
+use super::merge::{CostContext, GroupLine, MergeOptions, merge_group, merge_group_lines};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
-use super::needle::TreeInput;
+use super::needle::{Needle, TreeInput, bounds};
+use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
+use glam::Quat;
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Options of a bake.
@@ -48,9 +52,24 @@ pub enum BakeError {
     /// Merge weights negative, non-finite or all zero.
     #[error("merge weights must be finite, non-negative and not all zero")]
     Weights,
-    /// More needles than a record can index.
-    #[error("{0} needles: a record holds at most 2^31 − 1")]
+    /// More needles than a record can hold.
+    #[error("{0} needles: a record holds at most 2^24")]
     TooManyNeedles(usize),
+    /// A prototype's needle has a NaN, a radius ≤ 0 or a zero-length centerline.
+    #[error("needle {needle} of prototype {prototype} is invalid (non-finite, radius ≤ 0 or zero length)")]
+    InvalidPrototypeNeedle {
+        /// Index of the prototype.
+        prototype: usize,
+        /// Index of the needle in the prototype.
+        needle: usize,
+    },
+    /// A placement names a missing prototype, or has a non-finite number,
+    /// a scale ≤ 0 or a rotation that is not a unit quaternion.
+    #[error("placement {index} is invalid (unknown prototype, non-finite number, scale ≤ 0 or zero rotation)")]
+    InvalidPlacement {
+        /// Index of the placement.
+        index: usize,
+    },
     /// The result failed the record's own checks (a bug, reported, not a panic).
     #[error("internal: the baked record is inconsistent: {0}")]
     Inconsistent(#[from] RecordInvalid),
@@ -134,53 +153,146 @@ impl BakeProgress for StageTimer<'_> {
     }
 }
 
-struct Adapter<'a>(&'a dyn BakeProgress);
-
-impl MergeProgress for Adapter<'_> {
-    fn merged(&self, level: MergeLevel, done: usize, total: usize) {
-        let stage = match level {
-            MergeLevel::Group => BakeStage::MergeGroups,
-            MergeLevel::Tree => BakeStage::MergeTree,
-        };
-        self.0.progress(stage, done, total);
+/// Bakes a flat tree: every phyllotaxy group a prototype placed once
+/// ([`PrototypeInput::from_tree`], groups in order of first appearance),
+/// baked by [`bake_prototypes`] and flattened.
+pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgress) -> Result<LodRecord, BakeError> {
+    if let Some(index) = input.needles.iter().position(|n| !n.is_valid()) {
+        return Err(BakeError::InvalidNeedle { index });
     }
+    let record = bake_prototypes(&PrototypeInput::from_tree(input), options, progress)?;
+    let start = Instant::now();
+    let mut flat = record.flatten()?;
+    flat.bake.bake_seconds = record.bake.bake_seconds.map(|s| s + start.elapsed().as_secs_f64());
+    Ok(flat)
 }
 
-/// Bakes a tree: validates the needles, sorts them by group (renumbering
-/// groups `0..groups` in order of first appearance), snaps normals to the
-/// record's storage precision, runs the two-level merge and builds the record.
-pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgress) -> Result<LodRecord, BakeError> {
+/// Bakes a tree of prototypes: validates the needles and placements, snaps
+/// normals to the record's storage precision, merges each prototype down to
+/// one line once (level 1, prototypes in parallel), then the placed
+/// prototype lines across the tree (level 2), and builds the record.
+///
+/// Level 1's cost is measured in tree units at the prototype's mean
+/// placement scale (the crown diagonal over that scale, the tree's needle
+/// count), so a flat tree (every scale 1) merges as the paper does.
+pub fn bake_prototypes(
+    input: &PrototypeInput,
+    options: &BakeOptions,
+    progress: &dyn BakeProgress,
+) -> Result<PrototypeRecord, BakeError> {
     let start = Instant::now();
-    if input.needles.is_empty() {
-        return Err(BakeError::NoNeedles);
-    }
-    if input.needles.len() >= i32::MAX as usize {
-        return Err(BakeError::TooManyNeedles(input.needles.len()));
-    }
     if !(MIN_PRISM_SIDES..=MAX_PRISM_SIDES).contains(&options.max_sides) {
         return Err(BakeError::MaxSides(options.max_sides));
     }
     if !options.merge.weights.is_valid() {
         return Err(BakeError::Weights);
     }
-    if let Some(index) = input.needles.iter().position(|n| !n.is_valid()) {
-        return Err(BakeError::InvalidNeedle { index });
+    let placed = input.placed_needle_count();
+    if placed == 0 {
+        return Err(BakeError::NoNeedles);
+    }
+    if placed > MAX_PLACED_NEEDLES {
+        return Err(BakeError::TooManyNeedles(placed as usize));
+    }
+    for (prototype, needles) in input.prototypes.iter().enumerate() {
+        if let Some(needle) = needles.iter().position(|n| !n.is_valid()) {
+            return Err(BakeError::InvalidPrototypeNeedle { prototype, needle });
+        }
+    }
+    if let Some(index) = input
+        .placements
+        .iter()
+        .position(|p| !(p.is_valid() && (p.prototype as usize) < input.prototypes.len()))
+    {
+        return Err(BakeError::InvalidPlacement { index });
     }
     if !input.wood_mesh.is_valid() {
         return Err(BakeError::InvalidWoodMesh);
     }
+    let placements: Vec<Placement> = input
+        .placements
+        .iter()
+        .map(|p| Placement {
+            rotation: if p.rotation == Quat::IDENTITY {
+                p.rotation
+            } else {
+                p.rotation.normalize()
+            },
+            ..*p
+        })
+        .collect();
+    let prototype_needles: Vec<Vec<Needle>> = input
+        .prototypes
+        .iter()
+        .map(|needles| {
+            needles
+                .iter()
+                .map(|n| Needle {
+                    normal: snap_normal(n.normal),
+                    group: 0,
+                    ..*n
+                })
+                .collect()
+        })
+        .collect();
 
-    // Renumber groups by first appearance, then sort stably by group.
-    let mut renumber = std::collections::HashMap::new();
-    let mut needles = input.needles.clone();
-    for needle in &mut needles {
-        let next = renumber.len() as u32;
-        needle.group = *renumber.entry(needle.group).or_insert(next);
-        needle.normal = snap_normal(needle.normal);
+    // The cost context: the placed crown's diagonal and needle count.
+    let placed_points = placements.iter().flat_map(|p| {
+        prototype_needles[p.prototype as usize]
+            .iter()
+            .flat_map(move |n| [p.place_point(n.base), p.place_point(n.tip)])
+    });
+    let diagonal = bounds(placed_points).map_or(0.0, |(lo, hi)| lo.distance(hi));
+    let total = placed as usize;
+    let mut scale_sum = vec![(0.0f64, 0u32); prototype_needles.len()];
+    for p in &placements {
+        let entry = &mut scale_sum[p.prototype as usize];
+        *entry = (entry.0 + p.scale as f64, entry.1 + 1);
     }
-    needles.sort_by_key(|n| n.group);
 
-    let forest = merge_tree(&needles, &options.merge, &Adapter(progress));
+    // Level 1: each prototype once, in parallel.
+    let group_total: usize = prototype_needles.iter().map(|n| n.len().saturating_sub(1)).sum();
+    let done = AtomicUsize::new(0);
+    let prototypes: Vec<Prototype> = prototype_needles
+        .into_par_iter()
+        .zip(scale_sum.par_iter())
+        .map(|(needles, &(sum, count))| {
+            let mean_scale = if count == 0 { 1.0 } else { (sum / count as f64) as f32 };
+            let context = CostContext::new(options.merge.weights, diagonal / mean_scale, total);
+            let merged = merge_group(&needles, &context, &options.merge);
+            let so_far = done.fetch_add(merged.len(), Ordering::Relaxed) + merged.len();
+            progress.progress(BakeStage::MergeGroups, so_far, group_total);
+            Prototype { needles, merged }
+        })
+        .collect();
+
+    // Level 2: the placed prototype lines across the tree.
+    let mut first_needle = 0u32;
+    let group_lines: Vec<GroupLine> = placements
+        .iter()
+        .map(|p| {
+            let prototype = &prototypes[p.prototype as usize];
+            let root = prototype.root();
+            let ends = prototype.node_ends(root);
+            let line = GroupLine {
+                a: p.place_point(prototype.endpoint(ends[0])),
+                b: p.place_point(prototype.endpoint(ends[1])),
+                ends: ends.map(|e| 2 * first_needle + e),
+                error: prototype.node_error(root) * p.scale,
+                needles: prototype.needles.len() as u32,
+            };
+            first_needle += prototype.needles.len() as u32;
+            line
+        })
+        .collect();
+    let tree_total = group_lines.len().saturating_sub(1);
+    let context = CostContext::new(options.merge.weights, diagonal, total);
+    let tree_merged = merge_group_lines(&group_lines, &context, options.merge.tree_search, |k| {
+        if k % 1024 == 0 || k == tree_total {
+            progress.progress(BakeStage::MergeTree, k, tree_total)
+        }
+    });
+
     let info = BakeInfo {
         weights: options.merge.weights,
         bake_seconds: None,
@@ -190,10 +302,11 @@ pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgres
     for normal in &mut wood_mesh.normals {
         *normal = snap_normal(*normal);
     }
-    let mut record = LodRecord::from_parts(
+    let mut record = PrototypeRecord::from_parts(
         input.name.clone(),
-        needles,
-        forest.merged,
+        prototypes,
+        placements,
+        tree_merged,
         input.wood.clone(),
         wood_mesh,
         input.material,

@@ -9,29 +9,41 @@
 //! 24      …     payload: postcard (serde) encoding of the record
 //! ```
 //!
-//! The payload stores only what cannot be derived:
+//! The payload (format 3) is a tree of shared prototypes placed many times
+//! ([`PrototypeRecord`]); it stores only what cannot be derived:
 //!
-//! * needles as cylinders: base, tip, radius (f32) and the normal in 4 bytes
-//!   (octahedral, 16 bits a coordinate); prisms are rebuilt at load time;
-//! * groups as run lengths (needles are sorted by group);
-//! * original lines not at all (a needle's line is its centerline);
-//! * each merged line as its two children (varint distances back from its own
-//!   id), one byte saying which two of the children's four ends it keeps, and
-//!   its error (f32);
+//! * each prototype's needles as cylinders: base, tip, radius (f32) and the
+//!   normal in 4 bytes (octahedral, 16 bits a coordinate); prisms are
+//!   rebuilt at load time, original lines are the needles' centerlines;
+//! * each merged line (a prototype's level-1 lines, and the level-2 lines
+//!   over the placements) as its two children (varint distances back from
+//!   its own id), one byte saying which two of the children's four ends it
+//!   keeps, and its error (f32);
+//! * each placement as its prototype id (varint) and, unless it is the
+//!   identity, its rotation (4 f32), translation (3 f32) and scale (f32);
 //! * wood segments, material and bake information;
 //! * the wood mesh of imported trees: positions (f32), normals (4-byte
 //!   octahedral) and indices as zigzag varint differences from the previous
 //!   index (neighbouring triangles share nearby vertices: 1–2 bytes each).
 //!
-//! Version 2 added the wood mesh; version 1 files are refused with
-//! [`RecordError::UnsupportedVersion`] (re-bake them).
+//! A flat record ([`LodRecord`], an imported tree) is written as every group
+//! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
+//! either view ([`decode_record`] flattens).
+//!
+//! Version 3 added prototypes and placements. Version 2 files (flat, with
+//! the wood mesh) are still read and converted; version 1 files are refused
+//! with [`RecordError::UnsupportedVersion`] (re-bake them).
 //!
 //! Decoding checks everything: a truncated, corrupted, wrong-version,
-//! malformed or NaN-carrying file gives a [`RecordError`], never a panic.
+//! malformed or NaN-carrying file, an unknown prototype id, or placements
+//! standing for more needles than a record holds give a [`RecordError`],
+//! never a panic or an allocation beyond the file's own size (plus the
+//! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
+use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeRecord};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -41,8 +53,11 @@ use std::path::Path;
 /// First eight bytes of every record file.
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
-/// Format version written, and the only one read.
-pub const FORMAT_VERSION: u32 = 2;
+/// Format version written.
+pub const FORMAT_VERSION: u32 = 3;
+
+/// The oldest format version still read (converted on load).
+pub const OLDEST_READ_VERSION: u32 = 2;
 
 /// Size of the fixed header before the payload.
 pub const HEADER_BYTES: usize = 24;
@@ -57,11 +72,13 @@ pub enum RecordError {
     #[error("not a conifer LOD record (bad magic number)")]
     NotARecord,
     /// The file was written by another format version.
-    #[error("record format version {found} is not supported (this build reads version {supported})")]
+    #[error(
+        "record format version {found} is not supported (this build reads versions 2 to {supported}): re-bake the tree with this version of `conifer bake`"
+    )]
     UnsupportedVersion {
         /// Version in the file.
         found: u32,
-        /// Version this build reads.
+        /// Newest version this build reads (and the one it writes).
         supported: u32,
     },
     /// The file ends before the header or payload does.
@@ -146,8 +163,9 @@ impl StoredMesh {
     }
 }
 
+/// The payload of a format 2 file: one flat tree.
 #[derive(Serialize, Deserialize)]
-struct Payload {
+struct PayloadV2 {
     name: String,
     source: String,
     bake_seconds: Option<f64>,
@@ -162,6 +180,205 @@ struct Payload {
     merged: Vec<MergedEntry>,
     wood: Vec<[f32; 8]>,
     wood_mesh: StoredMesh,
+}
+
+/// The payload of a format 3 file: prototypes and placements.
+#[derive(Serialize, Deserialize)]
+struct Payload {
+    name: String,
+    source: String,
+    bake_seconds: Option<f64>,
+    weights: [f32; 3],
+    max_sides: u8,
+    material: FoliageMaterial,
+    prototypes: Vec<StoredPrototype>,
+    placements: Vec<StoredPlacement>,
+    tree_merged: Vec<MergedEntry>,
+    wood: Vec<[f32; 8]>,
+    wood_mesh: StoredMesh,
+}
+
+/// A prototype as stored: its needles and its level-1 merged lines.
+#[derive(Serialize, Deserialize)]
+struct StoredPrototype {
+    bases: Vec<[f32; 3]>,
+    tips: Vec<[f32; 3]>,
+    radii: Vec<f32>,
+    normals: Vec<[u8; 4]>,
+    merged: Vec<MergedEntry>,
+}
+
+/// A placement as stored: the identity costs its prototype id alone.
+#[derive(Serialize, Deserialize)]
+enum StoredPlacement {
+    Identity(u32),
+    Similarity {
+        prototype: u32,
+        rotation: [f32; 4],
+        translation: [f32; 3],
+        scale: f32,
+    },
+}
+
+impl StoredPlacement {
+    fn encode(p: &Placement) -> Self {
+        if p.is_identity() {
+            Self::Identity(p.prototype)
+        } else {
+            Self::Similarity {
+                prototype: p.prototype,
+                rotation: p.rotation.to_array(),
+                translation: p.translation.to_array(),
+                scale: p.scale,
+            }
+        }
+    }
+
+    fn decode(&self) -> Placement {
+        match *self {
+            Self::Identity(prototype) => Placement::identity(prototype),
+            Self::Similarity {
+                prototype,
+                rotation,
+                translation,
+                scale,
+            } => Placement {
+                prototype,
+                rotation: glam::Quat::from_array(rotation),
+                translation: Vec3::from(translation),
+                scale,
+            },
+        }
+    }
+}
+
+/// Merged lines as stored: children as distances back from the line's own
+/// id (`first_id + k`), ends as a selector among the children's four.
+/// `ends_of(node, earlier)` gives a node's ends, `earlier` being the merged
+/// lines before it.
+fn encode_merged(
+    lines: &[MergedLine],
+    first_id: u32,
+    ends_of: impl Fn(u32, &[MergedLine]) -> [EndpointId; 2],
+) -> Result<Vec<MergedEntry>, RecordError> {
+    let mut entries = Vec::with_capacity(lines.len());
+    for (k, line) in lines.iter().enumerate() {
+        let id = first_id + k as u32;
+        let [c0, c1] = line.children;
+        let candidates = [ends_of(c0, &lines[..k]), ends_of(c1, &lines[..k])].concat();
+        let find = |end: EndpointId| candidates.iter().position(|&c| c == end);
+        let (Some(e0), Some(e1)) = (find(line.ends[0]), find(line.ends[1])) else {
+            return Err(RecordInvalid::BadReference(k).into());
+        };
+        if c0 >= id || c1 >= id {
+            return Err(RecordInvalid::BadReference(k).into());
+        }
+        entries.push(MergedEntry {
+            back: [id - c0, id - c1],
+            ends: (e0 | (e1 << 2)) as u8,
+            error: line.error,
+        });
+    }
+    Ok(entries)
+}
+
+/// Inverse of [`encode_merged`]; `ends_of` may refuse a node (an unknown
+/// id) with `None`.
+fn decode_merged(
+    entries: &[MergedEntry],
+    first_id: u64,
+    ends_of: impl Fn(u32, &[MergedLine]) -> Option<[EndpointId; 2]>,
+) -> Result<Vec<MergedLine>, RecordError> {
+    let mut merged: Vec<MergedLine> = Vec::with_capacity(entries.len());
+    for (k, entry) in entries.iter().enumerate() {
+        let id = first_id + k as u64;
+        if entry.back.iter().any(|&b| b == 0 || b as u64 > id) || entry.ends >> 4 != 0 {
+            return Err(RecordInvalid::BadReference(k).into());
+        }
+        let children = entry.back.map(|b| (id - b as u64) as u32);
+        let (Some(a), Some(b)) = (ends_of(children[0], &merged), ends_of(children[1], &merged)) else {
+            return Err(RecordInvalid::BadReference(k).into());
+        };
+        let candidates = [a, b].concat();
+        merged.push(MergedLine {
+            ends: [
+                candidates[(entry.ends & 3) as usize],
+                candidates[(entry.ends >> 2) as usize],
+            ],
+            children,
+            error: entry.error,
+        });
+    }
+    Ok(merged)
+}
+
+/// Needles as stored: four parallel arrays.
+fn encode_needles(needles: &[Needle]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<f32>, Vec<[u8; 4]>) {
+    (
+        needles.iter().map(|x| x.base.to_array()).collect(),
+        needles.iter().map(|x| x.tip.to_array()).collect(),
+        needles.iter().map(|x| x.radius).collect(),
+        needles.iter().map(|x| encode_normal(x.normal)).collect(),
+    )
+}
+
+/// Inverse of [`encode_needles`] (every needle in group `group`).
+fn decode_needles(
+    bases: &[[f32; 3]],
+    tips: &[[f32; 3]],
+    radii: &[f32],
+    normals: &[[u8; 4]],
+    group: impl Fn(usize) -> u32,
+) -> Result<Vec<Needle>, RecordError> {
+    let n = bases.len();
+    if tips.len() != n || radii.len() != n || normals.len() != n {
+        return Err(RecordError::Malformed("needle arrays differ in length".into()));
+    }
+    Ok((0..n)
+        .map(|i| Needle {
+            base: Vec3::from(bases[i]),
+            tip: Vec3::from(tips[i]),
+            radius: radii[i],
+            normal: decode_normal(normals[i]),
+            group: group(i),
+        })
+        .collect())
+}
+
+fn encode_wood(wood: &[WoodSegment]) -> Vec<[f32; 8]> {
+    wood.iter()
+        .map(|s| {
+            let (a, b) = (s.start, s.end);
+            [a.x, a.y, a.z, b.x, b.y, b.z, s.start_radius, s.end_radius]
+        })
+        .collect()
+}
+
+fn decode_wood(wood: &[[f32; 8]]) -> Vec<WoodSegment> {
+    wood.iter()
+        .map(|w| WoodSegment {
+            start: Vec3::new(w[0], w[1], w[2]),
+            end: Vec3::new(w[3], w[4], w[5]),
+            start_radius: w[6],
+            end_radius: w[7],
+        })
+        .collect()
+}
+
+fn decode_bake_info(weights: [f32; 3], bake_seconds: Option<f64>, source: String) -> Result<BakeInfo, RecordError> {
+    if !weights.iter().all(|w| w.is_finite()) {
+        return Err(RecordInvalid::NonFinite("merge weights").into());
+    }
+    let [direction, distance, needle_count] = weights;
+    Ok(BakeInfo {
+        weights: MergeWeights {
+            direction,
+            distance,
+            needle_count,
+        },
+        bake_seconds,
+        source,
+    })
 }
 
 /// Octahedral encoding of a unit vector in 2 × 16 bits
@@ -205,39 +422,39 @@ pub fn snap_normal(normal: Vec3) -> Vec3 {
     decode_normal(encode_normal(normal))
 }
 
-fn node_ends(needles: usize, merged: &[MergedLine], node: u32) -> [EndpointId; 2] {
+fn node_ends(needles: usize, merged: &[MergedLine], node: u32) -> Option<[EndpointId; 2]> {
     if (node as usize) < needles {
-        [2 * node, 2 * node + 1]
+        Some([2 * node, 2 * node + 1])
     } else {
-        merged[node as usize - needles].ends
+        merged.get(node as usize - needles).map(|m| m.ends)
     }
 }
 
-/// Encodes a record into the bytes of a record file.
-pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
-    let n = record.needles.len();
-    let mut group_sizes: Vec<u32> = Vec::new();
-    for (i, needle) in record.needles.iter().enumerate() {
-        if i == 0 || needle.group != record.needles[i - 1].group {
-            group_sizes.push(0);
-        }
-        *group_sizes.last_mut().expect("pushed above") += 1;
-    }
-    let mut merged = Vec::with_capacity(record.merged.len());
-    for (k, line) in record.merged.iter().enumerate() {
-        let id = (n + k) as u32;
-        let [c0, c1] = line.children;
-        let candidates = [node_ends(n, &record.merged, c0), node_ends(n, &record.merged, c1)].concat();
-        let find = |end: EndpointId| candidates.iter().position(|&c| c == end);
-        let (Some(e0), Some(e1)) = (find(line.ends[0]), find(line.ends[1])) else {
-            return Err(RecordInvalid::BadReference(k).into());
-        };
-        merged.push(MergedEntry {
-            back: [id - c0, id - c1],
-            ends: (e0 | (e1 << 2)) as u8,
-            error: line.error,
+/// Encodes a tree of prototypes into the bytes of a record file.
+pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, RecordError> {
+    let mut prototypes = Vec::with_capacity(record.prototypes.len());
+    for prototype in &record.prototypes {
+        let n = prototype.needles.len();
+        let (bases, tips, radii, normals) = encode_needles(&prototype.needles);
+        let merged = encode_merged(&prototype.merged, n as u32, |c, earlier| {
+            node_ends(n, earlier, c).unwrap_or([u32::MAX; 2])
+        })?;
+        prototypes.push(StoredPrototype {
+            bases,
+            tips,
+            radii,
+            normals,
+            merged,
         });
     }
+    let p_count = record.placements.len() as u32;
+    let tree_merged = encode_merged(&record.tree_merged, p_count, |c, earlier| {
+        if c < p_count {
+            placed_root_ends(record, c as usize)
+        } else {
+            earlier.get((c - p_count) as usize).map_or([u32::MAX; 2], |m| m.ends)
+        }
+    })?;
     let w = record.bake.weights;
     let payload = Payload {
         name: record.name.clone(),
@@ -246,20 +463,10 @@ pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
         weights: [w.direction, w.distance, w.needle_count],
         max_sides: record.max_sides,
         material: record.material,
-        group_sizes,
-        bases: record.needles.iter().map(|x| x.base.to_array()).collect(),
-        tips: record.needles.iter().map(|x| x.tip.to_array()).collect(),
-        radii: record.needles.iter().map(|x| x.radius).collect(),
-        normals: record.needles.iter().map(|x| encode_normal(x.normal)).collect(),
-        merged,
-        wood: record
-            .wood
-            .iter()
-            .map(|s| {
-                let (a, b) = (s.start, s.end);
-                [a.x, a.y, a.z, b.x, b.y, b.z, s.start_radius, s.end_radius]
-            })
-            .collect(),
+        prototypes,
+        placements: record.placements.iter().map(StoredPlacement::encode).collect(),
+        tree_merged,
+        wood: encode_wood(&record.wood),
         wood_mesh: StoredMesh::encode(&record.wood_mesh),
     };
     let body = postcard::to_allocvec(&payload).map_err(|e| RecordError::Malformed(e.to_string()))?;
@@ -272,8 +479,21 @@ pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
     Ok(bytes)
 }
 
-/// Decodes the bytes of a record file.
-pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
+/// Tree-wide endpoint ids of placement `p`'s root line.
+fn placed_root_ends(record: &PrototypeRecord, placement: usize) -> [EndpointId; 2] {
+    let prototype = &record.prototypes[record.placements[placement].prototype as usize];
+    let first = 2 * record.needle_offset(placement) as u32;
+    prototype.node_ends(prototype.root()).map(|e| first + e)
+}
+
+/// Encodes a flat record into the bytes of a record file: every group a
+/// prototype placed once ([`PrototypeRecord::from_flat`]).
+pub fn encode_record(record: &LodRecord) -> Result<Vec<u8>, RecordError> {
+    encode_prototype_record(&PrototypeRecord::from_flat(record)?)
+}
+
+/// Checks the header and checksum; returns the format version and payload.
+fn checked_payload(bytes: &[u8]) -> Result<(u32, &[u8]), RecordError> {
     if bytes.len() < MAGIC.len() || bytes[..MAGIC.len()] != MAGIC {
         if bytes.len() < MAGIC.len() && MAGIC.starts_with(bytes) {
             return Err(RecordError::Truncated {
@@ -291,7 +511,7 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     }
     let u32_at = |at: usize| u32::from_le_bytes(bytes[at..at + 4].try_into().expect("4 bytes"));
     let version = u32_at(8);
-    if version != FORMAT_VERSION {
+    if !(OLDEST_READ_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(RecordError::UnsupportedVersion {
             found: version,
             supported: FORMAT_VERSION,
@@ -314,83 +534,108 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     if stored != computed {
         return Err(RecordError::ChecksumMismatch { stored, computed });
     }
-    let payload: Payload = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
-    payload_to_record(payload)
+    Ok((version, body))
 }
 
-fn payload_to_record(p: Payload) -> Result<LodRecord, RecordError> {
-    let n = p.bases.len();
-    if p.tips.len() != n || p.radii.len() != n || p.normals.len() != n {
-        return Err(RecordError::Malformed("needle arrays differ in length".into()));
+/// Decodes the bytes of a record file as a tree of prototypes (a format 2
+/// file is converted: every group a prototype placed once).
+pub fn decode_prototype_record(bytes: &[u8]) -> Result<PrototypeRecord, RecordError> {
+    let (version, body) = checked_payload(bytes)?;
+    if version == 2 {
+        return Ok(PrototypeRecord::from_flat(&decode_v2(body)?)?);
     }
+    let payload: Payload = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    payload_to_prototype_record(payload)
+}
+
+/// Decodes the bytes of a record file as a flat record (placements expanded).
+pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
+    let (version, body) = checked_payload(bytes)?;
+    if version == 2 {
+        return decode_v2(body);
+    }
+    let payload: Payload = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    Ok(payload_to_prototype_record(payload)?.flatten()?)
+}
+
+fn payload_to_prototype_record(p: Payload) -> Result<PrototypeRecord, RecordError> {
+    let mut prototypes = Vec::with_capacity(p.prototypes.len());
+    for (k, stored) in p.prototypes.iter().enumerate() {
+        let in_prototype = |problem: RecordError| match problem {
+            RecordError::Invalid(problem) => RecordError::Invalid(RecordInvalid::Prototype {
+                prototype: k,
+                problem: Box::new(problem),
+            }),
+            other => other,
+        };
+        let needles = decode_needles(&stored.bases, &stored.tips, &stored.radii, &stored.normals, |_| 0)?;
+        let n = needles.len();
+        let merged =
+            decode_merged(&stored.merged, n as u64, |c, earlier| node_ends(n, earlier, c)).map_err(in_prototype)?;
+        prototypes.push(Prototype { needles, merged });
+    }
+    // Where each placement's needles start, checked before any id is used.
+    let placements: Vec<Placement> = p.placements.iter().map(StoredPlacement::decode).collect();
+    let mut first_end = Vec::with_capacity(placements.len());
+    let mut needles = 0u64;
+    for (index, placement) in placements.iter().enumerate() {
+        let Some(prototype) = prototypes.get(placement.prototype as usize) else {
+            return Err(RecordInvalid::BadPlacement(index).into());
+        };
+        first_end.push(2 * needles as u32);
+        needles += prototype.needles.len() as u64;
+        if needles > MAX_PLACED_NEEDLES {
+            return Err(RecordInvalid::TooManyNeedles(needles).into());
+        }
+    }
+    let p_count = placements.len() as u32;
+    let tree_merged = decode_merged(&p.tree_merged, p_count as u64, |c, earlier| {
+        if c < p_count {
+            let prototype = &prototypes[placements[c as usize].prototype as usize];
+            Some(prototype.node_ends(prototype.root()).map(|e| first_end[c as usize] + e))
+        } else {
+            earlier.get((c - p_count) as usize).map(|m| m.ends)
+        }
+    })?;
+    let bake = decode_bake_info(p.weights, p.bake_seconds, p.source)?;
+    Ok(PrototypeRecord::from_parts(
+        p.name,
+        prototypes,
+        placements,
+        tree_merged,
+        decode_wood(&p.wood),
+        p.wood_mesh.decode()?,
+        p.material,
+        p.max_sides,
+        bake,
+    )?)
+}
+
+/// Decodes a format 2 payload (one flat tree).
+fn decode_v2(body: &[u8]) -> Result<LodRecord, RecordError> {
+    let p: PayloadV2 = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    let n = p.bases.len();
     let group_total: u64 = p.group_sizes.iter().map(|&s| s as u64).sum();
     if group_total != n as u64 || p.group_sizes.contains(&0) {
         return Err(RecordError::Malformed(
             "group sizes do not add up to the needle count".into(),
         ));
     }
-    let mut needles = Vec::with_capacity(n);
-    let mut groups = p
+    let group_of: Vec<u32> = p
         .group_sizes
         .iter()
         .enumerate()
-        .flat_map(|(g, &s)| std::iter::repeat_n(g as u32, s as usize));
-    for i in 0..n {
-        needles.push(Needle {
-            base: Vec3::from(p.bases[i]),
-            tip: Vec3::from(p.tips[i]),
-            radius: p.radii[i],
-            normal: decode_normal(p.normals[i]),
-            group: groups.next().expect("sizes add up to n"),
-        });
-    }
-    let mut merged: Vec<MergedLine> = Vec::with_capacity(p.merged.len());
-    for (k, entry) in p.merged.iter().enumerate() {
-        let id = (n + k) as u64;
-        if entry.back.iter().any(|&b| b == 0 || b as u64 > id) || entry.ends >> 4 != 0 {
-            return Err(RecordInvalid::BadReference(k).into());
-        }
-        let children = entry.back.map(|b| (id - b as u64) as u32);
-        let candidates = [node_ends(n, &merged, children[0]), node_ends(n, &merged, children[1])].concat();
-        merged.push(MergedLine {
-            ends: [
-                candidates[(entry.ends & 3) as usize],
-                candidates[(entry.ends >> 2) as usize],
-            ],
-            children,
-            error: entry.error,
-        });
-    }
-    let [direction, distance, needle_count] = p.weights;
-    let bake = BakeInfo {
-        weights: MergeWeights {
-            direction,
-            distance,
-            needle_count,
-        },
-        bake_seconds: p.bake_seconds,
-        source: p.source,
-    };
-    if !p.weights.iter().all(|w| w.is_finite()) {
-        return Err(RecordInvalid::NonFinite("merge weights").into());
-    }
-    let wood = p
-        .wood
-        .iter()
-        .map(|w| WoodSegment {
-            start: Vec3::new(w[0], w[1], w[2]),
-            end: Vec3::new(w[3], w[4], w[5]),
-            start_radius: w[6],
-            end_radius: w[7],
-        })
+        .flat_map(|(g, &s)| std::iter::repeat_n(g as u32, s as usize))
         .collect();
-    let wood_mesh = p.wood_mesh.decode()?;
+    let needles = decode_needles(&p.bases, &p.tips, &p.radii, &p.normals, |i| group_of[i])?;
+    let merged = decode_merged(&p.merged, n as u64, |c, earlier| node_ends(n, earlier, c))?;
+    let bake = decode_bake_info(p.weights, p.bake_seconds, p.source)?;
     Ok(LodRecord::from_parts(
         p.name,
         needles,
         merged,
-        wood,
-        wood_mesh,
+        decode_wood(&p.wood),
+        p.wood_mesh.decode()?,
         p.material,
         p.max_sides,
         bake,
@@ -430,9 +675,21 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     result
 }
 
-/// Reads and checks a record file.
+/// Writes a tree of prototypes to `path` atomically (see [`write_record`]).
+pub fn write_prototype_record(record: &PrototypeRecord, path: &Path) -> Result<u64, RecordError> {
+    let bytes = encode_prototype_record(record)?;
+    write_atomically(path, &bytes)?;
+    Ok(bytes.len() as u64)
+}
+
+/// Reads and checks a record file as a flat record.
 pub fn read_record(path: &Path) -> Result<LodRecord, RecordError> {
     decode_record(&std::fs::read(path)?)
+}
+
+/// Reads and checks a record file as a tree of prototypes.
+pub fn read_prototype_record(path: &Path) -> Result<PrototypeRecord, RecordError> {
+    decode_prototype_record(&std::fs::read(path)?)
 }
 
 #[cfg(test)]

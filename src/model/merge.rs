@@ -601,17 +601,6 @@ impl<'a> MergeSet<'a> {
     }
 }
 
-/// The merge forest of a tree: original lines `0..needles`, merged lines
-/// `needles..needles + merged.len()`, children always before parents.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct MergeForest {
-    /// The merges, in creation order: all group-level merges (group by group),
-    /// then the tree level.
-    pub merged: Vec<MergedLine>,
-    /// How many of `merged` are group-level merges.
-    pub group_merges: usize,
-}
-
 fn needle_line(needle_id: u32, needle: &Needle) -> Line {
     Line {
         a: needle.base,
@@ -622,124 +611,84 @@ fn needle_line(needle_id: u32, needle: &Needle) -> Line {
     }
 }
 
-/// Runs the two-level merge on `needles`, which must be sorted by group
-/// (needles of one group contiguous) and valid ([`Needle::is_valid`]).
+/// Level 1: merges one phyllotaxy group (a prototype's needles, in its own
+/// frame) down to a single line.
 ///
-/// Level 1 merges each group to one line (groups in parallel); level 2 merges
-/// the group lines to one root. Deterministic: the same needles and options
-/// give the same forest.
-pub fn merge_tree(needles: &[Needle], options: &MergeOptions, progress: &dyn MergeProgress) -> MergeForest {
-    let n = needles.len();
-    if n == 0 {
-        return MergeForest::default();
-    }
-    let diagonal = super::needle::bounds(needles.iter().flat_map(|x| [x.base, x.tip]))
-        .map(|(lo, hi)| lo.distance(hi))
-        .unwrap_or(0.0);
-    let context = CostContext::new(options.weights, diagonal, n);
+/// Node ids are local: `0..needles.len()` the needles' own lines, then the
+/// merged lines in creation order; the last merged line is the root (a
+/// one-needle group has none, and its root is its needle). Needles must be
+/// valid ([`Needle::is_valid`]). Groups larger than
+/// [`MergeOptions::exhaustive_group_limit`] use the whole-tree search.
+pub fn merge_group(needles: &[Needle], context: &CostContext, options: &MergeOptions) -> Vec<MergedLine> {
+    let lines: Vec<Line> = (0..needles.len()).map(|i| needle_line(i as u32, &needles[i])).collect();
+    let search = if lines.len() <= options.exhaustive_group_limit {
+        options.group_search
+    } else {
+        options.tree_search
+    };
+    let (merges, _) = MergeSet::new(context, search, lines).run(|_| {});
+    merges
+        .into_iter()
+        .map(|m| MergedLine {
+            ends: m.ends,
+            children: m.children,
+            error: m.error,
+        })
+        .collect()
+}
 
-    // Group ranges (needles sorted by group).
-    let mut groups: Vec<(usize, usize)> = Vec::new();
-    let mut start = 0;
-    for i in 1..=n {
-        if i == n || needles[i].group != needles[start].group {
-            groups.push((start, i));
-            start = i;
-        }
-    }
+/// A group's root line placed in the tree: the input of level 2.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroupLine {
+    /// Position of end 0, tree metres.
+    pub a: Vec3,
+    /// Position of end 1, tree metres.
+    pub b: Vec3,
+    /// The needle ends the line runs between, as tree-wide endpoint ids.
+    pub ends: [EndpointId; 2],
+    /// The line's error (its group root's error, placed), metres.
+    pub error: f32,
+    /// Needles the line stands for.
+    pub needles: u32,
+}
 
-    // Level 1, groups in parallel.
-    let group_total = n - groups.len();
-    let done = std::sync::atomic::AtomicUsize::new(0);
-    let local: Vec<(Vec<LocalMerge>, u32)> = groups
-        .par_iter()
-        .map(|&(lo, hi)| {
-            let lines: Vec<Line> = (lo..hi).map(|i| needle_line(i as u32, &needles[i])).collect();
-            let search = if lines.len() <= options.exhaustive_group_limit {
-                options.group_search
-            } else {
-                options.tree_search
-            };
-            let result = MergeSet::new(&context, search, lines).run(|_| {});
-            let so_far = done.fetch_add(result.0.len(), std::sync::atomic::Ordering::Relaxed);
-            progress.merged(MergeLevel::Group, so_far + result.0.len(), group_total);
-            result
+/// Level 2: merges the group lines of a tree down to one root.
+///
+/// Children ids below `lines.len()` are group lines (indices into `lines`),
+/// others merged lines (`lines.len() + index` in creation order); ends are
+/// the group lines' endpoint ids. `progress` is called with the merges done
+/// so far. Deterministic: the same lines and options give the same forest.
+pub fn merge_group_lines(
+    lines: &[GroupLine],
+    context: &CostContext,
+    search: PartnerSearch,
+    progress: impl Fn(usize),
+) -> Vec<MergedLine> {
+    let lines: Vec<Line> = lines
+        .iter()
+        .map(|l| Line {
+            a: l.a,
+            b: l.b,
+            ends: l.ends,
+            error: l.error,
+            needles: l.needles,
         })
         .collect();
-
-    let mut merged: Vec<MergedLine> = Vec::with_capacity(n.saturating_sub(1));
-    let mut group_roots: Vec<(u32, Line)> = Vec::with_capacity(groups.len());
-    for (&(lo, hi), (merges, root)) in groups.iter().zip(local) {
-        let inputs = (hi - lo) as u32;
-        let base = (n + merged.len()) as u32;
-        let global = |local: u32| {
-            if local < inputs {
-                lo as u32 + local
-            } else {
-                base + (local - inputs)
-            }
-        };
-        for m in &merges {
-            merged.push(MergedLine {
-                ends: m.ends,
-                children: m.children.map(global),
-                error: m.error,
-            });
-        }
-        let root_id = global(root);
-        let root_line = if root < inputs {
-            needle_line(root_id, &needles[root_id as usize])
-        } else {
-            let m = &merges[(root - inputs) as usize];
-            let needle_count = hi - lo;
-            line_from_ends(needles, m.ends, m.error, needle_count as u32)
-        };
-        group_roots.push((root_id, root_line));
-    }
-    let group_merges = merged.len();
-
-    // Level 2: the group lines across the tree.
-    let inputs = group_roots.len() as u32;
-    let lines: Vec<Line> = group_roots.iter().map(|(_, l)| *l).collect();
-    let tree_total = group_roots.len().saturating_sub(1);
-    let set = MergeSet::new(&context, options.tree_search, lines);
-    let (merges, _) = set.run(|k| {
-        if k % 1024 == 0 || k == tree_total {
-            progress.merged(MergeLevel::Tree, k, tree_total)
-        }
-    });
-    let base = (n + merged.len()) as u32;
-    let global = |local: u32| {
-        if local < inputs {
-            group_roots[local as usize].0
-        } else {
-            base + (local - inputs)
-        }
-    };
-    for m in &merges {
-        merged.push(MergedLine {
+    let (merges, _) = MergeSet::new(context, search, lines).run(progress);
+    merges
+        .into_iter()
+        .map(|m| MergedLine {
             ends: m.ends,
-            children: m.children.map(global),
+            children: m.children,
             error: m.error,
-        });
-    }
-    MergeForest { merged, group_merges }
+        })
+        .collect()
 }
 
 /// Position of a needle end.
 pub fn endpoint_position(needles: &[Needle], end: EndpointId) -> Vec3 {
     let needle = &needles[(end / 2) as usize];
     if end.is_multiple_of(2) { needle.base } else { needle.tip }
-}
-
-fn line_from_ends(needles: &[Needle], ends: [EndpointId; 2], error: f32, needle_count: u32) -> Line {
-    Line {
-        a: endpoint_position(needles, ends[0]),
-        b: endpoint_position(needles, ends[1]),
-        ends,
-        error,
-        needles: needle_count,
-    }
 }
 
 #[cfg(test)]

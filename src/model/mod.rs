@@ -6,6 +6,7 @@
 //! * [`prism`]: prism tessellation of a needle.
 //! * [`merge`]: the two-level line merging and its cost function.
 //! * [`record`]: the LOD record (merge forest, error ranges) and the cut.
+//! * [`prototype`]: a tree as shared prototypes placed many times (record format 3).
 //! * [`cut_count`]: the cut's primitive counts at any error without a traversal.
 //! * [`file`]: the binary record file.
 //! * [`gpu_layout`]: the GPU-ready arrays of a record and the CPU reference of the shader.
@@ -18,12 +19,17 @@ pub mod merge;
 pub mod metric;
 pub mod needle;
 pub mod prism;
+pub mod prototype;
 pub mod record;
 
-pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake};
+pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_prototypes};
 pub use cut_count::{CutCounter, CutCounts};
-pub use file::{RecordError, decode_record, encode_record, read_record, write_record};
+pub use file::{
+    RecordError, decode_prototype_record, decode_record, encode_prototype_record, encode_record, read_prototype_record,
+    read_record, write_prototype_record, write_record,
+};
 pub use merge::{MergeOptions, MergeWeights, PartnerSearch};
 pub use metric::{PixelError, ViewParams, spatial_error};
 pub use needle::*;
+pub use prototype::{Placement, Prototype, PrototypeInput, PrototypeRecord};
 pub use record::{Cut, CutStats, LodRecord, Representation};

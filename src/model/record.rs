@@ -131,6 +131,61 @@ pub enum RecordInvalid {
     /// normal count unlike its position count, or a non-finite number.
     #[error("the wood mesh is inconsistent (index out of range, partial triangle or non-finite number)")]
     BadWoodMesh,
+    /// A prototype breaks one of the checks above (its needle and merged
+    /// line indices are the prototype's own).
+    #[error("prototype {prototype}: {problem}")]
+    Prototype {
+        /// Index of the prototype.
+        prototype: usize,
+        /// What is wrong with it.
+        problem: Box<RecordInvalid>,
+    },
+    /// A prototype's level-1 forest does not end in exactly one line.
+    #[error("{merged} merged lines for {needles} needles: a prototype merges down to exactly one line")]
+    NotOneLine {
+        /// Needles of the prototype.
+        needles: usize,
+        /// Its merged lines.
+        merged: usize,
+    },
+    /// A placement names a prototype that does not exist, or has a
+    /// non-finite number, a scale ≤ 0 or a rotation that is not a unit quaternion.
+    #[error("placement {0} is invalid (unknown prototype, non-finite number, scale ≤ 0 or rotation not unit)")]
+    BadPlacement(usize),
+    /// The placements stand for more needles than a record may hold.
+    #[error("the placements stand for {0} needles: a record holds at most 2^24")]
+    TooManyNeedles(u64),
+    /// A flat record's merged line `k` mixes the two merge levels (a merge
+    /// across groups taking part of a group that is not down to one line).
+    #[error("merged line {0} mixes the two merge levels; re-bake the tree")]
+    NotTwoLevel(usize),
+}
+
+/// Checks what every record carries beside its foliage: finite wood
+/// segments, a consistent wood mesh, a finite material and bake time.
+pub(crate) fn check_appearance(
+    wood: &[WoodSegment],
+    wood_mesh: &TriangleMesh,
+    material: &FoliageMaterial,
+    bake: &BakeInfo,
+) -> Result<(), RecordInvalid> {
+    if !wood.iter().all(WoodSegment::is_valid) {
+        return Err(RecordInvalid::NonFinite("wood"));
+    }
+    if !wood_mesh.is_valid() {
+        return Err(RecordInvalid::BadWoodMesh);
+    }
+    let colors = material.needle_color.iter().chain(&material.wood_color);
+    if !colors
+        .chain([&material.roughness, &material.reflectance])
+        .all(|x| x.is_finite())
+    {
+        return Err(RecordInvalid::NonFinite("material"));
+    }
+    if bake.bake_seconds.is_some_and(|s| !s.is_finite()) {
+        return Err(RecordInvalid::NonFinite("bake_seconds"));
+    }
+    Ok(())
 }
 
 impl LodRecord {
@@ -177,22 +232,7 @@ impl LodRecord {
                 expected_group += 1;
             }
         }
-        if !wood.iter().all(WoodSegment::is_valid) {
-            return Err(RecordInvalid::NonFinite("wood"));
-        }
-        if !wood_mesh.is_valid() {
-            return Err(RecordInvalid::BadWoodMesh);
-        }
-        let colors = material.needle_color.iter().chain(&material.wood_color);
-        if !colors
-            .chain([&material.roughness, &material.reflectance])
-            .all(|x| x.is_finite())
-        {
-            return Err(RecordInvalid::NonFinite("material"));
-        }
-        if bake.bake_seconds.is_some_and(|s| !s.is_finite()) {
-            return Err(RecordInvalid::NonFinite("bake_seconds"));
-        }
+        check_appearance(&wood, &wood_mesh, &material, &bake)?;
 
         let total = n + merged.len();
         let mut parent = vec![NO_PARENT; total];
@@ -381,9 +421,14 @@ impl LodRecord {
 
     /// The cut at spatial error `e` with a chosen strategy; all strategies
     /// give the same cut (in different orders). A NaN or negative `e` counts
-    /// as 0 (finest detail).
+    /// as 0 (finest detail), an infinite one as the largest finite error
+    /// (the roots).
     pub fn cut_with(&self, spatial_error: f32, strategy: CutStrategy) -> Cut {
-        let e = if spatial_error > 0.0 { spatial_error } else { 0.0 };
+        let e = if spatial_error > 0.0 {
+            spatial_error.min(f32::MAX)
+        } else {
+            0.0
+        };
         let mut cut = Cut::default();
         match strategy {
             CutStrategy::Traversal { three_part_start } => {

@@ -1,0 +1,658 @@
+//! A tree as shared prototypes placed many times (record format 3).
+//!
+//! The paper's two merge levels already have this shape: level 1 merges the
+//! needles of one phyllotaxy group (shoot, fascicle, spray) down to one
+//! line, level 2 merges the group lines across the tree. Here the group is a
+//! [`Prototype`]: its needles in its own frame and its level-1 merge forest,
+//! stored once and placed any number of times by a [`Placement`] (rotation,
+//! translation, uniform scale). Level 2 runs over the placed prototype lines.
+//! A procedural tree uses a few dozen prototypes placed thousands of times;
+//! an imported or flat tree is the case of every group a prototype placed
+//! once ([`PrototypeRecord::from_flat`]).
+//!
+//! ## Errors of placed prototypes
+//!
+//! A placement scales every length of its prototype by `scale`, so a placed
+//! node's error is its prototype error times `scale` (a needle's radius,
+//! hence its line error `2R`, scales the same way). Monotone errors stay
+//! monotone, so the cut is still the paper's, node by node:
+//! `error ≤ e < parent_error`. [`PrototypeRecord::cut`] walks it without
+//! expanding the placements and names its nodes as [`PrototypeRecord::flatten`]
+//! numbers them, so the two cuts compare equal.
+//!
+//! ## Node ids
+//!
+//! * Inside a prototype (level 1): `0..needles` its needles' own lines, then
+//!   its merged lines in creation order; the last is the root (a one-needle
+//!   prototype's root is its needle). Endpoint ids are local: `2i` the base
+//!   and `2i + 1` the tip of needle `i`.
+//! * Level 2 ([`PrototypeRecord::tree_merged`]): ids `0..placements` stand
+//!   for placement `p`'s root line, `placements + k` for the `k`-th level-2
+//!   merged line. Their ends are tree-wide endpoint ids: needle `i` of
+//!   placement `p` is needle `needle_offset(p) + i` of the flattened tree.
+//! * Flattened ([`LodRecord`]): the placements' needles in placement order
+//!   (placement `p` is group `p`), then every placement's level-1 merged
+//!   lines in placement order, then the level-2 merged lines.
+
+use super::merge::{EndpointId, MergedLine};
+use super::metric::{NeedleForm, line_error, needle_form, relative_error};
+use super::needle::{FoliageMaterial, Needle, TreeInput, WoodSegment};
+use super::prism::TriangleMesh;
+use super::record::{BakeInfo, Cut, LodRecord, NO_PARENT, RecordInvalid, check_appearance};
+use glam::{Quat, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// Most needles a record may stand for once placed: the GPU layout packs a
+/// needle's index in 24 bits, and the flattened tree must fit in memory
+/// whatever a (possibly hostile) file claims.
+pub const MAX_PLACED_NEEDLES: u64 = 1 << 24;
+
+/// Where one prototype stands in the tree: `p ↦ rotation · (scale · p) + translation`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Placement {
+    /// Index of the placed prototype.
+    pub prototype: u32,
+    /// Rotation (a unit quaternion).
+    pub rotation: Quat,
+    /// Translation, tree metres.
+    pub translation: Vec3,
+    /// Uniform scale (> 0): lengths, radii and errors of the prototype are
+    /// multiplied by it.
+    pub scale: f32,
+}
+
+impl Placement {
+    /// Prototype `prototype` placed as it is (no rotation, no move, scale 1).
+    pub fn identity(prototype: u32) -> Self {
+        Self {
+            prototype,
+            rotation: Quat::IDENTITY,
+            translation: Vec3::ZERO,
+            scale: 1.0,
+        }
+    }
+
+    /// `true` for the identity transform.
+    pub fn is_identity(&self) -> bool {
+        self.rotation == Quat::IDENTITY && self.translation == Vec3::ZERO && self.scale == 1.0
+    }
+
+    /// `true` when every number is finite, the scale positive and the
+    /// rotation a unit quaternion (to 1e-4).
+    pub fn is_valid(&self) -> bool {
+        self.rotation.is_finite()
+            && (self.rotation.length() - 1.0).abs() < 1e-4
+            && self.translation.is_finite()
+            && self.scale.is_finite()
+            && self.scale > 0.0
+    }
+
+    /// A prototype-frame point in the tree. The identity is exact.
+    pub fn place_point(&self, point: Vec3) -> Vec3 {
+        if self.is_identity() {
+            point
+        } else {
+            self.rotation * (point * self.scale) + self.translation
+        }
+    }
+
+    /// A prototype needle in the tree, as group `group`.
+    pub fn place_needle(&self, needle: &Needle, group: u32) -> Needle {
+        Needle {
+            base: self.place_point(needle.base),
+            tip: self.place_point(needle.tip),
+            radius: needle.radius * self.scale,
+            normal: if self.is_identity() {
+                needle.normal
+            } else {
+                self.rotation * needle.normal
+            },
+            group,
+        }
+    }
+}
+
+/// One shared group of needles in its own frame, with its level-1 merge
+/// forest down to one line (see the module docs for its node ids).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Prototype {
+    /// The needles, prototype metres (their `group` is not used).
+    pub needles: Vec<Needle>,
+    /// Level-1 merged lines in creation order (children before parents);
+    /// `needles.len() − 1` of them, the last one the root.
+    pub merged: Vec<MergedLine>,
+}
+
+impl Prototype {
+    /// The root node: the last merged line, or the needle of a one-needle prototype.
+    pub fn root(&self) -> u32 {
+        (self.needles.len() + self.merged.len()).saturating_sub(1) as u32
+    }
+
+    /// Error of local node `node`, prototype metres (`2R` for a needle's line).
+    pub fn node_error(&self, node: u32) -> f32 {
+        let n = self.needles.len();
+        match (node as usize).checked_sub(n) {
+            None => line_error(self.needles[node as usize].radius),
+            Some(k) => self.merged[k].error,
+        }
+    }
+
+    /// The two local endpoint ids of node `node`'s line.
+    pub fn node_ends(&self, node: u32) -> [EndpointId; 2] {
+        match (node as usize).checked_sub(self.needles.len()) {
+            None => [2 * node, 2 * node + 1],
+            Some(k) => self.merged[k].ends,
+        }
+    }
+
+    /// Position of local endpoint `end`, prototype metres.
+    pub fn endpoint(&self, end: EndpointId) -> Vec3 {
+        super::merge::endpoint_position(&self.needles, end)
+    }
+
+    /// Checks the needles and the forest: valid needles, children before
+    /// parents, one parent each, ends in range, monotone errors, one root.
+    fn validate(&self) -> Result<(), RecordInvalid> {
+        let n = self.needles.len();
+        if n == 0 {
+            return Err(RecordInvalid::NoNeedles);
+        }
+        for (i, needle) in self.needles.iter().enumerate() {
+            if !(needle.base.is_finite()
+                && needle.tip.is_finite()
+                && needle.normal.is_finite()
+                && needle.radius.is_finite())
+            {
+                return Err(RecordInvalid::NonFinite("needles"));
+            }
+            if !needle.is_valid() {
+                return Err(RecordInvalid::DegenerateNeedle(i));
+            }
+        }
+        if self.merged.len() != n - 1 {
+            return Err(RecordInvalid::NotOneLine {
+                needles: n,
+                merged: self.merged.len(),
+            });
+        }
+        let mut has_parent = vec![false; n + self.merged.len()];
+        for (k, line) in self.merged.iter().enumerate() {
+            let id = n + k;
+            if !line.error.is_finite() {
+                return Err(RecordInvalid::NonFinite("merged line errors"));
+            }
+            let [c0, c1] = line.children.map(|c| c as usize);
+            if c0 == c1
+                || c0 >= id
+                || c1 >= id
+                || has_parent[c0]
+                || has_parent[c1]
+                || line.ends.iter().any(|&e| e as usize >= 2 * n)
+            {
+                return Err(RecordInvalid::BadReference(k));
+            }
+            has_parent[c0] = true;
+            has_parent[c1] = true;
+            if line.children.iter().any(|&c| line.error < self.node_error(c)) {
+                return Err(RecordInvalid::ErrorNotMonotone(k));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a prototype bake takes in: shared needle groups and where they go.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PrototypeInput {
+    /// Human-readable name (species preset, or the source file).
+    pub name: String,
+    /// Each prototype's needles in its own frame (their `group` is not used).
+    pub prototypes: Vec<Vec<Needle>>,
+    /// Where the prototypes stand; placement `p` becomes group `p`.
+    pub placements: Vec<Placement>,
+    /// Trunk and branches as cylinders.
+    pub wood: Vec<WoodSegment>,
+    /// Trunk and branches as a triangle mesh (imported trees).
+    pub wood_mesh: TriangleMesh,
+    /// Appearance.
+    pub material: FoliageMaterial,
+}
+
+impl PrototypeInput {
+    /// A flat tree as prototypes: every phyllotaxy group a prototype placed
+    /// once as it is, groups in order of first appearance (the order a
+    /// flat bake has always used).
+    pub fn from_tree(tree: &TreeInput) -> Self {
+        let mut index = std::collections::HashMap::new();
+        let mut prototypes: Vec<Vec<Needle>> = Vec::new();
+        for needle in &tree.needles {
+            let k = *index.entry(needle.group).or_insert_with(|| {
+                prototypes.push(Vec::new());
+                prototypes.len() - 1
+            });
+            prototypes[k].push(Needle { group: 0, ..*needle });
+        }
+        Self {
+            name: tree.name.clone(),
+            placements: (0..prototypes.len() as u32).map(Placement::identity).collect(),
+            prototypes,
+            wood: tree.wood.clone(),
+            wood_mesh: tree.wood_mesh.clone(),
+            material: tree.material,
+        }
+    }
+
+    /// Needles once placed.
+    pub fn placed_needle_count(&self) -> u64 {
+        self.placements
+            .iter()
+            .map(|p| self.prototypes.get(p.prototype as usize).map_or(0, |x| x.len() as u64))
+            .sum()
+    }
+
+    /// The flat tree: every placement's needles in the tree, as group `p`.
+    pub fn to_tree(&self) -> TreeInput {
+        let needles = self
+            .placements
+            .iter()
+            .enumerate()
+            .flat_map(|(p, placement)| {
+                self.prototypes[placement.prototype as usize]
+                    .iter()
+                    .map(move |n| placement.place_needle(n, p as u32))
+            })
+            .collect();
+        TreeInput {
+            name: self.name.clone(),
+            needles,
+            wood: self.wood.clone(),
+            wood_mesh: self.wood_mesh.clone(),
+            material: self.material,
+        }
+    }
+}
+
+/// The LOD record of a tree made of prototypes and placements (format 3).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrototypeRecord {
+    /// Name of the tree.
+    pub name: String,
+    /// The shared needle groups with their level-1 forests.
+    pub prototypes: Vec<Prototype>,
+    /// Where the prototypes stand.
+    pub placements: Vec<Placement>,
+    /// Level-2 merged lines over the placed prototype lines, in creation
+    /// order (see the module docs for their ids).
+    pub tree_merged: Vec<MergedLine>,
+    /// Trunk and branches as cylinders.
+    pub wood: Vec<WoodSegment>,
+    /// Trunk and branches as a triangle mesh (imported trees).
+    pub wood_mesh: TriangleMesh,
+    /// Appearance.
+    pub material: FoliageMaterial,
+    /// `Lmax`: most prism sides.
+    pub max_sides: u8,
+    /// How the record was made.
+    pub bake: BakeInfo,
+    // Derived by `from_parts`, never stored.
+    /// Placed needles before placement `p` (`placements + 1` entries).
+    needle_offset: Vec<u64>,
+    /// Level-1 merged lines of the placements before `p` (`placements + 1` entries).
+    merged_offset: Vec<u64>,
+    /// Parent of each level-2 node (placements, then `tree_merged`).
+    tree_parent: Vec<u32>,
+}
+
+impl PrototypeRecord {
+    /// Builds a record from its stored parts, checking every invariant the
+    /// cut relies on: valid prototypes, placements of existing prototypes
+    /// with finite, positive-scale transforms, at most
+    /// [`MAX_PLACED_NEEDLES`] placed needles, and a level-2 forest whose
+    /// children come first, have one parent each and errors at most the
+    /// parent's (placed errors, scaled).
+    #[allow(clippy::too_many_arguments)] // One argument per stored part, checked together.
+    pub fn from_parts(
+        name: String,
+        prototypes: Vec<Prototype>,
+        placements: Vec<Placement>,
+        tree_merged: Vec<MergedLine>,
+        wood: Vec<WoodSegment>,
+        wood_mesh: TriangleMesh,
+        material: FoliageMaterial,
+        max_sides: u8,
+        bake: BakeInfo,
+    ) -> Result<Self, RecordInvalid> {
+        if placements.is_empty() {
+            return Err(RecordInvalid::NoNeedles);
+        }
+        if !(super::metric::MIN_PRISM_SIDES..=super::metric::MAX_PRISM_SIDES).contains(&max_sides) {
+            return Err(RecordInvalid::MaxSides(max_sides));
+        }
+        for (k, prototype) in prototypes.iter().enumerate() {
+            prototype.validate().map_err(|problem| RecordInvalid::Prototype {
+                prototype: k,
+                problem: Box::new(problem),
+            })?;
+        }
+        let mut needle_offset = Vec::with_capacity(placements.len() + 1);
+        let mut merged_offset = Vec::with_capacity(placements.len() + 1);
+        let (mut needles, mut merged) = (0u64, 0u64);
+        for (p, placement) in placements.iter().enumerate() {
+            let Some(prototype) = prototypes.get(placement.prototype as usize) else {
+                return Err(RecordInvalid::BadPlacement(p));
+            };
+            if !placement.is_valid() {
+                return Err(RecordInvalid::BadPlacement(p));
+            }
+            needle_offset.push(needles);
+            merged_offset.push(merged);
+            needles += prototype.needles.len() as u64;
+            merged += prototype.merged.len() as u64;
+            if needles > MAX_PLACED_NEEDLES {
+                return Err(RecordInvalid::TooManyNeedles(needles));
+            }
+        }
+        needle_offset.push(needles);
+        merged_offset.push(merged);
+        check_appearance(&wood, &wood_mesh, &material, &bake)?;
+
+        let p_count = placements.len();
+        let mut tree_parent = vec![NO_PARENT; p_count + tree_merged.len()];
+        let mut record = Self {
+            name,
+            prototypes,
+            placements,
+            tree_merged: Vec::new(),
+            wood,
+            wood_mesh,
+            material,
+            max_sides,
+            bake,
+            needle_offset,
+            merged_offset,
+            tree_parent: Vec::new(),
+        };
+        for (k, line) in tree_merged.iter().enumerate() {
+            let id = p_count + k;
+            if !line.error.is_finite() {
+                return Err(RecordInvalid::NonFinite("merged line errors"));
+            }
+            let [c0, c1] = line.children.map(|c| c as usize);
+            if c0 == c1
+                || c0 >= id
+                || c1 >= id
+                || tree_parent[c0] != NO_PARENT
+                || tree_parent[c1] != NO_PARENT
+                || line.ends.iter().any(|&e| e as u64 >= 2 * needles)
+            {
+                return Err(RecordInvalid::BadReference(k));
+            }
+            tree_parent[c0] = id as u32;
+            tree_parent[c1] = id as u32;
+            for c in [c0, c1] {
+                let child_error = if c < p_count {
+                    record.placed_root_error(c)
+                } else {
+                    tree_merged[c - p_count].error
+                };
+                if line.error < child_error {
+                    return Err(RecordInvalid::ErrorNotMonotone(k));
+                }
+            }
+        }
+        record.tree_merged = tree_merged;
+        record.tree_parent = tree_parent;
+        Ok(record)
+    }
+
+    /// Needles once placed (the flattened tree's needle count).
+    pub fn needle_count(&self) -> u64 {
+        *self.needle_offset.last().unwrap_or(&0)
+    }
+
+    /// Needles stored in the prototypes.
+    pub fn prototype_needle_count(&self) -> u64 {
+        self.prototypes.iter().map(|p| p.needles.len() as u64).sum()
+    }
+
+    /// Placed needles before placement `p`: needle `i` of placement `p` is
+    /// needle `needle_offset(p) + i` of the flattened tree.
+    pub fn needle_offset(&self, placement: usize) -> u64 {
+        self.needle_offset[placement]
+    }
+
+    /// Error of placement `p`'s root line in the tree, metres.
+    pub fn placed_root_error(&self, placement: usize) -> f32 {
+        let pl = &self.placements[placement];
+        let prototype = &self.prototypes[pl.prototype as usize];
+        placed_error(prototype, prototype.root(), pl.scale)
+    }
+
+    /// Parent of level-2 node `node` (placements, then merged lines), or [`NO_PARENT`].
+    pub fn tree_parent(&self, node: u32) -> u32 {
+        self.tree_parent[node as usize]
+    }
+
+    /// Flattened node id of local node `node` of placement `p`.
+    fn flat_local(&self, placement: usize, node: u32) -> u32 {
+        let n = self.prototypes[self.placements[placement].prototype as usize]
+            .needles
+            .len() as u32;
+        if node < n {
+            (self.needle_offset[placement] + node as u64) as u32
+        } else {
+            (self.needle_count() + self.merged_offset[placement] + (node - n) as u64) as u32
+        }
+    }
+
+    /// Flattened node id of level-2 node `node`.
+    fn flat_tree_node(&self, node: u32) -> u32 {
+        let p_count = self.placements.len() as u32;
+        if node < p_count {
+            let prototype = &self.prototypes[self.placements[node as usize].prototype as usize];
+            self.flat_local(node as usize, prototype.root())
+        } else {
+            let level1 = *self.merged_offset.last().unwrap_or(&0);
+            (self.needle_count() + level1 + (node - p_count) as u64) as u32
+        }
+    }
+
+    /// The flat record of the same tree: every placement expanded (see the
+    /// module docs for its numbering). Its cut at any error equals
+    /// [`PrototypeRecord::cut`]'s.
+    pub fn flatten(&self) -> Result<LodRecord, RecordInvalid> {
+        let mut needles = Vec::with_capacity(self.needle_count() as usize);
+        for (p, placement) in self.placements.iter().enumerate() {
+            let prototype = &self.prototypes[placement.prototype as usize];
+            needles.extend(prototype.needles.iter().map(|n| placement.place_needle(n, p as u32)));
+        }
+        let level1 = *self.merged_offset.last().unwrap_or(&0) as usize;
+        let mut merged = Vec::with_capacity(level1 + self.tree_merged.len());
+        for (p, placement) in self.placements.iter().enumerate() {
+            let prototype = &self.prototypes[placement.prototype as usize];
+            let first_end = 2 * self.needle_offset[p] as u32;
+            merged.extend(prototype.merged.iter().map(|m| MergedLine {
+                ends: m.ends.map(|e| first_end + e),
+                children: m.children.map(|c| self.flat_local(p, c)),
+                error: m.error * placement.scale,
+            }));
+        }
+        merged.extend(self.tree_merged.iter().map(|m| MergedLine {
+            ends: m.ends,
+            children: m.children.map(|c| self.flat_tree_node(c)),
+            error: m.error,
+        }));
+        LodRecord::from_parts(
+            self.name.clone(),
+            needles,
+            merged,
+            self.wood.clone(),
+            self.wood_mesh.clone(),
+            self.material,
+            self.max_sides,
+            self.bake.clone(),
+        )
+    }
+
+    /// The cut at spatial error `e` (tree metres), walked down the level-2
+    /// forest and into the placed prototypes without expanding them; nodes
+    /// are named as in [`PrototypeRecord::flatten`]. A NaN or negative `e`
+    /// counts as 0, an infinite one as the largest finite error.
+    pub fn cut(&self, spatial_error: f32) -> Cut {
+        let e = if spatial_error > 0.0 {
+            spatial_error.min(f32::MAX)
+        } else {
+            0.0
+        };
+        let mut cut = Cut::default();
+        let p_count = self.placements.len() as u32;
+        let mut stack: Vec<u32> = (0..self.tree_parent.len() as u32)
+            .filter(|&k| self.tree_parent[k as usize] == NO_PARENT)
+            .collect();
+        while let Some(node) = stack.pop() {
+            if node < p_count {
+                self.push_placement(&mut cut, node as usize, e);
+                continue;
+            }
+            let line = &self.tree_merged[(node - p_count) as usize];
+            if line.error <= e {
+                cut.merged_lines.push(self.flat_tree_node(node));
+            } else {
+                stack.extend(line.children);
+            }
+        }
+        cut
+    }
+
+    /// Adds placement `p`'s part of the cut (its parent is known not to be in it).
+    fn push_placement(&self, cut: &mut Cut, placement: usize, e: f32) {
+        let pl = &self.placements[placement];
+        let prototype = &self.prototypes[pl.prototype as usize];
+        let n = prototype.needles.len() as u32;
+        let mut stack = vec![prototype.root()];
+        while let Some(node) = stack.pop() {
+            if node < n {
+                let radius = prototype.needles[node as usize].radius * pl.scale;
+                let flat = self.flat_local(placement, node);
+                match needle_form(relative_error(e, radius), self.max_sides) {
+                    NeedleForm::Line => cut.original_lines.push(flat),
+                    NeedleForm::Prism { sides } => cut.prisms.push((flat, sides)),
+                }
+            } else if placed_error(prototype, node, pl.scale) <= e {
+                cut.merged_lines.push(self.flat_local(placement, node));
+            } else {
+                stack.extend(prototype.merged[(node - n) as usize].children);
+            }
+        }
+    }
+
+    /// The same tree as prototypes: every group of a flat record a
+    /// prototype placed once as it is. The record's forest must have the
+    /// two levels every bake gives it: each group merged down to one line
+    /// by merges inside it, then group lines merged across groups
+    /// ([`RecordInvalid::NotTwoLevel`] otherwise).
+    pub fn from_flat(record: &LodRecord) -> Result<Self, RecordInvalid> {
+        const MIXED: u32 = u32::MAX;
+        let n = record.needle_count();
+        let groups = record.group_count();
+        let mut group_start = vec![0u32; groups + 1];
+        for needle in &record.needles {
+            group_start[needle.group as usize + 1] += 1;
+        }
+        for g in 0..groups {
+            group_start[g + 1] += group_start[g];
+        }
+        let mut prototypes: Vec<Prototype> = (0..groups)
+            .map(|g| Prototype {
+                needles: record.needles[group_start[g] as usize..group_start[g + 1] as usize]
+                    .iter()
+                    .map(|x| Needle { group: 0, ..*x })
+                    .collect(),
+                merged: Vec::new(),
+            })
+            .collect();
+        // A group's root so far: its first needle, then its latest level-1 line.
+        let mut group_root: Vec<u32> = group_start[..groups].to_vec();
+        // Per merged line: its group (`MIXED` across groups) and its index
+        // in its group's level-1 list or in level 2's.
+        let mut merged_group: Vec<u32> = Vec::with_capacity(record.merged.len());
+        let mut local_index: Vec<u32> = Vec::with_capacity(record.merged.len());
+        let mut level2: Vec<(usize, MergedLine)> = Vec::new();
+        let group_of = |node: u32, merged_group: &[u32]| {
+            if (node as usize) < n {
+                record.needles[node as usize].group
+            } else {
+                merged_group[node as usize - n]
+            }
+        };
+        for (k, line) in record.merged.iter().enumerate() {
+            let [g0, g1] = line.children.map(|c| group_of(c, &merged_group));
+            if g0 != g1 || g0 == MIXED {
+                merged_group.push(MIXED);
+                local_index.push(level2.len() as u32);
+                level2.push((k, *line));
+                continue;
+            }
+            let first = group_start[g0 as usize];
+            let prototype = &mut prototypes[g0 as usize];
+            let needles = prototype.needles.len() as u32;
+            let local = |c: u32| {
+                if (c as usize) < n {
+                    c - first
+                } else {
+                    needles + local_index[c as usize - n]
+                }
+            };
+            let ends = line.ends.map(|e| e.wrapping_sub(2 * first));
+            if ends.iter().any(|&e| e >= 2 * needles) {
+                return Err(RecordInvalid::NotTwoLevel(k));
+            }
+            let children = line.children.map(local);
+            merged_group.push(g0);
+            local_index.push(prototype.merged.len() as u32);
+            prototype.merged.push(MergedLine {
+                ends,
+                children,
+                error: line.error,
+            });
+            group_root[g0 as usize] = (n + k) as u32;
+        }
+        let tree_merged = level2
+            .iter()
+            .map(|&(k, line)| {
+                let child = |c: u32| match group_of(c, &merged_group) {
+                    MIXED => Some(groups as u32 + local_index[c as usize - n]),
+                    g if group_root[g as usize] == c => Some(g),
+                    _ => None,
+                };
+                match line.children.map(child) {
+                    [Some(a), Some(b)] => Ok(MergedLine {
+                        ends: line.ends,
+                        children: [a, b],
+                        error: line.error,
+                    }),
+                    _ => Err(RecordInvalid::NotTwoLevel(k)),
+                }
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Self::from_parts(
+            record.name.clone(),
+            prototypes,
+            (0..groups as u32).map(Placement::identity).collect(),
+            tree_merged,
+            record.wood.clone(),
+            record.wood_mesh.clone(),
+            record.material,
+            record.max_sides,
+            record.bake.clone(),
+        )
+    }
+}
+
+/// Error of local node `node` of `prototype` placed at `scale`, tree metres.
+/// The one product every placed error goes through, so the flattened record
+/// and the prototype cut compare the very same numbers.
+fn placed_error(prototype: &Prototype, node: u32, scale: f32) -> f32 {
+    prototype.node_error(node) * scale
+}
