@@ -2,13 +2,17 @@
 
 use super::{BakeArgs, CutArgs, ExportArgs, InspectArgs, PreviewArgs, ViewArgs};
 use crate::export::write_cut_glb;
-use crate::generate::{GenerateOptions, Species, generate};
+use crate::generate::{GenerateOptions, Species, generate, generate_prototypes};
 use crate::import::{ImportOptions, ImportReport, import_gltf};
+use crate::model::file::FORMAT_VERSION;
 use crate::model::gpu_layout::{LINE_BANDS, line_bands, lines_processed};
 use crate::model::merge::PartnerSearch;
 use crate::model::metric::{PixelError, ViewParams, line_opacity, relative_error};
 use crate::model::record::{ErrorRange, LodRecord};
-use crate::model::{BakeOptions, BakeProgress, BakeStage, MergeWeights, read_record, write_record};
+use crate::model::{
+    BakeOptions, BakeProgress, BakeStage, MergeWeights, PrototypeInput, PrototypeRecord, read_record,
+    write_prototype_record,
+};
 use crate::preview::{PreviewCamera, PreviewOptions, cut_primitives, mesh_triangles, render_preview_scene};
 use anyhow::{Context, bail};
 use glam::Vec3;
@@ -57,8 +61,14 @@ impl BakeProgress for BakeBars {
 #[derive(Serialize)]
 struct BakeReport<'a> {
     output: &'a Path,
+    /// Needles once placed.
     needles: usize,
+    /// Phyllotaxy groups: placed prototypes.
     groups: usize,
+    /// Shared prototypes.
+    prototypes: usize,
+    /// Needles stored in the prototypes.
+    prototype_needles: usize,
     lines_merged: usize,
     bytes: u64,
     bytes_per_needle: f64,
@@ -89,15 +99,17 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
                 ),
                 _ => bail!("--needles with --preset takes one needle count"),
             };
-            let mut tree = generate(
-                species,
-                &GenerateOptions {
-                    seed: args.seed,
-                    target_needles,
-                },
-            );
-            tree.name = species.name().to_string();
-            tree
+            let options = GenerateOptions {
+                seed: args.seed,
+                target_needles,
+            };
+            let mut input = if args.flat {
+                PrototypeInput::from_tree(&generate(species, &options))
+            } else {
+                generate_prototypes(species, &options)
+            };
+            input.name = species.name().to_string();
+            input
         }
         (None, Some(path)) => {
             let options = ImportOptions {
@@ -111,7 +123,7 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
                 print_import(path, &report);
             }
             import_report = Some(report);
-            tree
+            PrototypeInput::from_tree(&tree)
         }
         (None, None) => bail!("give an input file or --preset NAME"),
     };
@@ -138,7 +150,8 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let bars = BakeBars::new();
     let timer = crate::model::StageTimer::new(&bars);
     let bake_started = Instant::now();
-    let mut record = crate::model::bake(&input, &options, &timer).with_context(|| format!("baking {}", input.name))?;
+    let mut record =
+        crate::model::bake_prototypes(&input, &options, &timer).with_context(|| format!("baking {}", input.name))?;
     let stages = timer.seconds(bake_started.elapsed().as_secs_f64());
     bars.groups.finish_and_clear();
     bars.tree.finish_and_clear();
@@ -148,15 +161,18 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         (None, None) => String::new(),
     };
     let write_started = Instant::now();
-    let bytes = write_record(&record, &args.output)
+    let bytes = write_prototype_record(&record, &args.output)
         .with_context(|| format!("{}: cannot write record", args.output.display()))?;
+    let needles = record.needle_count() as usize;
     let report = BakeReport {
         output: &args.output,
-        needles: record.needle_count(),
-        groups: record.group_count(),
-        lines_merged: record.merged.len(),
+        needles,
+        groups: record.placements.len(),
+        prototypes: record.prototypes.len(),
+        prototype_needles: record.prototype_needle_count() as usize,
+        lines_merged: needles - record.placements.len() + record.tree_merged.len(),
         bytes,
-        bytes_per_needle: bytes as f64 / record.needle_count() as f64,
+        bytes_per_needle: bytes as f64 / needles as f64,
         generate_seconds,
         bake_seconds: record.bake.bake_seconds.unwrap_or(0.0),
         stages,
@@ -168,9 +184,11 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         eprintln!(
-            "baked {} needles in {} groups ({} merged lines) in {:.2} s → {} ({} bytes, {:.1} bytes/needle)",
+            "baked {} needles in {} groups ({} prototypes of {} needles) ({} merged lines) in {:.2} s → {} ({} bytes, {:.1} bytes/needle)",
             report.needles,
             report.groups,
+            report.prototypes,
+            report.prototype_needles,
             report.lines_merged,
             report.bake_seconds,
             args.output.display(),
@@ -228,10 +246,33 @@ fn print_import(path: &Path, report: &ImportReport) {
     }
 }
 
-fn load(path: &Path) -> anyhow::Result<(LodRecord, u64)> {
-    let record = read_record(path).with_context(|| format!("{}: cannot load record", path.display()))?;
-    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
-    Ok((record, bytes))
+fn load(path: &Path) -> anyhow::Result<LodRecord> {
+    read_record(path).with_context(|| format!("{}: cannot load record", path.display()))
+}
+
+/// `conifer upgrade`: rewrites records in the current format, in place.
+pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
+    for path in &args.files {
+        let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let version = bytes
+            .get(8..12)
+            .map(|v| u32::from_le_bytes(v.try_into().expect("4 bytes")));
+        let record: PrototypeRecord = crate::model::decode_prototype_record(&bytes)
+            .with_context(|| format!("{}: cannot load record", path.display()))?;
+        if version == Some(FORMAT_VERSION) {
+            eprintln!("{}: already format {FORMAT_VERSION}", path.display());
+            continue;
+        }
+        let written = write_prototype_record(&record, path)
+            .with_context(|| format!("{}: cannot write record", path.display()))?;
+        eprintln!(
+            "{}: format {} → {FORMAT_VERSION}, {} → {written} bytes",
+            path.display(),
+            version.unwrap_or(0),
+            bytes.len()
+        );
+    }
+    Ok(())
 }
 
 /// Smallest, median and largest of a set of numbers.
@@ -244,10 +285,16 @@ pub struct InspectReport {
     pub name: String,
     /// Where the tree came from.
     pub source: String,
-    /// Needle count.
+    /// Record format version of the file (older ones are converted on load).
+    pub format_version: u32,
+    /// Needle count (once the prototypes are placed).
     pub needles: usize,
-    /// Phyllotaxy groups.
+    /// Phyllotaxy groups (placed prototypes).
     pub groups: usize,
+    /// Shared prototypes.
+    pub prototypes: usize,
+    /// Needles stored in the prototypes.
+    pub prototype_needles: u64,
     /// Original lines (one per needle).
     pub lines_original: usize,
     /// Merged lines.
@@ -281,7 +328,14 @@ pub struct InspectReport {
 }
 
 pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
-    let (record, bytes) = load(&args.file)?;
+    let path = &args.file;
+    let file = std::fs::read(path).with_context(|| format!("{}: cannot load record", path.display()))?;
+    let prototypes = crate::model::decode_prototype_record(&file)
+        .with_context(|| format!("{}: cannot load record", path.display()))?;
+    let record = prototypes
+        .flatten()
+        .with_context(|| format!("{}: cannot load record", path.display()))?;
+    let bytes = file.len() as u64;
     let ranges = record.part_ranges();
     let pair = |r: ErrorRange| [r.min, r.max];
     let mut error_ranges = BTreeMap::new();
@@ -299,8 +353,11 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
     let report = InspectReport {
         name: record.name.clone(),
         source: record.bake.source.clone(),
+        format_version: u32::from_le_bytes(file[8..12].try_into().expect("a decoded record has a header")),
         needles: record.needle_count(),
         groups: record.group_count(),
+        prototypes: prototypes.prototypes.len(),
+        prototype_needles: prototypes.prototype_needle_count(),
         lines_original: record.needle_count(),
         lines_merged: record.merged.len(),
         roots: record.roots().len(),
@@ -322,9 +379,15 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
     } else {
         println!("{} ({})", report.name, report.source);
         println!(
-            "  needles {} in {} groups, {} merged lines, {} roots",
-            report.needles, report.groups, report.lines_merged, report.roots
+            "  needles {} in {} groups ({} prototypes of {} needles), {} merged lines, {} roots",
+            report.needles,
+            report.groups,
+            report.prototypes,
+            report.prototype_needles,
+            report.lines_merged,
+            report.roots
         );
+        println!("  format version {}", report.format_version);
         for (part, [min, max]) in &report.error_ranges {
             println!("  {part:>15}: error {min:.6} .. {max:.6} m");
         }
@@ -407,7 +470,7 @@ pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
 
 pub(super) fn cut(args: &CutArgs) -> anyhow::Result<()> {
     check_view(&args.view)?;
-    let (record, _) = load(&args.file)?;
+    let record = load(&args.file)?;
     let report = cut_report(&record, &args.view);
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -473,7 +536,7 @@ pub(super) fn picture_view(picture: &super::PictureArgs) -> anyhow::Result<(u32,
 pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
     let (width, height, view) = picture_view(&args.picture)?;
     let picture = &args.picture;
-    let (record, _) = load(&args.file)?;
+    let record = load(&args.file)?;
     let e = view_params(&view).spatial_error(picture.distance);
     let (lo, hi) = record.bounds();
     let centre = (lo + hi) * 0.5;
@@ -517,7 +580,7 @@ pub(super) fn export(args: &ExportArgs) -> anyhow::Result<()> {
     if !(args.transition > 0.0 && args.transition <= 1.0) {
         bail!("--transition must be in (0, 1], got {}", args.transition);
     }
-    let (record, _) = load(&args.file)?;
+    let record = load(&args.file)?;
     let report = write_cut_glb(&record, args.error, args.transition, &args.output)
         .with_context(|| format!("{}: cannot write glTF", args.output.display()))?;
     if args.json {

@@ -33,6 +33,9 @@ pub enum Command {
     Bake(BakeArgs),
     /// Print what a record holds.
     Inspect(InspectArgs),
+    /// Rewrite records of an older format version in the current one, in place
+    /// (older versions are read and converted; nothing else changes).
+    Upgrade(UpgradeArgs),
     /// Print the cut (what is drawn) of a record at a viewing distance.
     Cut(CutArgs),
     /// Render the cut at a viewing distance to a PNG with the CPU preview rasterizer.
@@ -65,6 +68,10 @@ pub struct BakeArgs {
     /// Seed of the procedural tree.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// With --preset: grow every needle on its own (the flat generator) instead of
+    /// placing a few dozen shared shoot prototypes.
+    #[arg(long, requires = "preset")]
+    pub flat: bool,
     /// With --preset: the approximate needle count N of the procedural tree (default: the
     /// preset's own). With a glTF input: a node, mesh or material NAME holding needle geometry
     /// (repeatable; any case; `*` wildcards); default: names containing leaf/leaves/needle/foliage.
@@ -101,6 +108,14 @@ pub struct InspectArgs {
     /// Print one JSON object.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Arguments of `conifer upgrade`.
+#[derive(Debug, clap::Args)]
+pub struct UpgradeArgs {
+    /// The records to rewrite.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
 }
 
 /// How a view is described on the command line.
@@ -200,6 +215,7 @@ where
     match cli.command {
         Command::Bake(args) => commands::bake(&args),
         Command::Inspect(args) => commands::inspect(&args),
+        Command::Upgrade(args) => commands::upgrade(&args),
         Command::Cut(args) => commands::cut(&args),
         Command::Preview(args) => commands::preview(&args),
         Command::Export(args) => commands::export(&args),

@@ -4,13 +4,13 @@
 
 use std::f32::consts::{FRAC_PI_2, TAU};
 
-use glam::Vec3;
+use glam::{Mat3, Quat, Vec3};
 
 use super::geometry::{GOLDEN_ANGLE, UP, bend, cone_direction, perpendicular_toward, rotate_around};
 use super::params::{FoliageParams, Phyllotaxy};
 use super::random::TreeRng;
 use super::skeleton::FoliageSite;
-use crate::model::Needle;
+use crate::model::{Needle, Placement};
 
 /// Radius of a young shoot: needles attach on its surface.
 const SHOOT_RADIUS: f32 = 0.0015;
@@ -27,18 +27,118 @@ pub(crate) fn grow_needles(
     let mut placer = Placer {
         params,
         rng,
+        up: UP,
         needles: Vec::with_capacity(total_units * needles_per_unit(params) as usize),
         next_group: 0,
         spray: None,
     };
     for (site, &count) in sites.iter().zip(&units) {
-        match params.phyllotaxy {
-            Phyllotaxy::Fascicle { needles, spread, twist } => placer.fascicles(site, count, needles, spread, twist),
-            Phyllotaxy::Spiral => placer.spiral(site, count),
-            Phyllotaxy::Scales => placer.scales(site, count),
-        }
+        placer.grow(site, count);
     }
     placer.needles
+}
+
+/// Prototype variants grown per unit count and vigour class.
+const VARIANTS: u32 = 3;
+
+/// Ratio between neighbouring unit counts of the prototype library.
+const UNIT_STEP: f32 = 1.25;
+
+/// Shoots of the prototype library: `(units, vigour class, variant)`.
+type ShootKey = (u32, u32, u32);
+
+/// Covers `sites` with about `target` needles as shared shoot prototypes.
+///
+/// Every site gets its unit count as in [`grow_needles`], rounded to a
+/// ladder of counts (steps of 25 %, the rounding errors diffused along the
+/// sites so the total is kept) and drawn from [`VARIANTS`] variants and two
+/// vigour classes. Each prototype is grown once on a canonical shoot (from
+/// the origin along +Y, its upper side +Z, as long as the median site that
+/// uses it); a site places it with the rotation onto its own axis and upper
+/// side and the scale of its length. The species' droop and the spruce's
+/// needles turning from beneath the shoot are grown toward the canonical
+/// shoot's upper side, which is the world's up for the level shoots that
+/// carry most foliage.
+pub(crate) fn grow_shoot_prototypes(
+    sites: &[FoliageSite],
+    params: &FoliageParams,
+    target: usize,
+    rng: &mut TreeRng,
+) -> (Vec<Vec<Needle>>, Vec<Placement>) {
+    let units = units_per_site(sites, params, target);
+    let largest = units.iter().copied().max().unwrap_or(0);
+    let mut ladder = vec![1u32];
+    while *ladder.last().expect("not empty") < largest {
+        let last = *ladder.last().expect("not empty");
+        ladder.push(((last as f32 * UNIT_STEP).round() as u32).max(last + 1));
+    }
+    // Each site's key, the rounding error carried to the next site.
+    let mut carry = 0.0f32;
+    let mut keyed: Vec<(usize, ShootKey)> = Vec::new();
+    for (index, (site, &count)) in sites.iter().zip(&units).enumerate() {
+        if count == 0 {
+            continue;
+        }
+        let wanted = count as f32 + carry;
+        let rung = ladder
+            .iter()
+            .copied()
+            .min_by(|a, b| (*a as f32 - wanted).abs().total_cmp(&(*b as f32 - wanted).abs()))
+            .unwrap_or(1);
+        carry = wanted - rung as f32;
+        let vigor_class = u32::from(site.vigor >= 0.85);
+        keyed.push((index, (rung, vigor_class, rng.count((0, VARIANTS - 1)))));
+    }
+    // One prototype per key in use, as long as its median site.
+    let mut library: std::collections::BTreeMap<ShootKey, Vec<usize>> = std::collections::BTreeMap::new();
+    for &(index, key) in &keyed {
+        library.entry(key).or_default().push(index);
+    }
+    let mut prototype_of = std::collections::HashMap::new();
+    let mut prototypes = Vec::with_capacity(library.len());
+    for (key, members) in &library {
+        let mut lengths: Vec<f32> = members.iter().map(|&i| sites[i].start.distance(sites[i].end)).collect();
+        lengths.sort_by(f32::total_cmp);
+        let length = lengths[lengths.len() / 2].max(1e-3);
+        let mut vigors: Vec<f32> = members.iter().map(|&i| sites[i].vigor).collect();
+        vigors.sort_by(f32::total_cmp);
+        let canonical = FoliageSite {
+            start: Vec3::ZERO,
+            end: Vec3::Y * length,
+            up: Vec3::Z,
+            weight: length,
+            group_key: 0,
+            vigor: vigors[vigors.len() / 2],
+        };
+        let mut placer = Placer {
+            params,
+            rng: &mut *rng,
+            up: Vec3::Z,
+            needles: Vec::new(),
+            next_group: 0,
+            spray: None,
+        };
+        placer.grow(&canonical, key.0);
+        prototype_of.insert(*key, (prototypes.len() as u32, length));
+        prototypes.push(placer.needles);
+    }
+    let placements = keyed
+        .iter()
+        .map(|&(index, key)| {
+            let site = &sites[index];
+            let (prototype, length) = prototype_of[&key];
+            let axis = site.axis();
+            let up = perpendicular_toward(axis, site.up);
+            let frame = Mat3::from_cols(axis.cross(up), axis, up);
+            Placement {
+                prototype,
+                rotation: Quat::from_mat3(&frame).normalize(),
+                translation: site.start,
+                scale: (site.start.distance(site.end) / length).max(1e-3),
+            }
+        })
+        .collect();
+    (prototypes, placements)
 }
 
 /// Needles per placed unit: a fascicle's needles, or 1.
@@ -106,6 +206,9 @@ fn diffuse(sites: &[FoliageSite], density: f32, floor: u32) -> Vec<u32> {
 struct Placer<'a> {
     params: &'a FoliageParams,
     rng: &'a mut TreeRng,
+    /// The world's up in the frame needles are grown in (droop, needles
+    /// turning away from beneath the shoot).
+    up: Vec3,
     needles: Vec<Needle>,
     next_group: u32,
     /// Spray key and size of the scale-leaf group being filled.
@@ -113,6 +216,15 @@ struct Placer<'a> {
 }
 
 impl Placer<'_> {
+    /// `count` units of the species' phyllotaxy on `site`.
+    fn grow(&mut self, site: &FoliageSite, count: u32) {
+        match self.params.phyllotaxy {
+            Phyllotaxy::Fascicle { needles, spread, twist } => self.fascicles(site, count, needles, spread, twist),
+            Phyllotaxy::Spiral => self.spiral(site, count),
+            Phyllotaxy::Scales => self.scales(site, count),
+        }
+    }
+
     /// Position of unit `index` of `count` along the site, 0 at its base:
     /// evenly spaced with jitter, crowded toward the tip for tufted species.
     fn position(&mut self, site: &FoliageSite, index: u32, count: u32) -> (f32, Vec3) {
@@ -150,7 +262,7 @@ impl Placer<'_> {
             let radial = cone_direction(axis, site.up, FRAC_PI_2, phase + index as f32 * GOLDEN_ANGLE);
             let divergence = self.rng.range(self.params.divergence);
             let bundle = (axis * divergence.cos() + radial * divergence.sin()).normalize();
-            let bundle = bend(bundle, -UP, self.params.droop * (0.6 + 0.4 * self.rng.unit()));
+            let bundle = bend(bundle, -self.up, self.params.droop * (0.6 + 0.4 * self.rng.unit()));
             let length = self.length(site);
             let roll = self.rng.unit() * TAU;
             let group = self.new_group();
@@ -180,9 +292,9 @@ impl Placer<'_> {
         for index in 0..count {
             let (t, pos) = self.position(site, index, count);
             let mut radial = cone_direction(axis, site.up, FRAC_PI_2, phase + index as f32 * GOLDEN_ANGLE);
-            let downward = -radial.y;
+            let downward = -radial.dot(self.up);
             if downward > 0.0 {
-                radial = perpendicular_toward(axis, radial + UP * (0.8 * downward));
+                radial = perpendicular_toward(axis, radial + self.up * (0.8 * downward));
             }
             let divergence = self.rng.range(self.params.divergence);
             let dir = (axis * divergence.cos() + radial * divergence.sin()).normalize();

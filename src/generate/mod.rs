@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 
 use self::params::SpeciesParams;
 use self::random::{Stream, TreeRng};
-use crate::model::TreeInput;
+use crate::model::{PrototypeInput, TreeInput};
 
 /// The conifer presets (after the paper's species).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -176,6 +176,33 @@ pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
     TreeInput {
         name: format!("{}-s{}", species.name(), options.seed),
         needles,
+        wood: skeleton.wood,
+        wood_mesh: Default::default(),
+        material: params.material,
+    }
+}
+
+/// Grows one tree of `species` as shared shoot prototypes placed on its
+/// foliage sites: the same skeleton and about the same needles as
+/// [`generate`], but each shoot's needles are one of a few dozen prototypes
+/// (by needle count, vigour and variant) placed, rotated and scaled onto the
+/// shoot, so the record and the GPU hold them once.
+pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> PrototypeInput {
+    let params = species.params();
+    let skeleton = skeleton::grow_skeleton(&params, &mut TreeRng::new(options.seed, Stream::Skeleton));
+    let target = options
+        .target_needles
+        .unwrap_or_else(|| default_needle_count(&params, options.seed));
+    let (prototypes, placements) = foliage::grow_shoot_prototypes(
+        &skeleton.sites,
+        &params.foliage,
+        target,
+        &mut TreeRng::new(options.seed, Stream::Foliage),
+    );
+    PrototypeInput {
+        name: format!("{}-s{}", species.name(), options.seed),
+        prototypes,
+        placements,
         wood: skeleton.wood,
         wood_mesh: Default::default(),
         material: params.material,

@@ -227,3 +227,65 @@ fn species_names_round_trip() {
     let error = "larch".parse::<Species>().unwrap_err().to_string();
     assert!(error.contains("larch") && error.contains("norway-spruce"), "{error}");
 }
+
+#[test]
+fn shoot_prototypes_grow_the_same_tree_from_a_few_dozen_shoots() {
+    use crate::model::needle::bounds;
+    for species in Species::ALL {
+        for target in [20_000usize, 200_000] {
+            let options = GenerateOptions {
+                seed: 5,
+                target_needles: Some(target),
+            };
+            let input = generate_prototypes(species, &options);
+            assert_eq!(
+                input,
+                generate_prototypes(species, &options),
+                "{species}: deterministic"
+            );
+            let placed = input.placed_needle_count() as f64;
+            let stored: usize = input.prototypes.iter().map(Vec::len).sum();
+            eprintln!(
+                "{species} {target}: {} prototypes ({stored} needles) placed {} times = {placed} needles",
+                input.prototypes.len(),
+                input.placements.len()
+            );
+            assert!(
+                (placed / target as f64 - 1.0).abs() < 0.03,
+                "{species}: {placed} placed needles for {target}"
+            );
+            assert!(
+                input.prototypes.len() <= 120,
+                "{species}: {} prototypes",
+                input.prototypes.len()
+            );
+            assert!(
+                stored * 10 < placed as usize,
+                "{species}: {stored} stored for {placed} placed"
+            );
+            assert!(input.placements.iter().all(|p| p.is_valid()));
+            // The same crown as the flat generator's, within a few centimetres.
+            let flat = generate(species, &options);
+            let tree = input.to_tree();
+            assert!(tree.needles.iter().all(Needle::is_valid));
+            let (lo, hi) = bounds(tree.needles.iter().flat_map(|n| [n.base, n.tip])).unwrap();
+            let (flat_lo, flat_hi) = flat.needle_bounds().unwrap();
+            let size = (flat_hi - flat_lo).length();
+            assert!(
+                (lo - flat_lo).length() < 0.05 * size && (hi - flat_hi).length() < 0.05 * size,
+                "{species}: bounds {lo}..{hi} against {flat_lo}..{flat_hi}"
+            );
+            // Needle lengths keep the species' range (scales stay near 1).
+            let mut lengths: Vec<f32> = tree.needles.iter().map(Needle::length).collect();
+            let mut flat_lengths: Vec<f32> = flat.needles.iter().map(Needle::length).collect();
+            lengths.sort_by(f32::total_cmp);
+            flat_lengths.sort_by(f32::total_cmp);
+            let median = lengths[lengths.len() / 2];
+            let flat_median = flat_lengths[flat_lengths.len() / 2];
+            assert!(
+                (median / flat_median - 1.0).abs() < 0.15,
+                "{species}: median needle {median} against {flat_median}"
+            );
+        }
+    }
+}

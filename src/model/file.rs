@@ -191,16 +191,19 @@ struct Payload {
     weights: [f32; 3],
     max_sides: u8,
     material: FoliageMaterial,
-    prototypes: Vec<StoredPrototype>,
+    prototypes: StoredPrototypes,
     placements: Vec<StoredPlacement>,
     tree_merged: Vec<MergedEntry>,
     wood: Vec<[f32; 8]>,
     wood_mesh: StoredMesh,
 }
 
-/// A prototype as stored: its needles and its level-1 merged lines.
+/// Every prototype's needles, one after the other, and their level-1
+/// merged lines (a prototype of `n` needles has `n − 1`, so only the needle
+/// counts are stored).
 #[derive(Serialize, Deserialize)]
-struct StoredPrototype {
+struct StoredPrototypes {
+    needle_counts: Vec<u32>,
     bases: Vec<[f32; 3]>,
     tips: Vec<[f32; 3]>,
     radii: Vec<f32>,
@@ -208,10 +211,15 @@ struct StoredPrototype {
     merged: Vec<MergedEntry>,
 }
 
-/// A placement as stored: the identity costs its prototype id alone.
+/// A placement as stored: the identity costs a byte or its prototype id.
 #[derive(Serialize, Deserialize)]
 enum StoredPlacement {
+    /// The prototype after the previous placement's (the first: prototype
+    /// 0), as it is: a flat tree's groups cost a byte each.
+    NextIdentity,
+    /// A prototype as it is.
     Identity(u32),
+    /// A prototype rotated, scaled and moved.
     Similarity {
         prototype: u32,
         rotation: [f32; 4],
@@ -221,21 +229,25 @@ enum StoredPlacement {
 }
 
 impl StoredPlacement {
-    fn encode(p: &Placement) -> Self {
-        if p.is_identity() {
-            Self::Identity(p.prototype)
-        } else {
+    /// `previous`: the prototype of the placement before, if any.
+    fn encode(p: &Placement, previous: Option<u32>) -> Self {
+        if !p.is_identity() {
             Self::Similarity {
                 prototype: p.prototype,
                 rotation: p.rotation.to_array(),
                 translation: p.translation.to_array(),
                 scale: p.scale,
             }
+        } else if previous.map_or(0, |k| k.wrapping_add(1)) == p.prototype {
+            Self::NextIdentity
+        } else {
+            Self::Identity(p.prototype)
         }
     }
 
-    fn decode(&self) -> Placement {
+    fn decode(&self, previous: Option<u32>) -> Placement {
         match *self {
+            Self::NextIdentity => Placement::identity(previous.map_or(0, |k| k.wrapping_add(1))),
             Self::Identity(prototype) => Placement::identity(prototype),
             Self::Similarity {
                 prototype,
@@ -432,21 +444,37 @@ fn node_ends(needles: usize, merged: &[MergedLine], node: u32) -> Option<[Endpoi
 
 /// Encodes a tree of prototypes into the bytes of a record file.
 pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, RecordError> {
-    let mut prototypes = Vec::with_capacity(record.prototypes.len());
+    let all_needles: Vec<Needle> = record
+        .prototypes
+        .iter()
+        .flat_map(|p| p.needles.iter().copied())
+        .collect();
+    let (bases, tips, radii, normals) = encode_needles(&all_needles);
+    let mut merged = Vec::with_capacity(all_needles.len());
     for prototype in &record.prototypes {
         let n = prototype.needles.len();
-        let (bases, tips, radii, normals) = encode_needles(&prototype.needles);
-        let merged = encode_merged(&prototype.merged, n as u32, |c, earlier| {
+        merged.extend(encode_merged(&prototype.merged, n as u32, |c, earlier| {
             node_ends(n, earlier, c).unwrap_or([u32::MAX; 2])
-        })?;
-        prototypes.push(StoredPrototype {
-            bases,
-            tips,
-            radii,
-            normals,
-            merged,
-        });
+        })?);
     }
+    let prototypes = StoredPrototypes {
+        needle_counts: record.prototypes.iter().map(|p| p.needles.len() as u32).collect(),
+        bases,
+        tips,
+        radii,
+        normals,
+        merged,
+    };
+    let mut previous = None;
+    let placements = record
+        .placements
+        .iter()
+        .map(|p| {
+            let stored = StoredPlacement::encode(p, previous);
+            previous = Some(p.prototype);
+            stored
+        })
+        .collect();
     let p_count = record.placements.len() as u32;
     let tree_merged = encode_merged(&record.tree_merged, p_count, |c, earlier| {
         if c < p_count {
@@ -464,7 +492,7 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         max_sides: record.max_sides,
         material: record.material,
         prototypes,
-        placements: record.placements.iter().map(StoredPlacement::encode).collect(),
+        placements,
         tree_merged,
         wood: encode_wood(&record.wood),
         wood_mesh: StoredMesh::encode(&record.wood_mesh),
@@ -559,23 +587,49 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
 }
 
 fn payload_to_prototype_record(p: Payload) -> Result<PrototypeRecord, RecordError> {
-    let mut prototypes = Vec::with_capacity(p.prototypes.len());
-    for (k, stored) in p.prototypes.iter().enumerate() {
-        let in_prototype = |problem: RecordError| match problem {
-            RecordError::Invalid(problem) => RecordError::Invalid(RecordInvalid::Prototype {
-                prototype: k,
-                problem: Box::new(problem),
-            }),
-            other => other,
-        };
-        let needles = decode_needles(&stored.bases, &stored.tips, &stored.radii, &stored.normals, |_| 0)?;
-        let n = needles.len();
+    let stored = &p.prototypes;
+    let all_needles = decode_needles(&stored.bases, &stored.tips, &stored.radii, &stored.normals, |_| 0)?;
+    let needle_total: u64 = stored.needle_counts.iter().map(|&c| c as u64).sum();
+    let merged_total = needle_total.saturating_sub(stored.needle_counts.len() as u64);
+    if needle_total != all_needles.len() as u64
+        || stored.needle_counts.contains(&0)
+        || merged_total != stored.merged.len() as u64
+    {
+        return Err(RecordError::Malformed(
+            "prototype needle counts do not add up to the needles and merged lines stored".into(),
+        ));
+    }
+    let mut prototypes = Vec::with_capacity(stored.needle_counts.len());
+    let (mut first_needle, mut first_merged) = (0usize, 0usize);
+    for (k, &count) in stored.needle_counts.iter().enumerate() {
+        let n = count as usize;
+        let needles = all_needles[first_needle..first_needle + n].to_vec();
+        let entries = &stored.merged[first_merged..first_merged + n - 1];
         let merged =
-            decode_merged(&stored.merged, n as u64, |c, earlier| node_ends(n, earlier, c)).map_err(in_prototype)?;
+            decode_merged(entries, n as u64, |c, earlier| node_ends(n, earlier, c)).map_err(
+                |problem| match problem {
+                    RecordError::Invalid(problem) => RecordError::Invalid(RecordInvalid::Prototype {
+                        prototype: k,
+                        problem: Box::new(problem),
+                    }),
+                    other => other,
+                },
+            )?;
         prototypes.push(Prototype { needles, merged });
+        first_needle += n;
+        first_merged += n - 1;
     }
     // Where each placement's needles start, checked before any id is used.
-    let placements: Vec<Placement> = p.placements.iter().map(StoredPlacement::decode).collect();
+    let mut previous = None;
+    let placements: Vec<Placement> = p
+        .placements
+        .iter()
+        .map(|stored| {
+            let placement = stored.decode(previous);
+            previous = Some(placement.prototype);
+            placement
+        })
+        .collect();
     let mut first_end = Vec::with_capacity(placements.len());
     let mut needles = 0u64;
     for (index, placement) in placements.iter().enumerate() {
@@ -695,6 +749,160 @@ pub fn read_prototype_record(path: &Path) -> Result<PrototypeRecord, RecordError
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A payload of one three-needle prototype placed `placements` times.
+    fn payload(placements: Vec<StoredPlacement>) -> Payload {
+        let needle = |k: f32| Needle {
+            base: Vec3::ZERO,
+            tip: Vec3::new(k * 0.01, 0.05, 0.0),
+            radius: 0.001,
+            normal: Vec3::Z,
+            group: 0,
+        };
+        let prototype = Prototype {
+            needles: vec![needle(0.0), needle(1.0), needle(2.0)],
+            merged: Vec::new(),
+        };
+        let (bases, tips, radii, normals) = encode_needles(&prototype.needles);
+        let entry = |back: [u32; 2]| MergedEntry {
+            back,
+            ends: 0b0100,
+            error: 0.05,
+        };
+        Payload {
+            name: "hostile".into(),
+            source: String::new(),
+            bake_seconds: None,
+            weights: [0.25, 0.25, 0.5],
+            max_sides: 8,
+            material: FoliageMaterial::default(),
+            prototypes: StoredPrototypes {
+                needle_counts: vec![3],
+                bases,
+                tips,
+                radii,
+                normals,
+                merged: vec![entry([3, 2]), entry([2, 1])],
+            },
+            placements,
+            tree_merged: Vec::new(),
+            wood: Vec::new(),
+            wood_mesh: StoredMesh::default(),
+        }
+    }
+
+    /// A well-formed header around `body`.
+    fn file(body: &[u8]) -> Vec<u8> {
+        let mut bytes = MAGIC.to_vec();
+        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
+        bytes.extend_from_slice(body);
+        bytes
+    }
+
+    fn decode(payload: &Payload) -> Result<PrototypeRecord, RecordError> {
+        decode_prototype_record(&file(&postcard::to_allocvec(payload).unwrap()))
+    }
+
+    #[test]
+    fn a_well_formed_payload_decodes() {
+        let record = decode(&payload(vec![StoredPlacement::NextIdentity])).unwrap();
+        assert_eq!((record.prototypes.len(), record.needle_count()), (1, 3));
+    }
+
+    #[test]
+    fn unknown_prototype_ids_are_bad_placements() {
+        for placements in [
+            vec![StoredPlacement::NextIdentity, StoredPlacement::NextIdentity],
+            vec![StoredPlacement::Identity(0), StoredPlacement::Identity(u32::MAX)],
+            vec![
+                StoredPlacement::NextIdentity,
+                StoredPlacement::Similarity {
+                    prototype: 7,
+                    rotation: [0.0, 0.0, 0.0, 1.0],
+                    translation: [0.0; 3],
+                    scale: 1.0,
+                },
+            ],
+        ] {
+            assert!(matches!(
+                decode(&payload(placements)),
+                Err(RecordError::Invalid(RecordInvalid::BadPlacement(1)))
+            ));
+        }
+    }
+
+    #[test]
+    fn non_finite_or_degenerate_transforms_are_bad_placements() {
+        for (rotation, scale) in [
+            ([f32::NAN, 0.0, 0.0, 1.0], 1.0),
+            ([0.0, 0.0, 0.0, 0.0], 1.0),
+            ([0.0, 0.0, 0.0, 1.0], 0.0),
+            ([0.0, 0.0, 0.0, 1.0], f32::INFINITY),
+        ] {
+            let placement = StoredPlacement::Similarity {
+                prototype: 0,
+                rotation,
+                translation: [0.0; 3],
+                scale,
+            };
+            assert!(matches!(
+                decode(&payload(vec![placement])),
+                Err(RecordError::Invalid(RecordInvalid::BadPlacement(0)))
+            ));
+        }
+    }
+
+    #[test]
+    fn placements_past_the_needle_limit_are_refused_before_expanding() {
+        // 3 needles placed 2^24 / 3 + 1 times: just over the limit, in a
+        // payload of a few megabytes.
+        let count = (MAX_PLACED_NEEDLES / 3 + 1) as usize;
+        let placements = (0..count).map(|_| StoredPlacement::Identity(0)).collect();
+        assert!(matches!(
+            decode(&payload(placements)),
+            Err(RecordError::Invalid(RecordInvalid::TooManyNeedles(n))) if n > MAX_PLACED_NEEDLES
+        ));
+    }
+
+    #[test]
+    fn counts_that_do_not_add_up_are_malformed() {
+        let mut bad = payload(vec![StoredPlacement::NextIdentity]);
+        bad.prototypes.needle_counts = vec![2];
+        assert!(matches!(decode(&bad), Err(RecordError::Malformed(_))));
+        let mut bad = payload(vec![StoredPlacement::NextIdentity]);
+        bad.prototypes.merged.pop();
+        assert!(matches!(decode(&bad), Err(RecordError::Malformed(_))));
+        let mut bad = payload(vec![StoredPlacement::NextIdentity]);
+        bad.prototypes.needle_counts = vec![3, 0];
+        assert!(matches!(decode(&bad), Err(RecordError::Malformed(_))));
+        // A merged line whose child is its own id: the prototype's error.
+        let mut bad = payload(vec![StoredPlacement::NextIdentity]);
+        bad.prototypes.merged[1].back = [0, 1];
+        assert!(matches!(
+            decode(&bad),
+            Err(RecordError::Invalid(RecordInvalid::Prototype { prototype: 0, .. }))
+        ));
+    }
+
+    #[test]
+    fn a_two_billion_element_header_is_an_error_not_an_allocation() {
+        // Everything before the prototypes, then a needle count list that
+        // claims 2^31 entries and ends at once.
+        let prefix = (
+            "hostile",
+            "",
+            None::<f64>,
+            [0.25f32, 0.25, 0.5],
+            8u8,
+            FoliageMaterial::default(),
+        );
+        let mut body = postcard::to_allocvec(&prefix).unwrap();
+        body.extend_from_slice(&[0x80, 0x80, 0x80, 0x80, 0x08, 1, 2, 3]);
+        assert!(matches!(decode_prototype_record(&file(&body)), Err(RecordError::Malformed(_))));
+        assert!(matches!(decode_record(&file(&body)), Err(RecordError::Malformed(_))));
+    }
 
     #[test]
     fn normal_codes_round_trip_exactly() {
