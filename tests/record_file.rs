@@ -226,3 +226,29 @@ fn shipped_tree_records_load_with_the_current_format() {
         ["eastern-white-pine", "lawson-cypress", "norway-spruce", "scots-pine"]
     );
 }
+
+#[test]
+fn format_2_files_load_converted() {
+    use bevy_conifer_lod::model::{PrototypeRecord, decode_prototype_record, encode_prototype_record};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/format2-scots-pine.conifer");
+    let bytes = std::fs::read(&path).unwrap();
+    assert_eq!(u32::from_le_bytes(bytes[8..12].try_into().unwrap()), 2);
+    let flat = decode_record(&bytes).unwrap();
+    assert_eq!((flat.needle_count(), flat.group_count()), (60, 30));
+    // As prototypes: every group a prototype placed once, flattening back
+    // to the very same record.
+    let prototypes = decode_prototype_record(&bytes).unwrap();
+    assert_eq!(prototypes, PrototypeRecord::from_flat(&flat).unwrap());
+    assert_eq!(prototypes.placements.len(), 30);
+    assert_eq!(prototypes.flatten().unwrap(), flat);
+    // Written again, it is a format 3 file holding the same tree.
+    let again = encode_prototype_record(&prototypes).unwrap();
+    assert_eq!(u32::from_le_bytes(again[8..12].try_into().unwrap()), FORMAT_VERSION);
+    assert_eq!(decode_record(&again).unwrap(), flat);
+    // Format 1 is refused with an error that says to re-bake.
+    let mut old = bytes.clone();
+    old[8..12].copy_from_slice(&1u32.to_le_bytes());
+    let error = decode_record(&old).unwrap_err();
+    assert!(matches!(error, RecordError::UnsupportedVersion { found: 1, .. }));
+    assert!(error.to_string().contains("re-bake"), "{error}");
+}
