@@ -410,3 +410,71 @@ fn a_failed_bake_keeps_the_previous_record() {
     let entries = std::fs::read_dir(dir.path()).unwrap().count();
     assert_eq!(entries, 1, "no temporary file left behind");
 }
+
+#[test]
+fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
+    let dir = tempfile::tempdir().unwrap();
+    let shoots = baked(dir.path(), "eastern-white-pine", "20000");
+    let inspect = json(&conifer(&["inspect", shoots.to_str().unwrap(), "--json"]));
+    let needles = inspect["needles"].as_u64().unwrap();
+    assert!((19_000..=21_000).contains(&needles), "{needles}");
+    assert_eq!(inspect["format_version"].as_u64(), Some(3));
+    let prototypes = inspect["prototypes"].as_u64().unwrap();
+    assert!((10..=120).contains(&prototypes), "{prototypes} prototypes");
+    assert!(inspect["prototype_needles"].as_u64().unwrap() * 5 < needles);
+    assert!(inspect["groups"].as_u64().unwrap() > prototypes);
+
+    // The flat generator: every group its own prototype.
+    let flat = dir.path().join("flat.conifer");
+    let output = conifer(&[
+        "bake",
+        "--preset",
+        "eastern-white-pine",
+        "--needles",
+        "20000",
+        "--flat",
+        "-o",
+        flat.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let flat_inspect = json(&conifer(&["inspect", flat.to_str().unwrap(), "--json"]));
+    assert_eq!(flat_inspect["prototypes"], flat_inspect["groups"]);
+    assert_eq!(flat_inspect["prototype_needles"], flat_inspect["needles"]);
+    assert!(flat_inspect["bytes"].as_u64().unwrap() > 4 * inspect["bytes"].as_u64().unwrap());
+
+    // A format 2 record: read as it is, rewritten in format 3 with the same cuts.
+    let old = dir.path().join("old.conifer");
+    std::fs::copy(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/format2-scots-pine.conifer"),
+        &old,
+    )
+    .unwrap();
+    let path = old.to_str().unwrap();
+    assert_eq!(
+        json(&conifer(&["inspect", path, "--json"]))["format_version"].as_u64(),
+        Some(2)
+    );
+    let cuts = |path: &str| -> Vec<serde_json::Value> {
+        ["0.3", "3", "30", "300"]
+            .iter()
+            .map(|d| json(&conifer(&["cut", path, "--distance", d, "--json"])))
+            .collect()
+    };
+    let before = cuts(path);
+    let output = conifer(&["upgrade", path]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("format 2 → 3"));
+    assert_eq!(
+        json(&conifer(&["inspect", path, "--json"]))["format_version"].as_u64(),
+        Some(3)
+    );
+    assert_eq!(cuts(path), before);
+    let output = conifer(&["upgrade", path]);
+    assert!(String::from_utf8_lossy(&output.stderr).contains("already format 3"));
+
+    // Not a record: an error naming the file, and the file is untouched.
+    let junk = dir.path().join("junk.conifer");
+    std::fs::write(&junk, b"not a record at all").unwrap();
+    assert_fails_naming(&conifer(&["upgrade", junk.to_str().unwrap()]), "junk.conifer");
+    assert_eq!(std::fs::read(&junk).unwrap(), b"not a record at all");
+}

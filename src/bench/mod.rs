@@ -3,7 +3,8 @@
 //!
 //! * Bake: a child `conifer bake --json` per size (so each peak memory is
 //!   its own), split into generate, merge level 1, level 2, record and write,
-//!   and the growth exponent of a log-log fit.
+//!   and the growth exponent of a log-log fit; the flat generator (every
+//!   needle grown and stored on its own) and the shoot prototypes.
 //! * Record: bytes per needle on disk and in GPU buffers, load time.
 //! * Cut: the paper's CPU traversal, with and without the three-part start.
 //! * [`runtime`]: the plugin's CPU time per frame, no rendering.
@@ -129,8 +130,12 @@ pub struct BakeStages {
 /// One bake.
 #[derive(Clone, Debug, Serialize)]
 pub struct BakeFigures {
-    /// Needles baked.
+    /// Needles baked (once placed).
     pub needles: usize,
+    /// Shared prototypes of the record (the flat generator: one per group).
+    pub prototypes: usize,
+    /// Needles stored in the prototypes.
+    pub prototype_needles: usize,
     /// Bake seconds (merge levels and record; generation and writing are
     /// in `stages`).
     pub seconds: f64,
@@ -217,8 +222,10 @@ pub struct BenchReport {
     pub machine: String,
     /// Build profile of the measuring binary.
     pub profile: String,
-    /// Bakes by size.
+    /// Bakes by size, the flat generator (`conifer bake --flat`).
     pub bake: Vec<BakeFigures>,
+    /// Bakes by size, shoot prototypes (`conifer bake`'s default).
+    pub bake_prototypes: Vec<BakeFigures>,
     /// Slope of log(bake seconds) over log(needles), least squares.
     pub bake_exponent: f64,
     /// Shipped records by species.
@@ -319,7 +326,7 @@ fn machine() -> String {
     format!("{cpu}, {cores} cores, {memory}, no GPU (software Vulkan: Mesa lavapipe)")
 }
 
-fn bake_child(conifer: &Path, needles: usize, dir: &Path) -> Result<BakeFigures, BenchError> {
+fn bake_child(conifer: &Path, needles: usize, flat: bool, dir: &Path) -> Result<BakeFigures, BenchError> {
     let output_file = dir.join(format!("bench_{needles}.conifer"));
     let fail = |message: String| BenchError::Bake { needles, message };
     let output = std::process::Command::new(conifer)
@@ -333,6 +340,7 @@ fn bake_child(conifer: &Path, needles: usize, dir: &Path) -> Result<BakeFigures,
             "-o",
         ])
         .arg(&output_file)
+        .args(flat.then_some("--flat"))
         .output()
         .map_err(|e| fail(format!("cannot run {}: {e}", conifer.display())))?;
     let _ = std::fs::remove_file(&output_file);
@@ -352,6 +360,8 @@ fn bake_child(conifer: &Path, needles: usize, dir: &Path) -> Result<BakeFigures,
     let baked = number("needles") as usize;
     Ok(BakeFigures {
         needles: baked,
+        prototypes: number("prototypes") as usize,
+        prototype_needles: number("prototype_needles") as usize,
         seconds,
         needles_per_second: if seconds > 0.0 { baked as f64 / seconds } else { 0.0 },
         peak_bytes: json.get("peak_bytes").and_then(serde_json::Value::as_u64),
@@ -434,10 +444,11 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     std::fs::create_dir_all(&options.out_dir).map_err(|e| BenchError::OutDir(options.out_dir.clone(), e))?;
     let mut files = Vec::new();
 
-    let mut bakes = Vec::new();
+    let (mut bakes, mut prototype_bakes) = (Vec::new(), Vec::new());
     for &needles in options.bake_needles.iter().filter(|_| options.runs("bake")) {
-        progress(&format!("bake {needles} needles"));
-        bakes.push(bake_child(&options.conifer, needles, &options.out_dir)?);
+        progress(&format!("bake {needles} needles, flat and as shoot prototypes"));
+        bakes.push(bake_child(&options.conifer, needles, true, &options.out_dir)?);
+        prototype_bakes.push(bake_child(&options.conifer, needles, false, &options.out_dir)?);
     }
     let bake_exponent = log_log_slope(&bakes.iter().map(|b| (b.needles as f64, b.seconds)).collect::<Vec<_>>());
 
@@ -471,12 +482,13 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     };
 
     progress("plots");
-    files.extend(write_plots(&options.out_dir, &bakes, &runtime)?);
+    files.extend(write_plots(&options.out_dir, &bakes, &prototype_bakes, &runtime)?);
 
     Ok(BenchReport {
         machine: machine(),
         profile: if cfg!(debug_assertions) { "debug" } else { "release" }.into(),
         bake: bakes,
+        bake_prototypes: prototype_bakes,
         bake_exponent,
         bytes_per_needle: records,
         cut_us,
@@ -535,11 +547,20 @@ fn forest_figures(
     })
 }
 
-fn write_plots(dir: &Path, bakes: &[BakeFigures], runtime: &[RuntimeFigures]) -> Result<Vec<PathBuf>, BenchError> {
+fn write_plots(
+    dir: &Path,
+    bakes: &[BakeFigures],
+    prototype_bakes: &[BakeFigures],
+    runtime: &[RuntimeFigures],
+) -> Result<Vec<PathBuf>, BenchError> {
     use crate::eval::plot::{Axes, Series, line_plot};
     let series = |name: &str, f: &dyn Fn(&BakeFigures) -> f64| Series {
         name: name.into(),
         points: bakes.iter().map(|b| (b.needles as f64, f(b))).collect(),
+    };
+    let prototypes = Series {
+        name: "shoot prototypes: bake".into(),
+        points: prototype_bakes.iter().map(|b| (b.needles as f64, b.seconds)).collect(),
     };
     let bake_path = dir.join("bake_time_vs_needles.png");
     line_plot(
@@ -552,7 +573,8 @@ fn write_plots(dir: &Path, bakes: &[BakeFigures], runtime: &[RuntimeFigures]) ->
             log_y: true,
         },
         &[
-            series("bake (both merge levels + record)", &|b| b.seconds),
+            series("flat: bake (both merge levels + record)", &|b| b.seconds),
+            prototypes,
             series("merge level 1 (groups)", &|b| b.stages.merge_groups),
             series("merge level 2 (tree)", &|b| b.stages.merge_tree),
             series("generate", &|b| b.stages.generate),

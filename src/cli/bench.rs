@@ -43,14 +43,18 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     println!("machine: {} ({} build)", report.machine, report.profile);
-    for b in &report.bake {
-        println!(
-            "bake {:>9} needles: {:8.3} s ({:.0} needles/s), peak {:.0} MB",
-            b.needles,
-            b.seconds,
-            b.needles_per_second,
-            b.peak_bytes.unwrap_or(0) as f64 / 1e6
-        );
+    for (mode, bakes) in [("flat", &report.bake), ("shoot prototypes", &report.bake_prototypes)] {
+        for b in bakes {
+            println!(
+                "bake {:>9} needles ({mode}, {} prototypes): {:8.3} s ({:.0} needles/s), peak {:.0} MB, {:.2} MB on disk",
+                b.needles,
+                b.prototypes,
+                b.seconds,
+                b.needles_per_second,
+                b.peak_bytes.unwrap_or(0) as f64 / 1e6,
+                b.file_bytes as f64 / 1e6
+            );
+        }
     }
     println!("bake exponent (log-log): {:.3}", report.bake_exponent);
     for (name, r) in &report.bytes_per_needle {

@@ -900,7 +900,10 @@ mod tests {
         );
         let mut body = postcard::to_allocvec(&prefix).unwrap();
         body.extend_from_slice(&[0x80, 0x80, 0x80, 0x80, 0x08, 1, 2, 3]);
-        assert!(matches!(decode_prototype_record(&file(&body)), Err(RecordError::Malformed(_))));
+        assert!(matches!(
+            decode_prototype_record(&file(&body)),
+            Err(RecordError::Malformed(_))
+        ));
         assert!(matches!(decode_record(&file(&body)), Err(RecordError::Malformed(_))));
     }
 
