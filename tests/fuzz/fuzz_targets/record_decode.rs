@@ -4,12 +4,16 @@
 //! An odd first byte makes the rest the payload of a well-formed header
 //! (magic, version, length and checksum filled in), so the fuzzer reaches
 //! the payload decoder and the record's invariant checks instead of
-//! stopping at the checksum.
+//! stopping at the checksum. Both views are decoded: the tree of prototypes
+//! (its direct cut must equal its flattened record's cut) and the flat
+//! record (it must encode and decode again to itself).
 #![no_main]
 
 use bevy_conifer_lod::model::file::{FORMAT_VERSION, MAGIC};
-use bevy_conifer_lod::model::{decode_record, encode_record};
+use bevy_conifer_lod::model::{decode_prototype_record, decode_record, encode_prototype_record, encode_record};
 use libfuzzer_sys::fuzz_target;
+
+const PROBES: [f32; 6] = [0.0, 1e-4, 1e-2, 1.0, 1e3, f32::INFINITY];
 
 fuzz_target!(|data: &[u8]| {
     let bytes = match data.split_first() {
@@ -23,8 +27,18 @@ fuzz_target!(|data: &[u8]| {
         }
         _ => data.to_vec(),
     };
+    if let Ok(prototypes) = decode_prototype_record(&bytes) {
+        let flat = prototypes.flatten().expect("a decoded tree of prototypes flattens");
+        for e in PROBES {
+            let cut = prototypes.cut(e).sorted();
+            assert_eq!(cut, flat.cut(e).sorted());
+            assert!(flat.coverage(&cut).iter().all(|&c| c == 1));
+        }
+        let again = encode_prototype_record(&prototypes).expect("a decoded record encodes");
+        assert_eq!(decode_prototype_record(&again).expect("and decodes again"), prototypes);
+    }
     if let Ok(record) = decode_record(&bytes) {
-        for e in [0.0, 1e-4, 1e-2, 1.0, f32::INFINITY] {
+        for e in PROBES {
             let cut = record.cut(e);
             assert!(record.coverage(&cut).iter().all(|&c| c == 1));
         }
