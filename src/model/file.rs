@@ -173,10 +173,7 @@ struct PayloadV2 {
     max_sides: u8,
     material: FoliageMaterial,
     group_sizes: Vec<u32>,
-    bases: Vec<[f32; 3]>,
-    tips: Vec<[f32; 3]>,
-    radii: Vec<f32>,
-    normals: Vec<[u8; 4]>,
+    needles: StoredNeedles,
     merged: Vec<MergedEntry>,
     wood: Vec<[f32; 8]>,
     wood_mesh: StoredMesh,
@@ -204,11 +201,18 @@ struct Payload {
 #[derive(Serialize, Deserialize)]
 struct StoredPrototypes {
     needle_counts: Vec<u32>,
+    needles: StoredNeedles,
+    merged: Vec<MergedEntry>,
+}
+
+/// Needles as stored: four parallel arrays (a nested struct encodes as its
+/// fields in order, so format 2's payload keeps its layout).
+#[derive(Serialize, Deserialize)]
+struct StoredNeedles {
     bases: Vec<[f32; 3]>,
     tips: Vec<[f32; 3]>,
     radii: Vec<f32>,
     normals: Vec<[u8; 4]>,
-    merged: Vec<MergedEntry>,
 }
 
 /// A placement as stored: the identity costs a byte or its prototype id.
@@ -324,37 +328,32 @@ fn decode_merged(
     Ok(merged)
 }
 
-/// Needles as stored: four parallel arrays.
-fn encode_needles(needles: &[Needle]) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<f32>, Vec<[u8; 4]>) {
-    (
-        needles.iter().map(|x| x.base.to_array()).collect(),
-        needles.iter().map(|x| x.tip.to_array()).collect(),
-        needles.iter().map(|x| x.radius).collect(),
-        needles.iter().map(|x| encode_normal(x.normal)).collect(),
-    )
-}
-
-/// Inverse of [`encode_needles`] (every needle in group `group`).
-fn decode_needles(
-    bases: &[[f32; 3]],
-    tips: &[[f32; 3]],
-    radii: &[f32],
-    normals: &[[u8; 4]],
-    group: impl Fn(usize) -> u32,
-) -> Result<Vec<Needle>, RecordError> {
-    let n = bases.len();
-    if tips.len() != n || radii.len() != n || normals.len() != n {
-        return Err(RecordError::Malformed("needle arrays differ in length".into()));
+impl StoredNeedles {
+    fn encode(needles: &[Needle]) -> Self {
+        Self {
+            bases: needles.iter().map(|x| x.base.to_array()).collect(),
+            tips: needles.iter().map(|x| x.tip.to_array()).collect(),
+            radii: needles.iter().map(|x| x.radius).collect(),
+            normals: needles.iter().map(|x| encode_normal(x.normal)).collect(),
+        }
     }
-    Ok((0..n)
-        .map(|i| Needle {
-            base: Vec3::from(bases[i]),
-            tip: Vec3::from(tips[i]),
-            radius: radii[i],
-            normal: decode_normal(normals[i]),
-            group: group(i),
-        })
-        .collect())
+
+    /// The needles, needle `i` in group `group(i)`.
+    fn decode(&self, group: impl Fn(usize) -> u32) -> Result<Vec<Needle>, RecordError> {
+        let n = self.bases.len();
+        if self.tips.len() != n || self.radii.len() != n || self.normals.len() != n {
+            return Err(RecordError::Malformed("needle arrays differ in length".into()));
+        }
+        Ok((0..n)
+            .map(|i| Needle {
+                base: Vec3::from(self.bases[i]),
+                tip: Vec3::from(self.tips[i]),
+                radius: self.radii[i],
+                normal: decode_normal(self.normals[i]),
+                group: group(i),
+            })
+            .collect())
+    }
 }
 
 fn encode_wood(wood: &[WoodSegment]) -> Vec<[f32; 8]> {
@@ -449,7 +448,6 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         .iter()
         .flat_map(|p| p.needles.iter().copied())
         .collect();
-    let (bases, tips, radii, normals) = encode_needles(&all_needles);
     let mut merged = Vec::with_capacity(all_needles.len());
     for prototype in &record.prototypes {
         let n = prototype.needles.len();
@@ -459,10 +457,7 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
     }
     let prototypes = StoredPrototypes {
         needle_counts: record.prototypes.iter().map(|p| p.needles.len() as u32).collect(),
-        bases,
-        tips,
-        radii,
-        normals,
+        needles: StoredNeedles::encode(&all_needles),
         merged,
     };
     let mut previous = None;
@@ -588,7 +583,7 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
 
 fn payload_to_prototype_record(p: Payload) -> Result<PrototypeRecord, RecordError> {
     let stored = &p.prototypes;
-    let all_needles = decode_needles(&stored.bases, &stored.tips, &stored.radii, &stored.normals, |_| 0)?;
+    let all_needles = stored.needles.decode(|_| 0)?;
     let needle_total: u64 = stored.needle_counts.iter().map(|&c| c as u64).sum();
     let merged_total = needle_total.saturating_sub(stored.needle_counts.len() as u64);
     if needle_total != all_needles.len() as u64
@@ -668,7 +663,7 @@ fn payload_to_prototype_record(p: Payload) -> Result<PrototypeRecord, RecordErro
 /// Decodes a format 2 payload (one flat tree).
 fn decode_v2(body: &[u8]) -> Result<LodRecord, RecordError> {
     let p: PayloadV2 = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
-    let n = p.bases.len();
+    let n = p.needles.bases.len();
     let group_total: u64 = p.group_sizes.iter().map(|&s| s as u64).sum();
     if group_total != n as u64 || p.group_sizes.contains(&0) {
         return Err(RecordError::Malformed(
@@ -681,7 +676,7 @@ fn decode_v2(body: &[u8]) -> Result<LodRecord, RecordError> {
         .enumerate()
         .flat_map(|(g, &s)| std::iter::repeat_n(g as u32, s as usize))
         .collect();
-    let needles = decode_needles(&p.bases, &p.tips, &p.radii, &p.normals, |i| group_of[i])?;
+    let needles = p.needles.decode(|i| group_of[i])?;
     let merged = decode_merged(&p.merged, n as u64, |c, earlier| node_ends(n, earlier, c))?;
     let bake = decode_bake_info(p.weights, p.bake_seconds, p.source)?;
     Ok(LodRecord::from_parts(
@@ -763,7 +758,6 @@ mod tests {
             needles: vec![needle(0.0), needle(1.0), needle(2.0)],
             merged: Vec::new(),
         };
-        let (bases, tips, radii, normals) = encode_needles(&prototype.needles);
         let entry = |back: [u32; 2]| MergedEntry {
             back,
             ends: 0b0100,
@@ -778,10 +772,7 @@ mod tests {
             material: FoliageMaterial::default(),
             prototypes: StoredPrototypes {
                 needle_counts: vec![3],
-                bases,
-                tips,
-                radii,
-                normals,
+                needles: StoredNeedles::encode(&prototype.needles),
                 merged: vec![entry([3, 2]), entry([2, 1])],
             },
             placements,
