@@ -411,15 +411,6 @@ struct MergeSet<'a> {
     partners: Partners,
 }
 
-/// A merge inside a set: `children` are set-local ids (inputs first, then
-/// merges in creation order).
-#[derive(Clone, Copy, Debug)]
-struct LocalMerge {
-    children: [u32; 2],
-    ends: [EndpointId; 2],
-    error: f32,
-}
-
 /// The live line that line `id` became (with path compression).
 fn find(forward: &mut [u32], id: u32) -> u32 {
     let mut root = id;
@@ -540,7 +531,7 @@ impl<'a> MergeSet<'a> {
 
     /// Merges the set down to one line; returns the merges and the root's
     /// local id. Calls `progress` after every merge with the count so far.
-    fn run(mut self, progress: impl Fn(usize)) -> (Vec<LocalMerge>, u32) {
+    fn run(mut self, progress: impl Fn(usize)) -> (Vec<MergedLine>, u32) {
         let inputs = self.lines.len();
         let mut merges = Vec::with_capacity(inputs.saturating_sub(1));
         if inputs <= 1 {
@@ -584,7 +575,7 @@ impl<'a> MergeSet<'a> {
             self.live.push(true);
             self.live_count -= 1;
             self.contract(x, y, z);
-            merges.push(LocalMerge {
+            merges.push(MergedLine {
                 children: [x, y],
                 ends: merged.ends,
                 error: merged.error,
@@ -626,15 +617,7 @@ pub fn merge_group(needles: &[Needle], context: &CostContext, options: &MergeOpt
     } else {
         options.tree_search
     };
-    let (merges, _) = MergeSet::new(context, search, lines).run(|_| {});
-    merges
-        .into_iter()
-        .map(|m| MergedLine {
-            ends: m.ends,
-            children: m.children,
-            error: m.error,
-        })
-        .collect()
+    MergeSet::new(context, search, lines).run(|_| {}).0
 }
 
 /// A group's root line placed in the tree: the input of level 2.
@@ -674,15 +657,7 @@ pub fn merge_group_lines(
             needles: l.needles,
         })
         .collect();
-    let (merges, _) = MergeSet::new(context, search, lines).run(progress);
-    merges
-        .into_iter()
-        .map(|m| MergedLine {
-            ends: m.ends,
-            children: m.children,
-            error: m.error,
-        })
-        .collect()
+    MergeSet::new(context, search, lines).run(progress).0
 }
 
 /// Position of a needle end.

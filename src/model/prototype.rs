@@ -38,7 +38,7 @@ use super::merge::{EndpointId, MergedLine};
 use super::metric::{NeedleForm, line_error, needle_form, relative_error};
 use super::needle::{FoliageMaterial, Needle, TreeInput, WoodSegment};
 use super::prism::TriangleMesh;
-use super::record::{BakeInfo, Cut, LodRecord, NO_PARENT, RecordInvalid, check_appearance};
+use super::record::{BakeInfo, Cut, LodRecord, NO_PARENT, RecordInvalid, check_appearance, check_forest};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -176,28 +176,7 @@ impl Prototype {
                 merged: self.merged.len(),
             });
         }
-        let mut has_parent = vec![false; n + self.merged.len()];
-        for (k, line) in self.merged.iter().enumerate() {
-            let id = n + k;
-            if !line.error.is_finite() {
-                return Err(RecordInvalid::NonFinite("merged line errors"));
-            }
-            let [c0, c1] = line.children.map(|c| c as usize);
-            if c0 == c1
-                || c0 >= id
-                || c1 >= id
-                || has_parent[c0]
-                || has_parent[c1]
-                || line.ends.iter().any(|&e| e as usize >= 2 * n)
-            {
-                return Err(RecordInvalid::BadReference(k));
-            }
-            has_parent[c0] = true;
-            has_parent[c1] = true;
-            if line.children.iter().any(|&c| line.error < self.node_error(c)) {
-                return Err(RecordInvalid::ErrorNotMonotone(k));
-            }
-        }
+        check_forest(n, &self.merged, 2 * n as u64, |c| line_error(self.needles[c].radius))?;
         Ok(())
     }
 }
@@ -357,8 +336,6 @@ impl PrototypeRecord {
         merged_offset.push(merged);
         check_appearance(&wood, &wood_mesh, &material, &bake)?;
 
-        let p_count = placements.len();
-        let mut tree_parent = vec![NO_PARENT; p_count + tree_merged.len()];
         let mut record = Self {
             name,
             prototypes,
@@ -373,34 +350,9 @@ impl PrototypeRecord {
             merged_offset,
             tree_parent: Vec::new(),
         };
-        for (k, line) in tree_merged.iter().enumerate() {
-            let id = p_count + k;
-            if !line.error.is_finite() {
-                return Err(RecordInvalid::NonFinite("merged line errors"));
-            }
-            let [c0, c1] = line.children.map(|c| c as usize);
-            if c0 == c1
-                || c0 >= id
-                || c1 >= id
-                || tree_parent[c0] != NO_PARENT
-                || tree_parent[c1] != NO_PARENT
-                || line.ends.iter().any(|&e| e as u64 >= 2 * needles)
-            {
-                return Err(RecordInvalid::BadReference(k));
-            }
-            tree_parent[c0] = id as u32;
-            tree_parent[c1] = id as u32;
-            for c in [c0, c1] {
-                let child_error = if c < p_count {
-                    record.placed_root_error(c)
-                } else {
-                    tree_merged[c - p_count].error
-                };
-                if line.error < child_error {
-                    return Err(RecordInvalid::ErrorNotMonotone(k));
-                }
-            }
-        }
+        let tree_parent = check_forest(record.placements.len(), &tree_merged, 2 * needles, |p| {
+            record.placed_root_error(p)
+        })?;
         record.tree_merged = tree_merged;
         record.tree_parent = tree_parent;
         Ok(record)

@@ -161,6 +161,49 @@ pub enum RecordInvalid {
     NotTwoLevel(usize),
 }
 
+/// Checks the merged lines of a merge forest whose ids `0..leaves` are its
+/// leaves and `leaves + k` its `k`-th merged line: finite errors, two
+/// distinct children made before the line, one parent each, ends below
+/// `ends_limit`, and errors never below a child's (`leaf_error(c)` for a
+/// leaf). Returns every node's parent ([`NO_PARENT`] for roots).
+pub(crate) fn check_forest(
+    leaves: usize,
+    merged: &[MergedLine],
+    ends_limit: u64,
+    leaf_error: impl Fn(usize) -> f32,
+) -> Result<Vec<u32>, RecordInvalid> {
+    let mut parent = vec![NO_PARENT; leaves + merged.len()];
+    for (k, line) in merged.iter().enumerate() {
+        let id = leaves + k;
+        if !line.error.is_finite() {
+            return Err(RecordInvalid::NonFinite("merged line errors"));
+        }
+        let [c0, c1] = line.children.map(|c| c as usize);
+        if c0 == c1
+            || c0 >= id
+            || c1 >= id
+            || parent[c0] != NO_PARENT
+            || parent[c1] != NO_PARENT
+            || line.ends.iter().any(|&e| e as u64 >= ends_limit)
+        {
+            return Err(RecordInvalid::BadReference(k));
+        }
+        parent[c0] = id as u32;
+        parent[c1] = id as u32;
+        for c in [c0, c1] {
+            let child_error = if c < leaves {
+                leaf_error(c)
+            } else {
+                merged[c - leaves].error
+            };
+            if line.error < child_error {
+                return Err(RecordInvalid::ErrorNotMonotone(k));
+            }
+        }
+    }
+    Ok(parent)
+}
+
 /// Checks what every record carries beside its foliage: finite wood
 /// segments, a consistent wood mesh, a finite material and bake time.
 pub(crate) fn check_appearance(
@@ -234,38 +277,12 @@ impl LodRecord {
         }
         check_appearance(&wood, &wood_mesh, &material, &bake)?;
 
-        let total = n + merged.len();
-        let mut parent = vec![NO_PARENT; total];
+        let parent = check_forest(n, &merged, 2 * n as u64, |c| line_error(needles[c].radius))?;
         let mut merged_needles = Vec::with_capacity(merged.len());
         let mut merged_area = Vec::with_capacity(merged.len());
-        let ends_limit = 2 * n as u64;
-        for (k, line) in merged.iter().enumerate() {
-            let id = n + k;
-            if !line.error.is_finite() {
-                return Err(RecordInvalid::NonFinite("merged line errors"));
-            }
-            let [c0, c1] = line.children.map(|c| c as usize);
-            if c0 == c1
-                || c0 >= id
-                || c1 >= id
-                || parent[c0] != NO_PARENT
-                || parent[c1] != NO_PARENT
-                || line.ends.iter().any(|&e| e as u64 >= ends_limit)
-            {
-                return Err(RecordInvalid::BadReference(k));
-            }
-            parent[c0] = id as u32;
-            parent[c1] = id as u32;
+        for line in &merged {
             let (mut count, mut area) = (0u32, 0f32);
-            for c in [c0, c1] {
-                let child_error = if c < n {
-                    line_error(needles[c].radius)
-                } else {
-                    merged[c - n].error
-                };
-                if line.error < child_error {
-                    return Err(RecordInvalid::ErrorNotMonotone(k));
-                }
+            for c in line.children.map(|c| c as usize) {
                 if c < n {
                     count += 1;
                     area += needles[c].side_area();
