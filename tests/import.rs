@@ -561,3 +561,67 @@ fn exported_trees_are_valid_gltf_and_the_fixture_exports_with_its_wood() {
     assert_eq!(report.wood_triangles, 60_224);
     gltf::Gltf::from_slice(&bytes).unwrap();
 }
+
+#[test]
+fn instanced_needle_meshes_become_one_prototype() {
+    use bevy_conifer_lod::import::import_gltf_bytes_prototypes;
+    use bevy_conifer_lod::model::{BakeOptions, bake, bake_prototypes};
+    // One mesh of 3 needle quads placed by six nodes: four rotated, moved
+    // and uniformly scaled (one prototype), one scaled unevenly and one
+    // mirrored (each a prototype of its own, placed as it is).
+    let positions = quad_positions(3);
+    let mut bin = f32_bytes(positions.iter().flatten().copied());
+    let index_offset = bin.len();
+    let indices: Vec<u8> = (0..3u8)
+        .flat_map(|q| [4 * q, 4 * q + 1, 4 * q + 2, 4 * q, 4 * q + 2, 4 * q + 3])
+        .collect();
+    bin.extend_from_slice(&indices);
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,1,2,3,4,5]}}],
+        "nodes":[{{"mesh":0}},
+                 {{"mesh":0,"translation":[1,2,3],"rotation":[0,0.3826834,0,0.9238795]}},
+                 {{"mesh":0,"translation":[-1,0.5,0],"scale":[1.5,1.5,1.5],"rotation":[0.5,0.5,0.5,0.5]}},
+                 {{"mesh":0,"matrix":[0,0,-0.8,0, 0,0.8,0,0, 0.8,0,0,0, 0,1,-2,1]}},
+                 {{"mesh":0,"scale":[1,3,1],"translation":[2,0,0]}},
+                 {{"mesh":0,"scale":[-1,1,1],"translation":[0,0,2]}}],
+        "meshes":[{{"name":"needles","primitives":[{{"attributes":{{"POSITION":0}},"indices":1}}]}}],
+        "accessors":[
+          {{"bufferView":0,"componentType":5126,"count":12,"type":"VEC3","min":[-1,0,0],"max":[1,1,0]}},
+          {{"bufferView":1,"componentType":5121,"count":18,"type":"SCALAR"}}],
+        "bufferViews":[{{"buffer":0,"byteLength":{index_offset}}},
+                       {{"buffer":0,"byteOffset":{index_offset},"byteLength":18}}],
+        "buffers":[{{"byteLength":{}}}]}}"#,
+        bin.len()
+    );
+    let bytes = glb(&json, &bin);
+    let (tree, flat_report) = import(&bytes).unwrap();
+    let (input, report) = import_gltf_bytes_prototypes(&bytes, None, "t", &ImportOptions::default()).unwrap();
+    assert_eq!(flat_report.prototypes, 6);
+    assert_eq!(report.prototypes, 3, "{report:?}");
+    assert_eq!(input.prototypes.len(), 3);
+    assert_eq!(input.placements.len(), 6);
+    let shared = input.placements[0].prototype;
+    assert!(input.placements[..4].iter().all(|p| p.prototype == shared));
+    assert!((input.placements[2].scale - 1.5).abs() < 1e-5);
+    assert!(input.placements[4].is_identity() && input.placements[5].is_identity());
+    // Placed again, the prototypes are the imported needles.
+    let placed = input.to_tree();
+    assert_eq!(placed.needles.len(), tree.needles.len());
+    for (a, b) in placed.needles.iter().zip(&tree.needles) {
+        let same = (a.base.distance(b.base) < 1e-5 && a.tip.distance(b.tip) < 1e-5)
+            || (a.base.distance(b.tip) < 1e-5 && a.tip.distance(b.base) < 1e-5);
+        assert!(same && (a.radius - b.radius).abs() < 1e-6, "{a:?} vs {b:?}");
+    }
+    // Baked, the record stores 9 needles for 18 and cuts exactly.
+    let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+    assert_eq!(record.prototype_needle_count(), 9);
+    let flat = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    assert_eq!(record.needle_count(), flat.needle_count() as u64);
+    let flattened = record.flatten().unwrap();
+    for e in [0.0, 1e-3, 3e-3, 0.05, 10.0] {
+        let cut = record.cut(e).sorted();
+        assert_eq!(cut, flattened.cut(e).sorted(), "e = {e}");
+        assert!(flattened.coverage(&cut).iter().all(|&c| c == 1), "e = {e}");
+    }
+    assert_eq!(record.cut(0.0).prisms.len(), 18);
+}

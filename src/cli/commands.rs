@@ -3,7 +3,7 @@
 use super::{BakeArgs, CutArgs, ExportArgs, InspectArgs, PreviewArgs, ViewArgs};
 use crate::export::write_cut_glb;
 use crate::generate::{GenerateOptions, Species, generate, generate_prototypes};
-use crate::import::{ImportOptions, ImportReport, import_gltf};
+use crate::import::{ImportOptions, ImportReport, import_gltf_prototypes};
 use crate::model::file::FORMAT_VERSION;
 use crate::model::gpu_layout::{LINE_BANDS, line_bands, lines_processed};
 use crate::model::merge::PartnerSearch;
@@ -117,13 +117,13 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
                 scale: args.scale,
                 ..Default::default()
             };
-            let (tree, report) =
-                import_gltf(path, &options).with_context(|| format!("{}: cannot import glTF", path.display()))?;
+            let (input, report) = import_gltf_prototypes(path, &options)
+                .with_context(|| format!("{}: cannot import glTF", path.display()))?;
             if !args.json {
                 print_import(path, &report);
             }
             import_report = Some(report);
-            PrototypeInput::from_tree(&tree)
+            input
         }
         (None, None) => bail!("give an input file or --preset NAME"),
     };
@@ -241,6 +241,12 @@ fn print_import(path: &Path, report: &ImportReport) {
         "  {} groups {source}, {} / {} / {} needles each",
         report.groups, report.group_size.min, report.group_size.median, report.group_size.max
     );
+    if report.prototypes < report.groups {
+        eprintln!(
+            "  instanced needle meshes kept: {} groups are {} shared prototypes",
+            report.groups, report.prototypes
+        );
+    }
     for warning in &report.warnings {
         eprintln!("  warning: {warning}");
     }

@@ -42,6 +42,8 @@ pub(crate) struct PlacedPrimitive {
     /// Index of the mesh and of the primitive in it.
     pub mesh: usize,
     pub primitive: usize,
+    /// The node's world transform (with the import scale).
+    pub world: Mat4,
     /// World-space positions (metres, after `--scale`).
     pub positions: Vec<Vec3>,
     /// World-space unit normals, when the file has them.
@@ -672,6 +674,7 @@ impl MeshData {
             material_name,
             mesh: mesh_index,
             primitive,
+            world,
             positions: self.positions.iter().map(|&p| world.transform_point3(p)).collect(),
             normals: self
                 .normals

@@ -27,6 +27,7 @@
 
 mod gltf;
 pub mod groups;
+mod instances;
 mod needles;
 
 pub use self::gltf::GROUP_ATTRIBUTES;
@@ -34,7 +35,7 @@ pub use groups::{GroupAgreement, GroupInferenceInfo, GroupRule, group_agreement,
 pub use needles::OrientStats;
 
 use crate::model::prism::TriangleMesh;
-use crate::model::{FoliageMaterial, TreeInput};
+use crate::model::{FoliageMaterial, PrototypeInput, TreeInput};
 use glam::Vec3;
 use serde::Serialize;
 use std::collections::HashMap;
@@ -197,6 +198,10 @@ pub struct ImportReport {
     pub radius: Spread,
     /// Needle length, metres.
     pub length: Spread,
+    /// Shared prototypes once instanced needle primitives are kept as one
+    /// prototype placed many times ([`import_gltf_prototypes`]); equal to
+    /// `groups` for [`import_gltf`], which places every group's own copy.
+    pub prototypes: usize,
     /// Things the user should know (skipped primitives, fallbacks).
     pub warnings: Vec<String>,
 }
@@ -222,6 +227,63 @@ pub fn import_gltf_bytes(
     name: &str,
     options: &ImportOptions,
 ) -> Result<(TreeInput, ImportReport), ImportError> {
+    import_parts(bytes, base_dir, name, options).map(|imported| (imported.tree, imported.report))
+}
+
+/// Imports the glTF file at `path` as prototypes: a needle primitive that
+/// several nodes place (rotated, moved, uniformly scaled) becomes one
+/// prototype placed by each, so the record holds its needles once. Groups,
+/// needles and wood are those of [`import_gltf`].
+pub fn import_gltf_prototypes(
+    path: &Path,
+    options: &ImportOptions,
+) -> Result<(PrototypeInput, ImportReport), ImportError> {
+    let bytes = std::fs::read(path)?;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_stem()
+        .map_or_else(|| "tree".to_string(), |s| s.to_string_lossy().into_owned());
+    import_gltf_bytes_prototypes(&bytes, Some(dir), &name, options)
+}
+
+/// [`import_gltf_prototypes`] from a file's bytes (see [`import_gltf_bytes`]).
+pub fn import_gltf_bytes_prototypes(
+    bytes: &[u8],
+    base_dir: Option<&Path>,
+    name: &str,
+    options: &ImportOptions,
+) -> Result<(PrototypeInput, ImportReport), ImportError> {
+    let Imported {
+        tree,
+        mut report,
+        parts,
+        part_of,
+        group_values,
+    } = import_parts(bytes, base_dir, name, options)?;
+    let input = instances::share_instances(&tree, &parts, &part_of, &group_values);
+    report.prototypes = input.prototypes.len();
+    Ok((input, report))
+}
+
+/// What [`import_parts`] read: the tree, its report, and where each needle
+/// came from (its placed primitive and group attribute value).
+struct Imported {
+    tree: TreeInput,
+    report: ImportReport,
+    parts: Vec<instances::PartInstance>,
+    part_of: Vec<usize>,
+    group_values: Vec<Option<i64>>,
+}
+
+fn import_parts(
+    bytes: &[u8],
+    base_dir: Option<&Path>,
+    name: &str,
+    options: &ImportOptions,
+) -> Result<Imported, ImportError> {
     if !(options.scale.is_finite() && options.scale > 0.0) {
         return Err(ImportError::BadScale(options.scale));
     }
@@ -344,6 +406,7 @@ pub fn import_gltf_bytes(
         group_size: Spread::of(sizes.values().map(|&s| s as f64).collect()),
         radius: Spread::of(needles.iter().map(|n| n.radius as f64).collect()),
         length: Spread::of(needles.iter().map(|n| n.length() as f64).collect()),
+        prototypes: sizes.len(),
         warnings,
     };
     let tree = TreeInput {
@@ -353,7 +416,20 @@ pub fn import_gltf_bytes(
         wood_mesh,
         material: FoliageMaterial::default(),
     };
-    Ok((tree, report))
+    Ok(Imported {
+        tree,
+        report,
+        parts: needle_parts
+            .iter()
+            .map(|p| instances::PartInstance {
+                mesh: p.mesh,
+                primitive: p.primitive,
+                world: p.world,
+            })
+            .collect(),
+        part_of,
+        group_values: fitted.iter().map(|f| f.group_value).collect(),
+    })
 }
 
 /// `true` when the primitive's node, mesh or material name marks it as
