@@ -206,8 +206,9 @@ pub struct ImportReport {
     pub warnings: Vec<String>,
 }
 
-/// Imports the glTF file at `path` (external buffers are read beside it).
-pub fn import_gltf(path: &Path, options: &ImportOptions) -> Result<(TreeInput, ImportReport), ImportError> {
+/// The bytes of the glTF file at `path`, the folder its external buffers
+/// are read from, and the tree's name (the file's stem).
+fn read_gltf_file(path: &Path) -> Result<(Vec<u8>, &Path, String), ImportError> {
     let bytes = std::fs::read(path)?;
     let dir = path
         .parent()
@@ -216,6 +217,12 @@ pub fn import_gltf(path: &Path, options: &ImportOptions) -> Result<(TreeInput, I
     let name = path
         .file_stem()
         .map_or_else(|| "tree".to_string(), |s| s.to_string_lossy().into_owned());
+    Ok((bytes, dir, name))
+}
+
+/// Imports the glTF file at `path` (external buffers are read beside it).
+pub fn import_gltf(path: &Path, options: &ImportOptions) -> Result<(TreeInput, ImportReport), ImportError> {
+    let (bytes, dir, name) = read_gltf_file(path)?;
     import_gltf_bytes(&bytes, Some(dir), &name, options)
 }
 
@@ -238,14 +245,7 @@ pub fn import_gltf_prototypes(
     path: &Path,
     options: &ImportOptions,
 ) -> Result<(PrototypeInput, ImportReport), ImportError> {
-    let bytes = std::fs::read(path)?;
-    let dir = path
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
-        .file_stem()
-        .map_or_else(|| "tree".to_string(), |s| s.to_string_lossy().into_owned());
+    let (bytes, dir, name) = read_gltf_file(path)?;
     import_gltf_bytes_prototypes(&bytes, Some(dir), &name, options)
 }
 
