@@ -517,7 +517,7 @@ impl Canvas {
 }
 
 /// An 8-bit sRGB value in linear light, [0, 1].
-pub(crate) fn srgb_to_linear(value: u8) -> f32 {
+pub fn srgb_to_linear(value: u8) -> f32 {
     let c = f32::from(value) / 255.0;
     if c <= 0.04045 {
         c / 12.92

@@ -690,3 +690,69 @@ fn shadow_cascades_keep_the_parts_they_need() {
     app.update();
     assert_eq!(state(&app, tree), far);
 }
+
+#[test]
+fn point_and_spot_light_shadows_keep_the_parts_they_need() {
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    app.world_mut().spawn(camera(300.0));
+    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
+    app.update();
+    let far = state(&app, tree);
+    assert!(!far.prisms_visible, "the camera alone sees no prism at 300 m");
+
+    // A lamp 3 m from the crown: its cube faces (1,024 texels over 90°)
+    // have 6 mm texels there, so the tree's shadow needs wood prisms and
+    // finer line bands than the far camera.
+    let lamp = app
+        .world_mut()
+        .spawn((
+            PointLight {
+                shadow_maps_enabled: true,
+                range: 20.0,
+                ..default()
+            },
+            Transform::from_xyz(3.0, 0.0, 0.0),
+        ))
+        .id();
+    app.update();
+    let lit = state(&app, tree);
+    assert!(lit.wood_prisms_visible, "the trunk casts the lamp's shadow as prisms");
+    assert!(
+        lit.line_bands.count_ones() > far.line_bands.count_ones(),
+        "finer bands for the lamp's shadow: {:b} vs {:b}",
+        lit.line_bands,
+        far.line_bands
+    );
+    assert_eq!(
+        lit.min_spatial_error, far.min_spatial_error,
+        "the camera's error is unchanged"
+    );
+
+    // Out of the lamp's range, or with its shadows off, the lamp changes nothing.
+    app.world_mut().get_mut::<Transform>(lamp).unwrap().translation = Vec3::new(100.0, 0.0, 0.0);
+    app.update();
+    assert_eq!(state(&app, tree), far, "a lamp out of range");
+    app.world_mut().get_mut::<Transform>(lamp).unwrap().translation = Vec3::new(3.0, 0.0, 0.0);
+    app.world_mut().get_mut::<PointLight>(lamp).unwrap().shadow_maps_enabled = false;
+    app.update();
+    assert_eq!(state(&app, tree), far, "a lamp without shadows");
+
+    // A spot light does the same.
+    app.world_mut().spawn((
+        SpotLight {
+            shadow_maps_enabled: true,
+            range: 20.0,
+            ..default()
+        },
+        Transform::from_xyz(0.0, 3.0, 0.0).looking_at(Vec3::ZERO, Vec3::X),
+    ));
+    app.update();
+    let spot = state(&app, tree);
+    assert!(
+        spot.wood_prisms_visible,
+        "the spot light's shadow needs the trunk's prisms"
+    );
+    assert!(spot.line_bands.count_ones() > far.line_bands.count_ones());
+}

@@ -112,7 +112,10 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         if !failures.is_empty() {
             bail!("eval check failed:\n  {}", failures.join("\n  "));
         }
-        eprintln!("eval: check passed (ours no worse than paper on coverage and popping; no blank render)");
+        eprintln!(
+            "eval: check passed (ours no worse than paper on coverage and popping; ours' shadow error within {}; no blank render)",
+            crate::eval::SHADOW_ERROR_LIMIT
+        );
     }
     Ok(())
 }
@@ -120,17 +123,18 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// The report as a Markdown table (the README's form).
 pub fn print_table(report: &EvalReport) {
     println!(
-        "| method | distance (m) | coverage error | colour error | FLIP | triangles | lines | primitives | frame ms |"
+        "| method | distance (m) | coverage error | colour error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, method) in &report.methods {
         for d in &method.distances {
             println!(
-                "| {name} | {:.2} | {:.4} | {:.2} | {:.3} | {} | {} | {} | {:.1} |",
+                "| {name} | {:.2} | {:.4} | {:.2} | {:.3} | {} | {} | {} | {} | {:.1} |",
                 d.distance,
                 d.coverage_error,
                 d.color_error,
                 d.perceptual,
+                d.shadow_coverage_error.map_or("–".to_string(), |e| format!("{e:.4}")),
                 d.triangles,
                 d.lines,
                 d.primitives,

@@ -485,8 +485,66 @@ pub fn shader_prism_sides(radius: f32, e: f32, max_sides: u8) -> Option<u8> {
     (e < line_error(radius)).then(|| prism_sides(relative_error(e, radius), max_sides))
 }
 
+/// PCG hash (Jarzynski and Olano, *Hash Functions for GPU Rendering*,
+/// JCGT 2020), as `conifer_line_shadow.wgsl` computes it.
+pub fn pcg_hash(value: u32) -> u32 {
+    let state = value.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// CPU reference of the lines' shadow test (`conifer_line_shadow.wgsl`):
+/// whether the fragment at shadow-map texel `texel` of line `line` of
+/// instance `tree`, whose opacity is `alpha`, writes depth. It does with
+/// probability `alpha`, independently between lines and trees, so a
+/// line's shadow covers what its blended colour covers and overlapping
+/// lines compose as `1 − Π(1 − aᵢ)`.
+pub fn shadow_texel_kept(texel: [u32; 2], line: u32, tree: u32, alpha: f32) -> bool {
+    let h = pcg_hash(texel[0] ^ pcg_hash(texel[1] ^ pcg_hash(line ^ pcg_hash(tree))));
+    (h >> 8) as f32 * (1.0 / 16_777_216.0) < alpha
+}
+
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn hashed_shadow_texels_cover_the_line_opacity() {
+        let kept = |line: u32, tree: u32, alpha: f32| {
+            (0..256u32)
+                .flat_map(|y| (0..256u32).map(move |x| [x, y]))
+                .filter(|&t| shadow_texel_kept(t, line, tree, alpha))
+                .count() as f32
+                / 65_536.0
+        };
+        for alpha in [0.0, 0.05, 0.3, 0.5, 0.9, 1.0] {
+            let fraction = kept(17, 3, alpha);
+            assert!((fraction - alpha).abs() < 0.01, "alpha {alpha}: {fraction}");
+        }
+        // Overlapping lines are independent: together they cover what
+        // blending them gives, 1 − Π(1 − aᵢ).
+        let alphas = [0.3f32, 0.5, 0.2];
+        let covered = (0..256u32)
+            .flat_map(|y| (0..256u32).map(move |x| [x, y]))
+            .filter(|&t| {
+                alphas
+                    .iter()
+                    .enumerate()
+                    .any(|(line, &a)| shadow_texel_kept(t, line as u32, 9, a))
+            })
+            .count() as f32
+            / 65_536.0;
+        let blended = 1.0 - alphas.iter().map(|a| 1.0 - a).product::<f32>();
+        assert!((covered - blended).abs() < 0.01, "{covered} vs {blended}");
+        // The same line of another tree uses other texels.
+        let same = (0..65_536u32)
+            .filter(|&i| {
+                let t = [i % 256, i / 256];
+                shadow_texel_kept(t, 5, 1, 0.5) == shadow_texel_kept(t, 5, 2, 0.5)
+            })
+            .count() as f32
+            / 65_536.0;
+        assert!((same - 0.5).abs() < 0.02, "{same}");
+    }
     use super::*;
     use crate::model::{BakeOptions, TreeInput, WoodSegment, bake};
 

@@ -49,6 +49,7 @@ struct ConiferLod {
 
 struct ConiferVertex {
     @builtin(instance_index) instance_index: u32,
+    @builtin(vertex_index) vertex_index: u32,
 #ifdef CONIFER_PRISMS
     @location(0) code: u32,
 #else
@@ -235,6 +236,12 @@ fn vertex(vertex: ConiferVertex) -> VertexOutput {
         }
         color.a = alpha;
     }
+#ifdef PREPASS_PIPELINE
+    // Depth passes (shadows) keep a fraction `alpha` of the line's texels,
+    // hashed by the line and the tree (conifer_line_shadow.wgsl), which
+    // travel as the colour: two vertices a line.
+    color = vec4<f32>(f32(vertex.vertex_index / 2u), f32(vertex.instance_index), 0.0, alpha);
+#endif
     return finish(vertex.position, vertex.normal, vertex.instance_index, world_from_local, color, true);
 #endif
 }

@@ -1,5 +1,7 @@
 //! The foliage material: Bevy's `StandardMaterial` (lighting, shadows, fog)
-//! extended with the LOD vertex shader `conifer_lod.wgsl`.
+//! extended with the LOD vertex shader `conifer_lod.wgsl`, and for the
+//! translucent lines' shadows the hashed alpha test of
+//! `conifer_line_shadow.wgsl`.
 
 use bevy::asset::{embedded_asset, embedded_path};
 use bevy::mesh::{MeshVertexAttribute, MeshVertexBufferLayoutRef};
@@ -73,6 +75,14 @@ impl MaterialExtension for ConiferLodExtension {
         ShaderRef::Path(shader_path())
     }
 
+    /// Lines (blended) reach depth passes only as shadow casters; there each
+    /// fragment is kept with the line's opacity, so a line casts the shadow
+    /// of the coverage it draws. Prisms are opaque and run no fragment
+    /// shader in depth passes.
+    fn prepass_fragment_shader() -> ShaderRef {
+        ShaderRef::Path(line_shadow_shader_path())
+    }
+
     fn specialize(
         _pipeline: &MaterialExtensionPipeline,
         descriptor: &mut RenderPipelineDescriptor,
@@ -98,9 +108,10 @@ impl MaterialExtension for ConiferLodExtension {
         };
         descriptor.vertex.buffers = vec![layout.0.get_layout(&attributes)?];
         let mut defs: Vec<ShaderDefVal> = vec![mesh_def.into()];
-        if !prepass {
+        if !prepass || mesh_def == "CONIFER_LINES" {
             // Opacity and debug colours travel as the vertex colour the
-            // StandardMaterial fragment shader multiplies in.
+            // StandardMaterial fragment shader multiplies in; in depth
+            // passes, a line's opacity and hash seeds for the alpha test.
             defs.push("VERTEX_COLORS".into());
         }
         descriptor.vertex.shader_defs.extend(defs.iter().cloned());
@@ -116,8 +127,14 @@ fn shader_path() -> bevy::asset::AssetPath<'static> {
     bevy::asset::AssetPath::from_path_buf(path).with_source("embedded")
 }
 
-/// Registers the embedded shader and the material.
+fn line_shadow_shader_path() -> bevy::asset::AssetPath<'static> {
+    let path = embedded_path!("conifer_line_shadow.wgsl");
+    bevy::asset::AssetPath::from_path_buf(path).with_source("embedded")
+}
+
+/// Registers the embedded shaders and the material.
 pub(super) fn build(app: &mut App) {
     embedded_asset!(app, "conifer_lod.wgsl");
+    embedded_asset!(app, "conifer_line_shadow.wgsl");
     app.add_plugins(MaterialPlugin::<ConiferMaterial>::default());
 }

@@ -79,6 +79,9 @@ impl Plugin for ConiferLodPlugin {
                 (ConiferLodSet::Prepare, ConiferLodSet::Select)
                     .chain()
                     .after(TransformSystems::Propagate)
+                    // The cascades of this frame's cameras, which the
+                    // selection reads for the shadows.
+                    .after(bevy::light::SimulationLightSystems::UpdateDirectionalLightCascades)
                     .before(VisibilitySystems::VisibilityPropagate),
             )
             .add_systems(

@@ -380,13 +380,74 @@ struct ShadowLod {
     texel_size: f32,
 }
 
+/// A point light's cube faces or a spot light's cone: a perspective
+/// shadow view from `position` reaching `range`, whose spatial error per
+/// metre of distance is `slope` (its texel at one metre).
+struct LocalShadowLod {
+    position: Vec3,
+    range: f32,
+    slope: f32,
+}
+
+/// The point and spot lights that cast shadows, and their shadow maps'
+/// sizes (Bevy's defaults where the resources are missing).
+#[derive(bevy::ecs::system::SystemParam)]
+pub(super) struct LocalLights<'w, 's> {
+    points: Query<'w, 's, (&'static PointLight, &'static GlobalTransform)>,
+    spots: Query<'w, 's, (&'static SpotLight, &'static GlobalTransform)>,
+    point_map: Option<Res<'w, bevy::light::PointLightShadowMap>>,
+    directional_map: Option<Res<'w, bevy::light::DirectionalLightShadowMap>>,
+}
+
+impl LocalLights<'_, '_> {
+    /// Every shadow-casting point and spot light as a view. A cube face is
+    /// a 90° view of `PointLightShadowMap::size` texels (texel `2/size` at
+    /// one metre); a spot light's map has `DirectionalLightShadowMap::size`
+    /// texels over its cone (`2·tan(outer angle)/size`), as Bevy renders
+    /// them.
+    fn views(&self) -> Vec<LocalShadowLod> {
+        let point_size = self
+            .point_map
+            .as_ref()
+            .map_or(bevy::light::PointLightShadowMap::default().size, |m| m.size) as f32;
+        let spot_size = self
+            .directional_map
+            .as_ref()
+            .map_or(bevy::light::DirectionalLightShadowMap::default().size, |m| m.size) as f32;
+        let points = self
+            .points
+            .iter()
+            .filter(|(light, _)| light.shadow_maps_enabled)
+            .map(|(light, transform)| LocalShadowLod {
+                position: transform.translation(),
+                range: light.range,
+                slope: 2.0 / point_size.max(1.0),
+            });
+        let spots = self
+            .spots
+            .iter()
+            .filter(|(light, _)| light.shadow_maps_enabled)
+            .map(|(light, transform)| LocalShadowLod {
+                position: transform.translation(),
+                range: light.range,
+                slope: 2.0 * light.outer_angle.clamp(0.0, 1.5).tan() / spot_size.max(1.0),
+            });
+        points
+            .chain(spots)
+            .filter(|view| view.position.is_finite() && view.range > 0.0 && view.slope > 0.0)
+            .collect()
+    }
+}
+
 /// Computes every tree's [`ConiferLodState`] over the active cameras and
-/// hides the parts that cannot draw anything at its errors (for the cameras
-/// or the directional lights' shadow cascades).
+/// hides the parts that cannot draw anything at its errors (for the cameras,
+/// the directional lights' shadow cascades, and the point and spot lights'
+/// shadow maps).
 #[allow(clippy::type_complexity, clippy::too_many_arguments)] // a Bevy system
 pub(super) fn select_lod(
     cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     lights: Query<(&DirectionalLight, &Cascades)>,
+    local_lights: LocalLights,
     mut trees: Query<(
         &ConiferFoliage,
         &GlobalTransform,
@@ -415,6 +476,7 @@ pub(super) fn select_lod(
             texel_size: cascade.texel_size,
         })
         .collect();
+    let local_shadows = local_lights.views();
     for (foliage, transform, over, mut state, tree_parts) in &mut trees {
         let Some(species) = species_assets.get(&foliage.0) else {
             continue;
@@ -453,6 +515,16 @@ pub(super) fn select_lod(
                 let ndc = shadow.clip_from_world.project_point3(center);
                 if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
                     let e = pixel_error * shadow.texel_size / scale;
+                    part_min_e = part_min_e.min(e);
+                    part_max_e = part_max_e.max(e);
+                }
+            }
+            // Point and spot lights whose range reaches the tree's box.
+            let radius = Vec3::from(species.aabb.half_extents).length() * scale;
+            let box_center = transform.transform_point(Vec3::from(species.aabb.center));
+            for light in &local_shadows {
+                if box_center.distance(light.position) <= light.range + radius {
+                    let e = pixel_error * center.distance(light.position) * light.slope / scale;
                     part_min_e = part_min_e.min(e);
                     part_max_e = part_max_e.max(e);
                 }

@@ -1,0 +1,204 @@
+//! Shadows of the foliage, rendered (Mesa's lavapipe is enough): the tree's
+//! shadow on the ground, with the needles drawn as translucent lines in the
+//! shadow maps, is as dark as the shadow of every needle drawn as a prism
+//! (LOD off), not the shadow of opaque lines, under a directional light and
+//! under a point light near a tree the camera sees from far away.
+//! Pictures go to `target/test-output/render/`.
+#![cfg(feature = "plugin")]
+
+use bevy::light::CascadeShadowConfigBuilder;
+use bevy::prelude::*;
+use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::prelude::*;
+use bevy_conifer_lod::preview::srgb_to_linear;
+use std::path::PathBuf;
+
+const SIZE: u32 = 256;
+
+fn luminance(image: &image::RgbaImage) -> Vec<f32> {
+    image
+        .pixels()
+        .map(|p| 0.2126 * srgb_to_linear(p[0]) + 0.7152 * srgb_to_linear(p[1]) + 0.0722 * srgb_to_linear(p[2]))
+        .collect()
+}
+
+/// Mean darkening `(lit − shaded)/lit` (linear luminance) of `lines` and of
+/// `prisms` over the pixels of rows `rows` where the prisms' shadow darkens
+/// the ground by more than 5 %.
+fn shadow_darkening(
+    lit: &image::RgbaImage,
+    lines: &image::RgbaImage,
+    prisms: &image::RgbaImage,
+    rows: std::ops::Range<u32>,
+) -> (f32, f32, usize) {
+    let (lit, lines, prisms) = (luminance(lit), luminance(lines), luminance(prisms));
+    let (mut sum_lines, mut sum_prisms, mut count) = (0.0, 0.0, 0);
+    for i in (rows.start * SIZE) as usize..(rows.end * SIZE) as usize {
+        if lit[i] <= 1e-4 {
+            continue;
+        }
+        let prism_dark = (lit[i] - prisms[i]) / lit[i];
+        if prism_dark > 0.05 {
+            sum_prisms += prism_dark;
+            sum_lines += (lit[i] - lines[i]) / lit[i];
+            count += 1;
+        }
+    }
+    let n = count.max(1) as f32;
+    (sum_lines / n, sum_prisms / n, count)
+}
+
+struct ShadowScene {
+    renderer: HeadlessRenderer,
+    tree: Entity,
+    target: Handle<Image>,
+    out: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl ShadowScene {
+    /// A 20,000-needle Scots pine at the origin on a grey ground.
+    fn new() -> Self {
+        let dir = tempfile::tempdir().unwrap();
+        let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+        std::fs::create_dir_all(&out).unwrap();
+        let tree = generate(
+            Species::ScotsPine,
+            &GenerateOptions {
+                seed: 4,
+                target_needles: Some(20_000),
+            },
+        );
+        let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+        write_record(&record, &dir.path().join("pine.conifer")).unwrap();
+        let mut renderer = HeadlessRenderer::new(&dir.path().to_string_lossy());
+        let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
+        let tree = renderer
+            .world_mut()
+            .spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY))
+            .id();
+        let world = renderer.world_mut();
+        world.insert_resource(GlobalAmbientLight {
+            brightness: 150.0,
+            ..default()
+        });
+        let ground_mesh = world
+            .resource_mut::<Assets<Mesh>>()
+            .add(Plane3d::default().mesh().size(60.0, 60.0));
+        let ground_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+            base_color: Color::srgb(0.6, 0.6, 0.6),
+            perceptual_roughness: 1.0,
+            reflectance: 0.0,
+            ..default()
+        });
+        world.spawn((Mesh3d(ground_mesh), MeshMaterial3d(ground_material)));
+        renderer.load(&[handle.untyped()], 600).unwrap();
+        let target = renderer.render_target(SIZE, SIZE);
+        Self {
+            renderer,
+            tree,
+            target,
+            out,
+            _dir: dir,
+        }
+    }
+
+    /// A camera looking straight down from `height` above `at` with field
+    /// of view `fov_deg`, +x up the picture.
+    fn camera(&mut self, at: Vec3, height: f32, fov_deg: f32) {
+        self.renderer.world_mut().spawn((
+            HeadlessRenderer::camera_bundle(
+                &self.target,
+                Transform::from_translation(at + Vec3::Y * height).looking_at(at, Vec3::X),
+                fov_deg.to_radians(),
+            ),
+            bevy::core_pipeline::tonemapping::Tonemapping::None,
+        ));
+    }
+
+    /// Pictures with the LOD on, with it off (every needle a prism), and
+    /// without the tree.
+    fn capture(&mut self, name: &str) -> [image::RgbaImage; 3] {
+        let shot = |scene: &mut Self, label: &str| {
+            let image = scene.renderer.capture(&scene.target, 20).unwrap();
+            image
+                .save(scene.out.join(format!("shadow_{name}_{label}.png")))
+                .unwrap();
+            image
+        };
+        let lines = shot(self, "lines");
+        self.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
+        let prisms = shot(self, "prisms");
+        self.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = true;
+        self.renderer
+            .world_mut()
+            .entity_mut(self.tree)
+            .insert(Visibility::Hidden);
+        let lit = shot(self, "no_tree");
+        self.renderer
+            .world_mut()
+            .entity_mut(self.tree)
+            .insert(Visibility::Inherited);
+        [lit, lines, prisms]
+    }
+}
+
+#[test]
+fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
+    let mut scene = ShadowScene::new();
+    // A low sun from +x: the crown's shadow falls 1–6 m toward −x.
+    scene.renderer.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 2_500.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(5.0, 4.0, 0.0).looking_at(Vec3::ZERO, Vec3::Y),
+        CascadeShadowConfigBuilder {
+            num_cascades: 1,
+            maximum_distance: 16.0,
+            first_cascade_far_bound: 16.0,
+            ..default()
+        }
+        .build(),
+    ));
+    // From 10 m above the shadow: the tree stands at the top edge, its
+    // shadow fills the lower part.
+    scene.camera(Vec3::new(-3.5, 0.0, 0.0), 10.0, 40.0);
+    let [lit, lines, prisms] = scene.capture("sun");
+    let (lines, prisms, pixels) = shadow_darkening(&lit, &lines, &prisms, SIZE * 3 / 10..SIZE);
+    println!("sun: {pixels} shadow pixels; darkening: prisms {prisms:.3}, lines {lines:.3}");
+    assert!(pixels > 500, "the tree casts a visible shadow: {pixels} pixels");
+    assert!(
+        (lines - prisms).abs() <= 0.15 * prisms,
+        "the lines' shadow darkens the ground by {lines:.3}, the prisms' by {prisms:.3}"
+    );
+}
+
+#[test]
+fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
+    let mut scene = ShadowScene::new();
+    scene.renderer.world_mut().spawn((
+        PointLight {
+            intensity: 2_000_000.0,
+            range: 30.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(3.0, 4.5, 0.0),
+    ));
+    // The camera is 80 m up (its cut is coarse lines), the lamp 3 m from the
+    // crown (its cube faces need the fine lines and the trunk's prisms).
+    scene.camera(Vec3::new(-3.0, 0.0, 0.0), 80.0, 8.0);
+    let [lit, lines, prisms] = scene.capture("lamp");
+    // The crown seen from above covers rows 32–86: below is shadow only.
+    let (lines, prisms, pixels) = shadow_darkening(&lit, &lines, &prisms, 90..SIZE);
+    println!("lamp: {pixels} shadow pixels; darkening: prisms {prisms:.3}, lines {lines:.3}");
+    assert!(pixels > 500, "the tree casts a visible shadow: {pixels} pixels");
+    assert!(
+        (lines - prisms).abs() <= 0.2 * prisms,
+        "the lines' shadow darkens the ground by {lines:.3}, the prisms' by {prisms:.3}"
+    );
+}
