@@ -418,7 +418,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     let inspect = json(&conifer(&["inspect", shoots.to_str().unwrap(), "--json"]));
     let needles = inspect["needles"].as_u64().unwrap();
     assert!((19_000..=21_000).contains(&needles), "{needles}");
-    assert_eq!(inspect["format_version"].as_u64(), Some(3));
+    assert_eq!(inspect["format_version"].as_u64(), Some(4));
     let prototypes = inspect["prototypes"].as_u64().unwrap();
     assert!((10..=120).contains(&prototypes), "{prototypes} prototypes");
     assert!(inspect["prototype_needles"].as_u64().unwrap() * 5 < needles);
@@ -442,7 +442,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     assert_eq!(flat_inspect["prototype_needles"], flat_inspect["needles"]);
     assert!(flat_inspect["bytes"].as_u64().unwrap() > 4 * inspect["bytes"].as_u64().unwrap());
 
-    // A format 2 record: read as it is, rewritten in format 3 with the same cuts.
+    // A format 2 record: read as it is, rewritten in format 4 with the same cuts.
     let old = dir.path().join("old.conifer");
     std::fs::copy(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/format2-scots-pine.conifer"),
@@ -463,14 +463,31 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     let before = cuts(path);
     let output = conifer(&["upgrade", path]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(String::from_utf8_lossy(&output.stderr).contains("format 2 → 3"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("format 2 → 4"));
     assert_eq!(
         json(&conifer(&["inspect", path, "--json"]))["format_version"].as_u64(),
-        Some(3)
+        Some(4)
     );
-    assert_eq!(cuts(path), before);
+    // The same cuts; only the opacity moves with the radii's quantization,
+    // and the lines the GPU processes with the band limits (which follow
+    // the rounded-up errors).
+    let opacity = |cut: &mut serde_json::Value| cut.as_object_mut().unwrap().remove("mean_original_line_opacity");
+    for (mut after, mut then) in cuts(path).into_iter().zip(before) {
+        for cut in [&mut after, &mut then] {
+            let processed = cut.as_object_mut().unwrap().remove("gpu_lines_processed").unwrap();
+            assert!(processed.as_u64() >= cut["line_segments"].as_u64());
+        }
+        match (
+            opacity(&mut after).and_then(|o| o.as_f64()),
+            opacity(&mut then).and_then(|o| o.as_f64()),
+        ) {
+            (Some(a), Some(b)) => assert!((a / b - 1.0).abs() < 5e-4, "opacity {a} vs {b}"),
+            (a, b) => assert_eq!(a, b),
+        }
+        assert_eq!(after, then);
+    }
     let output = conifer(&["upgrade", path]);
-    assert!(String::from_utf8_lossy(&output.stderr).contains("already format 3"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("already format 4"));
 
     // Not a record: an error naming the file, and the file is untouched.
     let junk = dir.path().join("junk.conifer");

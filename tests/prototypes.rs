@@ -141,6 +141,25 @@ proptest! {
         let bytes = encode_prototype_record(&record).unwrap();
         prop_assert_eq!(&decode_prototype_record(&bytes).unwrap(), &record);
         prop_assert_eq!(decode_record(&bytes).unwrap(), record.flatten().unwrap());
+        // A bake is already what format 4 stores: quantizing changes nothing.
+        prop_assert_eq!(&record.quantized().unwrap(), &record);
+    }
+
+    #[test]
+    fn quantizing_moves_needles_by_micrometres_and_keeps_errors_monotone(input in prototype_tree()) {
+        let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+        // The placed needles of the bake against the unquantized input's.
+        for (placement, p) in record.placements.iter().zip(&input.placements) {
+            let (baked, given) = (&record.prototypes[placement.prototype as usize], &input.prototypes[p.prototype as usize]);
+            for (b, g) in baked.needles.iter().zip(given) {
+                prop_assert!(b.base.distance(g.base) < 1e-5 && b.tip.distance(g.tip) < 1e-5, "{:?} vs {:?}", b, g);
+                prop_assert!((b.radius / g.radius - 1.0).abs() < 2.5e-4);
+            }
+        }
+        let flat = record.flatten().unwrap();
+        for node in 0..flat.node_count() as u32 {
+            prop_assert!(flat.parent_error(node) >= flat.node_error(node));
+        }
     }
 }
 
@@ -212,8 +231,10 @@ fn one_prototype_placed_many_times_is_stored_once() {
     let proto_bytes = encode_prototype_record(&record).unwrap().len();
     // The same tree written flat: every group its own prototype.
     let flat_bytes = encode_record(&flat).unwrap().len();
+    // The shoot is stored once: what remains is each placement (a
+    // similarity, 33 bytes) and its level-2 merged line (about 7).
     assert!(
-        proto_bytes * 2 < flat_bytes,
+        proto_bytes < 2000 * 41 && proto_bytes * 3 < flat_bytes * 2,
         "prototypes {proto_bytes} bytes, flat {flat_bytes} bytes"
     );
     // The cut is the flat cut at every distance band.

@@ -144,14 +144,16 @@ fn trailing_bytes_and_huge_lengths() {
 
 #[test]
 fn nan_carrying_records_are_rejected() {
+    // Format 4 stores needles and errors as codes (no NaN to write; the
+    // unit tests of `model::file` corrupt the codes); wood segments,
+    // placements and the material stay f32. The trunk's start radius:
     let record = small_record();
     let bytes = encode_record(&record).unwrap();
-    // The first needle's radius, as stored (f32 little-endian, fixed width).
-    let radius = record.needles[0].radius.to_le_bytes();
+    let radius = record.wood[0].start_radius.to_le_bytes();
     let at = bytes
         .windows(4)
         .position(|w| w == radius)
-        .expect("radius stored verbatim");
+        .expect("wood radius stored verbatim");
     let mut bad = bytes.clone();
     bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     fix_checksum(&mut bad);
@@ -159,16 +161,6 @@ fn nan_carrying_records_are_rejected() {
         Err(RecordError::Invalid(reason)) => assert!(reason.to_string().contains("non-finite"), "{reason}"),
         other => panic!("{other:?}"),
     }
-    // A merged line's error.
-    let error = record.merged.last().unwrap().error.to_le_bytes();
-    let at = bytes
-        .windows(4)
-        .rposition(|w| w == error)
-        .expect("error stored verbatim");
-    let mut bad = bytes.clone();
-    bad[at..at + 4].copy_from_slice(&f32::INFINITY.to_le_bytes());
-    fix_checksum(&mut bad);
-    assert!(matches!(decode_record(&bad), Err(RecordError::Invalid(_))));
 }
 
 #[test]
@@ -241,10 +233,39 @@ fn format_2_files_load_converted() {
     assert_eq!(prototypes, PrototypeRecord::from_flat(&flat).unwrap());
     assert_eq!(prototypes.placements.len(), 30);
     assert_eq!(prototypes.flatten().unwrap(), flat);
-    // Written again, it is a format 3 file holding the same tree.
+    // Written again, it is a format 4 file holding the same tree, quantized:
+    // needle ends within a grid step (micrometres for these fascicles),
+    // radii within 0.025 %, merged errors rounded up (0.05 % a level, plus
+    // what their children's rounding added), the merge forest unchanged;
+    // and quantizing again changes nothing.
     let again = encode_prototype_record(&prototypes).unwrap();
     assert_eq!(u32::from_le_bytes(again[8..12].try_into().unwrap()), FORMAT_VERSION);
-    assert_eq!(decode_record(&again).unwrap(), flat);
+    let back = decode_record(&again).unwrap();
+    assert_eq!((back.needle_count(), back.group_count()), (60, 30));
+    for (a, b) in flat.needles.iter().zip(&back.needles) {
+        assert!(
+            a.base.distance(b.base) < 1e-5 && a.tip.distance(b.tip) < 1e-5,
+            "{a:?} vs {b:?}"
+        );
+        assert!(
+            (b.radius / a.radius - 1.0).abs() < 2.5e-4,
+            "{} vs {}",
+            a.radius,
+            b.radius
+        );
+        assert_eq!(a.group, b.group);
+    }
+    assert_eq!(flat.merged.len(), back.merged.len());
+    for (a, b) in flat.merged.iter().zip(&back.merged) {
+        assert_eq!((a.children, a.ends), (b.children, b.ends));
+        assert!(
+            b.error >= a.error && b.error <= a.error * 1.002,
+            "{} vs {}",
+            a.error,
+            b.error
+        );
+    }
+    assert_eq!(encode_record(&back).unwrap(), again);
     // Format 1 is refused with an error that says to re-bake.
     let mut old = bytes.clone();
     old[8..12].copy_from_slice(&1u32.to_le_bytes());

@@ -5,6 +5,7 @@ use super::merge::{CostContext, GroupLine, MergeOptions, merge_group, merge_grou
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
 use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord};
+use super::quantize::{prototype_grid, quantize_needle};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Quat;
 use rayon::prelude::*;
@@ -221,20 +222,24 @@ pub fn bake_prototypes(
             ..*p
         })
         .collect();
-    let prototype_needles: Vec<Vec<Needle>> = input
-        .prototypes
-        .iter()
-        .map(|needles| {
-            needles
-                .iter()
-                .map(|n| Needle {
-                    normal: snap_normal(n.normal),
-                    group: 0,
-                    ..*n
-                })
-                .collect()
-        })
-        .collect();
+    // Needles as the record stores them (format 4: ends on the prototype's
+    // grid, radius and normal on their codes), before anything is measured
+    // on them, so the merged lines' errors hold for the stored needles.
+    let mut prototype_needles: Vec<Vec<Needle>> = Vec::with_capacity(input.prototypes.len());
+    for (prototype, needles) in input.prototypes.iter().enumerate() {
+        // Valid needles (checked above) have no grid only when one lies
+        // beyond `quantize::MAX_GRID_COORDINATE`.
+        let grid = prototype_grid(needles).ok_or(BakeError::InvalidPrototypeNeedle { prototype, needle: 0 })?;
+        let quantized = needles
+            .iter()
+            .enumerate()
+            .map(|(needle, n)| {
+                quantize_needle(&Needle { group: 0, ..*n }, &grid)
+                    .ok_or(BakeError::InvalidPrototypeNeedle { prototype, needle })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        prototype_needles.push(quantized);
+    }
 
     // The cost context: the placed crown's diagonal and needle count.
     let placed_points = placements.iter().flat_map(|p| {
@@ -313,6 +318,9 @@ pub fn bake_prototypes(
         options.max_sides,
         info,
     )?;
+    // What the record file stores (format 4): writing and reading the
+    // bake's record is exact.
+    record = record.quantized()?;
     record.bake.bake_seconds = Some(start.elapsed().as_secs_f64());
     Ok(record)
 }

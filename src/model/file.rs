@@ -44,6 +44,7 @@ use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
 use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeRecord};
+use super::quantize::{PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -54,7 +55,7 @@ use std::path::Path;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -163,6 +164,47 @@ impl StoredMesh {
     }
 }
 
+/// The wood mesh as format 4 stores it: positions on a [`PositionGrid`]
+/// over the mesh (three 16-bit codes), the rest as format 3.
+#[derive(Serialize, Deserialize)]
+struct QuantizedMesh {
+    grid: ([i32; 3], i8),
+    positions: Vec<[u8; 6]>,
+    normals: Vec<[u8; 4]>,
+    index_steps: Vec<i64>,
+}
+
+impl QuantizedMesh {
+    /// `mesh`, whose positions lie on `grid`
+    /// ([`PrototypeRecord::quantized`]).
+    fn encode(mesh: &TriangleMesh, grid: &PositionGrid) -> Self {
+        let StoredMesh {
+            normals, index_steps, ..
+        } = StoredMesh::encode(&TriangleMesh {
+            positions: Vec::new(),
+            ..mesh.clone()
+        });
+        Self {
+            grid: grid.to_codes(),
+            positions: mesh.positions.iter().map(|&p| grid_bytes(grid.encode(p))).collect(),
+            normals,
+            index_steps,
+        }
+    }
+
+    fn decode(self) -> Result<TriangleMesh, RecordError> {
+        let grid = PositionGrid::from_codes(self.grid.0, self.grid.1).ok_or(RecordInvalid::BadWoodMesh)?;
+        let mut mesh = StoredMesh {
+            positions: Vec::new(),
+            normals: self.normals,
+            index_steps: self.index_steps,
+        }
+        .decode()?;
+        mesh.positions = self.positions.into_iter().map(|p| grid.decode(grid_codes(p))).collect();
+        Ok(mesh)
+    }
+}
+
 /// The payload of a format 2 file: one flat tree.
 #[derive(Serialize, Deserialize)]
 struct PayloadV2 {
@@ -179,9 +221,10 @@ struct PayloadV2 {
     wood_mesh: StoredMesh,
 }
 
-/// The payload of a format 3 file: prototypes and placements.
+/// The payload of a format 3 file: prototypes and placements, needles and
+/// errors as `f32`.
 #[derive(Serialize, Deserialize)]
-struct Payload {
+struct PayloadV3 {
     name: String,
     source: String,
     bake_seconds: Option<f64>,
@@ -193,6 +236,90 @@ struct Payload {
     tree_merged: Vec<MergedEntry>,
     wood: Vec<[f32; 8]>,
     wood_mesh: StoredMesh,
+}
+
+/// The payload of a format 4 file: format 3 with needles, radii and errors
+/// quantized ([`super::quantize`]).
+#[derive(Serialize, Deserialize)]
+struct Payload {
+    name: String,
+    source: String,
+    bake_seconds: Option<f64>,
+    weights: [f32; 3],
+    max_sides: u8,
+    material: FoliageMaterial,
+    prototypes: QuantizedPrototypes,
+    placements: Vec<StoredPlacement>,
+    tree_merged: Vec<QuantizedMergedEntry>,
+    wood: Vec<[f32; 8]>,
+    wood_mesh: QuantizedMesh,
+}
+
+/// Format 4's prototypes: each one's grid, then as format 3 with codes.
+#[derive(Serialize, Deserialize)]
+struct QuantizedPrototypes {
+    needle_counts: Vec<u32>,
+    /// Per prototype: its grid's origin in [`super::quantize::GRID_ORIGIN_UNIT`]s
+    /// (zigzag varints) and its step's power of two.
+    grids: Vec<([i32; 3], i8)>,
+    needles: QuantizedNeedles,
+    merged: Vec<QuantizedMergedEntry>,
+}
+
+/// Needles as format 4 stores them, 18 bytes each: ends as three 16-bit
+/// grid codes, the radius as a 16-bit logarithmic code, the normal as the
+/// octahedral code (all little-endian bytes, so postcard writes them as
+/// they are rather than as varints).
+#[derive(Serialize, Deserialize)]
+struct QuantizedNeedles {
+    bases: Vec<[u8; 6]>,
+    tips: Vec<[u8; 6]>,
+    radii: Vec<[u8; 2]>,
+    normals: Vec<[u8; 4]>,
+}
+
+/// A merged line as format 4 stores it: the error as a logarithmic code.
+#[derive(Serialize, Deserialize)]
+struct QuantizedMergedEntry {
+    back: [u32; 2],
+    ends: u8,
+    error: [u8; 2],
+}
+
+fn grid_bytes(codes: [u16; 3]) -> [u8; 6] {
+    let [a, b] = codes[0].to_le_bytes();
+    let [c, d] = codes[1].to_le_bytes();
+    let [e, f] = codes[2].to_le_bytes();
+    [a, b, c, d, e, f]
+}
+
+fn grid_codes(bytes: [u8; 6]) -> [u16; 3] {
+    [
+        u16::from_le_bytes([bytes[0], bytes[1]]),
+        u16::from_le_bytes([bytes[2], bytes[3]]),
+        u16::from_le_bytes([bytes[4], bytes[5]]),
+    ]
+}
+
+impl QuantizedMergedEntry {
+    /// `entry` with its (already quantized) error as its code.
+    fn encode(entry: MergedEntry) -> Result<Self, RecordError> {
+        let code =
+            log_encode_at_least(entry.error).ok_or(RecordInvalid::NonFinite("merged line errors (above 100 km)"))?;
+        Ok(Self {
+            back: entry.back,
+            ends: entry.ends,
+            error: code.to_le_bytes(),
+        })
+    }
+
+    fn decode(&self) -> MergedEntry {
+        MergedEntry {
+            back: self.back,
+            ends: self.ends,
+            error: log_decode(u16::from_le_bytes(self.error)),
+        }
+    }
 }
 
 /// Every prototype's needles, one after the other, and their level-1
@@ -329,6 +456,8 @@ fn decode_merged(
 }
 
 impl StoredNeedles {
+    /// Format 3's needle arrays (written only by the tests' format 3 files).
+    #[cfg(test)]
     fn encode(needles: &[Needle]) -> Self {
         Self {
             bases: needles.iter().map(|x| x.base.to_array()).collect(),
@@ -441,23 +570,41 @@ fn node_ends(needles: usize, merged: &[MergedLine], node: u32) -> Option<[Endpoi
     }
 }
 
-/// Encodes a tree of prototypes into the bytes of a record file.
+/// Encodes a tree of prototypes into the bytes of a record file (format 4).
+/// The record is quantized first: decoding the bytes gives
+/// [`PrototypeRecord::quantized`]`(record)`, and for a baked record (already
+/// quantized) the record itself.
 pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, RecordError> {
-    let all_needles: Vec<Needle> = record
-        .prototypes
-        .iter()
-        .flat_map(|p| p.needles.iter().copied())
-        .collect();
-    let mut merged = Vec::with_capacity(all_needles.len());
-    for prototype in &record.prototypes {
+    let quantized = record.quantized_on_grids()?;
+    let record = &quantized.record;
+    let mut grids = Vec::with_capacity(record.prototypes.len());
+    let mut needles = QuantizedNeedles {
+        bases: Vec::new(),
+        tips: Vec::new(),
+        radii: Vec::new(),
+        normals: Vec::new(),
+    };
+    let mut merged = Vec::new();
+    for (prototype, grid) in record.prototypes.iter().zip(&quantized.prototype_grids) {
+        grids.push(grid.to_codes());
+        for needle in &prototype.needles {
+            needles.bases.push(grid_bytes(grid.encode(needle.base)));
+            needles.tips.push(grid_bytes(grid.encode(needle.tip)));
+            let radius = log_encode_nearest(needle.radius).ok_or(RecordInvalid::NonFinite("needle radii"))?;
+            needles.radii.push(radius.to_le_bytes());
+            needles.normals.push(encode_normal(needle.normal));
+        }
         let n = prototype.needles.len();
-        merged.extend(encode_merged(&prototype.merged, n as u32, |c, earlier| {
+        for entry in encode_merged(&prototype.merged, n as u32, |c, earlier| {
             node_ends(n, earlier, c).unwrap_or([u32::MAX; 2])
-        })?);
+        })? {
+            merged.push(QuantizedMergedEntry::encode(entry)?);
+        }
     }
-    let prototypes = StoredPrototypes {
+    let prototypes = QuantizedPrototypes {
         needle_counts: record.prototypes.iter().map(|p| p.needles.len() as u32).collect(),
-        needles: StoredNeedles::encode(&all_needles),
+        grids,
+        needles,
         merged,
     };
     let mut previous = None;
@@ -477,7 +624,10 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         } else {
             earlier.get((c - p_count) as usize).map_or([u32::MAX; 2], |m| m.ends)
         }
-    })?;
+    })?
+    .into_iter()
+    .map(QuantizedMergedEntry::encode)
+    .collect::<Result<Vec<_>, _>>()?;
     let w = record.bake.weights;
     let payload = Payload {
         name: record.name.clone(),
@@ -490,7 +640,7 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         placements,
         tree_merged,
         wood: encode_wood(&record.wood),
-        wood_mesh: StoredMesh::encode(&record.wood_mesh),
+        wood_mesh: QuantizedMesh::encode(&record.wood_mesh, &quantized.mesh_grid),
     };
     let body = postcard::to_allocvec(&payload).map_err(|e| RecordError::Malformed(e.to_string()))?;
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
@@ -567,8 +717,7 @@ pub fn decode_prototype_record(bytes: &[u8]) -> Result<PrototypeRecord, RecordEr
     if version == 2 {
         return Ok(PrototypeRecord::from_flat(&decode_v2(body)?)?);
     }
-    let payload: Payload = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
-    payload_to_prototype_record(payload)
+    payload_to_prototype_record(decode_payload(version, body)?)
 }
 
 /// Decodes the bytes of a record file as a flat record (placements expanded).
@@ -577,29 +726,112 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     if version == 2 {
         return decode_v2(body);
     }
-    let payload: Payload = postcard::from_bytes(body).map_err(|e| RecordError::Malformed(e.to_string()))?;
-    Ok(payload_to_prototype_record(payload)?.flatten()?)
+    Ok(payload_to_prototype_record(decode_payload(version, body)?)?.flatten()?)
 }
 
-fn payload_to_prototype_record(p: Payload) -> Result<PrototypeRecord, RecordError> {
+/// A format 3 or 4 payload with its numbers decoded, before its checks.
+struct DecodedPayload {
+    name: String,
+    source: String,
+    bake_seconds: Option<f64>,
+    weights: [f32; 3],
+    max_sides: u8,
+    material: FoliageMaterial,
+    needle_counts: Vec<u32>,
+    needles: Vec<Needle>,
+    merged: Vec<MergedEntry>,
+    placements: Vec<StoredPlacement>,
+    tree_merged: Vec<MergedEntry>,
+    wood: Vec<[f32; 8]>,
+    wood_mesh: TriangleMesh,
+}
+
+fn decode_payload(version: u32, body: &[u8]) -> Result<DecodedPayload, RecordError> {
+    let malformed = |e: postcard::Error| RecordError::Malformed(e.to_string());
+    if version == 3 {
+        let p: PayloadV3 = postcard::from_bytes(body).map_err(malformed)?;
+        return Ok(DecodedPayload {
+            needles: p.prototypes.needles.decode(|_| 0)?,
+            name: p.name,
+            source: p.source,
+            bake_seconds: p.bake_seconds,
+            weights: p.weights,
+            max_sides: p.max_sides,
+            material: p.material,
+            needle_counts: p.prototypes.needle_counts,
+            merged: p.prototypes.merged,
+            placements: p.placements,
+            tree_merged: p.tree_merged,
+            wood: p.wood,
+            wood_mesh: p.wood_mesh.decode()?,
+        });
+    }
+    let p: Payload = postcard::from_bytes(body).map_err(malformed)?;
     let stored = &p.prototypes;
-    let all_needles = stored.needles.decode(|_| 0)?;
+    let q = &stored.needles;
+    let n = q.bases.len();
+    if q.tips.len() != n || q.radii.len() != n || q.normals.len() != n {
+        return Err(RecordError::Malformed("needle arrays differ in length".into()));
+    }
+    if stored.grids.len() != stored.needle_counts.len() {
+        return Err(RecordError::Malformed("one grid per prototype expected".into()));
+    }
     let needle_total: u64 = stored.needle_counts.iter().map(|&c| c as u64).sum();
-    let merged_total = needle_total.saturating_sub(stored.needle_counts.len() as u64);
-    if needle_total != all_needles.len() as u64
-        || stored.needle_counts.contains(&0)
-        || merged_total != stored.merged.len() as u64
+    if needle_total != n as u64 {
+        return Err(RecordError::Malformed(
+            "prototype needle counts do not add up to the needles stored".into(),
+        ));
+    }
+    let mut needles = Vec::with_capacity(n);
+    for (&count, &(origin, exponent)) in stored.needle_counts.iter().zip(&stored.grids) {
+        let Some(grid) = PositionGrid::from_codes(origin, exponent) else {
+            return Err(RecordError::Malformed(format!(
+                "grid step 2^{exponent} m is out of range"
+            )));
+        };
+        for i in needles.len()..needles.len() + count as usize {
+            needles.push(Needle {
+                base: grid.decode(grid_codes(q.bases[i])),
+                tip: grid.decode(grid_codes(q.tips[i])),
+                radius: log_decode(u16::from_le_bytes(q.radii[i])),
+                normal: decode_normal(q.normals[i]),
+                group: 0,
+            });
+        }
+    }
+    Ok(DecodedPayload {
+        name: p.name,
+        source: p.source,
+        bake_seconds: p.bake_seconds,
+        weights: p.weights,
+        max_sides: p.max_sides,
+        material: p.material,
+        needles,
+        merged: stored.merged.iter().map(QuantizedMergedEntry::decode).collect(),
+        needle_counts: p.prototypes.needle_counts,
+        placements: p.placements,
+        tree_merged: p.tree_merged.iter().map(QuantizedMergedEntry::decode).collect(),
+        wood: p.wood,
+        wood_mesh: p.wood_mesh.decode()?,
+    })
+}
+
+fn payload_to_prototype_record(p: DecodedPayload) -> Result<PrototypeRecord, RecordError> {
+    let all_needles = &p.needles;
+    let needle_total: u64 = p.needle_counts.iter().map(|&c| c as u64).sum();
+    let merged_total = needle_total.saturating_sub(p.needle_counts.len() as u64);
+    if needle_total != all_needles.len() as u64 || p.needle_counts.contains(&0) || merged_total != p.merged.len() as u64
     {
         return Err(RecordError::Malformed(
             "prototype needle counts do not add up to the needles and merged lines stored".into(),
         ));
     }
-    let mut prototypes = Vec::with_capacity(stored.needle_counts.len());
+    let mut prototypes = Vec::with_capacity(p.needle_counts.len());
     let (mut first_needle, mut first_merged) = (0usize, 0usize);
-    for (k, &count) in stored.needle_counts.iter().enumerate() {
+    for (k, &count) in p.needle_counts.iter().enumerate() {
         let n = count as usize;
         let needles = all_needles[first_needle..first_needle + n].to_vec();
-        let entries = &stored.merged[first_merged..first_merged + n - 1];
+        let entries = &p.merged[first_merged..first_merged + n - 1];
         let merged =
             decode_merged(entries, n as u64, |c, earlier| node_ends(n, earlier, c)).map_err(
                 |problem| match problem {
@@ -653,7 +885,7 @@ fn payload_to_prototype_record(p: Payload) -> Result<PrototypeRecord, RecordErro
         placements,
         tree_merged,
         decode_wood(&p.wood),
-        p.wood_mesh.decode()?,
+        p.wood_mesh,
         p.material,
         p.max_sides,
         bake,
@@ -746,7 +978,7 @@ mod tests {
     use super::*;
 
     /// A payload of one three-needle prototype placed `placements` times.
-    fn payload(placements: Vec<StoredPlacement>) -> Payload {
+    fn payload(placements: Vec<StoredPlacement>) -> PayloadV3 {
         let needle = |k: f32| Needle {
             base: Vec3::ZERO,
             tip: Vec3::new(k * 0.01, 0.05, 0.0),
@@ -763,7 +995,7 @@ mod tests {
             ends: 0b0100,
             error: 0.05,
         };
-        Payload {
+        PayloadV3 {
             name: "hostile".into(),
             source: String::new(),
             bake_seconds: None,
@@ -782,18 +1014,81 @@ mod tests {
         }
     }
 
-    /// A well-formed header around `body`.
+    /// A well-formed format 3 header around `body` (format 3 and 4 decode
+    /// placements, references and counts alike).
     fn file(body: &[u8]) -> Vec<u8> {
         let mut bytes = MAGIC.to_vec();
-        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        bytes.extend_from_slice(&3u32.to_le_bytes());
         bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
         bytes.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
         bytes.extend_from_slice(body);
         bytes
     }
 
-    fn decode(payload: &Payload) -> Result<PrototypeRecord, RecordError> {
+    fn decode(payload: &PayloadV3) -> Result<PrototypeRecord, RecordError> {
         decode_prototype_record(&file(&postcard::to_allocvec(payload).unwrap()))
+    }
+
+    /// A baked tree of three one-needle groups: its format 4 payload, edited by `edit`, in a
+    /// well-formed format 4 file.
+    fn edited_v4(edit: impl FnOnce(&mut Payload)) -> Result<PrototypeRecord, RecordError> {
+        let needle = |k: f32| Needle {
+            base: Vec3::new(k * 0.1, 0.0, 0.0),
+            tip: Vec3::new(k * 0.1 + 0.01, 0.05, 0.0),
+            radius: 0.001,
+            normal: Vec3::Z,
+            group: k as u32,
+        };
+        let input = super::super::needle::TreeInput {
+            name: "three".into(),
+            needles: vec![needle(0.0), needle(1.0), needle(2.0)],
+            ..Default::default()
+        };
+        let record = super::super::bake(&input, &Default::default(), &()).unwrap();
+        let bytes = encode_record(&record).unwrap();
+        let mut payload: Payload = postcard::from_bytes(&bytes[HEADER_BYTES..]).unwrap();
+        edit(&mut payload);
+        let body = postcard::to_allocvec(&payload).unwrap();
+        let mut file = MAGIC.to_vec();
+        file.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        file.extend_from_slice(&crc32fast::hash(&body).to_le_bytes());
+        file.extend_from_slice(&body);
+        decode_prototype_record(&file)
+    }
+
+    #[test]
+    fn corrupted_codes_are_typed_errors() {
+        assert!(edited_v4(|_| {}).is_ok());
+        // A radius of code 0 is a zero radius: a degenerate needle.
+        let error = edited_v4(|p| p.prototypes.needles.radii[1] = [0, 0]).unwrap_err();
+        assert!(error.to_string().contains("degenerate"), "{error}");
+        // Both ends on the same code: a zero-length needle.
+        let error = edited_v4(|p| p.prototypes.needles.tips[0] = p.prototypes.needles.bases[0]).unwrap_err();
+        assert!(error.to_string().contains("degenerate"), "{error}");
+        // A merged error below its children's.
+        let error = edited_v4(|p| p.tree_merged.last_mut().unwrap().error = 1u16.to_le_bytes()).unwrap_err();
+        assert!(
+            matches!(error, RecordError::Invalid(RecordInvalid::ErrorNotMonotone(_))),
+            "{error}"
+        );
+        // A grid step of 2^100 m, or a grid missing.
+        let error = edited_v4(|p| p.prototypes.grids[0].1 = 100).unwrap_err();
+        assert!(matches!(error, RecordError::Malformed(_)), "{error}");
+        let error = edited_v4(|p| p.prototypes.grids.clear()).unwrap_err();
+        assert!(matches!(error, RecordError::Malformed(_)), "{error}");
+        // Needle arrays of different lengths.
+        let error = edited_v4(|p| {
+            p.prototypes.needles.radii.pop();
+        })
+        .unwrap_err();
+        assert!(matches!(error, RecordError::Malformed(_)), "{error}");
+        // A wood mesh grid out of range.
+        let error = edited_v4(|p| p.wood_mesh.grid.1 = -100).unwrap_err();
+        assert!(
+            matches!(error, RecordError::Invalid(RecordInvalid::BadWoodMesh)),
+            "{error}"
+        );
     }
 
     #[test]

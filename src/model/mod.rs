@@ -20,6 +20,7 @@ pub mod metric;
 pub mod needle;
 pub mod prism;
 pub mod prototype;
+pub mod quantize;
 pub mod record;
 
 pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_prototypes};

@@ -1,0 +1,488 @@
+//! Quantization of what a record stores (format 4), so a needle costs
+//! 18 bytes on disk and the same codes can feed the GPU.
+//!
+//! * Needle ends: 16 bits an axis on a [`PositionGrid`] over the prototype's
+//!   own box, whose step is a power of two (a few micrometres for a shoot).
+//! * Radii and errors: a 16-bit logarithmic code ([`log_decode`]), 0.049 %
+//!   apart from 1 nm to 100 km. A radius takes the nearest code; a merged
+//!   line's error the smallest code at or above it and at or above its
+//!   children's, so "parent error ≥ child error" and with it the exact
+//!   partition of every cut survive quantization.
+//! * Normals: the 4-byte octahedral code of [`super::file::snap_normal`].
+//! * The wood mesh of imported trees: positions on a grid over the mesh
+//!   ([`quantize_mesh`]; a tenth of a millimetre for a tree's trunk).
+//!
+//! The bake quantizes its output ([`PrototypeRecord::quantized`]), so writing
+//! and reading a baked record is exact, and quantizing twice changes
+//! nothing.
+
+use super::file::snap_normal;
+use super::merge::MergedLine;
+use super::needle::{Needle, bounds};
+use super::prism::TriangleMesh;
+use super::prototype::{Prototype, PrototypeRecord};
+use super::record::RecordInvalid;
+use glam::Vec3;
+
+/// Codes a grid spans over the prototype's box, measured from the grid's
+/// origin; the codes up to `u16::MAX` are a margin, so that the box of
+/// quantized points never needs a coarser step than the one they were
+/// quantized on.
+const GRID_SPAN_CODES: f32 = 65_531.0;
+
+/// The finest grid step, metres (2⁻⁴⁰ ≈ 0.9 pm): the step of a box with no
+/// extent.
+const MIN_GRID_STEP: f32 = 9.094_947e-13;
+
+/// Two ulps of an `f32`, relative (2⁻²²).
+const F32_GRID_ULPS: f32 = 2.384_185_8e-7;
+
+/// The farthest a stored needle end may lie from its prototype's origin,
+/// metres (65 km: grid origins then stay exact in `f32`).
+pub const MAX_GRID_COORDINATE: f32 = 65_000.0;
+
+/// Grid origins are multiples of this (2⁻⁸ m ≈ 3.9 mm), so a record
+/// stores them as small integers ([`PositionGrid::origin_codes`]).
+pub const GRID_ORIGIN_UNIT: f32 = 0.003_906_25;
+
+/// A grid of 65,536 positions an axis: `origin + code · step`, with `step`
+/// a power of two (the same on every axis), at least two `f32` ulps of the
+/// box's coordinates, and `origin` a multiple of both `step` and
+/// [`GRID_ORIGIN_UNIT`], so that grid points are exact `f32` values and a
+/// grid costs 7 bytes or so to store.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PositionGrid {
+    /// Position of code 0, metres.
+    pub origin: Vec3,
+    /// Distance between neighbouring codes, metres.
+    pub step: f32,
+}
+
+impl PositionGrid {
+    /// The grid covering `points` (`None` when there are none, one is not
+    /// finite, or one lies more than [`MAX_GRID_COORDINATE`] from the origin). Every point quantizes to
+    /// within `step / 2` a coordinate of itself.
+    pub fn covering(points: impl IntoIterator<Item = Vec3>) -> Option<Self> {
+        let (lo, hi) = bounds(points)?;
+        if !(lo.is_finite() && hi.is_finite()) || lo.abs().max(hi.abs()).max_element() > MAX_GRID_COORDINATE {
+            return None;
+        }
+        let finest = lo.abs().max(hi.abs()).max_element() * F32_GRID_ULPS;
+        let mut step = power_of_two_at_least(((hi - lo).max_element() / GRID_SPAN_CODES).max(finest));
+        // The origin snaps down, which widens the span: settle the step.
+        loop {
+            let unit = step.max(GRID_ORIGIN_UNIT);
+            let origin = (lo / unit).floor() * unit;
+            let needed = power_of_two_at_least(((hi - origin).max_element() / GRID_SPAN_CODES).max(finest));
+            if needed <= step {
+                return Some(Self { origin, step });
+            }
+            step = needed;
+        }
+    }
+
+    /// Whether the grid can be used: finite origin, finite positive step.
+    pub fn is_valid(&self) -> bool {
+        self.origin.is_finite() && self.step.is_finite() && self.step > 0.0
+    }
+
+    /// The origin in [`GRID_ORIGIN_UNIT`]s, and the step's power of two, as
+    /// a record stores them.
+    pub fn to_codes(&self) -> ([i32; 3], i8) {
+        (
+            (self.origin / GRID_ORIGIN_UNIT).round().to_array().map(|c| c as i32),
+            self.step.log2().round() as i8,
+        )
+    }
+
+    /// The grid of [`PositionGrid::to_codes`]' output (`None` for a step
+    /// outside 2⁻⁴⁰ … 2²⁰ m).
+    pub fn from_codes(origin: [i32; 3], step_exponent: i8) -> Option<Self> {
+        if !(-40..=20).contains(&step_exponent) {
+            return None;
+        }
+        Some(Self {
+            origin: Vec3::new(origin[0] as f32, origin[1] as f32, origin[2] as f32) * GRID_ORIGIN_UNIT,
+            step: 2f32.powi(i32::from(step_exponent)),
+        })
+    }
+
+    /// The nearest grid point's codes (clamped to the grid).
+    pub fn encode(&self, point: Vec3) -> [u16; 3] {
+        let codes = ((point - self.origin) / self.step).round();
+        codes.to_array().map(|c| c.clamp(0.0, f32::from(u16::MAX)) as u16)
+    }
+
+    /// The grid point of `codes`.
+    pub fn decode(&self, codes: [u16; 3]) -> Vec3 {
+        self.origin + Vec3::new(f32::from(codes[0]), f32::from(codes[1]), f32::from(codes[2])) * self.step
+    }
+
+    /// `decode(encode(point))`.
+    pub fn snap(&self, point: Vec3) -> Vec3 {
+        self.decode(self.encode(point))
+    }
+}
+
+/// The smallest power of two ≥ `x` (at least [`MIN_GRID_STEP`]).
+fn power_of_two_at_least(x: f32) -> f32 {
+    if x.is_nan() || x <= MIN_GRID_STEP {
+        return MIN_GRID_STEP;
+    }
+    let mut step = 2f32.powi(x.log2().ceil() as i32);
+    while step < x {
+        step *= 2.0;
+    }
+    while step * 0.5 >= x {
+        step *= 0.5;
+    }
+    step
+}
+
+/// Smallest non-zero value of the logarithmic code, metres.
+pub const LOG_CODE_MIN: f32 = 1e-9;
+/// Largest value of the logarithmic code, metres.
+pub const LOG_CODE_MAX: f32 = 1e5;
+
+fn log_step() -> f64 {
+    (f64::from(LOG_CODE_MAX).ln() - f64::from(LOG_CODE_MIN).ln()) / f64::from(u16::MAX - 1)
+}
+
+/// The value of a logarithmic code: 0 for code 0, else
+/// `LOG_CODE_MIN · r^(code − 1)` with `r = (LOG_CODE_MAX/LOG_CODE_MIN)^(1/65534)`
+/// (neighbouring codes 0.049 % apart). Strictly increasing in `code`.
+pub fn log_decode(code: u16) -> f32 {
+    if code == 0 {
+        return 0.0;
+    }
+    (f64::from(LOG_CODE_MIN).ln() + f64::from(code - 1) * log_step()).exp() as f32
+}
+
+/// The code whose value is nearest to `value` in ratio (0 for 0; `None`
+/// for NaN, a negative value or one above [`LOG_CODE_MAX`]). A positive
+/// value never gets code 0.
+pub fn log_encode_nearest(value: f32) -> Option<u16> {
+    let code = log_code_near(value)?;
+    if code == 0 {
+        return Some(0);
+    }
+    // The nearer of the neighbours, compared in ratio.
+    let ratio = |c: u16| (f64::from(log_decode(c)) / f64::from(value)).ln().abs();
+    let mut best = code;
+    for candidate in [code.saturating_sub(1).max(1), code.saturating_add(1)] {
+        if ratio(candidate) < ratio(best) {
+            best = candidate;
+        }
+    }
+    Some(best)
+}
+
+/// The smallest code whose value is ≥ `value` (`None` for NaN, a negative
+/// value or one above [`LOG_CODE_MAX`]).
+pub fn log_encode_at_least(value: f32) -> Option<u16> {
+    let mut code = log_code_near(value)?;
+    while code > 0 && log_decode(code - 1) >= value {
+        code -= 1;
+    }
+    while log_decode(code) < value {
+        code = code.checked_add(1)?;
+    }
+    Some(code)
+}
+
+/// A code within one of the answer, from the logarithm.
+fn log_code_near(value: f32) -> Option<u16> {
+    if !(0.0..=LOG_CODE_MAX).contains(&value) {
+        return None;
+    }
+    if value == 0.0 {
+        return Some(0);
+    }
+    if value <= LOG_CODE_MIN {
+        return Some(1);
+    }
+    let steps = (f64::from(value).ln() - f64::from(LOG_CODE_MIN).ln()) / log_step();
+    Some((steps.round() as u32 + 1).min(u32::from(u16::MAX)) as u16)
+}
+
+/// A needle as the record stores it: ends on `grid`, radius on the
+/// logarithmic code, normal on the octahedral code. A needle whose ends
+/// would meet gets its tip one step away along its longest axis.
+pub fn quantize_needle(needle: &Needle, grid: &PositionGrid) -> Option<Needle> {
+    let base = grid.encode(needle.base);
+    let mut tip = grid.encode(needle.tip);
+    if tip == base {
+        let d = needle.tip - needle.base;
+        let axis = d.abs().max_position();
+        tip[axis] = if d[axis] >= 0.0 && tip[axis] < u16::MAX {
+            tip[axis] + 1
+        } else {
+            tip[axis].saturating_sub(1)
+        };
+        if tip == base {
+            tip[axis] += 1;
+        }
+    }
+    let radius = log_decode(log_encode_nearest(needle.radius)?.max(1));
+    Some(Needle {
+        base: grid.decode(base),
+        tip: grid.decode(tip),
+        radius,
+        normal: snap_normal(needle.normal),
+        group: needle.group,
+    })
+}
+
+/// The grid a prototype's needles are stored on: its needles' box.
+pub fn prototype_grid(needles: &[Needle]) -> Option<PositionGrid> {
+    PositionGrid::covering(needles.iter().flat_map(|n| [n.base, n.tip]))
+}
+
+/// Merged lines with their errors as stored, and how much each was raised.
+struct QuantizedLines {
+    lines: Vec<MergedLine>,
+    /// `stored error − baked error` of each line.
+    raised: Vec<f32>,
+}
+
+/// Errors of merged lines as stored: each the smallest code at or above its
+/// error raised by its children's own raise (a merged line's error bounds
+/// the distance to a child's line plus the child's error, so a child whose
+/// error grew by `d` needs its parent's to grow by `d` too), and at or above
+/// its children's stored errors. `child(c, raised)` gives a child's stored
+/// error and raise (`raised`: the lines already done).
+fn quantize_errors(
+    lines: &[MergedLine],
+    first_id: u32,
+    child: impl Fn(u32, &[f32]) -> (f32, f32),
+) -> Result<QuantizedLines, RecordInvalid> {
+    let mut out = QuantizedLines {
+        lines: Vec::with_capacity(lines.len()),
+        raised: Vec::with_capacity(lines.len()),
+    };
+    for line in lines {
+        let (mut floor, mut raise) = (0.0f32, 0.0f32);
+        for c in line.children {
+            if c >= first_id + out.lines.len() as u32 {
+                return Err(RecordInvalid::BadReference(out.lines.len()));
+            }
+            let (error, raised) = child(c, &out.raised);
+            floor = floor.max(error);
+            raise = raise.max(raised);
+        }
+        let wanted = floor.max(line.error + raise);
+        let code = log_encode_at_least(wanted).ok_or(RecordInvalid::NonFinite("merged line errors (above 100 km)"))?;
+        let error = log_decode(code);
+        out.raised.push((error - line.error).max(0.0));
+        out.lines.push(MergedLine { error, ..*line });
+    }
+    Ok(out)
+}
+
+/// `mesh` with its positions on the grid over them, as format 4 stores it
+/// (normals on their octahedral code). `None` when a position lies beyond
+/// [`MAX_GRID_COORDINATE`] or is not finite.
+pub fn quantize_mesh(mesh: &TriangleMesh) -> Option<TriangleMesh> {
+    quantize_mesh_on_grid(mesh).map(|(mesh, _)| mesh)
+}
+
+/// [`quantize_mesh`], and the grid used (a unit grid for a mesh without
+/// positions).
+fn quantize_mesh_on_grid(mesh: &TriangleMesh) -> Option<(TriangleMesh, PositionGrid)> {
+    let normals = mesh.normals.iter().map(|&n| snap_normal(n)).collect();
+    let grid = if mesh.positions.is_empty() {
+        PositionGrid {
+            origin: Vec3::ZERO,
+            step: 1.0,
+        }
+    } else {
+        PositionGrid::covering(mesh.positions.iter().copied())?
+    };
+    Some((
+        TriangleMesh {
+            positions: mesh.positions.iter().map(|&p| grid.snap(p)).collect(),
+            normals,
+            indices: mesh.indices.clone(),
+        },
+        grid,
+    ))
+}
+
+/// A quantized record and the grids its positions lie on: one per
+/// prototype, and the wood mesh's.
+pub(crate) struct QuantizedRecord {
+    pub record: PrototypeRecord,
+    pub prototype_grids: Vec<PositionGrid>,
+    pub mesh_grid: PositionGrid,
+}
+
+impl PrototypeRecord {
+    /// The record as format 4 stores it: needles on their prototype's
+    /// [`PositionGrid`], radii and errors on the logarithmic code (errors
+    /// rounded up, never below a child's), normals on the octahedral code.
+    /// The wood mesh's positions go on their grid ([`quantize_mesh`]);
+    /// placements and wood segments are kept as they are.
+    /// Quantizing a quantized record returns it unchanged.
+    pub fn quantized(&self) -> Result<PrototypeRecord, RecordInvalid> {
+        Ok(self.quantized_on_grids()?.record)
+    }
+
+    /// [`PrototypeRecord::quantized`], with the grids it used (the record
+    /// file stores the codes on these).
+    pub(crate) fn quantized_on_grids(&self) -> Result<QuantizedRecord, RecordInvalid> {
+        let mut prototypes = Vec::with_capacity(self.prototypes.len());
+        let mut prototype_grids = Vec::with_capacity(self.prototypes.len());
+        for (k, prototype) in self.prototypes.iter().enumerate() {
+            let problem = |problem: RecordInvalid| RecordInvalid::Prototype {
+                prototype: k,
+                problem: Box::new(problem),
+            };
+            let grid = prototype_grid(&prototype.needles).ok_or(problem(RecordInvalid::NonFinite(
+                "needle ends (more than 65 km from the prototype's origin)",
+            )))?;
+            let needles = prototype
+                .needles
+                .iter()
+                .map(|n| quantize_needle(n, &grid))
+                .collect::<Option<Vec<_>>>()
+                .ok_or(problem(RecordInvalid::NonFinite("needle radii (above 100 km)")))?;
+            let n = needles.len() as u32;
+            let quantized = quantize_errors(&prototype.merged, n, |c, raised| {
+                if c < n {
+                    (super::metric::line_error(needles[c as usize].radius), 0.0)
+                } else {
+                    let k = (c - n) as usize;
+                    (0.0, raised[k])
+                }
+            })
+            .map_err(problem)?;
+            // A merged child's stored error is its own: the raise carries it.
+            let root_raise = quantized.raised.last().copied().unwrap_or(0.0);
+            prototypes.push((
+                Prototype {
+                    needles,
+                    merged: quantized.lines,
+                },
+                root_raise,
+            ));
+            prototype_grids.push(grid);
+        }
+        let placed = self.placements.len() as u32;
+        let placed_child = |p: u32| -> (f32, f32) {
+            let placement = &self.placements[p as usize];
+            prototypes
+                .get(placement.prototype as usize)
+                .map_or((0.0, 0.0), |(prototype, raise)| {
+                    (
+                        prototype.node_error(prototype.root()) * placement.scale,
+                        raise * placement.scale,
+                    )
+                })
+        };
+        let tree = quantize_errors(&self.tree_merged, placed, |c, raised| {
+            if c < placed {
+                placed_child(c)
+            } else {
+                (0.0, raised[(c - placed) as usize])
+            }
+        })?;
+        let prototypes: Vec<Prototype> = prototypes.into_iter().map(|(p, _)| p).collect();
+        let tree_merged = tree.lines;
+        let (wood_mesh, mesh_grid) = quantize_mesh_on_grid(&self.wood_mesh).ok_or(RecordInvalid::BadWoodMesh)?;
+        let record = PrototypeRecord::from_parts(
+            self.name.clone(),
+            prototypes,
+            self.placements.clone(),
+            tree_merged,
+            self.wood.clone(),
+            wood_mesh,
+            self.material,
+            self.max_sides,
+            self.bake.clone(),
+        )?;
+        Ok(QuantizedRecord {
+            record,
+            prototype_grids,
+            mesh_grid,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn log_codes_are_strictly_increasing_and_fine() {
+        let mut previous = log_decode(0);
+        for code in 1..=u16::MAX {
+            let value = log_decode(code);
+            assert!(value > previous, "code {code}");
+            if code > 1 {
+                assert!(value / previous < 1.000_5, "code {code}: {}", value / previous);
+            }
+            previous = value;
+        }
+        assert!((log_decode(1) - LOG_CODE_MIN).abs() < 1e-15);
+        assert!((log_decode(u16::MAX) / LOG_CODE_MAX - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn codes_of_code_values_are_themselves() {
+        for code in (0..=u16::MAX).step_by(7).chain([1, 2, u16::MAX - 1, u16::MAX]) {
+            let value = log_decode(code);
+            assert_eq!(log_encode_nearest(value), Some(code));
+            assert_eq!(log_encode_at_least(value), Some(code));
+        }
+        assert_eq!(log_encode_at_least(f32::NAN), None);
+        assert_eq!(log_encode_at_least(-1.0), None);
+        assert_eq!(log_encode_at_least(2e5), None);
+        assert_eq!(log_encode_nearest(0.0), Some(0));
+        assert_eq!(log_encode_nearest(1e-12), Some(1));
+    }
+
+    #[test]
+    fn power_of_two_steps() {
+        assert_eq!(power_of_two_at_least(0.3), 0.5);
+        assert_eq!(power_of_two_at_least(0.5), 0.5);
+        assert_eq!(power_of_two_at_least(0.500_001), 1.0);
+        assert_eq!(power_of_two_at_least(0.0), MIN_GRID_STEP);
+        assert_eq!(power_of_two_at_least(f32::NAN), MIN_GRID_STEP);
+    }
+
+    proptest! {
+        #[test]
+        fn log_codes_bound_their_values(value in 1e-9f32..1e5) {
+            let up = log_encode_at_least(value).unwrap();
+            prop_assert!(log_decode(up) >= value);
+            prop_assert!(up == 0 || log_decode(up - 1) < value);
+            let near = log_encode_nearest(value).unwrap();
+            let ratio = log_decode(near) / value;
+            prop_assert!((0.999_75..=1.000_25).contains(&ratio), "{}", ratio);
+        }
+
+        #[test]
+        fn grids_hold_their_points_and_snapping_is_stable(
+            points in prop::collection::vec(prop::array::uniform3(-30.0f32..30.0), 1..40),
+            spread in 1e-4f32..1.0,
+        ) {
+            let points: Vec<Vec3> = points.iter().map(|p| Vec3::from(*p) * spread).collect();
+            let grid = PositionGrid::covering(points.iter().copied()).unwrap();
+            prop_assert!(grid.is_valid());
+            let (origin, exponent) = grid.to_codes();
+            prop_assert_eq!(PositionGrid::from_codes(origin, exponent), Some(grid));
+            let snapped: Vec<Vec3> = points.iter().map(|&p| grid.snap(p)).collect();
+            for (p, s) in points.iter().zip(&snapped) {
+                // Half a step, plus the rounding of `p − origin` in f32.
+                let slack = Vec3::splat(grid.step * 0.5 + p.abs().max_element() * 1e-6);
+                prop_assert!((*p - *s).abs().cmple(slack).all(), "{} vs {}", p, s);
+            }
+            // The grid of the snapped points snaps them to themselves.
+            let again = PositionGrid::covering(snapped.iter().copied()).unwrap();
+            for s in &snapped {
+                prop_assert_eq!(again.snap(*s), *s);
+            }
+        }
+    }
+}
