@@ -201,6 +201,13 @@ fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
 }
 
 /// `count` needle quads (10 cm × 2 mm, 1 cm apart along x) as positions.
+/// Two triangles per quad of [`quad_positions`], as u8 indices.
+fn quad_indices_u8(count: u8) -> Vec<u8> {
+    (0..count)
+        .flat_map(|q| [4 * q, 4 * q + 1, 4 * q + 2, 4 * q, 4 * q + 2, 4 * q + 3])
+        .collect()
+}
+
 fn quad_positions(count: usize) -> Vec<[f32; 3]> {
     (0..count)
         .flat_map(|k| {
@@ -242,9 +249,7 @@ fn interleaved_strided_u8_indices_trs_and_instancing() {
         .flat_map(|p| f32_bytes([p[0], p[1], p[2], 0.0, 0.0, 1.0]))
         .collect();
     let index_offset = bin.len();
-    let indices: Vec<u8> = (0..3u8)
-        .flat_map(|q| [4 * q, 4 * q + 1, 4 * q + 2, 4 * q, 4 * q + 2, 4 * q + 3])
-        .collect();
+    let indices = quad_indices_u8(3);
     bin.extend_from_slice(&indices);
     let json = format!(
         r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,1]}}],
@@ -572,9 +577,7 @@ fn instanced_needle_meshes_become_one_prototype() {
     let positions = quad_positions(3);
     let mut bin = f32_bytes(positions.iter().flatten().copied());
     let index_offset = bin.len();
-    let indices: Vec<u8> = (0..3u8)
-        .flat_map(|q| [4 * q, 4 * q + 1, 4 * q + 2, 4 * q, 4 * q + 2, 4 * q + 3])
-        .collect();
+    let indices = quad_indices_u8(3);
     bin.extend_from_slice(&indices);
     let json = format!(
         r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0,1,2,3,4,5]}}],

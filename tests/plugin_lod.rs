@@ -637,9 +637,9 @@ fn lod_keys_change_the_settings_and_the_overlay() {
     assert!(app.world().resource::<ConiferLodSettings>().debug_colors);
 }
 
-#[test]
-fn shadow_cascades_keep_the_parts_they_need() {
-    use bevy::light::cascade::{Cascade, Cascades};
+/// A spruce seen by one camera 300 m away, and its state then (the files
+/// live as long as the returned directory).
+fn tree_seen_from_300_m() -> (tempfile::TempDir, App, Entity, ConiferLodState) {
     let dir = tempfile::tempdir().unwrap();
     let crown = write_tree(dir.path(), "spruce.conifer");
     let mut app = app(dir.path());
@@ -647,6 +647,13 @@ fn shadow_cascades_keep_the_parts_they_need() {
     let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
     app.update();
     let far = state(&app, tree);
+    (dir, app, tree, far)
+}
+
+#[test]
+fn shadow_cascades_keep_the_parts_they_need() {
+    use bevy::light::cascade::{Cascade, Cascades};
+    let (_dir, mut app, tree, far) = tree_seen_from_300_m();
     assert!(
         !far.prisms_visible && !far.wood_prisms_visible,
         "the camera alone sees no prism at 300 m"
@@ -693,13 +700,7 @@ fn shadow_cascades_keep_the_parts_they_need() {
 
 #[test]
 fn point_and_spot_light_shadows_keep_the_parts_they_need() {
-    let dir = tempfile::tempdir().unwrap();
-    let crown = write_tree(dir.path(), "spruce.conifer");
-    let mut app = app(dir.path());
-    app.world_mut().spawn(camera(300.0));
-    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
-    app.update();
-    let far = state(&app, tree);
+    let (_dir, mut app, tree, far) = tree_seen_from_300_m();
     assert!(!far.prisms_visible, "the camera alone sees no prism at 300 m");
 
     // A lamp 3 m from the crown: its cube faces (1,024 texels over 90°)

@@ -143,6 +143,21 @@ impl ShadowScene {
             .insert(Visibility::Inherited);
         [lit, lines, prisms]
     }
+
+    /// Captures `name`'s pictures and asserts that over `rows` the tree
+    /// casts a visible shadow (over 500 pixels darkened by the prisms) and
+    /// that the lines' shadow darkens the ground within `tolerance` (a
+    /// fraction) of the prisms'.
+    fn assert_line_shadow_like_prisms(&mut self, name: &str, rows: std::ops::Range<u32>, tolerance: f32) {
+        let [lit, lines, prisms] = self.capture(name);
+        let (lines, prisms, pixels) = shadow_darkening(&lit, &lines, &prisms, rows);
+        println!("{name}: {pixels} shadow pixels; darkening: prisms {prisms:.3}, lines {lines:.3}");
+        assert!(pixels > 500, "the tree casts a visible shadow: {pixels} pixels");
+        assert!(
+            (lines - prisms).abs() <= tolerance * prisms,
+            "the lines' shadow darkens the ground by {lines:.3}, the prisms' by {prisms:.3}"
+        );
+    }
 }
 
 #[test]
@@ -167,14 +182,7 @@ fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
     // From 10 m above the shadow: the tree stands at the top edge, its
     // shadow fills the lower part.
     scene.camera(Vec3::new(-3.5, 0.0, 0.0), 10.0, 40.0);
-    let [lit, lines, prisms] = scene.capture("sun");
-    let (lines, prisms, pixels) = shadow_darkening(&lit, &lines, &prisms, SIZE * 3 / 10..SIZE);
-    println!("sun: {pixels} shadow pixels; darkening: prisms {prisms:.3}, lines {lines:.3}");
-    assert!(pixels > 500, "the tree casts a visible shadow: {pixels} pixels");
-    assert!(
-        (lines - prisms).abs() <= 0.15 * prisms,
-        "the lines' shadow darkens the ground by {lines:.3}, the prisms' by {prisms:.3}"
-    );
+    scene.assert_line_shadow_like_prisms("sun", SIZE * 3 / 10..SIZE, 0.15);
 }
 
 #[test]
@@ -192,13 +200,6 @@ fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
     // The camera is 80 m up (its cut is coarse lines), the lamp 3 m from the
     // crown (its cube faces need the fine lines and the trunk's prisms).
     scene.camera(Vec3::new(-3.0, 0.0, 0.0), 80.0, 8.0);
-    let [lit, lines, prisms] = scene.capture("lamp");
     // The crown seen from above covers rows 32–86: below is shadow only.
-    let (lines, prisms, pixels) = shadow_darkening(&lit, &lines, &prisms, 90..SIZE);
-    println!("lamp: {pixels} shadow pixels; darkening: prisms {prisms:.3}, lines {lines:.3}");
-    assert!(pixels > 500, "the tree casts a visible shadow: {pixels} pixels");
-    assert!(
-        (lines - prisms).abs() <= 0.2 * prisms,
-        "the lines' shadow darkens the ground by {lines:.3}, the prisms' by {prisms:.3}"
-    );
+    scene.assert_line_shadow_like_prisms("lamp", 90..SIZE, 0.2);
 }

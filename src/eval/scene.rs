@@ -76,6 +76,44 @@ impl Method {
     fn layer(self) -> usize {
         1 + self as usize
     }
+
+    /// The merged-line opacity of the plugin's methods (`None`: the method
+    /// does not draw through the plugin's defaults or the paper's).
+    pub fn line_opacity(self) -> Option<LineOpacity> {
+        match self {
+            Method::Paper => Some(LineOpacity::Paper),
+            Method::Ours => Some(LineOpacity::AreaPreserving),
+            _ => None,
+        }
+    }
+}
+
+/// A headless renderer with the plugin set to `view`'s ε and δ, and
+/// `record` made a species (not yet added to the assets). Both eval scenes
+/// start here.
+pub(super) fn renderer_with_species(
+    record: LodRecord,
+    view: &EvalView,
+) -> Result<(HeadlessRenderer, ConiferSpecies), EvalError> {
+    if record.needle_count() == 0 {
+        return Err(EvalError::NoNeedles);
+    }
+    if view.width == 0 || view.height == 0 {
+        return Err(EvalError::EmptyPicture(view.width, view.height));
+    }
+    let mut renderer = HeadlessRenderer::new(".");
+    *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
+        pixel_error: view.pixel_error,
+        transition: view.transition,
+        ..ConiferLodSettings::default()
+    };
+    let species = renderer
+        .world_mut()
+        .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+            let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
+            ConiferSpecies::from_record(record, &mut meshes, &mut buffers)
+        })?;
+    Ok((renderer, species))
 }
 
 /// The picture every method is rendered at.
@@ -210,24 +248,7 @@ impl EvalScene {
     /// Builds the scene for `record` with `methods` (the reference is always
     /// there), loads it and lets it reach the GPU.
     pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
-        if record.needle_count() == 0 {
-            return Err(EvalError::NoNeedles);
-        }
-        if view.width == 0 || view.height == 0 {
-            return Err(EvalError::EmptyPicture(view.width, view.height));
-        }
-        let mut renderer = HeadlessRenderer::new(".");
-        *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
-            pixel_error: view.pixel_error,
-            transition: view.transition,
-            ..ConiferLodSettings::default()
-        };
-        let species = renderer
-            .world_mut()
-            .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
-                ConiferSpecies::from_record(record, &mut meshes, &mut buffers)
-            })?;
+        let (mut renderer, species) = renderer_with_species(record, &view)?;
         let record = species.record.clone();
         let mut methods: Vec<Method> = methods.to_vec();
         methods.sort();
@@ -240,11 +261,8 @@ impl EvalScene {
 
         // The plugin's methods.
         let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species.clone());
-        for (method, opacity) in [
-            (Method::Paper, LineOpacity::Paper),
-            (Method::Ours, LineOpacity::AreaPreserving),
-        ] {
-            if methods.contains(&method) {
+        for method in [Method::Paper, Method::Ours] {
+            if let Some(opacity) = method.line_opacity().filter(|_| methods.contains(&method)) {
                 world.spawn((
                     ConiferFoliage(species_handle.clone()),
                     ConiferLodOverride {

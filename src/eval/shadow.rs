@@ -24,18 +24,15 @@
 //! reference shadow's screen box.
 
 use super::measure::PixelRect;
-use super::scene::{EvalError, EvalView, Method, RawTree, raw_materials};
+use super::scene::{EvalError, EvalView, Method, RawTree, raw_materials, renderer_with_species};
 use crate::model::LodRecord;
 use crate::plugin::headless::HeadlessRenderer;
-use crate::plugin::{
-    ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, triangle_mesh,
-};
+use crate::plugin::{ConiferFoliage, ConiferLodOverride, ConiferSpecies, triangle_mesh};
 use bevy::camera::CameraProjection;
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use glam::{Mat4, Vec2};
 use std::sync::Arc;
 
@@ -96,25 +93,9 @@ pub struct ShadowScene {
 impl ShadowScene {
     /// Builds the scene for `record` and those of `methods` that
     /// [`SHADOW_METHODS`] lists, and lets it reach the GPU.
-    pub fn new(record: Arc<LodRecord>, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
-        if record.needle_count() == 0 {
-            return Err(EvalError::NoNeedles);
-        }
-        if view.width == 0 || view.height == 0 {
-            return Err(EvalError::EmptyPicture(view.width, view.height));
-        }
-        let mut renderer = HeadlessRenderer::new(".");
-        *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
-            pixel_error: view.pixel_error,
-            transition: view.transition,
-            ..ConiferLodSettings::default()
-        };
-        let species = renderer
-            .world_mut()
-            .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
-                ConiferSpecies::from_record((*record).clone(), &mut meshes, &mut buffers)
-            })?;
+    pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
+        let (mut renderer, species) = renderer_with_species(record, &view)?;
+        let record = species.record.clone();
         let world = renderer.world_mut();
         world.insert_resource(GlobalAmbientLight {
             brightness: AMBIENT,
@@ -144,28 +125,21 @@ impl ShadowScene {
         for (k, method) in SHADOW_METHODS.into_iter().filter(|m| methods.contains(m)).enumerate() {
             let (tree_layer, ground_layer) = (2 * k + 1, 2 * k + 2);
             let world = renderer.world_mut();
-            let trees = match method {
-                Method::Paper | Method::Ours => {
-                    let opacity = if method == Method::Paper {
-                        LineOpacity::Paper
-                    } else {
-                        LineOpacity::AreaPreserving
-                    };
-                    vec![
-                        world
-                            .spawn((
-                                ConiferFoliage(species_handle.clone()),
-                                ConiferLodOverride {
-                                    line_opacity: Some(opacity),
-                                    ..default()
-                                },
-                                Transform::IDENTITY,
-                                RenderLayers::layer(tree_layer),
-                            ))
-                            .id(),
-                    ]
-                }
-                _ => raw_meshes
+            let trees = match method.line_opacity() {
+                Some(opacity) => vec![
+                    world
+                        .spawn((
+                            ConiferFoliage(species_handle.clone()),
+                            ConiferLodOverride {
+                                line_opacity: Some(opacity),
+                                ..default()
+                            },
+                            Transform::IDENTITY,
+                            RenderLayers::layer(tree_layer),
+                        ))
+                        .id(),
+                ],
+                None => raw_meshes
                     .iter()
                     .map(|(mesh, material)| {
                         world

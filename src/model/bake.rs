@@ -1,6 +1,5 @@
 //! The bake: from a [`TreeInput`] to a [`LodRecord`] (paper, §4–5.1).
 
-use super::file::snap_normal;
 use super::merge::{CostContext, GroupLine, MergeOptions, merge_group, merge_group_lines};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
@@ -303,17 +302,13 @@ pub fn bake_prototypes(
         bake_seconds: None,
         source: input.name.clone(),
     };
-    let mut wood_mesh = input.wood_mesh.clone();
-    for normal in &mut wood_mesh.normals {
-        *normal = snap_normal(*normal);
-    }
     let mut record = PrototypeRecord::from_parts(
         input.name.clone(),
         prototypes,
         placements,
         tree_merged,
         input.wood.clone(),
-        wood_mesh,
+        input.wood_mesh.clone(),
         input.material,
         options.max_sides,
         info,

@@ -128,38 +128,39 @@ struct StoredMesh {
     index_steps: Vec<i64>,
 }
 
-impl StoredMesh {
-    fn encode(mesh: &TriangleMesh) -> Self {
-        let mut previous = 0i64;
-        Self {
-            positions: mesh.positions.iter().map(|p| p.to_array()).collect(),
-            normals: mesh.normals.iter().map(|&n| encode_normal(n)).collect(),
-            index_steps: mesh
-                .indices
-                .iter()
-                .map(|&i| {
-                    let step = i as i64 - previous;
-                    previous = i as i64;
-                    step
-                })
-                .collect(),
-        }
-    }
+/// Indices as `index[k] − index[k − 1]` (the first relative to 0).
+fn index_steps(indices: &[u32]) -> Vec<i64> {
+    let mut previous = 0i64;
+    indices
+        .iter()
+        .map(|&i| {
+            let step = i as i64 - previous;
+            previous = i as i64;
+            step
+        })
+        .collect()
+}
 
+/// The indices of [`index_steps`]' output; an index leaving `u32` is a bad mesh.
+fn indices_from_steps(steps: &[i64]) -> Result<Vec<u32>, RecordError> {
+    let mut previous = 0i64;
+    let mut indices = Vec::with_capacity(steps.len());
+    for &step in steps {
+        previous = previous
+            .checked_add(step)
+            .filter(|i| (0..=u32::MAX as i64).contains(i))
+            .ok_or(RecordInvalid::BadWoodMesh)?;
+        indices.push(previous as u32);
+    }
+    Ok(indices)
+}
+
+impl StoredMesh {
     fn decode(self) -> Result<TriangleMesh, RecordError> {
-        let mut previous = 0i64;
-        let mut indices = Vec::with_capacity(self.index_steps.len());
-        for step in self.index_steps {
-            previous = previous
-                .checked_add(step)
-                .filter(|i| (0..=u32::MAX as i64).contains(i))
-                .ok_or(RecordInvalid::BadWoodMesh)?;
-            indices.push(previous as u32);
-        }
         Ok(TriangleMesh {
             positions: self.positions.into_iter().map(Vec3::from).collect(),
             normals: self.normals.into_iter().map(decode_normal).collect(),
-            indices,
+            indices: indices_from_steps(&self.index_steps)?,
         })
     }
 }
@@ -178,30 +179,21 @@ impl QuantizedMesh {
     /// `mesh`, whose positions lie on `grid`
     /// ([`PrototypeRecord::quantized`]).
     fn encode(mesh: &TriangleMesh, grid: &PositionGrid) -> Self {
-        let StoredMesh {
-            normals, index_steps, ..
-        } = StoredMesh::encode(&TriangleMesh {
-            positions: Vec::new(),
-            ..mesh.clone()
-        });
         Self {
             grid: grid.to_codes(),
             positions: mesh.positions.iter().map(|&p| grid_bytes(grid.encode(p))).collect(),
-            normals,
-            index_steps,
+            normals: mesh.normals.iter().map(|&n| encode_normal(n)).collect(),
+            index_steps: index_steps(&mesh.indices),
         }
     }
 
     fn decode(self) -> Result<TriangleMesh, RecordError> {
         let grid = PositionGrid::from_codes(self.grid.0, self.grid.1).ok_or(RecordInvalid::BadWoodMesh)?;
-        let mut mesh = StoredMesh {
-            positions: Vec::new(),
-            normals: self.normals,
-            index_steps: self.index_steps,
-        }
-        .decode()?;
-        mesh.positions = self.positions.into_iter().map(|p| grid.decode(grid_codes(p))).collect();
-        Ok(mesh)
+        Ok(TriangleMesh {
+            positions: self.positions.into_iter().map(|p| grid.decode(grid_codes(p))).collect(),
+            normals: self.normals.into_iter().map(decode_normal).collect(),
+            indices: indices_from_steps(&self.index_steps)?,
+        })
     }
 }
 
@@ -221,38 +213,65 @@ struct PayloadV2 {
     wood_mesh: StoredMesh,
 }
 
-/// The payload of a format 3 file: prototypes and placements, needles and
-/// errors as `f32`.
+/// The payload of a format 3 or 4 file: prototypes and placements. Format
+/// 3 ([`PayloadV3`]) stores needles, errors and the wood mesh as `f32`,
+/// format 4 ([`Payload`]) quantized ([`super::quantize`]); decoding turns
+/// either into [`DecodedPayload`].
 #[derive(Serialize, Deserialize)]
-struct PayloadV3 {
+struct PrototypePayload<Prototypes, Merged, Mesh> {
     name: String,
     source: String,
     bake_seconds: Option<f64>,
     weights: [f32; 3],
     max_sides: u8,
     material: FoliageMaterial,
-    prototypes: StoredPrototypes,
+    prototypes: Prototypes,
     placements: Vec<StoredPlacement>,
-    tree_merged: Vec<MergedEntry>,
+    tree_merged: Vec<Merged>,
     wood: Vec<[f32; 8]>,
-    wood_mesh: StoredMesh,
+    wood_mesh: Mesh,
 }
 
-/// The payload of a format 4 file: format 3 with needles, radii and errors
-/// quantized ([`super::quantize`]).
-#[derive(Serialize, Deserialize)]
-struct Payload {
-    name: String,
-    source: String,
-    bake_seconds: Option<f64>,
-    weights: [f32; 3],
-    max_sides: u8,
-    material: FoliageMaterial,
-    prototypes: QuantizedPrototypes,
-    placements: Vec<StoredPlacement>,
-    tree_merged: Vec<QuantizedMergedEntry>,
-    wood: Vec<[f32; 8]>,
-    wood_mesh: QuantizedMesh,
+/// A format 3 payload.
+type PayloadV3 = PrototypePayload<StoredPrototypes, MergedEntry, StoredMesh>;
+
+/// A format 4 payload.
+type Payload = PrototypePayload<QuantizedPrototypes, QuantizedMergedEntry, QuantizedMesh>;
+
+/// A format 3 or 4 payload with its numbers decoded, before its checks.
+type DecodedPayload = PrototypePayload<DecodedPrototypes, MergedEntry, TriangleMesh>;
+
+/// Every prototype's needle count, the needles one after the other, and
+/// their level-1 merged lines, decoded.
+struct DecodedPrototypes {
+    needle_counts: Vec<u32>,
+    needles: Vec<Needle>,
+    merged: Vec<MergedEntry>,
+}
+
+impl<P, E, W> PrototypePayload<P, E, W> {
+    /// The same payload with its prototypes, merged lines and wood mesh
+    /// converted.
+    fn convert<P2, E2, W2>(
+        self,
+        prototypes: impl FnOnce(P) -> Result<P2, RecordError>,
+        merged: impl Fn(E) -> E2,
+        mesh: impl FnOnce(W) -> Result<W2, RecordError>,
+    ) -> Result<PrototypePayload<P2, E2, W2>, RecordError> {
+        Ok(PrototypePayload {
+            name: self.name,
+            source: self.source,
+            bake_seconds: self.bake_seconds,
+            weights: self.weights,
+            max_sides: self.max_sides,
+            material: self.material,
+            prototypes: prototypes(self.prototypes)?,
+            placements: self.placements,
+            tree_merged: self.tree_merged.into_iter().map(merged).collect(),
+            wood: self.wood,
+            wood_mesh: mesh(self.wood_mesh)?,
+        })
+    }
 }
 
 /// Format 4's prototypes: each one's grid, then as format 3 with codes.
@@ -729,109 +748,91 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     Ok(payload_to_prototype_record(decode_payload(version, body)?)?.flatten()?)
 }
 
-/// A format 3 or 4 payload with its numbers decoded, before its checks.
-struct DecodedPayload {
-    name: String,
-    source: String,
-    bake_seconds: Option<f64>,
-    weights: [f32; 3],
-    max_sides: u8,
-    material: FoliageMaterial,
-    needle_counts: Vec<u32>,
-    needles: Vec<Needle>,
-    merged: Vec<MergedEntry>,
-    placements: Vec<StoredPlacement>,
-    tree_merged: Vec<MergedEntry>,
-    wood: Vec<[f32; 8]>,
-    wood_mesh: TriangleMesh,
-}
-
 fn decode_payload(version: u32, body: &[u8]) -> Result<DecodedPayload, RecordError> {
     let malformed = |e: postcard::Error| RecordError::Malformed(e.to_string());
     if version == 3 {
         let p: PayloadV3 = postcard::from_bytes(body).map_err(malformed)?;
-        return Ok(DecodedPayload {
-            needles: p.prototypes.needles.decode(|_| 0)?,
-            name: p.name,
-            source: p.source,
-            bake_seconds: p.bake_seconds,
-            weights: p.weights,
-            max_sides: p.max_sides,
-            material: p.material,
-            needle_counts: p.prototypes.needle_counts,
-            merged: p.prototypes.merged,
-            placements: p.placements,
-            tree_merged: p.tree_merged,
-            wood: p.wood,
-            wood_mesh: p.wood_mesh.decode()?,
-        });
+        return p.convert(
+            |stored| {
+                Ok(DecodedPrototypes {
+                    needles: stored.needles.decode(|_| 0)?,
+                    needle_counts: stored.needle_counts,
+                    merged: stored.merged,
+                })
+            },
+            |entry| entry,
+            StoredMesh::decode,
+        );
     }
     let p: Payload = postcard::from_bytes(body).map_err(malformed)?;
-    let stored = &p.prototypes;
-    let q = &stored.needles;
-    let n = q.bases.len();
-    if q.tips.len() != n || q.radii.len() != n || q.normals.len() != n {
-        return Err(RecordError::Malformed("needle arrays differ in length".into()));
-    }
-    if stored.grids.len() != stored.needle_counts.len() {
-        return Err(RecordError::Malformed("one grid per prototype expected".into()));
-    }
-    let needle_total: u64 = stored.needle_counts.iter().map(|&c| c as u64).sum();
-    if needle_total != n as u64 {
-        return Err(RecordError::Malformed(
-            "prototype needle counts do not add up to the needles stored".into(),
-        ));
-    }
-    let mut needles = Vec::with_capacity(n);
-    for (&count, &(origin, exponent)) in stored.needle_counts.iter().zip(&stored.grids) {
-        let Some(grid) = PositionGrid::from_codes(origin, exponent) else {
-            return Err(RecordError::Malformed(format!(
-                "grid step 2^{exponent} m is out of range"
-            )));
-        };
-        for i in needles.len()..needles.len() + count as usize {
-            needles.push(Needle {
-                base: grid.decode(grid_codes(q.bases[i])),
-                tip: grid.decode(grid_codes(q.tips[i])),
-                radius: log_decode(u16::from_le_bytes(q.radii[i])),
-                normal: decode_normal(q.normals[i]),
-                group: 0,
-            });
+    p.convert(
+        QuantizedPrototypes::decode,
+        |entry| entry.decode(),
+        QuantizedMesh::decode,
+    )
+}
+
+impl QuantizedPrototypes {
+    /// The needles on their prototypes' grids, the errors from their codes.
+    fn decode(self) -> Result<DecodedPrototypes, RecordError> {
+        let q = &self.needles;
+        let n = q.bases.len();
+        if q.tips.len() != n || q.radii.len() != n || q.normals.len() != n {
+            return Err(RecordError::Malformed("needle arrays differ in length".into()));
         }
+        if self.grids.len() != self.needle_counts.len() {
+            return Err(RecordError::Malformed("one grid per prototype expected".into()));
+        }
+        let needle_total: u64 = self.needle_counts.iter().map(|&c| c as u64).sum();
+        if needle_total != n as u64 {
+            return Err(RecordError::Malformed(
+                "prototype needle counts do not add up to the needles stored".into(),
+            ));
+        }
+        let mut needles = Vec::with_capacity(n);
+        for (&count, &(origin, exponent)) in self.needle_counts.iter().zip(&self.grids) {
+            let Some(grid) = PositionGrid::from_codes(origin, exponent) else {
+                return Err(RecordError::Malformed(format!(
+                    "grid step 2^{exponent} m is out of range"
+                )));
+            };
+            for i in needles.len()..needles.len() + count as usize {
+                needles.push(Needle {
+                    base: grid.decode(grid_codes(q.bases[i])),
+                    tip: grid.decode(grid_codes(q.tips[i])),
+                    radius: log_decode(u16::from_le_bytes(q.radii[i])),
+                    normal: decode_normal(q.normals[i]),
+                    group: 0,
+                });
+            }
+        }
+        Ok(DecodedPrototypes {
+            needles,
+            merged: self.merged.iter().map(QuantizedMergedEntry::decode).collect(),
+            needle_counts: self.needle_counts,
+        })
     }
-    Ok(DecodedPayload {
-        name: p.name,
-        source: p.source,
-        bake_seconds: p.bake_seconds,
-        weights: p.weights,
-        max_sides: p.max_sides,
-        material: p.material,
-        needles,
-        merged: stored.merged.iter().map(QuantizedMergedEntry::decode).collect(),
-        needle_counts: p.prototypes.needle_counts,
-        placements: p.placements,
-        tree_merged: p.tree_merged.iter().map(QuantizedMergedEntry::decode).collect(),
-        wood: p.wood,
-        wood_mesh: p.wood_mesh.decode()?,
-    })
 }
 
 fn payload_to_prototype_record(p: DecodedPayload) -> Result<PrototypeRecord, RecordError> {
-    let all_needles = &p.needles;
-    let needle_total: u64 = p.needle_counts.iter().map(|&c| c as u64).sum();
-    let merged_total = needle_total.saturating_sub(p.needle_counts.len() as u64);
-    if needle_total != all_needles.len() as u64 || p.needle_counts.contains(&0) || merged_total != p.merged.len() as u64
+    let stored = &p.prototypes;
+    let all_needles = &stored.needles;
+    let needle_total: u64 = stored.needle_counts.iter().map(|&c| c as u64).sum();
+    let merged_total = needle_total.saturating_sub(stored.needle_counts.len() as u64);
+    if needle_total != all_needles.len() as u64
+        || stored.needle_counts.contains(&0)
+        || merged_total != stored.merged.len() as u64
     {
         return Err(RecordError::Malformed(
             "prototype needle counts do not add up to the needles and merged lines stored".into(),
         ));
     }
-    let mut prototypes = Vec::with_capacity(p.needle_counts.len());
+    let mut prototypes = Vec::with_capacity(stored.needle_counts.len());
     let (mut first_needle, mut first_merged) = (0usize, 0usize);
-    for (k, &count) in p.needle_counts.iter().enumerate() {
+    for (k, &count) in stored.needle_counts.iter().enumerate() {
         let n = count as usize;
         let needles = all_needles[first_needle..first_needle + n].to_vec();
-        let entries = &p.merged[first_merged..first_merged + n - 1];
+        let entries = &stored.merged[first_merged..first_merged + n - 1];
         let merged =
             decode_merged(entries, n as u64, |c, earlier| node_ends(n, earlier, c)).map_err(
                 |problem| match problem {

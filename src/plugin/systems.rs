@@ -520,8 +520,14 @@ pub(super) fn select_lod(
                 }
             }
             // Point and spot lights whose range reaches the tree's box.
-            let radius = Vec3::from(species.aabb.half_extents).length() * scale;
-            let box_center = transform.transform_point(Vec3::from(species.aabb.center));
+            let (box_center, radius) = if local_shadows.is_empty() {
+                (Vec3::ZERO, 0.0)
+            } else {
+                (
+                    transform.transform_point(Vec3::from(species.aabb.center)),
+                    Vec3::from(species.aabb.half_extents).length() * scale,
+                )
+            };
             for light in &local_shadows {
                 if box_center.distance(light.position) <= light.range + radius {
                     let e = pixel_error * center.distance(light.position) * light.slope / scale;
