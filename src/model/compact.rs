@@ -41,7 +41,7 @@
 //! nodes above a cut than nodes in it, so a prefix holds at most twice the
 //! cut's lines).
 
-use super::gpu_layout::{WOOD_LINE_FADE, wood_segment_error};
+use super::gpu_layout::WOOD_LINE_FADE;
 use super::metric::line_error;
 use super::quantize::{LOG_CODE_MAX, LOG_CODE_MIN, PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
 use super::record::{Cut, LodRecord, NO_PARENT};

@@ -6,6 +6,7 @@ use crate::model::gpu_layout::{
     wood_segment_error,
 };
 use crate::model::prism::{TriangleMesh, append_wood_segment};
+use crate::model::compact::CompactSpecies;
 use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
 use bevy::asset::io::Reader;
 use bevy::asset::{AssetLoader, LoadContext, RenderAssetUsages};
@@ -53,6 +54,12 @@ pub struct ConiferSpecies {
     pub min_line_error: f32,
     /// Deepest merge level of the lines (0 without merged lines).
     pub max_merge_depth: u32,
+    /// The record in the compact GPU layout of [`RenderPath::Compact`]
+    /// (`None` when the record does not fit it: more than 8,388,608
+    /// needles, or positions beyond 65 km).
+    ///
+    /// [`RenderPath::Compact`]: super::RenderPath::Compact
+    pub compact: Option<Arc<CompactSpecies>>,
 }
 
 /// One band of a species' lines (see [`line_bands`]).
@@ -149,6 +156,8 @@ pub struct SpeciesMeshes {
     pub min_line_error: f32,
     /// Deepest merge level.
     pub max_merge_depth: u32,
+    /// The compact layout, if the record fits it.
+    pub compact: Option<CompactSpecies>,
 }
 
 impl SpeciesMeshes {
@@ -181,6 +190,13 @@ impl SpeciesMeshes {
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
             max_merge_depth: merge_depths(record).into_iter().max().unwrap_or(0),
+            compact: match CompactSpecies::build(record) {
+                Ok(compact) => Some(compact),
+                Err(error) => {
+                    warn!("`{}` cannot be drawn by the compact render path: {error}", record.name);
+                    None
+                }
+            },
         })
     }
 }
@@ -238,6 +254,7 @@ impl SpeciesMeshes {
             max_line_error: self.max_line_error,
             min_line_error: self.min_line_error,
             max_merge_depth: self.max_merge_depth,
+            compact: self.compact.map(Arc::new),
             record: Arc::new(record),
         }
     }

@@ -43,6 +43,7 @@ mod asset;
 mod debug;
 pub mod headless;
 mod material;
+mod render;
 mod systems;
 
 pub use asset::{
@@ -51,6 +52,8 @@ pub use asset::{
 };
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
+pub use render::gpu::PartKind;
+pub use render::{CompactGpuMemory, CompactInstances};
 pub use systems::{ConiferLodCpuTime, SpeciesMaterials, view_error_slope};
 
 use bevy::asset::AssetApp;
@@ -74,6 +77,7 @@ impl Plugin for ConiferLodPlugin {
             .init_resource::<ConiferLodSettings>()
             .init_resource::<SpeciesMaterials>()
             .init_resource::<ConiferLodCpuTime>()
+            .init_resource::<CompactInstances>()
             .configure_sets(
                 PostUpdate,
                 (ConiferLodSet::Prepare, ConiferLodSet::Select)
@@ -95,10 +99,13 @@ impl Plugin for ConiferLodPlugin {
                         .chain()
                         .in_set(ConiferLodSet::Prepare),
                     systems::select_lod.in_set(ConiferLodSet::Select),
+                    // After visibility propagation: a hidden tree is not drawn.
+                    render::track_instances.after(VisibilitySystems::VisibilityPropagate),
                 ),
             );
         if app.is_plugin_added::<bevy::pbr::PbrPlugin>() {
             material::build(app);
+            render::build(app);
         }
     }
 }
@@ -142,6 +149,25 @@ pub struct ConiferLodSettings {
     /// Colour needles by representation (prisms blue, original lines green,
     /// merged lines yellow to red).
     pub debug_colors: bool,
+    /// How trees are drawn (see [`RenderPath`]).
+    pub render_path: RenderPath,
+}
+
+/// How the plugin draws trees.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
+pub enum RenderPath {
+    /// Render path v1: each tree gets child entities with the species'
+    /// prism, line-band and wood meshes (a `MaterialExtension` of
+    /// `StandardMaterial`), chosen per vertex; the CPU hides parts a tree
+    /// cannot use. Draws shadows (hashed for lines).
+    #[default]
+    Meshes,
+    /// Render path v2: compact storage buffers pulled by the vertex shader
+    /// (~32 bytes a needle), one instance buffer per species, and per view
+    /// a compute pass that culls trees and writes indirect draws of the
+    /// prefixes their cuts need; nothing spawned per tree. Casts no shadows
+    /// yet.
+    Compact,
 }
 
 impl Default for ConiferLodSettings {
@@ -152,6 +178,7 @@ impl Default for ConiferLodSettings {
             line_opacity: LineOpacity::default(),
             enabled: true,
             debug_colors: false,
+            render_path: RenderPath::default(),
         }
     }
 }

@@ -4,7 +4,7 @@
 use super::material::{ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferLodState, ConiferPart, ConiferParts, ConiferSpecies,
-    LineOpacity,
+    LineOpacity, RenderPath,
 };
 use bevy::camera::visibility::RenderLayers;
 use bevy::light::Cascades;
@@ -212,6 +212,7 @@ pub(super) fn spawn_parts(
             Changed<ConiferLodOverride>,
         )>,
     >,
+    with_parts: Query<(Entity, &ConiferParts)>,
     species_assets: Res<Assets<ConiferSpecies>>,
     settings: Res<ConiferLodSettings>,
     mut materials: ResMut<SpeciesMaterials>,
@@ -220,6 +221,18 @@ pub(super) fn spawn_parts(
     mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
     let _timer = CpuTimer::start(&mut cpu_time, false);
+    if settings.render_path == RenderPath::Compact {
+        // The compact path spawns nothing per tree; take away what the mesh
+        // path spawned.
+        for (entity, parts) in &with_parts {
+            let wood = parts.wood_prisms.into_iter().chain(parts.wood);
+            for part in parts.lines.iter().copied().chain([parts.prisms]).chain(wood) {
+                commands.entity(part).try_despawn();
+            }
+            commands.entity(entity).remove::<ConiferParts>();
+        }
+        return;
+    }
     for (entity, foliage, over, parts, layers) in &trees {
         let Some(species) = species_assets.get(&foliage.0) else {
             continue;

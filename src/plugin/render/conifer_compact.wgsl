@@ -1,0 +1,332 @@
+// The compact render path's draw: every part of every tree of a species
+// pulls its vertices from the species' storage arrays (no vertex or index
+// buffers), keeps the primitives of its indirect-draw prefix whose own
+// error interval holds the tree's threshold code (written per view by
+// `conifer_cull.wgsl`), and is lit by Bevy's PBR functions (lights,
+// shadows, fog, tonemapping as for any mesh). CPU reference:
+// `model::compact::CompactSpecies::drawn`.
+
+#import bevy_pbr::{
+    mesh_view_bindings::view,
+    view_transformations::position_world_to_clip,
+    pbr_types,
+    pbr_functions,
+    mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
+}
+#import bevy_conifer_lod::compact_types::{
+    Instance, InstanceLod, SpeciesParams,
+    LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
+    instance_world_from_local, log_decode,
+}
+
+@group(2) @binding(0) var<uniform> species: SpeciesParams;
+@group(2) @binding(1) var<storage, read> instances: array<Instance>;
+@group(2) @binding(2) var<storage, read> instance_lods: array<InstanceLod>;
+@group(2) @binding(3) var<storage, read> needles: array<vec4<u32>>;
+@group(2) @binding(4) var<storage, read> original_lines: array<u32>;
+@group(2) @binding(5) var<storage, read> merged_lines: array<u32>;
+@group(2) @binding(6) var<storage, read> wood_segments: array<vec4<f32>>;
+@group(2) @binding(7) var<storage, read> wood_mesh: array<u32>;
+
+const PI: f32 = 3.14159265358979;
+const TAU: f32 = 6.28318530717959;
+
+struct VertexOutput {
+    @builtin(position) position: vec4<f32>,
+    @location(0) world_position: vec4<f32>,
+    @location(1) world_normal: vec3<f32>,
+    @location(2) color: vec4<f32>,
+}
+
+// A position outside every clip plane: the primitive is not drawn.
+fn culled() -> VertexOutput {
+    var out: VertexOutput;
+    out.position = vec4<f32>(2.0, 2.0, 2.0, 1.0);
+    out.world_position = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+    out.world_normal = vec3<f32>(0.0, 1.0, 0.0);
+    out.color = vec4<f32>(0.0);
+    return out;
+}
+
+fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
+    var out: VertexOutput;
+    out.world_position = world_from_local * vec4<f32>(local_position, 1.0);
+    out.position = position_world_to_clip(out.world_position.xyz);
+    out.world_normal = normalize((world_from_local * vec4<f32>(local_normal, 0.0)).xyz);
+    out.color = color;
+    return out;
+}
+
+// A line's normal: perpendicular to it, toward the viewer (the lit side of
+// the cylinder it stands for).
+fn finish_line(local_position: vec3<f32>, local_tangent: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
+    var out = finish(local_position, local_tangent, world_from_local, color);
+    let tangent = out.world_normal;
+    let to_viewer = normalize(view.world_position - out.world_position.xyz);
+    var normal = to_viewer - tangent * dot(tangent, to_viewer);
+    if dot(normal, normal) < 1e-12 {
+        normal = to_viewer;
+    }
+    out.world_normal = normalize(normal);
+    return out;
+}
+
+fn grid_point(grid: vec4<f32>, x: u32, y: u32, z: u32) -> vec3<f32> {
+    return grid.xyz + vec3<f32>(f32(x), f32(y), f32(z)) * grid.w;
+}
+
+fn needle_base(k: u32) -> vec3<f32> {
+    let w = needles[k];
+    return grid_point(species.grid, w.x & 0xffffu, w.x >> 16u, w.y & 0xffffu);
+}
+
+fn needle_tip(k: u32) -> vec3<f32> {
+    let w = needles[k];
+    return grid_point(species.grid, w.y >> 16u, w.z & 0xffffu, w.z >> 16u);
+}
+
+fn end_position(reference: u32) -> vec3<f32> {
+    let k = (reference & 0xffffffu) >> 1u;
+    if (reference & 1u) != 0u {
+        return needle_tip(k);
+    }
+    return needle_base(k);
+}
+
+// Sides of a prism of radius `radius` at spatial error `e`: ⌈π / arccos(1 − e/R)⌉.
+fn prism_sides(radius: f32, e: f32) -> u32 {
+    let max_sides = max(species.max_sides, 3u);
+    let rho = e / max(radius, 1e-12);
+    if rho >= 1.0 {
+        return 3u;
+    }
+    if rho <= 0.0 {
+        return max_sides;
+    }
+    return clamp(u32(ceil(PI / acos(1.0 - rho))), 3u, max_sides);
+}
+
+struct PrismCorner {
+    slot: u32,
+    at_tip: bool,
+    cap: bool,
+}
+
+// Vertex `local` of an Lmax-slot prism, drawn without indices: Lmax side
+// quads (two triangles each), then the base and the tip cap as fans.
+fn prism_corner(local: u32) -> PrismCorner {
+    let m = max(species.max_sides, 3u);
+    var corner: PrismCorner;
+    if local < 6u * m {
+        let quad = local / 6u;
+        let j = local % 6u;
+        let next = (quad + 1u) % m;
+        // (base q, base q+1, tip q), (tip q, base q+1, tip q+1)
+        corner.slot = select(quad, next, j == 1u || j == 4u || j == 5u);
+        corner.at_tip = j == 2u || j == 3u || j == 5u;
+        corner.cap = false;
+        return corner;
+    }
+    let t = local - 6u * m;
+    let fan = 3u * (m - 2u);
+    corner.at_tip = t >= fan;
+    let u = t % fan;
+    let triangle = u / 3u;
+    let j = u % 3u;
+    corner.slot = select(triangle + j, 0u, j == 0u);
+    corner.cap = true;
+    return corner;
+}
+
+// Position and normal of a prism corner of the (tapered) cylinder from
+// `base` to `tip`, drawn with `sides` sides.
+struct PrismVertex {
+    position: vec3<f32>,
+    normal: vec3<f32>,
+}
+
+fn prism_vertex(base: vec3<f32>, tip: vec3<f32>, base_radius: f32, tip_radius: f32, sides: u32, corner: PrismCorner) -> PrismVertex {
+    let m = max(species.max_sides, 3u);
+    let k = corner.slot * sides / m;
+    let angle = TAU * f32(k) / f32(sides);
+    var axis = tip - base;
+    if dot(axis, axis) < 1e-24 {
+        axis = vec3<f32>(0.0, 1.0, 0.0);
+    }
+    axis = normalize(axis);
+    // Duff et al., JCGT 2017 (`model::compact::ring_basis`).
+    let sign = select(-1.0, 1.0, axis.z >= 0.0);
+    let a = -1.0 / (sign + axis.z);
+    let b = axis.x * axis.y * a;
+    let u = vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
+    let v = vec3<f32>(b, sign + axis.y * axis.y * a, -axis.y);
+    let radial = u * cos(angle) + v * sin(angle);
+    var out: PrismVertex;
+    let end = select(base, tip, corner.at_tip);
+    let radius = select(base_radius, tip_radius, corner.at_tip);
+    out.position = end + radial * radius;
+    out.normal = radial;
+    if corner.cap {
+        out.normal = select(-axis, axis, corner.at_tip);
+    }
+    return out;
+}
+
+// Debug colours: prisms blue → cyan by side count, original lines green,
+// merged lines yellow → red by error, wood brown.
+fn debug_color(kind: i32, amount: f32) -> vec3<f32> {
+    if kind < 0 {
+        return vec3<f32>(0.1, 0.3 + 0.7 * amount, 1.0);
+    }
+    if kind == 0 {
+        return vec3<f32>(0.1, 0.9, 0.1);
+    }
+    if kind == 1 {
+        return vec3<f32>(1.0, 1.0 - amount, 0.05);
+    }
+    return vec3<f32>(0.45, 0.3, 0.15);
+}
+
+fn base_color(kind: i32, amount: f32, alpha: f32) -> vec4<f32> {
+    if species.debug_colors != 0u {
+        return vec4<f32>(debug_color(kind, amount), alpha);
+    }
+    if kind == 2 {
+        return vec4<f32>(species.wood_color.rgb, alpha);
+    }
+    return vec4<f32>(species.needle_color.rgb, alpha);
+}
+
+// A line of equivalent width `width` (metres) as coverage of its one-pixel
+// line: the paper's `T = 2R/e` (`paper_width` is 2R for an original line,
+// e(X) for a merged one), or the width over the pixel size.
+fn line_alpha(lod: InstanceLod, width: f32, paper_width: f32) -> f32 {
+    let rule = (lod.code >> LOD_OPACITY_SHIFT) & 3u;
+    let e = max(lod.spatial_error, 1e-12);
+    if rule == 0u {
+        return min(paper_width / e, 1.0);
+    }
+    return min(width * lod.pixel_error / e, 1.0);
+}
+
+@vertex
+fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance_index: u32) -> VertexOutput {
+    let instance = instances[instance_index];
+    let lod = instance_lods[instance_index];
+    let code = lod.code & LOD_CODE_MASK;
+    let world_from_local = instance_world_from_local(instance);
+
+#ifdef CONIFER_PRISMS
+    let k = vertex_index / species.prism_vertices;
+    let radius = 0.5 * log_decode(needles[k].w & 0xffffu);
+    let sides = prism_sides(radius, lod.spatial_error);
+    let corner = prism_corner(vertex_index % species.prism_vertices);
+    let p = prism_vertex(needle_base(k), needle_tip(k), radius, radius, sides, corner);
+    let m = max(species.max_sides, 3u);
+    let amount = f32(m - sides) / max(f32(m - 3u), 1.0);
+    return finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0));
+#endif
+
+#ifdef CONIFER_WOOD_PRISMS
+    let s = vertex_index / species.prism_vertices;
+    let start = wood_segments[2u * s];
+    let end = wood_segments[2u * s + 1u];
+    let sides = prism_sides(max(start.w, end.w), lod.spatial_error);
+    let corner = prism_corner(vertex_index % species.prism_vertices);
+    let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner);
+    let m = max(species.max_sides, 3u);
+    var color = base_color(2, 0.0, 1.0);
+    if species.debug_colors != 0u {
+        color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0);
+    }
+    return finish(p.position, p.normal, world_from_local, color);
+#endif
+
+#ifdef CONIFER_ORIGINAL_LINES
+    let line = vertex_index / 2u;
+    var k = line;
+    if (lod.code & LOD_ORIGINAL_FROM_NEEDLES) == 0u {
+        k = original_lines[line];
+    }
+    let w = needles[k].w;
+    let own = w & 0xffffu;
+    if !(own <= code && code < (w >> 16u)) {
+        return culled();
+    }
+    let width = log_decode(own);
+    let alpha = line_alpha(lod, width, width) * lod.transition;
+    let base = needle_base(k);
+    let tip = needle_tip(k);
+    let position = select(base, tip, (vertex_index & 1u) != 0u);
+    return finish_line(position, tip - base, world_from_local, base_color(0, 0.0, alpha));
+#endif
+
+#ifdef CONIFER_MERGED_LINES
+    let line = vertex_index / 2u;
+    let a = merged_lines[3u * line];
+    let b = merged_lines[3u * line + 1u];
+    let codes = merged_lines[3u * line + 2u];
+    let own = codes & 0xffffu;
+    if !(own <= code && code < (codes >> 16u)) {
+        return culled();
+    }
+    let width = log_decode((a >> 24u) | ((b >> 24u) << 8u));
+    let alpha = line_alpha(lod, width, log_decode(own));
+    let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
+    let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
+    let start = end_position(a);
+    let end = end_position(b);
+    let position = select(start, end, (vertex_index & 1u) != 0u);
+    return finish_line(position, end - start, world_from_local, base_color(1, amount, alpha));
+#endif
+
+#ifdef CONIFER_WOOD_LINES
+    let s = vertex_index / 2u;
+    let start = wood_segments[2u * s];
+    let end = wood_segments[2u * s + 1u];
+    let width = start.w + end.w;
+    let alpha = line_alpha(lod, width, width);
+    let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
+    return finish_line(position, end.xyz - start.xyz, world_from_local, base_color(2, 0.0, alpha));
+#endif
+
+#ifdef CONIFER_WOOD_MESH
+    let vertex = wood_mesh[vertex_index];
+    let w0 = wood_mesh[species.wood_index_count + 3u * vertex];
+    let w1 = wood_mesh[species.wood_index_count + 3u * vertex + 1u];
+    let w2 = wood_mesh[species.wood_index_count + 3u * vertex + 2u];
+    let position = grid_point(species.wood_grid, w0 & 0xffffu, w0 >> 16u, w1 & 0xffffu);
+    // Octahedral normal, 16 bits a coordinate (`model::file::decode_normal`).
+    let x = f32(w2 & 0xffffu) / 65535.0 * 2.0 - 1.0;
+    let y = f32(w2 >> 16u) / 65535.0 * 2.0 - 1.0;
+    let z = 1.0 - abs(x) - abs(y);
+    let t = max(-z, 0.0);
+    let normal = vec3<f32>(x + select(t, -t, x >= 0.0), y + select(t, -t, y >= 0.0), z);
+    return finish(position, normalize(normal), world_from_local, base_color(2, 0.0, 1.0));
+#endif
+}
+
+@fragment
+fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
+    var pbr_input = pbr_types::pbr_input_new();
+    pbr_input.material.base_color = in.color;
+    pbr_input.material.perceptual_roughness = species.roughness;
+    pbr_input.material.reflectance = vec3<f32>(species.reflectance);
+#ifdef CONIFER_LINES
+    pbr_input.material.flags = pbr_types::STANDARD_MATERIAL_FLAGS_FOG_ENABLED_BIT
+        | pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_BLEND;
+#else
+    pbr_input.material.flags = pbr_types::STANDARD_MATERIAL_FLAGS_FOG_ENABLED_BIT
+        | pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_OPAQUE;
+#endif
+    pbr_input.frag_coord = in.position;
+    pbr_input.world_position = in.world_position;
+    pbr_input.world_normal = normalize(in.world_normal);
+    pbr_input.is_orthographic = view.clip_from_view[3].w == 1.0;
+    pbr_input.V = pbr_functions::calculate_view(in.world_position, pbr_input.is_orthographic);
+    pbr_input.N = pbr_input.world_normal;
+    pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;
+    var color = pbr_functions::apply_pbr_lighting(pbr_input);
+    color = pbr_functions::main_pass_post_lighting_processing(pbr_input, color);
+    return color;
+}

@@ -1,0 +1,1025 @@
+//! Render path v2 ([`RenderPath::Compact`](super::RenderPath::Compact)):
+//! one set of compact storage buffers per species, one instance buffer per
+//! species, and per view a compute pass that culls every tree and writes
+//! the indirect draws of the prefixes its cut needs. Nothing is spawned per
+//! tree; the CPU only copies the instances that changed.
+//!
+//! * Main world: [`CompactInstances`] tracks every [`ConiferFoliage`] tree
+//!   (transform, override, visibility, layers) per species, touching only
+//!   trees that changed.
+//! * Extract: instances of species whose trees changed, the species' compact
+//!   arrays ([`CompactSpecies`], built when the record loaded) and settings.
+//! * Prepare: the species' buffers (re-created only when the record
+//!   changes), the instance buffer (grown by powers of two, else written in
+//!   place), and per view the compute inputs and outputs.
+//! * Queue: per view and species, one opaque item per opaque part and one
+//!   transparent item per line part, each drawn by one multi-draw-indirect
+//!   with one draw per tree.
+//! * Render graph: the culling compute pass (`conifer_cull.wgsl`), before
+//!   the cameras draw.
+//!
+//! Shadow views are not drawn by this path yet: trees on it cast no shadows.
+
+pub mod gpu;
+
+use self::gpu::{
+    CullView, DRAW_ARGS_BYTES, FLAG_VISIBLE, GpuInstance, INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS,
+    PartKind, SpeciesParams, prism_vertices,
+};
+use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath};
+use crate::model::compact::CompactSpecies;
+use crate::model::gpu_layout::WOOD_LINE_FADE;
+use bevy::asset::{embedded_asset, embedded_path};
+use bevy::camera::visibility::RenderLayers;
+use bevy::core_pipeline::core_3d::{
+    Opaque3d, Opaque3dBatchSetKey, Opaque3dBinKey, Transparent3d, TransparentSortingInfo3d,
+};
+use bevy::core_pipeline::schedule::camera_driver;
+use bevy::ecs::entity::EntityHashMap;
+use bevy::ecs::query::ROQueryItem;
+use bevy::ecs::system::SystemParamItem;
+use bevy::ecs::system::lifetimeless::{Read, SRes};
+use bevy::mesh::{MeshVertexBufferLayoutRef, MeshVertexBufferLayouts, PrimitiveTopology};
+use bevy::pbr::{
+    MeshPipeline, MeshPipelineKey, MeshPipelineSystems, SetMeshViewBindGroup, SetMeshViewBindingArrayBindGroup,
+    ViewKeyCache,
+};
+use bevy::platform::collections::HashMap;
+use bevy::prelude::*;
+use bevy::render::mesh::allocator::MeshSlabs;
+use bevy::render::render_phase::{
+    AddRenderCommand, BinnedRenderPhaseType, DrawFunctions, InputUniformIndex, PhaseItem, PhaseItemExtraIndex,
+    RenderCommand, RenderCommandResult, SetItemPipeline, TrackedRenderPass, ViewBinnedRenderPhases,
+    ViewSortedRenderPhases,
+};
+use bevy::render::render_resource::binding_types::{
+    storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer_sized,
+};
+use bevy::render::render_resource::{
+    BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor,
+    BufferUsages, CachedComputePipelineId, ComputePassDescriptor, ComputePipelineDescriptor, PipelineCache,
+    RenderPipelineDescriptor, ShaderStages, SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines,
+};
+use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
+use bevy::render::sync_world::MainEntity;
+use bevy::render::view::ExtractedView;
+use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
+use bevy::shader::{Shader, ShaderDefVal};
+use std::sync::Arc;
+
+/// Every tree drawn by the compact path, grouped by species; only trees
+/// that changed are rewritten.
+#[derive(Resource, Default, Debug)]
+pub struct CompactInstances {
+    species: HashMap<AssetId<ConiferSpecies>, SpeciesInstances>,
+    slots: EntityHashMap<(AssetId<ConiferSpecies>, u32)>,
+}
+
+#[derive(Default, Debug, Clone)]
+struct SpeciesInstances {
+    instances: Vec<GpuInstance>,
+    entities: Vec<Entity>,
+    /// Bumped at every change, so extraction copies only what changed.
+    generation: u64,
+}
+
+impl CompactInstances {
+    /// Trees tracked, over all species.
+    pub fn len(&self) -> usize {
+        self.slots.len()
+    }
+
+    /// `true` without trees.
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+
+    /// Trees of one species.
+    pub fn species_len(&self, species: AssetId<ConiferSpecies>) -> usize {
+        self.species.get(&species).map_or(0, |s| s.instances.len())
+    }
+
+    fn remove(&mut self, entity: Entity) {
+        let Some((species, slot)) = self.slots.remove(&entity) else {
+            return;
+        };
+        let Some(list) = self.species.get_mut(&species) else {
+            return;
+        };
+        let slot = slot as usize;
+        list.instances.swap_remove(slot);
+        list.entities.swap_remove(slot);
+        if let Some(&moved) = list.entities.get(slot) {
+            self.slots.insert(moved, (species, slot as u32));
+        }
+        list.generation += 1;
+        if list.instances.is_empty() {
+            self.species.remove(&species);
+        }
+    }
+
+    fn upsert(&mut self, entity: Entity, species: AssetId<ConiferSpecies>, instance: GpuInstance) {
+        match self.slots.get(&entity) {
+            Some(&(old, slot)) if old == species => {
+                let list = self.species.entry(species).or_default();
+                if list.instances[slot as usize] != instance {
+                    list.instances[slot as usize] = instance;
+                    list.generation += 1;
+                }
+            }
+            Some(_) => {
+                self.remove(entity);
+                self.upsert(entity, species, instance);
+            }
+            None => {
+                let list = self.species.entry(species).or_default();
+                self.slots.insert(entity, (species, list.instances.len() as u32));
+                list.instances.push(instance);
+                list.entities.push(entity);
+                list.generation += 1;
+            }
+        }
+    }
+}
+
+fn gpu_instance(
+    transform: &GlobalTransform,
+    over: Option<&ConiferLodOverride>,
+    visible: bool,
+    layers: Option<&RenderLayers>,
+) -> GpuInstance {
+    let affine = transform.affine();
+    let m = affine.matrix3;
+    let t = affine.translation;
+    let rule = match over.and_then(|o| o.line_opacity) {
+        None => 0,
+        Some(LineOpacity::Paper) => 1,
+        Some(LineOpacity::AreaPreserving) => 2,
+    };
+    let layer_mask = match layers {
+        None => 1,
+        Some(layers) => (0..32).filter(|&l| layers.intersects(&RenderLayers::layer(l))).fold(0u32, |m, l| m | 1 << l),
+    };
+    GpuInstance {
+        rows: [
+            [m.x_axis.x, m.y_axis.x, m.z_axis.x, t.x],
+            [m.x_axis.y, m.y_axis.y, m.z_axis.y, t.y],
+            [m.x_axis.z, m.y_axis.z, m.z_axis.z, t.z],
+        ],
+        pixel_error: over.and_then(|o| o.pixel_error).unwrap_or(f32::NAN),
+        transition: over.and_then(|o| o.transition).unwrap_or(f32::NAN),
+        flags: u32::from(visible) * FLAG_VISIBLE | rule << OPACITY_OVERRIDE_SHIFT,
+        layers: layer_mask,
+    }
+}
+
+type TreeData = (
+    Entity,
+    &'static ConiferFoliage,
+    &'static GlobalTransform,
+    Option<&'static ConiferLodOverride>,
+    &'static InheritedVisibility,
+    Option<&'static RenderLayers>,
+);
+
+/// Keeps [`CompactInstances`] in step with the trees (spawned, moved,
+/// re-targeted, hidden, despawned), touching only trees that changed.
+#[allow(clippy::type_complexity)] // a Bevy system's parameters
+pub(super) fn track_instances(
+    settings: Res<ConiferLodSettings>,
+    mut tracked: ResMut<CompactInstances>,
+    changed: Query<
+        TreeData,
+        Or<(
+            Changed<GlobalTransform>,
+            Changed<ConiferFoliage>,
+            Changed<ConiferLodOverride>,
+            Changed<InheritedVisibility>,
+            Changed<RenderLayers>,
+        )>,
+    >,
+    all: Query<TreeData>,
+    mut removed_trees: RemovedComponents<ConiferFoliage>,
+    mut removed_overrides: RemovedComponents<ConiferLodOverride>,
+    mut removed_layers: RemovedComponents<RenderLayers>,
+    mut was_compact: Local<bool>,
+) {
+    let compact = settings.render_path == RenderPath::Compact;
+    if !compact {
+        if *was_compact {
+            *tracked = CompactInstances::default();
+        }
+        *was_compact = false;
+        return;
+    }
+    for entity in removed_trees.read() {
+        tracked.remove(entity);
+    }
+    let mut upsert = |(entity, foliage, transform, over, visibility, layers): ROQueryItem<'_, '_, TreeData>| {
+        let instance = gpu_instance(transform, over, visibility.get(), layers);
+        tracked.upsert(entity, foliage.0.id(), instance);
+    };
+    if !*was_compact {
+        all.iter().for_each(&mut upsert);
+        *was_compact = true;
+        return;
+    }
+    changed.iter().for_each(&mut upsert);
+    for entity in removed_overrides.read().chain(removed_layers.read()) {
+        if let Ok(tree) = all.get(entity) {
+            upsert(tree);
+        }
+    }
+}
+
+/// The render world's copy of a species: its compact arrays, its trees,
+/// and (once prepared) its GPU buffers.
+struct RenderSpecies {
+    compact: Arc<CompactSpecies>,
+    params: SpeciesParams,
+    instances: Vec<GpuInstance>,
+    generation: u64,
+    instances_dirty: bool,
+    /// Where the trees are, on average: the transparent items' sort point.
+    center: Vec3,
+    gpu: Option<SpeciesBuffers>,
+    /// Render-world entities standing for the species' parts in phases.
+    draw_entities: [Entity; PART_KINDS],
+}
+
+/// A species' GPU buffers.
+struct SpeciesBuffers {
+    params: Buffer,
+    instances: Buffer,
+    instance_capacity: usize,
+    needles: Buffer,
+    original_lines: Buffer,
+    merged_lines: Buffer,
+    wood_segments: Buffer,
+    wood_mesh: Buffer,
+}
+
+impl SpeciesBuffers {
+    fn bytes(&self) -> u64 {
+        [
+            &self.params,
+            &self.instances,
+            &self.needles,
+            &self.original_lines,
+            &self.merged_lines,
+            &self.wood_segments,
+            &self.wood_mesh,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+
+    /// Bytes of the species' shared arrays (not its trees).
+    fn species_bytes(&self) -> u64 {
+        [
+            &self.needles,
+            &self.original_lines,
+            &self.merged_lines,
+            &self.wood_segments,
+            &self.wood_mesh,
+        ]
+        .iter()
+        .map(|b| b.size())
+        .sum()
+    }
+}
+
+/// Marks the render-world entities that stand for a species' parts in the
+/// render phases.
+#[derive(Component, Clone, Copy, Debug)]
+pub struct CompactDrawItem {
+    species: AssetId<ConiferSpecies>,
+    kind: PartKind,
+}
+
+/// Every species on the compact path, in the render world.
+#[derive(Resource, Default)]
+pub struct RenderCompactSpecies {
+    species: HashMap<AssetId<ConiferSpecies>, RenderSpecies>,
+    /// Draw entities of species that went away, to take out of the phases.
+    retired: Vec<Entity>,
+}
+
+/// GPU memory the compact path allocated, summed from the sizes of the
+/// `wgpu` buffers it created (render world; copied to the main world as
+/// [`CompactGpuMemory`]).
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct CompactGpuMemory {
+    /// Per species: bytes of its shared arrays (needles, lines, wood).
+    pub species_bytes: HashMap<AssetId<ConiferSpecies>, u64>,
+    /// Per species: bytes of its parameters and instance buffer.
+    pub instance_bytes: HashMap<AssetId<ConiferSpecies>, u64>,
+    /// Bytes of the per-view buffers (culling inputs, LOD results,
+    /// indirect draws) over all views and species.
+    pub view_bytes: u64,
+    /// Buffers alive.
+    pub buffers: usize,
+}
+
+impl CompactGpuMemory {
+    /// All bytes.
+    pub fn total(&self) -> u64 {
+        self.species_bytes.values().sum::<u64>() + self.instance_bytes.values().sum::<u64>() + self.view_bytes
+    }
+}
+
+fn linear(color: [f32; 4]) -> [f32; 4] {
+    color
+}
+
+fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: &ConiferLodSettings) -> SpeciesParams {
+    let material = &species.record.material;
+    let center = species.crown_center;
+    let (lo, hi) = (Vec3::from(species.aabb.min()), Vec3::from(species.aabb.max()));
+    let radius = (lo - center).abs().max((hi - center).abs()).length();
+    SpeciesParams {
+        crown_center: center.extend(radius).to_array(),
+        grid: compact.grid.origin.extend(compact.grid.step).to_array(),
+        wood_grid: compact.wood_grid.origin.extend(compact.wood_grid.step).to_array(),
+        needle_color: linear(material.needle_color),
+        wood_color: linear(material.wood_color),
+        needle_count: compact.needles.len() as u32,
+        original_line_count: compact.original_lines.len() as u32,
+        merged_line_count: compact.merged_lines.len() as u32,
+        wood_segment_count: compact.wood_segments.len() as u32,
+        wood_index_count: compact.wood_indices.len() as u32,
+        instance_count: 0,
+        max_sides: u32::from(compact.max_sides),
+        prism_vertices: prism_vertices(compact.max_sides),
+        merged_code_min: u32::from(compact.merged_code_range[0]),
+        merged_code_max: u32::from(compact.merged_code_range[1]),
+        lod_enabled: u32::from(settings.enabled),
+        debug_colors: u32::from(settings.debug_colors),
+        pixel_error: settings.pixel_error.max(0.0),
+        transition: settings.transition.clamp(0.0, 1.0),
+        opacity_rule: match settings.line_opacity {
+            LineOpacity::Paper => 0,
+            LineOpacity::AreaPreserving => 1,
+        },
+        wood_line_fade: WOOD_LINE_FADE,
+        roughness: material.roughness,
+        reflectance: material.reflectance,
+        padding: [0; 2],
+    }
+}
+
+/// Copies the species and trees that changed into the render world.
+fn extract_compact(
+    mut commands: Commands,
+    instances: Extract<Res<CompactInstances>>,
+    species_assets: Extract<Res<Assets<ConiferSpecies>>>,
+    settings: Extract<Res<ConiferLodSettings>>,
+    mut render: ResMut<RenderCompactSpecies>,
+) {
+    let render = &mut *render;
+    let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
+    for &id in render.species.keys() {
+        if !instances.species.contains_key(&id) || species_assets.get(id).is_none() {
+            gone.push(id);
+        }
+    }
+    for id in gone {
+        if let Some(species) = render.species.remove(&id) {
+            render.retired.extend(species.draw_entities);
+            for entity in species.draw_entities {
+                commands.entity(entity).despawn();
+            }
+        }
+    }
+    for (&id, tracked) in &instances.species {
+        let Some(asset) = species_assets.get(id) else {
+            continue;
+        };
+        let Some(compact) = asset.compact.as_ref() else {
+            continue;
+        };
+        let entry = render.species.entry(id).or_insert_with(|| RenderSpecies {
+            compact: compact.clone(),
+            params: SpeciesParams::default(),
+            instances: Vec::new(),
+            generation: u64::MAX,
+            instances_dirty: true,
+            center: Vec3::ZERO,
+            gpu: None,
+            draw_entities: PartKind::ALL.map(|kind| commands.spawn(CompactDrawItem { species: id, kind }).id()),
+        });
+        if !Arc::ptr_eq(&entry.compact, compact) {
+            // A reloaded record: new arrays.
+            entry.compact = compact.clone();
+            entry.gpu = None;
+            entry.instances_dirty = true;
+        }
+        if entry.generation != tracked.generation {
+            entry.instances.clone_from(&tracked.instances);
+            entry.generation = tracked.generation;
+            entry.instances_dirty = true;
+            let sum = entry
+                .instances
+                .iter()
+                .fold(Vec3::ZERO, |s, i| s + Vec3::new(i.rows[0][3], i.rows[1][3], i.rows[2][3]));
+            entry.center = sum / entry.instances.len().max(1) as f32 + asset.crown_center;
+        }
+        entry.params = species_params(asset, compact, &settings);
+        entry.params.instance_count = entry.instances.len() as u32;
+    }
+}
+
+/// A storage buffer holding `bytes` (at least 16 bytes: a binding cannot be empty).
+fn storage_buffer(device: &RenderDevice, label: &'static str, bytes: &[u8]) -> Buffer {
+    let mut contents = bytes.to_vec();
+    contents.resize(contents.len().max(16).next_multiple_of(4), 0);
+    device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
+        label: Some(label),
+        contents: &contents,
+        usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
+    })
+}
+
+fn empty_buffer(device: &RenderDevice, label: &'static str, size: u64, usage: BufferUsages) -> Buffer {
+    device.create_buffer(&BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage: usage | BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}
+
+/// Creates the buffers of new or reloaded species and writes the trees and
+/// parameters that changed.
+fn prepare_species(
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    mut render: ResMut<RenderCompactSpecies>,
+    mut memory: ResMut<CompactGpuMemory>,
+) {
+    memory.species_bytes.clear();
+    memory.instance_bytes.clear();
+    for (&id, species) in &mut render.species {
+        let instance_bytes: &[u8] = bytemuck::cast_slice(&species.instances);
+        if species.gpu.is_none() {
+            let c = &species.compact;
+            let mut wood_mesh: Vec<u32> = c.wood_indices.clone();
+            wood_mesh.extend(c.wood_vertices.iter().flatten());
+            let capacity = species.instances.len().next_power_of_two().max(64);
+            species.gpu = Some(SpeciesBuffers {
+                params: device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
+                    label: Some("conifer species params"),
+                    contents: bytemuck::bytes_of(&species.params),
+                    usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST,
+                }),
+                instances: empty_buffer(
+                    &device,
+                    "conifer instances",
+                    (capacity * size_of::<GpuInstance>()) as u64,
+                    BufferUsages::STORAGE,
+                ),
+                instance_capacity: capacity,
+                needles: storage_buffer(&device, "conifer needles", bytemuck::cast_slice(&c.needles)),
+                original_lines: storage_buffer(&device, "conifer original lines", bytemuck::cast_slice(&c.original_lines)),
+                merged_lines: storage_buffer(&device, "conifer merged lines", bytemuck::cast_slice(&c.merged_lines)),
+                wood_segments: storage_buffer(&device, "conifer wood segments", bytemuck::cast_slice(&c.wood_segments)),
+                wood_mesh: storage_buffer(&device, "conifer wood mesh", bytemuck::cast_slice(&wood_mesh)),
+            });
+            species.instances_dirty = true;
+        }
+        let Some(gpu) = species.gpu.as_mut() else { continue };
+        if species.instances.len() > gpu.instance_capacity {
+            gpu.instance_capacity = species.instances.len().next_power_of_two();
+            gpu.instances = empty_buffer(
+                &device,
+                "conifer instances",
+                (gpu.instance_capacity * size_of::<GpuInstance>()) as u64,
+                BufferUsages::STORAGE,
+            );
+            species.instances_dirty = true;
+        } else if species.instances.len() * 4 < gpu.instance_capacity && gpu.instance_capacity > 64 {
+            // Shrink back after many trees went away.
+            gpu.instance_capacity = species.instances.len().next_power_of_two().max(64);
+            gpu.instances = empty_buffer(
+                &device,
+                "conifer instances",
+                (gpu.instance_capacity * size_of::<GpuInstance>()) as u64,
+                BufferUsages::STORAGE,
+            );
+            species.instances_dirty = true;
+        }
+        if species.instances_dirty && !instance_bytes.is_empty() {
+            queue.write_buffer(&gpu.instances, 0, instance_bytes);
+        }
+        species.instances_dirty = false;
+        queue.write_buffer(&gpu.params, 0, bytemuck::bytes_of(&species.params));
+        memory.species_bytes.insert(id, gpu.species_bytes());
+        memory.instance_bytes.insert(id, gpu.bytes() - gpu.species_bytes());
+    }
+}
+
+/// Per view and species: the culling inputs and outputs and both bind groups.
+struct ViewSpecies {
+    cull_view: Buffer,
+    lods: Buffer,
+    args: Buffer,
+    capacity: usize,
+    instance_count: u32,
+    cull_bind_group: BindGroup,
+    draw_bind_group: BindGroup,
+    used: bool,
+}
+
+/// Per-view buffers of the compact path, keyed by (view entity, species).
+#[derive(Resource, Default)]
+pub struct CompactViews {
+    views: HashMap<(Entity, AssetId<ConiferSpecies>), ViewSpecies>,
+}
+
+/// The compact path's pipelines and layouts.
+#[derive(Resource)]
+pub struct CompactPipeline {
+    mesh_pipeline: MeshPipeline,
+    shader: Handle<Shader>,
+    draw_layout: BindGroupLayoutDescriptor,
+    cull_layout: BindGroupLayoutDescriptor,
+    cull_pipeline: CachedComputePipelineId,
+    no_vertices: MeshVertexBufferLayoutRef,
+}
+
+/// The key of a compact draw pipeline: the view's mesh key and the part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct CompactPipelineKey {
+    mesh_key: MeshPipelineKey,
+    kind: PartKind,
+}
+
+fn init_compact_pipeline(
+    mut commands: Commands,
+    asset_server: Res<AssetServer>,
+    mesh_pipeline: Res<MeshPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    mut layouts: ResMut<MeshVertexBufferLayouts>,
+) {
+    let read = || storage_buffer_read_only_sized(false, None);
+    let draw_layout = BindGroupLayoutDescriptor::new(
+        "conifer compact draw",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::VERTEX_FRAGMENT,
+            (
+                uniform_buffer_sized(false, None),
+                read(),
+                read(),
+                read(),
+                read(),
+                read(),
+                read(),
+                read(),
+            ),
+        ),
+    );
+    let cull_layout = BindGroupLayoutDescriptor::new(
+        "conifer compact cull",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                uniform_buffer_sized(false, None),
+                uniform_buffer_sized(false, None),
+                read(),
+                read(),
+                read(),
+                read(),
+                read(),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+            ),
+        ),
+    );
+    let cull_shader = asset_server.load(shader_path("conifer_cull.wgsl"));
+    let cull_pipeline = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+        label: Some("conifer compact cull".into()),
+        layout: vec![cull_layout.clone()],
+        shader: cull_shader,
+        entry_point: Some("cull".into()),
+        ..default()
+    });
+    // The mesh pipeline builds the view layout and shader definitions from
+    // a mesh layout; ours pulls its vertices, so its vertex buffers are
+    // dropped after.
+    let mut positions = Mesh::new(PrimitiveTopology::TriangleList, bevy::asset::RenderAssetUsages::all());
+    positions.insert_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32; 3]]);
+    let no_vertices = positions.get_mesh_vertex_buffer_layout(&mut layouts);
+    commands.insert_resource(CompactPipeline {
+        mesh_pipeline: mesh_pipeline.clone(),
+        shader: asset_server.load(shader_path("conifer_compact.wgsl")),
+        draw_layout,
+        cull_layout,
+        cull_pipeline,
+        no_vertices,
+    });
+}
+
+impl SpecializedRenderPipeline for CompactPipeline {
+    type Key = CompactPipelineKey;
+
+    fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
+        // A layout with positions never misses an attribute; an error here
+        // leaves an empty descriptor, which the pipeline cache reports.
+        let mut descriptor = match SpecializedMeshPipeline::specialize(&self.mesh_pipeline, key.mesh_key, &self.no_vertices) {
+            Ok(descriptor) => descriptor,
+            Err(error) => {
+                error!("conifer compact pipeline: {error}");
+                return RenderPipelineDescriptor::default();
+            }
+        };
+        descriptor.label = Some(format!("conifer compact {:?}", key.kind).into());
+        descriptor.vertex.shader = self.shader.clone();
+        descriptor.vertex.buffers.clear();
+        let mut defs: Vec<ShaderDefVal> = vec![
+            key.kind.shader_def().into(),
+            ShaderDefVal::UInt("MATERIAL_BIND_GROUP".into(), 3),
+        ];
+        if key.kind.is_lines() {
+            defs.push("CONIFER_LINES".into());
+        }
+        descriptor.vertex.shader_defs.extend(defs.iter().cloned());
+        if let Some(fragment) = descriptor.fragment.as_mut() {
+            fragment.shader = self.shader.clone();
+            fragment.shader_defs.extend(defs);
+        }
+        descriptor.layout.truncate(2);
+        descriptor.layout.push(self.draw_layout.clone());
+        descriptor.primitive.cull_mode = None;
+        descriptor
+    }
+}
+
+/// Frustum planes of `clip_from_world` (Gribb and Hartmann), normals
+/// pointing inside, normalized; reversed-Z infinite projections have no far
+/// plane (it comes out zero and culls nothing).
+fn frustum_planes(clip_from_world: &Mat4) -> [[f32; 4]; 6] {
+    let rows = [
+        clip_from_world.row(0),
+        clip_from_world.row(1),
+        clip_from_world.row(2),
+        clip_from_world.row(3),
+    ];
+    let planes = [
+        rows[3] + rows[0],
+        rows[3] - rows[0],
+        rows[3] + rows[1],
+        rows[3] - rows[1],
+        rows[2],
+        rows[3] - rows[2],
+    ];
+    planes.map(|p| {
+        let length = p.truncate().length();
+        if length > 1e-12 {
+            (p / length).to_array()
+        } else {
+            [0.0, 0.0, 0.0, 1.0]
+        }
+    })
+}
+
+fn view_layers(layers: Option<&RenderLayers>) -> u32 {
+    match layers {
+        None => 1,
+        Some(layers) => (0..32).filter(|&l| layers.intersects(&RenderLayers::layer(l))).fold(0u32, |m, l| m | 1 << l),
+    }
+}
+
+/// Writes each view's culling inputs and (re)creates the per-view buffers
+/// and bind groups.
+#[allow(clippy::too_many_arguments)] // a Bevy system's parameters
+fn prepare_views(
+    device: Res<RenderDevice>,
+    queue: Res<RenderQueue>,
+    pipeline: Res<CompactPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    render: Res<RenderCompactSpecies>,
+    mut compact_views: ResMut<CompactViews>,
+    mut memory: ResMut<CompactGpuMemory>,
+    opaque_phases: Res<ViewBinnedRenderPhases<Opaque3d>>,
+    views: Query<(Entity, &ExtractedView, Option<&RenderLayers>)>,
+) {
+    for view in compact_views.views.values_mut() {
+        view.used = false;
+    }
+    let draw_layout = pipeline_cache.get_bind_group_layout(&pipeline.draw_layout);
+    let cull_layout = pipeline_cache.get_bind_group_layout(&pipeline.cull_layout);
+    for (view_entity, view, layers) in &views {
+        if !opaque_phases.contains_key(&view.retained_view_entity) {
+            continue;
+        }
+        let clip_from_world = view.clip_from_world.unwrap_or_else(|| view.clip_from_view * view.world_from_view.to_matrix().inverse());
+        let height = view.viewport.w as f32;
+        let Some((slope, perspective)) = super::view_error_slope(&view.clip_from_view, height) else {
+            continue;
+        };
+        let cull_view = CullView {
+            planes: frustum_planes(&clip_from_world),
+            world_position: view.world_from_view.translation().extend(1.0).to_array(),
+            error_slope: slope,
+            perspective: u32::from(perspective),
+            layers: view_layers(layers),
+            padding: 0,
+        };
+        for (&id, species) in &render.species {
+            let Some(gpu) = species.gpu.as_ref() else { continue };
+            let n = species.instances.len();
+            if n == 0 {
+                continue;
+            }
+            let entry = compact_views.views.entry((view_entity, id));
+            let fresh = |capacity: usize| {
+                let cull_view = empty_buffer(&device, "conifer cull view", size_of::<CullView>() as u64, BufferUsages::UNIFORM);
+                let lods = empty_buffer(&device, "conifer instance lods", capacity as u64 * INSTANCE_LOD_BYTES, BufferUsages::STORAGE);
+                let args = empty_buffer(
+                    &device,
+                    "conifer indirect draws",
+                    capacity as u64 * DRAW_ARGS_BYTES * PART_KINDS as u64,
+                    BufferUsages::STORAGE | BufferUsages::INDIRECT,
+                );
+                (cull_view, lods, args)
+            };
+            let make_groups = |cull_view: &Buffer, lods: &Buffer, args: &Buffer| {
+                let cull = device.create_bind_group(
+                    "conifer compact cull",
+                    &cull_layout,
+                    &BindGroupEntries::sequential((
+                        cull_view.as_entire_binding(),
+                        gpu.params.as_entire_binding(),
+                        gpu.instances.as_entire_binding(),
+                        gpu.needles.as_entire_binding(),
+                        gpu.original_lines.as_entire_binding(),
+                        gpu.merged_lines.as_entire_binding(),
+                        gpu.wood_segments.as_entire_binding(),
+                        lods.as_entire_binding(),
+                        args.as_entire_binding(),
+                    )),
+                );
+                let draw = device.create_bind_group(
+                    "conifer compact draw",
+                    &draw_layout,
+                    &BindGroupEntries::sequential((
+                        gpu.params.as_entire_binding(),
+                        gpu.instances.as_entire_binding(),
+                        lods.as_entire_binding(),
+                        gpu.needles.as_entire_binding(),
+                        gpu.original_lines.as_entire_binding(),
+                        gpu.merged_lines.as_entire_binding(),
+                        gpu.wood_segments.as_entire_binding(),
+                        gpu.wood_mesh.as_entire_binding(),
+                    )),
+                );
+                (cull, draw)
+            };
+            let view_species = match entry {
+                bevy::platform::collections::hash_map::Entry::Occupied(entry) => {
+                    let v = entry.into_mut();
+                    if v.capacity < n || n * 4 < v.capacity && v.capacity > 64 {
+                        let capacity = n.next_power_of_two().max(64);
+                        let (c, l, a) = fresh(capacity);
+                        v.cull_view = c;
+                        v.lods = l;
+                        v.args = a;
+                        v.capacity = capacity;
+                    }
+                    let (cull, draw) = make_groups(&v.cull_view, &v.lods, &v.args);
+                    v.cull_bind_group = cull;
+                    v.draw_bind_group = draw;
+                    v
+                }
+                bevy::platform::collections::hash_map::Entry::Vacant(entry) => {
+                    let capacity = n.next_power_of_two().max(64);
+                    let (c, l, a) = fresh(capacity);
+                    let (cull, draw) = make_groups(&c, &l, &a);
+                    entry.insert(ViewSpecies {
+                        cull_view: c,
+                        lods: l,
+                        args: a,
+                        capacity,
+                        instance_count: 0,
+                        cull_bind_group: cull,
+                        draw_bind_group: draw,
+                        used: false,
+                    })
+                }
+            };
+            view_species.instance_count = n as u32;
+            view_species.used = true;
+            queue.write_buffer(&view_species.cull_view, 0, bytemuck::bytes_of(&cull_view));
+        }
+    }
+    compact_views.views.retain(|_, v| v.used);
+    memory.view_bytes = compact_views
+        .views
+        .values()
+        .map(|v| v.cull_view.size() + v.lods.size() + v.args.size())
+        .sum();
+    memory.buffers = compact_views.views.len() * 3 + render.species.values().filter(|s| s.gpu.is_some()).count() * 7;
+}
+
+/// Puts each species' parts in each view's opaque and transparent phases.
+#[allow(clippy::too_many_arguments)] // a Bevy system's parameters
+fn queue_compact(
+    pipeline: Res<CompactPipeline>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
+    pipeline_cache: Res<PipelineCache>,
+    mut render: ResMut<RenderCompactSpecies>,
+    compact_views: Res<CompactViews>,
+    view_key_cache: Res<ViewKeyCache>,
+    opaque_draw_functions: Res<DrawFunctions<Opaque3d>>,
+    transparent_draw_functions: Res<DrawFunctions<Transparent3d>>,
+    mut opaque_phases: ResMut<ViewBinnedRenderPhases<Opaque3d>>,
+    mut transparent_phases: ResMut<ViewSortedRenderPhases<Transparent3d>>,
+    views: Query<(Entity, &ExtractedView)>,
+) {
+    let draw_opaque = opaque_draw_functions.read().id::<DrawCompact>();
+    let draw_transparent = transparent_draw_functions.read().id::<DrawCompact>();
+    let retired = std::mem::take(&mut render.retired);
+    for (view_entity, view) in &views {
+        let Some(opaque) = opaque_phases.get_mut(&view.retained_view_entity) else {
+            continue;
+        };
+        for &entity in &retired {
+            opaque.remove(MainEntity::from(entity));
+        }
+        let Some(transparent) = transparent_phases.get_mut(&view.retained_view_entity) else {
+            continue;
+        };
+        let Some(&view_key) = view_key_cache.get(&view.retained_view_entity) else {
+            continue;
+        };
+        for (&id, species) in &render.species {
+            let drawn = compact_views.views.contains_key(&(view_entity, id));
+            for kind in PartKind::ALL {
+                let entity = species.draw_entities[kind.index()];
+                let main_entity = MainEntity::from(entity);
+                if !kind.is_lines() {
+                    opaque.remove(main_entity);
+                }
+                if !drawn || !kind.present_in(&species.compact) {
+                    continue;
+                }
+                let (topology, blend) = if kind.is_lines() {
+                    (PrimitiveTopology::LineList, MeshPipelineKey::BLEND_ALPHA)
+                } else {
+                    (PrimitiveTopology::TriangleList, MeshPipelineKey::empty())
+                };
+                let key = CompactPipelineKey {
+                    mesh_key: view_key | blend | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
+                    kind,
+                };
+                let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
+                if kind.is_lines() {
+                    transparent.add_transient(Transparent3d {
+                        sorting_info: TransparentSortingInfo3d::Sorted {
+                            mesh_center: species.center,
+                            depth_bias: 0.0,
+                        },
+                        entity: (entity, main_entity),
+                        pipeline: pipeline_id,
+                        draw_function: draw_transparent,
+                        distance: 0.0,
+                        batch_range: 0..1,
+                        extra_index: PhaseItemExtraIndex::None,
+                        indexed: false,
+                    });
+                } else {
+                    opaque.add(
+                        Opaque3dBatchSetKey {
+                            draw_function: draw_opaque,
+                            pipeline: pipeline_id,
+                            material_bind_group_index: None,
+                            lightmap_slab: None,
+                            slabs: MeshSlabs::default(),
+                        },
+                        Opaque3dBinKey {
+                            asset_id: id.untyped(),
+                        },
+                        (entity, main_entity),
+                        InputUniformIndex::default(),
+                        BinnedRenderPhaseType::NonMesh,
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Culls every tree of every species for every view and writes the
+/// indirect draws (`conifer_cull.wgsl`).
+fn cull_trees(
+    mut render_context: RenderContext,
+    pipeline: Res<CompactPipeline>,
+    pipeline_cache: Res<PipelineCache>,
+    compact_views: Res<CompactViews>,
+) {
+    let Some(cull) = pipeline_cache.get_compute_pipeline(pipeline.cull_pipeline) else {
+        return;
+    };
+    if compact_views.views.is_empty() {
+        return;
+    }
+    let mut pass = render_context
+        .command_encoder()
+        .begin_compute_pass(&ComputePassDescriptor {
+            label: Some("conifer compact cull"),
+            timestamp_writes: None,
+        });
+    pass.set_pipeline(cull);
+    for view in compact_views.views.values() {
+        pass.set_bind_group(0, &view.cull_bind_group, &[]);
+        pass.dispatch_workgroups(view.instance_count.div_ceil(64), 1, 1);
+    }
+}
+
+/// Binds a species' compact arrays and the view's culling results and draws
+/// one part of every tree with one multi-draw-indirect.
+pub struct DrawCompactPart;
+
+impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
+    type Param = SRes<CompactViews>;
+    type ViewQuery = Entity;
+    type ItemQuery = Read<CompactDrawItem>;
+
+    fn render<'w>(
+        _item: &P,
+        view: ROQueryItem<'w, '_, Self::ViewQuery>,
+        item: Option<ROQueryItem<'w, '_, Self::ItemQuery>>,
+        compact_views: SystemParamItem<'w, '_, Self::Param>,
+        pass: &mut TrackedRenderPass<'w>,
+    ) -> RenderCommandResult {
+        let Some(item) = item else {
+            return RenderCommandResult::Skip;
+        };
+        let Some(buffers) = compact_views.into_inner().views.get(&(view, item.species)) else {
+            return RenderCommandResult::Skip;
+        };
+        pass.set_bind_group(2, &buffers.draw_bind_group, &[]);
+        let offset = item.kind.index() as u64 * buffers.instance_count as u64 * DRAW_ARGS_BYTES;
+        pass.multi_draw_indirect(&buffers.args, offset, buffers.instance_count);
+        RenderCommandResult::Success
+    }
+}
+
+/// The draw function of every compact part.
+pub type DrawCompact = (
+    SetItemPipeline,
+    SetMeshViewBindGroup<0>,
+    SetMeshViewBindingArrayBindGroup<1>,
+    DrawCompactPart,
+);
+
+fn shader_path(file: &str) -> bevy::asset::AssetPath<'static> {
+    let path = embedded_path!("conifer_compact.wgsl").with_file_name(file);
+    bevy::asset::AssetPath::from_path_buf(path).with_source("embedded")
+}
+
+/// The shared WGSL types, kept loaded so the shaders can import them.
+#[derive(Resource)]
+struct CompactShaderLibrary(#[allow(dead_code)] Handle<Shader>);
+
+/// Copies the render world's [`CompactGpuMemory`] to the main world each
+/// frame, where the bench and tests read it.
+fn publish_memory(memory: Res<CompactGpuMemory>, mut main_world: ResMut<bevy::render::MainWorld>) {
+    if let Some(mut target) = main_world.get_resource_mut::<CompactGpuMemory>() {
+        target.clone_from(&memory);
+    }
+}
+
+/// Adds the compact path: shaders, main-world tracking, and the render
+/// world's extraction, preparation, queueing, culling and draw.
+pub(super) fn build(app: &mut App) {
+    embedded_asset!(app, "compact_types.wgsl");
+    embedded_asset!(app, "conifer_cull.wgsl");
+    embedded_asset!(app, "conifer_compact.wgsl");
+    let library = app.world().resource::<AssetServer>().load(shader_path("compact_types.wgsl"));
+    app.insert_resource(CompactShaderLibrary(library));
+    app.init_resource::<CompactGpuMemory>();
+    let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
+        return;
+    };
+    render_app
+        .init_resource::<RenderCompactSpecies>()
+        .init_resource::<CompactViews>()
+        .init_resource::<CompactGpuMemory>()
+        .init_resource::<SpecializedRenderPipelines<CompactPipeline>>()
+        .add_render_command::<Opaque3d, DrawCompact>()
+        .add_render_command::<Transparent3d, DrawCompact>()
+        .add_systems(RenderStartup, init_compact_pipeline.after(MeshPipelineSystems))
+        .add_systems(ExtractSchedule, (extract_compact, publish_memory))
+        .add_systems(
+            Render,
+            (
+                (prepare_species, prepare_views)
+                    .chain()
+                    .in_set(RenderSystems::PrepareResources),
+                queue_compact.in_set(RenderSystems::QueueMeshes),
+            ),
+        )
+        .add_systems(bevy::render::renderer::RenderGraph, cull_trees.before(camera_driver));
+}
