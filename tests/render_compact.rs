@@ -1,0 +1,223 @@
+//! Render path v2 (`RenderPath::Compact`), rendered on Mesa's lavapipe:
+//! it draws what the mesh path draws at every distance (prisms, original
+//! lines, merged lines, wood), its GPU memory is what it allocated, a
+//! species' buffers hold about 32 bytes a needle, and its per-tree and
+//! per-view buffers grow and shrink with the trees and views.
+//! Pictures go to `target/test-output/render/`.
+#![cfg(feature = "plugin")]
+
+use bevy::prelude::*;
+use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::compact::CompactSpecies;
+use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
+use bevy_conifer_lod::plugin::CompactGpuMemory;
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::prelude::*;
+use std::path::PathBuf;
+
+const SIZE: u32 = 192;
+const BACKGROUND: [u8; 3] = [235, 237, 242];
+
+struct Scene {
+    renderer: HeadlessRenderer,
+    species: Handle<ConiferSpecies>,
+    target: Handle<Image>,
+    camera: Entity,
+    crown: Vec3,
+    needles: usize,
+    out: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+impl Scene {
+    /// A 12,000-needle Scots pine (with wood segments) at the origin.
+    fn new() -> Self {
+        let dir = tempfile::tempdir().unwrap();
+        let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+        std::fs::create_dir_all(&out).unwrap();
+        let tree = generate(
+            Species::ScotsPine,
+            &GenerateOptions {
+                seed: 2,
+                target_needles: Some(12_000),
+            },
+        );
+        let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+        let crown = record.crown_center();
+        let needles = record.needle_count();
+        write_record(&record, &dir.path().join("pine.conifer")).unwrap();
+        let mut renderer = HeadlessRenderer::new(&dir.path().to_string_lossy());
+        let species: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
+        HeadlessRenderer::spawn_lights(renderer.world_mut());
+        renderer.load(&[species.clone().untyped()], 600).unwrap();
+        let target = renderer.render_target(SIZE, SIZE);
+        let camera = renderer
+            .world_mut()
+            .spawn((
+                HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, 45f32.to_radians()),
+                Camera {
+                    clear_color: ClearColorConfig::Custom(Color::srgb_u8(
+                        BACKGROUND[0],
+                        BACKGROUND[1],
+                        BACKGROUND[2],
+                    )),
+                    ..default()
+                },
+            ))
+            .id();
+        Self {
+            renderer,
+            species,
+            target,
+            camera,
+            crown,
+            needles,
+            out,
+            _dir: dir,
+        }
+    }
+
+    fn look_from(&mut self, distance: f32, fov_deg: f32) {
+        let eye = self.crown + Vec3::Z * distance;
+        let world = self.renderer.world_mut();
+        *world.get_mut::<Transform>(self.camera).unwrap() = Transform::from_translation(eye).looking_at(self.crown, Vec3::Y);
+        *world.get_mut::<Projection>(self.camera).unwrap() = Projection::Perspective(PerspectiveProjection {
+            fov: fov_deg.to_radians(),
+            ..default()
+        });
+    }
+
+    fn set_path(&mut self, path: RenderPath) {
+        self.renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = path;
+    }
+
+    fn shot(&mut self, name: &str) -> image::RgbaImage {
+        // Parts spawn, buffers fill and pipelines compile over a few frames.
+        for _ in 0..3 {
+            self.renderer.update().unwrap();
+        }
+        let image = self.renderer.capture(&self.target, 20).unwrap();
+        image.save(self.out.join(format!("compact_{name}.png"))).unwrap();
+        image
+    }
+
+    fn memory(&self) -> CompactGpuMemory {
+        self.renderer.world().resource::<CompactGpuMemory>().clone()
+    }
+}
+
+/// Pixels that differ from the background by more than 6 grey levels.
+fn covered(image: &image::RgbaImage) -> Vec<bool> {
+    image
+        .pixels()
+        .map(|p| (0..3).map(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs()).max().unwrap() > 6)
+        .collect()
+}
+
+/// Mean |Δ| of the grey levels (0–255) over the pixels either picture covers.
+fn mean_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> f32 {
+    let (ca, cb) = (covered(a), covered(b));
+    let (mut sum, mut n) = (0.0f32, 0usize);
+    for (i, (pa, pb)) in a.pixels().zip(b.pixels()).enumerate() {
+        if ca[i] || cb[i] {
+            let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
+            sum += (grey(pa) - grey(pb)).abs();
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f32
+}
+
+#[test]
+fn compact_path_draws_what_the_mesh_path_draws() {
+    let mut scene = Scene::new();
+    let tree = scene
+        .renderer
+        .world_mut()
+        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY))
+        .id();
+    // Prisms close up, original lines, merged lines, a far tree.
+    for (distance, fov, what) in [(1.0, 20.0, "prisms"), (4.0, 45.0, "lines"), (30.0, 30.0, "merged"), (90.0, 20.0, "far")] {
+        scene.look_from(distance, fov);
+        scene.set_path(RenderPath::Meshes);
+        let meshes = scene.shot(&format!("{what}_meshes"));
+        scene.set_path(RenderPath::Compact);
+        let compact = scene.shot(&format!("{what}_compact"));
+        let (cm, cc) = (covered(&meshes), covered(&compact));
+        let (pm, pc) = (cm.iter().filter(|&&c| c).count(), cc.iter().filter(|&&c| c).count());
+        let diff = mean_difference(&meshes, &compact);
+        println!("{what}: covered pixels meshes {pm}, compact {pc}; mean grey |Δ| {diff:.2}");
+        assert!(pm > 50, "{what}: the mesh path draws the tree");
+        assert!(
+            (pc as f32 - pm as f32).abs() <= 0.12 * pm as f32,
+            "{what}: compact covers {pc} pixels, meshes {pm}"
+        );
+        assert!(diff < 12.0, "{what}: mean grey difference {diff}");
+    }
+    // A hidden tree is not drawn.
+    scene.renderer.world_mut().entity_mut(tree).insert(Visibility::Hidden);
+    let hidden = scene.shot("hidden");
+    assert_eq!(covered(&hidden).iter().filter(|&&c| c).count(), 0);
+}
+
+#[test]
+fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
+    let mut scene = Scene::new();
+    scene.set_path(RenderPath::Compact);
+    scene.look_from(60.0, 45.0);
+    let mut trees = Vec::new();
+    for i in 0..3000 {
+        let (x, z) = ((i % 60) as f32 * 5.0 - 150.0, -((i / 60) as f32) * 5.0);
+        trees.push(
+            scene
+                .renderer
+                .world_mut()
+                .spawn((ConiferFoliage(scene.species.clone()), Transform::from_xyz(x, 0.0, z)))
+                .id(),
+        );
+    }
+    let forest = scene.shot("forest");
+    assert!(covered(&forest).iter().filter(|&&c| c).count() > 1000);
+    let memory = scene.memory();
+    let id = scene.species.id();
+    let species_bytes = memory.species_bytes[&id];
+    let record = scene
+        .renderer
+        .world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(id)
+        .unwrap()
+        .record
+        .clone();
+    let compact = CompactSpecies::build(&record).unwrap();
+    let per_needle = species_bytes as f64 / scene.needles as f64;
+    println!(
+        "species {species_bytes} B ({per_needle:.1} B/needle), instances {} B, views {} B, {} buffers",
+        memory.instance_bytes[&id], memory.view_bytes, memory.buffers
+    );
+    // The buffers hold the arrays (each at least 16 bytes).
+    assert!(species_bytes >= compact.bytes().total() && species_bytes <= compact.bytes().total() + 5 * 16);
+    assert!(per_needle <= 36.0, "{per_needle} B/needle");
+    // 3,000 trees: a 4,096-slot instance buffer (64 B each) and per view
+    // 4,096 LOD slots (16 B) and 6 × 4,096 indirect draws (16 B).
+    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 160);
+    assert_eq!(memory.view_bytes, 128 + 4096 * 16 + 6 * 4096 * 16);
+    let buffers = memory.buffers;
+    // Most trees go: the buffers shrink back, none leak.
+    for &tree in &trees[100..] {
+        scene.renderer.world_mut().despawn(tree);
+    }
+    scene.shot("forest_thinned");
+    let memory = scene.memory();
+    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 160);
+    assert_eq!(memory.view_bytes, 128 + 128 * 16 + 6 * 128 * 16);
+    assert_eq!(memory.buffers, buffers);
+    // All go: nothing is left.
+    for &tree in &trees[..100] {
+        scene.renderer.world_mut().despawn(tree);
+    }
+    scene.shot("forest_gone");
+    let memory = scene.memory();
+    assert_eq!(memory.total(), 0, "{memory:?}");
+    assert_eq!(memory.buffers, 0);
+}
