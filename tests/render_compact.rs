@@ -56,11 +56,7 @@ impl Scene {
             .spawn((
                 HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, 45f32.to_radians()),
                 Camera {
-                    clear_color: ClearColorConfig::Custom(Color::srgb_u8(
-                        BACKGROUND[0],
-                        BACKGROUND[1],
-                        BACKGROUND[2],
-                    )),
+                    clear_color: ClearColorConfig::Custom(Color::srgb_u8(BACKGROUND[0], BACKGROUND[1], BACKGROUND[2])),
                     ..default()
                 },
             ))
@@ -80,7 +76,8 @@ impl Scene {
     fn look_from(&mut self, distance: f32, fov_deg: f32) {
         let eye = self.crown + Vec3::Z * distance;
         let world = self.renderer.world_mut();
-        *world.get_mut::<Transform>(self.camera).unwrap() = Transform::from_translation(eye).looking_at(self.crown, Vec3::Y);
+        *world.get_mut::<Transform>(self.camera).unwrap() =
+            Transform::from_translation(eye).looking_at(self.crown, Vec3::Y);
         *world.get_mut::<Projection>(self.camera).unwrap() = Projection::Perspective(PerspectiveProjection {
             fov: fov_deg.to_radians(),
             ..default()
@@ -88,7 +85,10 @@ impl Scene {
     }
 
     fn set_path(&mut self, path: RenderPath) {
-        self.renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = path;
+        self.renderer
+            .world_mut()
+            .resource_mut::<ConiferLodSettings>()
+            .render_path = path;
     }
 
     fn shot(&mut self, name: &str) -> image::RgbaImage {
@@ -110,7 +110,13 @@ impl Scene {
 fn covered(image: &image::RgbaImage) -> Vec<bool> {
     image
         .pixels()
-        .map(|p| (0..3).map(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs()).max().unwrap() > 6)
+        .map(|p| {
+            (0..3)
+                .map(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs())
+                .max()
+                .unwrap()
+                > 6
+        })
         .collect()
 }
 
@@ -137,7 +143,12 @@ fn compact_path_draws_what_the_mesh_path_draws() {
         .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY))
         .id();
     // Prisms close up, original lines, merged lines, a far tree.
-    for (distance, fov, what) in [(1.0, 20.0, "prisms"), (4.0, 45.0, "lines"), (30.0, 30.0, "merged"), (90.0, 20.0, "far")] {
+    for (distance, fov, what) in [
+        (1.0, 20.0, "prisms"),
+        (4.0, 45.0, "lines"),
+        (30.0, 30.0, "merged"),
+        (90.0, 20.0, "far"),
+    ] {
         scene.look_from(distance, fov);
         scene.set_path(RenderPath::Meshes);
         let meshes = scene.shot(&format!("{what}_meshes"));

@@ -13,8 +13,10 @@ use std::time::Instant;
 /// How the forest's trees are drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum ForestMethod {
-    /// The plugin.
+    /// The plugin, mesh path (`RenderPath::Meshes`).
     Ours,
+    /// The plugin, compact path (`RenderPath::Compact`).
+    OursCompact,
     /// Every needle an `Lmax`-sided prism, no LOD.
     Raw,
     /// meshoptimizer LODs switched by `VisibilityRange` with crossfades.
@@ -75,6 +77,9 @@ pub fn forest_frame_ms(
     let extent = side as f32 * TREE_SPACING;
     let world = renderer.world_mut();
     HeadlessRenderer::spawn_lights(world);
+    if method == ForestMethod::OursCompact {
+        world.resource_mut::<crate::plugin::ConiferLodSettings>().render_path = crate::plugin::RenderPath::Compact;
+    }
     // Per species: what each tree spawns.
     type Parts = Vec<(
         Handle<Mesh>,
@@ -85,7 +90,7 @@ pub fn forest_frame_ms(
     let mut species_handles: Vec<Handle<ConiferSpecies>> = Vec::new();
     for record in records {
         match method {
-            ForestMethod::Ours => {
+            ForestMethod::Ours | ForestMethod::OursCompact => {
                 let species = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
                     let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
                     ConiferSpecies::from_record(record.clone(), &mut meshes, &mut buffers)
@@ -122,7 +127,7 @@ pub fn forest_frame_ms(
     for i in 0..instances {
         let transform = place(i, side);
         match method {
-            ForestMethod::Ours => {
+            ForestMethod::Ours | ForestMethod::OursCompact => {
                 world.spawn((
                     ConiferFoliage(species_handles[i % species_handles.len()].clone()),
                     transform,

@@ -17,6 +17,7 @@ pub mod runtime;
 use crate::generate::{GenerateOptions, Species, generate};
 use crate::model::record::CutStrategy;
 use crate::model::{BakeOptions, LodRecord, PixelError, ViewParams, bake, decode_record};
+use crate::plugin::RenderPath;
 use forest::{ForestMethod, forest_frame_ms};
 use runtime::RuntimeFigures;
 use serde::Serialize;
@@ -158,10 +159,18 @@ pub struct RecordFigures {
     pub file_bytes: u64,
     /// File bytes per needle.
     pub disk_bytes_per_needle: f64,
-    /// GPU buffer bytes (prisms, line bands, wood prisms).
+    /// GPU buffer bytes of the species on the compact render path: the
+    /// sizes of the `wgpu` buffers the render world created for it
+    /// (`CompactGpuMemory::species_bytes`), per-tree and per-view buffers
+    /// not included.
     pub gpu_bytes: u64,
     /// GPU bytes per needle.
     pub gpu_bytes_per_needle: f64,
+    /// Whether `gpu_bytes` was read from the allocated buffers (always).
+    pub gpu_bytes_measured: bool,
+    /// The mesh path's buffers (prisms, line bands, wood prisms) per
+    /// needle, from their lengths.
+    pub mesh_path_gpu_bytes_per_needle: f64,
     /// Median time to decode and validate the file from memory, ms.
     pub decode_ms: f64,
     /// Median time to build the GPU-ready meshes from the record, ms.
@@ -192,8 +201,14 @@ pub struct RenderRatio {
     pub raw_over_ours: f64,
     /// `bevy-lod` frame time over `ours`.
     pub bevylod_over_ours: f64,
-    /// Median frame ms, the plugin.
+    /// `bevy-lod` frame time over `ours-compact`.
+    pub bevylod_over_ours_compact: f64,
+    /// Median frame ms, the plugin (mesh path).
     pub ours_ms: f64,
+    /// Median frame ms, the plugin on the compact path.
+    pub ours_compact_ms: f64,
+    /// The compact path without MSAA, ms.
+    pub ours_compact_no_msaa_ms: f64,
     /// Median frame ms, raw meshes.
     pub raw_ms: f64,
     /// Median frame ms, meshoptimizer LODs with `VisibilityRange`.
@@ -232,8 +247,10 @@ pub struct BenchReport {
     pub bytes_per_needle: BTreeMap<String, RecordFigures>,
     /// CPU cut selection.
     pub cut_us: Option<CutFigures>,
-    /// The plugin's CPU time per frame, no rendering.
+    /// The plugin's CPU time per frame, no rendering (mesh path).
     pub runtime: Vec<RuntimeFigures>,
+    /// The same on the compact path.
+    pub runtime_compact: Vec<RuntimeFigures>,
     /// The rendered forest.
     pub render_ratio: Option<RenderRatio>,
     /// The GPU machine's figures, or why there are none.
@@ -385,7 +402,8 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
     let build_ms = time_us(|| {
         std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record).ok());
     }) / 1e3;
-    let gpu = crate::model::gpu_layout::gpu_bytes(&record).total();
+    let mesh_path = crate::model::gpu_layout::gpu_bytes(&record).total();
+    let gpu = compact_gpu_bytes(&record)?;
     let needles = record.needle_count().max(1);
     Ok(RecordFigures {
         needles: record.needle_count(),
@@ -393,9 +411,48 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
         disk_bytes_per_needle: bytes.len() as f64 / needles as f64,
         gpu_bytes: gpu,
         gpu_bytes_per_needle: gpu as f64 / needles as f64,
+        gpu_bytes_measured: true,
+        mesh_path_gpu_bytes_per_needle: mesh_path as f64 / needles as f64,
         decode_ms,
         build_ms,
     })
+}
+
+/// Bytes of the buffers the compact render path allocates for `record`'s
+/// species: one tree drawn headless, then `CompactGpuMemory` read back.
+fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
+    use crate::plugin::headless::HeadlessRenderer;
+    use crate::plugin::{CompactGpuMemory, ConiferFoliage, ConiferLodSettings, ConiferSpecies, RenderPath};
+    use bevy::prelude::*;
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(64, 64);
+    let world = renderer.world_mut();
+    world.resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
+    let species = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+        let mut buffers = world.resource_mut::<Assets<bevy::render::storage::ShaderBuffer>>();
+        ConiferSpecies::from_record(record.clone(), &mut meshes, &mut buffers)
+    });
+    let species = species.map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+    world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+    let eye = record.crown_center() + Vec3::Z * 20.0;
+    world.spawn(HeadlessRenderer::camera_bundle(
+        &target,
+        Transform::from_translation(eye).looking_at(record.crown_center(), Vec3::Y),
+        0.8,
+    ));
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        renderer
+            .update()
+            .map_err(|e| BenchError::Render(crate::eval::scene::EvalError::from(e)))?;
+    }
+    Ok(renderer
+        .world()
+        .resource::<CompactGpuMemory>()
+        .species_bytes
+        .get(&handle.id())
+        .copied()
+        .unwrap_or(0))
 }
 
 /// Distances of the cut benchmark, metres.
@@ -464,7 +521,7 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     progress("cuts");
     let cut_us = options.runs("cuts").then(|| cut_figures(options.cut_needles));
 
-    let mut runtime = Vec::new();
+    let (mut runtime, mut runtime_compact) = (Vec::new(), Vec::new());
     let runtime_records = if options.runs("runtime") {
         species_records(5_000)
     } else {
@@ -472,7 +529,18 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     };
     for &instances in options.instances.iter().filter(|_| options.runs("runtime")) {
         progress(&format!("run time, {instances} trees"));
-        runtime.push(runtime::runtime(&runtime_records, instances, options.runtime_frames));
+        runtime.push(runtime::runtime(
+            &runtime_records,
+            instances,
+            options.runtime_frames,
+            RenderPath::Meshes,
+        ));
+        runtime_compact.push(runtime::runtime(
+            &runtime_records,
+            instances,
+            options.runtime_frames,
+            RenderPath::Compact,
+        ));
     }
 
     let render_ratio = if options.runs("forest") {
@@ -493,6 +561,7 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
         bytes_per_needle: records,
         cut_us,
         runtime,
+        runtime_compact,
         render_ratio,
         gpu: "no GPU machine was lent to this session (the device tool's status: not drawn); no absolute GPU figures"
             .into(),
@@ -509,6 +578,8 @@ fn forest_figures(
     let mut forest_ms = BTreeMap::new();
     for (name, method, msaa) in [
         ("ours", ForestMethod::Ours, true),
+        ("ours-compact", ForestMethod::OursCompact, true),
+        ("ours-compact-no-msaa", ForestMethod::OursCompact, false),
         ("raw", ForestMethod::Raw, true),
         ("bevy-lod", ForestMethod::BevyLod, true),
         ("ours-no-msaa", ForestMethod::Ours, false),
@@ -534,7 +605,10 @@ fn forest_figures(
     Ok(RenderRatio {
         raw_over_ours: forest_ms["raw"] / ours,
         bevylod_over_ours: forest_ms["bevy-lod"] / ours,
+        bevylod_over_ours_compact: forest_ms["bevy-lod"] / forest_ms["ours-compact"].max(1e-9),
         ours_ms: forest_ms["ours"],
+        ours_compact_ms: forest_ms["ours-compact"],
+        ours_compact_no_msaa_ms: forest_ms["ours-compact-no-msaa"],
         raw_ms: forest_ms["raw"],
         bevylod_ms: forest_ms["bevy-lod"],
         ours_no_msaa_ms: forest_ms["ours-no-msaa"],

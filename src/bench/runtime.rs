@@ -14,6 +14,8 @@ use std::time::Instant;
 /// The plugin's CPU cost at one instance count.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct RuntimeFigures {
+    /// The render path measured.
+    pub render_path: &'static str,
     /// Trees.
     pub instances: usize,
     /// Median frame time with the plugin's systems, ms.
@@ -49,16 +51,23 @@ fn species_assets(app: &mut App, records: &[LodRecord]) -> Vec<Handle<ConiferSpe
 /// Median frame time and median plugin-systems time (ms) of `frames`
 /// frames with `instances` trees of `records` (cycled) on a 6 m grid and a
 /// 1920×1080 camera flying across it at 10 m per frame.
-fn run(records: &[LodRecord], instances: usize, frames: usize, with_plugin_systems: bool) -> (f64, f64) {
+fn run(
+    records: &[LodRecord],
+    instances: usize,
+    frames: usize,
+    with_plugin_systems: bool,
+    path: RenderPath,
+) -> (f64, f64) {
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, AssetPlugin::default(), TransformPlugin))
         .init_asset::<Mesh>()
         .init_asset::<ShaderBuffer>()
         .add_plugins(ConiferLodPlugin);
+    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = path;
     if !with_plugin_systems {
         app.configure_sets(
             PostUpdate,
-            (ConiferLodSet::Prepare, ConiferLodSet::Select).run_if(|| false),
+            (ConiferLodSet::Prepare, ConiferLodSet::Select, ConiferLodSet::Instances).run_if(|| false),
         );
     }
     let handles = species_assets(&mut app, records);
@@ -112,12 +121,16 @@ fn run(records: &[LodRecord], instances: usize, frames: usize, with_plugin_syste
 
 /// The plugin's CPU cost per frame at `instances` trees of `records`:
 /// frames with and without its system sets, and its own systems' time.
-pub fn runtime(records: &[LodRecord], instances: usize, frames: usize) -> RuntimeFigures {
-    let (with, systems) = run(records, instances, frames, true);
-    let (without, _) = run(records, instances, frames, false);
+pub fn runtime(records: &[LodRecord], instances: usize, frames: usize, path: RenderPath) -> RuntimeFigures {
+    let (with, systems) = run(records, instances, frames, true, path);
+    let (without, _) = run(records, instances, frames, false, path);
     let cpu = (with - without).max(0.0);
     let per = |ms: f64| ms * 1e6 / instances.max(1) as f64;
     RuntimeFigures {
+        render_path: match path {
+            RenderPath::Meshes => "meshes",
+            RenderPath::Compact => "compact",
+        },
         instances,
         frame_ms_with_plugin: with,
         frame_ms_without_plugin: without,

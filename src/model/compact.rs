@@ -243,7 +243,12 @@ impl CompactSpecies {
             let [tx, ty, tz] = grid.encode(needle.tip).map(u32::from);
             let own = line_codes[i as usize];
             let parent = parent_code(record, i)?;
-            needles.push([bx | by << 16, bz | tx << 16, ty | tz << 16, u32::from(own) | u32::from(parent) << 16]);
+            needles.push([
+                bx | by << 16,
+                bz | tx << 16,
+                ty | tz << 16,
+                u32::from(own) | u32::from(parent) << 16,
+            ]);
             if parent > own {
                 original.push((parent, k as u32));
             }
@@ -477,7 +482,13 @@ mod tests {
 
     #[test]
     fn ring_basis_is_orthonormal() {
-        for axis in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.4, 0.5).normalize()] {
+        for axis in [
+            Vec3::X,
+            Vec3::Y,
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.4, 0.5).normalize(),
+        ] {
             let (u, v) = ring_basis(axis);
             assert!((u.length() - 1.0).abs() < 1e-5 && (v.length() - 1.0).abs() < 1e-5);
             assert!(u.dot(v).abs() < 1e-5 && u.dot(axis).abs() < 1e-5 && v.dot(axis).abs() < 1e-5);
@@ -498,7 +509,8 @@ mod tests {
                 let mut expected = record.cut(threshold);
                 // Side counts follow the view's own error.
                 for (needle, sides) in &mut expected.prisms {
-                    let radius = compact.needle_radius(compact.needle_source.iter().position(|s| s == needle).unwrap() as u32);
+                    let radius =
+                        compact.needle_radius(compact.needle_source.iter().position(|s| s == needle).unwrap() as u32);
                     *sides = metric::prism_sides(metric::relative_error(e, radius), record.max_sides);
                 }
                 assert_eq!(drawn, expected.sorted(), "e = {e}");

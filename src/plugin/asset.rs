@@ -1,12 +1,12 @@
 //! The species asset: a `.conifer` record turned into GPU-ready meshes.
 
 use super::material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE};
+use crate::model::compact::CompactSpecies;
 use crate::model::gpu_layout::{
     BandErrors, LineBuffers, PrismBuffers, line_bands, merge_depths, prism_buffers, wood_prism_buffers,
     wood_segment_error,
 };
 use crate::model::prism::{TriangleMesh, append_wood_segment};
-use crate::model::compact::CompactSpecies;
 use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
 use bevy::asset::io::Reader;
 use bevy::asset::{AssetLoader, LoadContext, RenderAssetUsages};

@@ -34,10 +34,12 @@
 //!
 //! ## System sets
 //!
-//! Both run in `PostUpdate`, after transform propagation and before
-//! visibility checks: [`ConiferLodSet::Prepare`] (spawn the mesh parts of
-//! newly loaded trees, keep materials in sync with the settings), then
-//! [`ConiferLodSet::Select`] (per-instance spatial error and part visibility).
+//! All run in `PostUpdate`. After transform propagation and Bevy's shadow
+//! cascades, before visibility checks: [`ConiferLodSet::Prepare`] (spawn
+//! the mesh parts of newly loaded trees, keep materials in sync with the
+//! settings), then [`ConiferLodSet::Select`] (per-instance spatial error
+//! and part visibility). After visibility propagation:
+//! [`ConiferLodSet::Instances`] (the compact path's instance tracking).
 
 mod asset;
 mod debug;
@@ -88,6 +90,11 @@ impl Plugin for ConiferLodPlugin {
                     .after(bevy::light::SimulationLightSystems::UpdateDirectionalLightCascades)
                     .before(VisibilitySystems::VisibilityPropagate),
             )
+            // After visibility propagation: a hidden tree is not drawn.
+            .configure_sets(
+                PostUpdate,
+                ConiferLodSet::Instances.after(VisibilitySystems::VisibilityPropagate),
+            )
             .add_systems(
                 PostUpdate,
                 (
@@ -99,8 +106,7 @@ impl Plugin for ConiferLodPlugin {
                         .chain()
                         .in_set(ConiferLodSet::Prepare),
                     systems::select_lod.in_set(ConiferLodSet::Select),
-                    // After visibility propagation: a hidden tree is not drawn.
-                    render::track_instances.after(VisibilitySystems::VisibilityPropagate),
+                    render::track_instances.in_set(ConiferLodSet::Instances),
                 ),
             );
         if app.is_plugin_added::<bevy::pbr::PbrPlugin>() {
@@ -119,6 +125,10 @@ pub enum ConiferLodSet {
     /// Computes every instance's [`ConiferLodState`] and hides parts that
     /// cannot draw anything at its error.
     Select,
+    /// [`RenderPath::Compact`]: records the trees that were spawned, moved,
+    /// hidden, re-targeted or despawned in [`CompactInstances`] (after
+    /// Bevy's visibility propagation, which it reads).
+    Instances,
 }
 
 /// How merged (and original) lines get their opacity.
@@ -215,7 +225,9 @@ pub struct ConiferLodOverride {
 }
 
 /// What a tree's LOD is this frame, over every active camera (written by
-/// [`ConiferLodSet::Select`]).
+/// [`ConiferLodSet::Select`]). On [`RenderPath::Compact`] the GPU chooses
+/// alone and the CPU keeps this up to date only while the debug overlay
+/// (or its stats) is on.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
 pub struct ConiferLodState {
     /// Smallest spatial error over the views (tree-local metres); infinite

@@ -22,14 +22,14 @@ pub struct ConiferLodCpuTime {
 
 /// Adds the time until it is dropped to [`ConiferLodCpuTime`]; the last
 /// system of the frame publishes the sum.
-struct CpuTimer<'a> {
+pub(super) struct CpuTimer<'a> {
     time: &'a mut ConiferLodCpuTime,
     started: std::time::Instant,
     publish: bool,
 }
 
 impl<'a> CpuTimer<'a> {
-    fn start(time: &'a mut ConiferLodCpuTime, publish: bool) -> Self {
+    pub(super) fn start(time: &'a mut ConiferLodCpuTime, publish: bool) -> Self {
         Self {
             time,
             started: std::time::Instant::now(),
@@ -471,9 +471,16 @@ pub(super) fn select_lod(
     mut parts: Query<&mut Visibility, With<ConiferPart>>,
     species_assets: Res<Assets<ConiferSpecies>>,
     settings: Res<ConiferLodSettings>,
+    debug: Option<Res<super::ConiferLodDebug>>,
     mut cpu_time: ResMut<ConiferLodCpuTime>,
 ) {
     let _timer = CpuTimer::start(&mut cpu_time, true);
+    // The compact path's GPU pass chooses alone: the CPU state is for the
+    // debug overlay and its stats only.
+    let overlay_reads_state = debug.is_some_and(|d| d.enabled || d.always_collect_stats);
+    if settings.render_path == RenderPath::Compact && !overlay_reads_state {
+        return;
+    }
     let views: Vec<ViewLod> = cameras
         .iter()
         .filter(|(camera, _, _)| camera.is_active)

@@ -58,7 +58,8 @@ use bevy::render::render_resource::binding_types::{
 use bevy::render::render_resource::{
     BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor,
     BufferUsages, CachedComputePipelineId, ComputePassDescriptor, ComputePipelineDescriptor, PipelineCache,
-    RenderPipelineDescriptor, ShaderStages, SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines,
+    RenderPipelineDescriptor, ShaderStages, SpecializedMeshPipeline, SpecializedRenderPipeline,
+    SpecializedRenderPipelines,
 };
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
 use bevy::render::sync_world::MainEntity;
@@ -158,7 +159,9 @@ fn gpu_instance(
     };
     let layer_mask = match layers {
         None => 1,
-        Some(layers) => (0..32).filter(|&l| layers.intersects(&RenderLayers::layer(l))).fold(0u32, |m, l| m | 1 << l),
+        Some(layers) => (0..32)
+            .filter(|&l| layers.intersects(&RenderLayers::layer(l)))
+            .fold(0u32, |m, l| m | 1 << l),
     };
     GpuInstance {
         rows: [
@@ -203,7 +206,9 @@ pub(super) fn track_instances(
     mut removed_overrides: RemovedComponents<ConiferLodOverride>,
     mut removed_layers: RemovedComponents<RenderLayers>,
     mut was_compact: Local<bool>,
+    mut cpu_time: ResMut<super::ConiferLodCpuTime>,
 ) {
+    let _timer = super::systems::CpuTimer::start(&mut cpu_time, true);
     let compact = settings.render_path == RenderPath::Compact;
     if !compact {
         if *was_compact {
@@ -419,10 +424,9 @@ fn extract_compact(
             entry.instances.clone_from(&tracked.instances);
             entry.generation = tracked.generation;
             entry.instances_dirty = true;
-            let sum = entry
-                .instances
-                .iter()
-                .fold(Vec3::ZERO, |s, i| s + Vec3::new(i.rows[0][3], i.rows[1][3], i.rows[2][3]));
+            let sum = entry.instances.iter().fold(Vec3::ZERO, |s, i| {
+                s + Vec3::new(i.rows[0][3], i.rows[1][3], i.rows[2][3])
+            });
             entry.center = sum / entry.instances.len().max(1) as f32 + asset.crown_center;
         }
         entry.params = species_params(asset, compact, &settings);
@@ -481,7 +485,11 @@ fn prepare_species(
                 ),
                 instance_capacity: capacity,
                 needles: storage_buffer(&device, "conifer needles", bytemuck::cast_slice(&c.needles)),
-                original_lines: storage_buffer(&device, "conifer original lines", bytemuck::cast_slice(&c.original_lines)),
+                original_lines: storage_buffer(
+                    &device,
+                    "conifer original lines",
+                    bytemuck::cast_slice(&c.original_lines),
+                ),
                 merged_lines: storage_buffer(&device, "conifer merged lines", bytemuck::cast_slice(&c.merged_lines)),
                 wood_segments: storage_buffer(&device, "conifer wood segments", bytemuck::cast_slice(&c.wood_segments)),
                 wood_mesh: storage_buffer(&device, "conifer wood mesh", bytemuck::cast_slice(&wood_mesh)),
@@ -626,13 +634,14 @@ impl SpecializedRenderPipeline for CompactPipeline {
     fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
         // A layout with positions never misses an attribute; an error here
         // leaves an empty descriptor, which the pipeline cache reports.
-        let mut descriptor = match SpecializedMeshPipeline::specialize(&self.mesh_pipeline, key.mesh_key, &self.no_vertices) {
-            Ok(descriptor) => descriptor,
-            Err(error) => {
-                error!("conifer compact pipeline: {error}");
-                return RenderPipelineDescriptor::default();
-            }
-        };
+        let mut descriptor =
+            match SpecializedMeshPipeline::specialize(&self.mesh_pipeline, key.mesh_key, &self.no_vertices) {
+                Ok(descriptor) => descriptor,
+                Err(error) => {
+                    error!("conifer compact pipeline: {error}");
+                    return RenderPipelineDescriptor::default();
+                }
+            };
         descriptor.label = Some(format!("conifer compact {:?}", key.kind).into());
         descriptor.vertex.shader = self.shader.clone();
         descriptor.vertex.buffers.clear();
@@ -686,7 +695,9 @@ fn frustum_planes(clip_from_world: &Mat4) -> [[f32; 4]; 6] {
 fn view_layers(layers: Option<&RenderLayers>) -> u32 {
     match layers {
         None => 1,
-        Some(layers) => (0..32).filter(|&l| layers.intersects(&RenderLayers::layer(l))).fold(0u32, |m, l| m | 1 << l),
+        Some(layers) => (0..32)
+            .filter(|&l| layers.intersects(&RenderLayers::layer(l)))
+            .fold(0u32, |m, l| m | 1 << l),
     }
 }
 
@@ -713,7 +724,9 @@ fn prepare_views(
         if !opaque_phases.contains_key(&view.retained_view_entity) {
             continue;
         }
-        let clip_from_world = view.clip_from_world.unwrap_or_else(|| view.clip_from_view * view.world_from_view.to_matrix().inverse());
+        let clip_from_world = view
+            .clip_from_world
+            .unwrap_or_else(|| view.clip_from_view * view.world_from_view.to_matrix().inverse());
         let height = view.viewport.w as f32;
         let Some((slope, perspective)) = super::view_error_slope(&view.clip_from_view, height) else {
             continue;
@@ -734,8 +747,18 @@ fn prepare_views(
             }
             let entry = compact_views.views.entry((view_entity, id));
             let fresh = |capacity: usize| {
-                let cull_view = empty_buffer(&device, "conifer cull view", size_of::<CullView>() as u64, BufferUsages::UNIFORM);
-                let lods = empty_buffer(&device, "conifer instance lods", capacity as u64 * INSTANCE_LOD_BYTES, BufferUsages::STORAGE);
+                let cull_view = empty_buffer(
+                    &device,
+                    "conifer cull view",
+                    size_of::<CullView>() as u64,
+                    BufferUsages::UNIFORM,
+                );
+                let lods = empty_buffer(
+                    &device,
+                    "conifer instance lods",
+                    capacity as u64 * INSTANCE_LOD_BYTES,
+                    BufferUsages::STORAGE,
+                );
                 let args = empty_buffer(
                     &device,
                     "conifer indirect draws",
@@ -870,7 +893,9 @@ fn queue_compact(
                     (PrimitiveTopology::TriangleList, MeshPipelineKey::empty())
                 };
                 let key = CompactPipelineKey {
-                    mesh_key: view_key | blend | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
+                    mesh_key: view_key
+                        | blend
+                        | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
                     kind,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
@@ -897,9 +922,7 @@ fn queue_compact(
                             lightmap_slab: None,
                             slabs: MeshSlabs::default(),
                         },
-                        Opaque3dBinKey {
-                            asset_id: id.untyped(),
-                        },
+                        Opaque3dBinKey { asset_id: id.untyped() },
                         (entity, main_entity),
                         InputUniformIndex::default(),
                         BinnedRenderPhaseType::NonMesh,
@@ -997,7 +1020,10 @@ pub(super) fn build(app: &mut App) {
     embedded_asset!(app, "compact_types.wgsl");
     embedded_asset!(app, "conifer_cull.wgsl");
     embedded_asset!(app, "conifer_compact.wgsl");
-    let library = app.world().resource::<AssetServer>().load(shader_path("compact_types.wgsl"));
+    let library = app
+        .world()
+        .resource::<AssetServer>()
+        .load(shader_path("compact_types.wgsl"));
     app.insert_resource(CompactShaderLibrary(library));
     app.init_resource::<CompactGpuMemory>();
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
