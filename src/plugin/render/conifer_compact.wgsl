@@ -9,10 +9,14 @@
 #import bevy_pbr::{
     mesh_view_bindings::view,
     view_transformations::position_world_to_clip,
+}
+#ifndef CONIFER_SHADOW
+#import bevy_pbr::{
     pbr_types,
     pbr_functions,
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
 }
+#endif
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
@@ -35,7 +39,11 @@ struct VertexOutput {
     @builtin(position) position: vec4<f32>,
     @location(0) world_position: vec4<f32>,
     @location(1) world_normal: vec3<f32>,
+#ifdef CONIFER_SHADOW
+    @location(2) @interpolate(flat) color: vec4<f32>,
+#else
     @location(2) color: vec4<f32>,
+#endif
 }
 
 // A position outside every clip plane: the primitive is not drawn.
@@ -52,6 +60,13 @@ fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: 
     var out: VertexOutput;
     out.world_position = world_from_local * vec4<f32>(local_position, 1.0);
     out.position = position_world_to_clip(out.world_position.xyz);
+#ifdef CONIFER_SHADOW
+    // Directional shadow maps: casters nearer the light than the cascade's
+    // near plane are flattened onto it ("pancaking"), not clipped.
+    if view.clip_from_view[3][3] == 1.0 {
+        out.position.z = min(out.position.z, 1.0);
+    }
+#endif
     out.world_normal = normalize((world_from_local * vec4<f32>(local_normal, 0.0)).xyz);
     out.color = color;
     return out;
@@ -209,6 +224,16 @@ fn line_alpha(lod: InstanceLod, width: f32, paper_width: f32) -> f32 {
     return min(width * lod.pixel_error / e, 1.0);
 }
 
+// A line's colour; in shadow passes its index and tree (for the hashed
+// alpha test) and its opacity.
+fn line_color(color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
+#ifdef CONIFER_SHADOW
+    return vec4<f32>(f32(line & 0xffffffu), f32(tree & 0xffffffu), 0.0, color.a);
+#else
+    return color;
+#endif
+}
+
 @vertex
 fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance_index: u32) -> VertexOutput {
     let instance = instances[instance_index];
@@ -258,7 +283,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(k);
     let tip = needle_tip(k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return finish_line(position, tip - base, world_from_local, base_color(0, 0.0, alpha));
+    return finish_line(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha), k, instance_index));
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -277,7 +302,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = end_position(a);
     let end = end_position(b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return finish_line(position, end - start, world_from_local, base_color(1, amount, alpha));
+    return finish_line(position, end - start, world_from_local, line_color(base_color(1, amount, alpha), species.needle_count + line, instance_index));
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -287,7 +312,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let width = start.w + end.w;
     let alpha = line_alpha(lod, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
-    return finish_line(position, end.xyz - start.xyz, world_from_local, base_color(2, 0.0, alpha));
+    return finish_line(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, instance_index));
 #endif
 
 #ifdef CONIFER_WOOD_MESH
@@ -306,6 +331,28 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 }
 
+#ifdef CONIFER_SHADOW
+// PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering", JCGT 2020).
+fn pcg(value: u32) -> u32 {
+    let state = value * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// Shadows of translucent lines: each fragment is kept with the line's
+// opacity, by a hash of its texel, line and tree, so a line casts the
+// shadow of the coverage it draws (`model::gpu_layout::shadow_texel_kept`).
+@fragment
+fn fragment(in: VertexOutput) {
+    let line = u32(in.color.r + 0.5);
+    let tree = u32(in.color.g + 0.5);
+    let texel = vec2<u32>(in.position.xy);
+    let h = pcg(texel.x ^ pcg(texel.y ^ pcg(line ^ pcg(tree))));
+    if !(f32(h >> 8u) * (1.0 / 16777216.0) < in.color.a) {
+        discard;
+    }
+}
+#else
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
@@ -330,3 +377,4 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     color = pbr_functions::main_pass_post_lighting_processing(pbr_input, color);
     return color;
 }
+#endif

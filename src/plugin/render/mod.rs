@@ -18,7 +18,10 @@
 //! * Render graph: the culling compute pass (`conifer_cull.wgsl`), before
 //!   the cameras draw.
 //!
-//! Shadow views are not drawn by this path yet: trees on it cast no shadows.
+//! * Shadows: every shadow view (directional cascades, point-light faces,
+//!   spot lights) is culled like a camera, at its texel's error, and drawn
+//!   depth-only; lines keep each fragment with their opacity (a hashed
+//!   alpha test), so they cast the shadow of the coverage they draw.
 
 pub mod gpu;
 
@@ -41,8 +44,9 @@ use bevy::ecs::system::SystemParamItem;
 use bevy::ecs::system::lifetimeless::{Read, SRes};
 use bevy::mesh::{MeshVertexBufferLayoutRef, MeshVertexBufferLayouts, PrimitiveTopology};
 use bevy::pbr::{
-    MeshPipeline, MeshPipelineKey, MeshPipelineSystems, SetMeshViewBindGroup, SetMeshViewBindingArrayBindGroup,
-    ViewKeyCache,
+    LightEntity, MeshPipeline, MeshPipelineKey, MeshPipelineSystems, PrepassPipeline, SetMeshViewBindGroup,
+    SetMeshViewBindingArrayBindGroup, SetPrepassViewBindGroup, SetPrepassViewEmptyBindGroup, Shadow,
+    ShadowBatchSetKey, ShadowBinKey, ViewKeyCache,
 };
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -58,7 +62,8 @@ use bevy::render::render_resource::binding_types::{
 use bevy::render::render_resource::{
     BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor,
     BufferUsages, CachedComputePipelineId, ComputePassDescriptor, ComputePipelineDescriptor, PipelineCache,
-    RenderPipelineDescriptor, ShaderStages, SpecializedMeshPipeline, SpecializedRenderPipeline,
+    CompareFunction, DepthStencilState, FragmentState, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
+    TextureFormat, VertexState, SpecializedMeshPipeline, SpecializedRenderPipeline,
     SpecializedRenderPipelines,
 };
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
@@ -549,6 +554,8 @@ pub struct CompactViews {
 #[derive(Resource)]
 pub struct CompactPipeline {
     mesh_pipeline: MeshPipeline,
+    /// The view layouts of depth-only passes (`None` without Bevy's prepass).
+    prepass_layouts: Option<(BindGroupLayoutDescriptor, BindGroupLayoutDescriptor)>,
     shader: Handle<Shader>,
     draw_layout: BindGroupLayoutDescriptor,
     cull_layout: BindGroupLayoutDescriptor,
@@ -561,12 +568,16 @@ pub struct CompactPipeline {
 pub struct CompactPipelineKey {
     mesh_key: MeshPipelineKey,
     kind: PartKind,
+    /// A depth-only shadow pipeline (prepass view layout, hashed alpha
+    /// test for lines).
+    shadow: bool,
 }
 
 fn init_compact_pipeline(
     mut commands: Commands,
     asset_server: Res<AssetServer>,
     mesh_pipeline: Res<MeshPipeline>,
+    prepass_pipeline: Option<Res<PrepassPipeline>>,
     pipeline_cache: Res<PipelineCache>,
     mut layouts: ResMut<MeshVertexBufferLayouts>,
 ) {
@@ -620,6 +631,8 @@ fn init_compact_pipeline(
     let no_vertices = positions.get_mesh_vertex_buffer_layout(&mut layouts);
     commands.insert_resource(CompactPipeline {
         mesh_pipeline: mesh_pipeline.clone(),
+        prepass_layouts: prepass_pipeline
+            .map(|p| (p.view_layout_no_motion_vectors.clone(), p.empty_layout.clone())),
         shader: asset_server.load(shader_path("conifer_compact.wgsl")),
         draw_layout,
         cull_layout,
@@ -632,6 +645,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
     type Key = CompactPipelineKey;
 
     fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
+        if key.shadow {
+            return self.shadow_descriptor(key.kind);
+        }
         // A layout with positions never misses an attribute; an error here
         // leaves an empty descriptor, which the pipeline cache reports.
         let mut descriptor =
@@ -661,6 +677,50 @@ impl SpecializedRenderPipeline for CompactPipeline {
         descriptor.layout.push(self.draw_layout.clone());
         descriptor.primitive.cull_mode = None;
         descriptor
+    }
+}
+
+impl CompactPipeline {
+    /// A depth-only pipeline for shadow maps: prisms write depth, lines
+    /// keep each fragment with their opacity (hashed).
+    fn shadow_descriptor(&self, kind: PartKind) -> RenderPipelineDescriptor {
+        let Some((view_layout, empty_layout)) = self.prepass_layouts.clone() else {
+            return RenderPipelineDescriptor::default();
+        };
+        let defs: Vec<ShaderDefVal> = vec![kind.shader_def().into(), "CONIFER_SHADOW".into()];
+        RenderPipelineDescriptor {
+            label: Some(format!("conifer compact shadow {kind:?}").into()),
+            layout: vec![view_layout, empty_layout, self.draw_layout.clone()],
+            vertex: VertexState {
+                shader: self.shader.clone(),
+                shader_defs: defs.clone(),
+                entry_point: Some("vertex".into()),
+                buffers: Vec::new(),
+            },
+            fragment: kind.is_lines().then(|| FragmentState {
+                shader: self.shader.clone(),
+                shader_defs: defs,
+                entry_point: Some("fragment".into()),
+                targets: Vec::new(),
+            }),
+            primitive: PrimitiveState {
+                topology: if kind.is_lines() {
+                    PrimitiveTopology::LineList
+                } else {
+                    PrimitiveTopology::TriangleList
+                },
+                cull_mode: None,
+                ..default()
+            },
+            depth_stencil: Some(DepthStencilState {
+                format: TextureFormat::Depth32Float,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(CompareFunction::GreaterEqual),
+                stencil: default(),
+                bias: default(),
+            }),
+            ..default()
+        }
     }
 }
 
@@ -713,6 +773,7 @@ fn prepare_views(
     mut compact_views: ResMut<CompactViews>,
     mut memory: ResMut<CompactGpuMemory>,
     opaque_phases: Res<ViewBinnedRenderPhases<Opaque3d>>,
+    shadow_phases: Res<ViewBinnedRenderPhases<Shadow>>,
     views: Query<(Entity, &ExtractedView, Option<&RenderLayers>)>,
 ) {
     for view in compact_views.views.values_mut() {
@@ -721,7 +782,9 @@ fn prepare_views(
     let draw_layout = pipeline_cache.get_bind_group_layout(&pipeline.draw_layout);
     let cull_layout = pipeline_cache.get_bind_group_layout(&pipeline.cull_layout);
     for (view_entity, view, layers) in &views {
-        if !opaque_phases.contains_key(&view.retained_view_entity) {
+        if !opaque_phases.contains_key(&view.retained_view_entity)
+            && !shadow_phases.contains_key(&view.retained_view_entity)
+        {
             continue;
         }
         let clip_from_world = view
@@ -858,11 +921,13 @@ fn queue_compact(
     transparent_draw_functions: Res<DrawFunctions<Transparent3d>>,
     mut opaque_phases: ResMut<ViewBinnedRenderPhases<Opaque3d>>,
     mut transparent_phases: ResMut<ViewSortedRenderPhases<Transparent3d>>,
+    mut retired_draw_entities: ResMut<RetiredDrawEntities>,
     views: Query<(Entity, &ExtractedView)>,
 ) {
     let draw_opaque = opaque_draw_functions.read().id::<DrawCompact>();
     let draw_transparent = transparent_draw_functions.read().id::<DrawCompact>();
     let retired = std::mem::take(&mut render.retired);
+    retired_draw_entities.0.clone_from(&retired);
     for (view_entity, view) in &views {
         let Some(opaque) = opaque_phases.get_mut(&view.retained_view_entity) else {
             continue;
@@ -897,6 +962,7 @@ fn queue_compact(
                         | blend
                         | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
                     kind,
+                    shadow: false,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 if kind.is_lines() {
@@ -932,6 +998,69 @@ fn queue_compact(
         }
     }
 }
+
+/// Puts each species' parts in each shadow view's phase (directional
+/// cascades, point-light faces, spot lights).
+fn queue_compact_shadows(
+    pipeline: Res<CompactPipeline>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
+    pipeline_cache: Res<PipelineCache>,
+    render: Res<RenderCompactSpecies>,
+    retired: Res<RetiredDrawEntities>,
+    compact_views: Res<CompactViews>,
+    shadow_draw_functions: Res<DrawFunctions<Shadow>>,
+    mut shadow_phases: ResMut<ViewBinnedRenderPhases<Shadow>>,
+    views: Query<(Entity, &ExtractedView), With<LightEntity>>,
+) {
+    if pipeline.prepass_layouts.is_none() {
+        return;
+    }
+    let draw = shadow_draw_functions.read().id::<DrawCompactShadow>();
+    for (view_entity, view) in &views {
+        let Some(phase) = shadow_phases.get_mut(&view.retained_view_entity) else {
+            continue;
+        };
+        for &entity in &retired.0 {
+            phase.remove(MainEntity::from(entity));
+        }
+        for (&id, species) in &render.species {
+            let drawn = compact_views.views.contains_key(&(view_entity, id));
+            for kind in PartKind::ALL {
+                let entity = species.draw_entities[kind.index()];
+                let main_entity = MainEntity::from(entity);
+                phase.remove(main_entity);
+                if !drawn || !kind.present_in(&species.compact) {
+                    continue;
+                }
+                let key = CompactPipelineKey {
+                    mesh_key: MeshPipelineKey::DEPTH_PREPASS,
+                    kind,
+                    shadow: true,
+                };
+                let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
+                phase.add(
+                    ShadowBatchSetKey {
+                        pipeline: pipeline_id,
+                        draw_function: draw,
+                        material_bind_group_index: None,
+                        slabs: MeshSlabs::default(),
+                    },
+                    ShadowBinKey {
+                        asset_id: id.untyped(),
+                    },
+                    (entity, main_entity),
+                    InputUniformIndex::default(),
+                    BinnedRenderPhaseType::NonMesh,
+                );
+            }
+        }
+    }
+}
+
+/// Draw entities of species that went away this frame, taken out of the
+/// phases by the queue systems.
+#[derive(Resource, Default)]
+struct RetiredDrawEntities(Vec<Entity>);
 
 /// Culls every tree of every species for every view and writes the
 /// indirect draws (`conifer_cull.wgsl`).
@@ -989,6 +1118,14 @@ impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
     }
 }
 
+/// The draw function of every compact part in shadow maps.
+pub type DrawCompactShadow = (
+    SetItemPipeline,
+    SetPrepassViewBindGroup<0>,
+    SetPrepassViewEmptyBindGroup<1>,
+    DrawCompactPart,
+);
+
 /// The draw function of every compact part.
 pub type DrawCompact = (
     SetItemPipeline,
@@ -1033,10 +1170,17 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<RenderCompactSpecies>()
         .init_resource::<CompactViews>()
         .init_resource::<CompactGpuMemory>()
+        .init_resource::<RetiredDrawEntities>()
         .init_resource::<SpecializedRenderPipelines<CompactPipeline>>()
         .add_render_command::<Opaque3d, DrawCompact>()
         .add_render_command::<Transparent3d, DrawCompact>()
-        .add_systems(RenderStartup, init_compact_pipeline.after(MeshPipelineSystems))
+        .add_render_command::<Shadow, DrawCompactShadow>()
+        .add_systems(
+            RenderStartup,
+            init_compact_pipeline
+                .after(MeshPipelineSystems)
+                .after(bevy::pbr::init_prepass_pipeline),
+        )
         .add_systems(ExtractSchedule, (extract_compact, publish_memory))
         .add_systems(
             Render,
@@ -1044,7 +1188,9 @@ pub(super) fn build(app: &mut App) {
                 (prepare_species, prepare_views)
                     .chain()
                     .in_set(RenderSystems::PrepareResources),
-                queue_compact.in_set(RenderSystems::QueueMeshes),
+                (queue_compact, queue_compact_shadows)
+                    .chain()
+                    .in_set(RenderSystems::QueueMeshes),
             ),
         )
         .add_systems(bevy::render::renderer::RenderGraph, cull_trees.before(camera_driver));
