@@ -757,3 +757,96 @@ fn point_and_spot_light_shadows_keep_the_parts_they_need() {
     );
     assert!(spot.line_bands.count_ones() > far.line_bands.count_ones());
 }
+
+/// The compact path's instance tracking under churn: 100,000 trees of two
+/// species spawned, moved, re-targeted and mostly despawned; every tree's
+/// GPU instance follows its transform and species, nothing is left of
+/// despawned trees, and no mesh asset is made or touched after warm-up.
+#[test]
+fn compact_instances_follow_100k_trees_in_churn() {
+    use bevy_conifer_lod::plugin::CompactInstances;
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    std::fs::copy(dir.path().join("spruce.conifer"), dir.path().join("spruce2.conifer")).unwrap();
+    let mut app = app(dir.path());
+    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
+    app.world_mut().spawn(camera(5.0));
+    let (first, a) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let (second, b) = spawn_tree(&mut app, "spruce2.conifer", crown);
+    for tree in [first, second] {
+        app.world_mut().despawn(tree);
+    }
+    let n = 100_000usize;
+    let trees: Vec<Entity> = (0..n)
+        .map(|i| {
+            let handle = if i % 3 == 0 { b.clone() } else { a.clone() };
+            let position = Vec3::new((i % 400) as f32 * 5.0, 0.0, (i / 400) as f32 * 5.0);
+            app.world_mut()
+                .spawn((ConiferFoliage(handle), Transform::from_translation(position)))
+                .id()
+        })
+        .collect();
+    app.update();
+    let mesh_events = |app: &mut App| {
+        let mut reader = app
+            .world_mut()
+            .resource_mut::<Messages<AssetEvent<Mesh>>>()
+            .get_cursor();
+        let messages = app.world().resource::<Messages<AssetEvent<Mesh>>>();
+        reader.read(messages).count()
+    };
+    let _ = mesh_events(&mut app);
+    let check = |app: &App, alive: &[Entity]| {
+        let tracked = app.world().resource::<CompactInstances>();
+        assert_eq!(tracked.len(), alive.len());
+        assert_eq!(tracked.species_len(a.id()) + tracked.species_len(b.id()), alive.len());
+        for &tree in alive {
+            let (species, instance) = tracked.get(tree).expect("tracked");
+            let foliage = app.world().get::<ConiferFoliage>(tree).unwrap();
+            assert_eq!(species, foliage.0.id());
+            let t = app.world().get::<GlobalTransform>(tree).unwrap().translation();
+            assert_eq!(
+                [instance.rows[0][3], instance.rows[1][3], instance.rows[2][3]],
+                t.to_array()
+            );
+        }
+    };
+    check(&app, &trees);
+    assert_eq!(
+        app.world().resource::<CompactInstances>().species_len(b.id()),
+        n.div_ceil(3)
+    );
+    // Move a thousand, re-target five hundred.
+    for (k, &tree) in trees.iter().enumerate().step_by(97) {
+        app.world_mut().get_mut::<Transform>(tree).unwrap().translation.y = 1.0 + k as f32;
+    }
+    for &tree in trees.iter().skip(1).step_by(199) {
+        app.world_mut().get_mut::<ConiferFoliage>(tree).unwrap().0 = b.clone();
+    }
+    app.update();
+    check(&app, &trees);
+    // Despawn 60 %: swap-removals keep every other tree's slot right.
+    let (gone, alive): (Vec<(usize, Entity)>, Vec<(usize, Entity)>) =
+        trees.iter().copied().enumerate().partition(|(k, _)| k % 5 < 3);
+    for (_, tree) in gone {
+        app.world_mut().despawn(tree);
+    }
+    let alive: Vec<Entity> = alive.into_iter().map(|(_, e)| e).collect();
+    app.update();
+    check(&app, &alive);
+    // The mesh path takes over: nothing is tracked; back again: all of them.
+    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Meshes;
+    app.update();
+    assert!(app.world().resource::<CompactInstances>().is_empty());
+    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
+    app.update();
+    app.update();
+    check(&app, &alive);
+    // Nothing per tree on the compact path: no mesh asset made or changed
+    // while trees moved, changed and went (the switch to the mesh path
+    // spawned parts, which use the species' existing meshes).
+    for _ in 0..3 {
+        app.update();
+    }
+    assert_eq!(mesh_events(&mut app), 0);
+}

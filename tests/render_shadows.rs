@@ -135,12 +135,6 @@ impl ShadowScene {
                 .unwrap();
             image
         };
-        // Shadow views, buffers and pipelines settle over a few frames (on
-        // the compact path a point light's cube map is wrong, fully dark,
-        // for its first frames).
-        for _ in 0..6 {
-            self.renderer.update().unwrap();
-        }
         let lines = shot(self, "lines");
         self.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
         let prisms = shot(self, "prisms");

@@ -22,7 +22,7 @@ use crate::model::prism::{TriangleMesh, append_wood_segment, prism_triangle_coun
 use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
-    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity,
+    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath,
     SpeciesLineBand, line_mesh, triangle_mesh,
 };
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
@@ -105,6 +105,7 @@ pub(super) fn renderer_with_species(
     *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
         pixel_error: view.pixel_error,
         transition: view.transition,
+        render_path: view.render_path,
         ..ConiferLodSettings::default()
     };
     let species = renderer
@@ -132,6 +133,8 @@ pub struct EvalView {
     /// Reference supersampling per axis (at least 4 for the issue's
     /// "4×4 per pixel").
     pub supersampling: u32,
+    /// How the plugin's methods (`paper`, `ours`) are drawn.
+    pub render_path: RenderPath,
 }
 
 impl EvalView {

@@ -20,17 +20,28 @@
 //!
 //! ## How it draws
 //!
-//! A [`ConiferSpecies`] asset holds meshes shared by all its instances:
-//! every needle as an `Lmax`-slot prism, and every original and merged line,
-//! with each primitive's error interval as vertex data (the lines split into
-//! a few bands by parent error). The vertex shader
-//! computes each instance's spatial error for the view being drawn (so each
-//! camera, and each shadow view, gets its own LOD) and keeps exactly the
-//! paper's cut. The CPU does no traversal and never touches a mesh after
-//! load; per frame it only hides a species' prism part or line bands on
-//! instances where no primitive of that part can be in the cut (so a far
-//! tree runs the vertex shader on little more than its cut), and records each
-//! instance's [`ConiferLodState`].
+//! Two render paths, chosen by [`ConiferLodSettings::render_path`]; both
+//! compute each tree's spatial error per view (each camera and each shadow
+//! view gets its own LOD) and draw exactly the paper's cut, lines casting
+//! the shadow of the coverage they draw (a hashed alpha test).
+//!
+//! * [`RenderPath::Meshes`] (v1, the default): a [`ConiferSpecies`] asset
+//!   holds meshes shared by all its instances: every needle as an
+//!   `Lmax`-slot prism, and every original and merged line, with each
+//!   primitive's error interval as vertex data (the lines split into a few
+//!   bands by parent error). Each tree spawns ~13 child entities; the vertex
+//!   shader keeps the cut; per frame the CPU hides a species' prism part or
+//!   line bands on instances where no primitive of that part can be in the
+//!   cut, and records each instance's [`ConiferLodState`]. ~690 GPU bytes a
+//!   needle.
+//! * [`RenderPath::Compact`] (v2): the species' compact arrays
+//!   ([`crate::model::compact`], ~32 bytes a needle) in storage buffers,
+//!   one instance buffer per species updated only for trees that changed,
+//!   and per view a compute pass that culls every tree and writes the
+//!   indirect draws of the prefixes of its cut (one multi-draw-indirect per
+//!   species and part); nothing is spawned per tree, and the CPU does no
+//!   per-tree work while trees stand still. Lit by Bevy's PBR functions.
+//!   Measured in `docs/bench` and `tests/render_compact.rs`.
 //!
 //! ## System sets
 //!
@@ -54,7 +65,7 @@ pub use asset::{
 };
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
-pub use render::gpu::PartKind;
+pub use render::gpu::{GpuInstance, PartKind};
 pub use render::{CompactGpuMemory, CompactInstances};
 pub use systems::{ConiferLodCpuTime, SpeciesMaterials, view_error_slope};
 
@@ -174,9 +185,10 @@ pub enum RenderPath {
     Meshes,
     /// Render path v2: compact storage buffers pulled by the vertex shader
     /// (~32 bytes a needle), one instance buffer per species, and per view
-    /// a compute pass that culls trees and writes indirect draws of the
-    /// prefixes their cuts need; nothing spawned per tree. Casts no shadows
-    /// yet.
+    /// (cameras and shadow views) a compute pass that culls trees and
+    /// writes indirect draws of the prefixes their cuts need; nothing
+    /// spawned per tree. Needs indirect draws with a first instance
+    /// (`INDIRECT_FIRST_INSTANCE`: Vulkan, Metal, DX12; not WebGL).
     Compact,
 }
 

@@ -23,6 +23,9 @@ const KIND_WOOD_MESH: u32 = 5u;
 const FLAG_VISIBLE: u32 = 1u;
 // Bits 1–2: 0 no override, 1 paper, 2 area-preserving.
 const OPACITY_OVERRIDE_SHIFT: u32 = 1u;
+// The instance's pixel error and transition override the global settings.
+const FLAG_PIXEL_ERROR_OVERRIDE: u32 = 8u;
+const FLAG_TRANSITION_OVERRIDE: u32 = 16u;
 
 // InstanceLod.code: the threshold code (16 bits), then flags.
 const LOD_CODE_MASK: u32 = 0xffffu;
@@ -79,7 +82,7 @@ struct Instance {
     row_x: vec4<f32>,
     row_y: vec4<f32>,
     row_z: vec4<f32>,
-    // overrides, NaN for the global setting
+    // overrides (with FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE)
     pixel_error: f32,
     transition: f32,
     flags: u32,

@@ -7,7 +7,7 @@
     Instance, InstanceLod, SpeciesParams, CullView, DrawArgs,
     LOG_LN_MIN, LOG_LN_STEP, MAX_THRESHOLD_CODE, KIND_COUNT,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH,
-    FLAG_VISIBLE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
+    FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale,
 }
 
@@ -125,13 +125,13 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
             return;
         }
     }
-    // Per-tree overrides (NaN: the global setting).
+    // Per-tree overrides.
     var pixel_error = species.pixel_error;
-    if instance.pixel_error == instance.pixel_error {
+    if (instance.flags & FLAG_PIXEL_ERROR_OVERRIDE) != 0u {
         pixel_error = instance.pixel_error;
     }
     var transition = species.transition;
-    if instance.transition == instance.transition {
+    if (instance.flags & FLAG_TRANSITION_OVERRIDE) != 0u {
         transition = instance.transition;
     }
     var opacity_rule = species.opacity_rule;

@@ -77,6 +77,10 @@ pub const PART_KINDS: usize = PartKind::ALL.len();
 pub const FLAG_VISIBLE: u32 = 1;
 /// Shift of the instance's opacity-rule override (0 none, 1 paper, 2 area).
 pub const OPACITY_OVERRIDE_SHIFT: u32 = 1;
+/// Instance flag: `pixel_error` overrides the global setting.
+pub const FLAG_PIXEL_ERROR_OVERRIDE: u32 = 8;
+/// Instance flag: `transition` overrides the global setting.
+pub const FLAG_TRANSITION_OVERRIDE: u32 = 16;
 
 /// One tree (`Instance` in WGSL), 64 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -84,11 +88,11 @@ pub const OPACITY_OVERRIDE_SHIFT: u32 = 1;
 pub struct GpuInstance {
     /// Rows of the affine part of `world_from_local`.
     pub rows: [[f32; 4]; 3],
-    /// Pixel error override, NaN for the global setting.
+    /// Pixel error override (with [`FLAG_PIXEL_ERROR_OVERRIDE`]).
     pub pixel_error: f32,
-    /// Transition override, NaN for the global setting.
+    /// Transition override (with [`FLAG_TRANSITION_OVERRIDE`]).
     pub transition: f32,
-    /// [`FLAG_VISIBLE`] and the opacity-rule override.
+    /// [`FLAG_VISIBLE`], the overrides' flags and the opacity-rule override.
     pub flags: u32,
     /// Render layers 0–31 the tree is on.
     pub layers: u32,

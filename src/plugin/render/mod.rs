@@ -26,8 +26,8 @@
 pub mod gpu;
 
 use self::gpu::{
-    CullView, DRAW_ARGS_BYTES, FLAG_VISIBLE, GpuInstance, INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS,
-    PartKind, SpeciesParams, prism_vertices,
+    CullView, DRAW_ARGS_BYTES, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance,
+    INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS, PartKind, SpeciesParams, prism_vertices,
 };
 use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath};
 use crate::model::compact::CompactSpecies;
@@ -45,8 +45,8 @@ use bevy::ecs::system::lifetimeless::{Read, SRes};
 use bevy::mesh::{MeshVertexBufferLayoutRef, MeshVertexBufferLayouts, PrimitiveTopology};
 use bevy::pbr::{
     LightEntity, MeshPipeline, MeshPipelineKey, MeshPipelineSystems, PrepassPipeline, SetMeshViewBindGroup,
-    SetMeshViewBindingArrayBindGroup, SetPrepassViewBindGroup, SetPrepassViewEmptyBindGroup, Shadow,
-    ShadowBatchSetKey, ShadowBinKey, ViewKeyCache,
+    SetMeshViewBindingArrayBindGroup, SetPrepassViewBindGroup, SetPrepassViewEmptyBindGroup, Shadow, ShadowBatchSetKey,
+    ShadowBinKey, ViewKeyCache,
 };
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -61,10 +61,9 @@ use bevy::render::render_resource::binding_types::{
 };
 use bevy::render::render_resource::{
     BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor,
-    BufferUsages, CachedComputePipelineId, ComputePassDescriptor, ComputePipelineDescriptor, PipelineCache,
-    CompareFunction, DepthStencilState, FragmentState, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
-    TextureFormat, VertexState, SpecializedMeshPipeline, SpecializedRenderPipeline,
-    SpecializedRenderPipelines,
+    BufferUsages, CachedComputePipelineId, CompareFunction, ComputePassDescriptor, ComputePipelineDescriptor,
+    DepthStencilState, FragmentState, PipelineCache, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
+    SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
 };
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
 use bevy::render::sync_world::MainEntity;
@@ -103,6 +102,14 @@ impl CompactInstances {
     /// Trees of one species.
     pub fn species_len(&self, species: AssetId<ConiferSpecies>) -> usize {
         self.species.get(&species).map_or(0, |s| s.instances.len())
+    }
+
+    /// A tracked tree's species and GPU instance (what the instance buffer
+    /// holds for it).
+    pub fn get(&self, entity: Entity) -> Option<(AssetId<ConiferSpecies>, &GpuInstance)> {
+        let &(species, slot) = self.slots.get(&entity)?;
+        let list = self.species.get(&species)?;
+        (list.entities.get(slot as usize) == Some(&entity)).then(|| (species, &list.instances[slot as usize]))
     }
 
     fn remove(&mut self, entity: Entity) {
@@ -162,21 +169,23 @@ fn gpu_instance(
         Some(LineOpacity::Paper) => 1,
         Some(LineOpacity::AreaPreserving) => 2,
     };
-    let layer_mask = match layers {
-        None => 1,
-        Some(layers) => (0..32)
-            .filter(|&l| layers.intersects(&RenderLayers::layer(l)))
-            .fold(0u32, |m, l| m | 1 << l),
-    };
+    let layer_mask = view_layers(layers);
+    // A NaN or negative override would make every error NaN: such a tree
+    // takes the global setting.
+    let pixel_error = over.and_then(|o| o.pixel_error).filter(|p| *p >= 0.0);
+    let transition = over.and_then(|o| o.transition).filter(|t| t.is_finite());
     GpuInstance {
         rows: [
             [m.x_axis.x, m.y_axis.x, m.z_axis.x, t.x],
             [m.x_axis.y, m.y_axis.y, m.z_axis.y, t.y],
             [m.x_axis.z, m.y_axis.z, m.z_axis.z, t.z],
         ],
-        pixel_error: over.and_then(|o| o.pixel_error).unwrap_or(f32::NAN),
-        transition: over.and_then(|o| o.transition).unwrap_or(f32::NAN),
-        flags: u32::from(visible) * FLAG_VISIBLE | rule << OPACITY_OVERRIDE_SHIFT,
+        pixel_error: pixel_error.unwrap_or(0.0),
+        transition: transition.unwrap_or(0.0),
+        flags: u32::from(visible) * FLAG_VISIBLE
+            | u32::from(pixel_error.is_some()) * FLAG_PIXEL_ERROR_OVERRIDE
+            | u32::from(transition.is_some()) * FLAG_TRANSITION_OVERRIDE
+            | rule << OPACITY_OVERRIDE_SHIFT,
         layers: layer_mask,
     }
 }
@@ -631,8 +640,7 @@ fn init_compact_pipeline(
     let no_vertices = positions.get_mesh_vertex_buffer_layout(&mut layouts);
     commands.insert_resource(CompactPipeline {
         mesh_pipeline: mesh_pipeline.clone(),
-        prepass_layouts: prepass_pipeline
-            .map(|p| (p.view_layout_no_motion_vectors.clone(), p.empty_layout.clone())),
+        prepass_layouts: prepass_pipeline.map(|p| (p.view_layout_no_motion_vectors.clone(), p.empty_layout.clone())),
         shader: asset_server.load(shader_path("conifer_compact.wgsl")),
         draw_layout,
         cull_layout,
@@ -915,20 +923,19 @@ fn queue_compact(
     mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
     pipeline_cache: Res<PipelineCache>,
     mut render: ResMut<RenderCompactSpecies>,
-    compact_views: Res<CompactViews>,
     view_key_cache: Res<ViewKeyCache>,
     opaque_draw_functions: Res<DrawFunctions<Opaque3d>>,
     transparent_draw_functions: Res<DrawFunctions<Transparent3d>>,
     mut opaque_phases: ResMut<ViewBinnedRenderPhases<Opaque3d>>,
     mut transparent_phases: ResMut<ViewSortedRenderPhases<Transparent3d>>,
     mut retired_draw_entities: ResMut<RetiredDrawEntities>,
-    views: Query<(Entity, &ExtractedView)>,
+    views: Query<&ExtractedView>,
 ) {
     let draw_opaque = opaque_draw_functions.read().id::<DrawCompact>();
     let draw_transparent = transparent_draw_functions.read().id::<DrawCompact>();
     let retired = std::mem::take(&mut render.retired);
     retired_draw_entities.0.clone_from(&retired);
-    for (view_entity, view) in &views {
+    for view in &views {
         let Some(opaque) = opaque_phases.get_mut(&view.retained_view_entity) else {
             continue;
         };
@@ -942,7 +949,11 @@ fn queue_compact(
             continue;
         };
         for (&id, species) in &render.species {
-            let drawn = compact_views.views.contains_key(&(view_entity, id));
+            // Queueing runs before this frame's buffers are prepared: a
+            // species with trees is queued, and its draw skips a view whose
+            // buffers could not be made.
+            let drawn = !species.instances.is_empty();
+
             for kind in PartKind::ALL {
                 let entity = species.draw_entities[kind.index()];
                 let main_entity = MainEntity::from(entity);
@@ -1007,16 +1018,15 @@ fn queue_compact_shadows(
     pipeline_cache: Res<PipelineCache>,
     render: Res<RenderCompactSpecies>,
     retired: Res<RetiredDrawEntities>,
-    compact_views: Res<CompactViews>,
     shadow_draw_functions: Res<DrawFunctions<Shadow>>,
     mut shadow_phases: ResMut<ViewBinnedRenderPhases<Shadow>>,
-    views: Query<(Entity, &ExtractedView), With<LightEntity>>,
+    views: Query<&ExtractedView, With<LightEntity>>,
 ) {
     if pipeline.prepass_layouts.is_none() {
         return;
     }
     let draw = shadow_draw_functions.read().id::<DrawCompactShadow>();
-    for (view_entity, view) in &views {
+    for view in &views {
         let Some(phase) = shadow_phases.get_mut(&view.retained_view_entity) else {
             continue;
         };
@@ -1024,7 +1034,10 @@ fn queue_compact_shadows(
             phase.remove(MainEntity::from(entity));
         }
         for (&id, species) in &render.species {
-            let drawn = compact_views.views.contains_key(&(view_entity, id));
+            // Queueing runs before this frame's buffers are prepared: a
+            // species with trees is queued, and its draw skips a view whose
+            // buffers could not be made.
+            let drawn = !species.instances.is_empty();
             for kind in PartKind::ALL {
                 let entity = species.draw_entities[kind.index()];
                 let main_entity = MainEntity::from(entity);
@@ -1045,9 +1058,7 @@ fn queue_compact_shadows(
                         material_bind_group_index: None,
                         slabs: MeshSlabs::default(),
                     },
-                    ShadowBinKey {
-                        asset_id: id.untyped(),
-                    },
+                    ShadowBinKey { asset_id: id.untyped() },
                     (entity, main_entity),
                     InputUniformIndex::default(),
                     BinnedRenderPhaseType::NonMesh,
@@ -1111,6 +1122,7 @@ impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
         let Some(buffers) = compact_views.into_inner().views.get(&(view, item.species)) else {
             return RenderCommandResult::Skip;
         };
+
         pass.set_bind_group(2, &buffers.draw_bind_group, &[]);
         let offset = item.kind.index() as u64 * buffers.instance_count as u64 * DRAW_ARGS_BYTES;
         pass.multi_draw_indirect(&buffers.args, offset, buffers.instance_count);
