@@ -826,12 +826,23 @@ fn compact_instances_follow_100k_trees_in_churn() {
     app.update();
     check(&app, &trees);
     // Despawn 60 %: swap-removals keep every other tree's slot right.
-    let (gone, alive): (Vec<(usize, Entity)>, Vec<(usize, Entity)>) =
-        trees.iter().copied().enumerate().partition(|(k, _)| k % 5 < 3);
-    for (_, tree) in gone {
+    let gone: Vec<Entity> = trees
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|(k, _)| k % 5 < 3)
+        .map(|(_, e)| e)
+        .collect();
+    let alive: Vec<Entity> = trees
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|(k, _)| k % 5 >= 3)
+        .map(|(_, e)| e)
+        .collect();
+    for tree in gone {
         app.world_mut().despawn(tree);
     }
-    let alive: Vec<Entity> = alive.into_iter().map(|(_, e)| e).collect();
     app.update();
     check(&app, &alive);
     // The mesh path takes over: nothing is tracked; back again: all of them.

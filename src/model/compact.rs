@@ -175,7 +175,8 @@ pub fn threshold_code(e: f32) -> u16 {
 /// logarithm (it may differ from the exact code by one, which moves the
 /// cut by 0.049 % of the error and keeps it an exact partition).
 pub fn shader_threshold_code(e: f32) -> u16 {
-    if !(e >= LOG_CODE_MIN) {
+    // NaN fails every comparison: it lands here too.
+    if e.is_nan() || e < LOG_CODE_MIN {
         return 0;
     }
     let steps = ((e.ln() - LOG_CODE_LN_MIN) / LOG_CODE_LN_STEP).floor() + 1.0;
@@ -202,6 +203,30 @@ pub fn ring_basis(axis: Vec3) -> (Vec3, Vec3) {
         Vec3::new(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x),
         Vec3::new(b, sign + axis.y * axis.y * a, -axis.y),
     )
+}
+
+/// Which ring slot, end (`true` at the tip) and cap vertex `local` of an
+/// `Lmax`-slot prism drawn without indices is: the shader's
+/// `prism_corner`, in the triangle order and winding of
+/// [`super::prism::append_prism`] (side quads, then the base and tip caps).
+pub fn prism_corner(local: u32, max_sides: u8) -> (u32, bool, bool) {
+    let m = u32::from(max_sides.max(3));
+    if local < 6 * m {
+        let (quad, j) = (local / 6, local % 6);
+        let next = (quad + 1) % m;
+        let slot = if matches!(j, 1 | 2 | 4) { next } else { quad };
+        return (slot, matches!(j, 2 | 4 | 5), false);
+    }
+    let t = local - 6 * m;
+    let fan = 3 * (m - 2);
+    let at_tip = t >= fan;
+    let (k, j) = ((t % fan) / 3 + 1, t % 3);
+    let slot = match j {
+        0 => 0,
+        _ if (j == 1) == at_tip => k,
+        _ => k + 1,
+    };
+    (slot, at_tip, true)
 }
 
 fn code_at_least(value: f32, what: &'static str) -> Result<u16, CompactError> {
@@ -478,6 +503,27 @@ mod tests {
         assert_eq!(threshold_code(f32::INFINITY), MAX_THRESHOLD_CODE);
         assert_eq!(shader_threshold_code(f32::NAN), 0);
         assert_eq!(shader_threshold_code(f32::INFINITY), MAX_THRESHOLD_CODE);
+    }
+
+    #[test]
+    fn prism_corners_follow_the_cpu_tessellation() {
+        use crate::model::gpu_layout::{CAP_BIT, SLOT_BITS, TIP_BIT, prism_buffers};
+        for max_sides in [3u8, 4, 7, 8, 12] {
+            let mut record = record(200, 3);
+            record.max_sides = max_sides;
+            let buffers = prism_buffers(&record).unwrap();
+            let per_prism = buffers.indices.len() / record.needle_count();
+            assert_eq!(per_prism as u32, 12 * u32::from(max_sides) - 12);
+            for (local, &index) in buffers.indices[..per_prism].iter().enumerate() {
+                let code = buffers.codes[index as usize];
+                let expected = (code & ((1 << SLOT_BITS) - 1), code & TIP_BIT != 0, code & CAP_BIT != 0);
+                assert_eq!(
+                    prism_corner(local as u32, max_sides),
+                    expected,
+                    "Lmax {max_sides}, vertex {local}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -128,7 +128,9 @@ struct PrismCorner {
 }
 
 // Vertex `local` of an Lmax-slot prism, drawn without indices: Lmax side
-// quads (two triangles each), then the base and the tip cap as fans.
+// quads (two triangles each), then the base and the tip cap as fans, in the
+// triangle order and winding of `model::prism::append_prism` (CPU
+// reference: `model::compact::prism_corner`).
 fn prism_corner(local: u32) -> PrismCorner {
     let m = max(species.max_sides, 3u);
     var corner: PrismCorner;
@@ -136,9 +138,9 @@ fn prism_corner(local: u32) -> PrismCorner {
         let quad = local / 6u;
         let j = local % 6u;
         let next = (quad + 1u) % m;
-        // (base q, base q+1, tip q), (tip q, base q+1, tip q+1)
-        corner.slot = select(quad, next, j == 1u || j == 4u || j == 5u);
-        corner.at_tip = j == 2u || j == 3u || j == 5u;
+        // (base q, base q+1, tip q+1), (base q, tip q+1, tip q)
+        corner.slot = select(quad, next, j == 1u || j == 2u || j == 4u);
+        corner.at_tip = j == 2u || j == 4u || j == 5u;
         corner.cap = false;
         return corner;
     }
@@ -146,9 +148,14 @@ fn prism_corner(local: u32) -> PrismCorner {
     let fan = 3u * (m - 2u);
     corner.at_tip = t >= fan;
     let u = t % fan;
-    let triangle = u / 3u;
+    let k = u / 3u + 1u;
     let j = u % 3u;
-    corner.slot = select(triangle + j, 0u, j == 0u);
+    // Tip: (0, k, k+1), facing +axis; base: (0, k+1, k), facing −axis.
+    var slot = select(k + 1u, k, (j == 1u) == corner.at_tip);
+    if j == 0u {
+        slot = 0u;
+    }
+    corner.slot = slot;
     corner.cap = true;
     return corner;
 }

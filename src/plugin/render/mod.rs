@@ -65,6 +65,7 @@ use bevy::render::render_resource::{
     DepthStencilState, FragmentState, PipelineCache, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
     SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
 };
+use bevy::render::render_resource::{Face, WgpuFeatures};
 use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::view::ExtractedView;
@@ -78,6 +79,8 @@ use std::sync::Arc;
 pub struct CompactInstances {
     species: HashMap<AssetId<ConiferSpecies>, SpeciesInstances>,
     slots: EntityHashMap<(AssetId<ConiferSpecies>, u32)>,
+    /// Phase keys of species that lost their last tree, to despawn.
+    retired_keys: Vec<[Entity; PART_KINDS]>,
 }
 
 #[derive(Default, Debug, Clone)]
@@ -86,6 +89,10 @@ struct SpeciesInstances {
     entities: Vec<Entity>,
     /// Bumped at every change, so extraction copies only what changed.
     generation: u64,
+    /// Main-world entities (empty) that key the species' parts in Bevy's
+    /// render phases: phases key items by main-world entity, so keys made
+    /// up in the render world could collide with real entities' items.
+    phase_keys: Option<[Entity; PART_KINDS]>,
 }
 
 impl CompactInstances {
@@ -126,8 +133,17 @@ impl CompactInstances {
             self.slots.insert(moved, (species, slot as u32));
         }
         list.generation += 1;
-        if list.instances.is_empty() {
-            self.species.remove(&species);
+        if list.instances.is_empty()
+            && let Some(gone) = self.species.remove(&species)
+            && let Some(keys) = gone.phase_keys
+        {
+            self.retired_keys.push(keys);
+        }
+    }
+
+    fn allocate_phase_keys(&mut self, commands: &mut Commands) {
+        for list in self.species.values_mut().filter(|s| s.phase_keys.is_none()) {
+            list.phase_keys = Some(std::array::from_fn(|_| commands.spawn_empty().id()));
         }
     }
 
@@ -182,10 +198,10 @@ fn gpu_instance(
         ],
         pixel_error: pixel_error.unwrap_or(0.0),
         transition: transition.unwrap_or(0.0),
-        flags: u32::from(visible) * FLAG_VISIBLE
-            | u32::from(pixel_error.is_some()) * FLAG_PIXEL_ERROR_OVERRIDE
-            | u32::from(transition.is_some()) * FLAG_TRANSITION_OVERRIDE
-            | rule << OPACITY_OVERRIDE_SHIFT,
+        flags: (u32::from(visible) * FLAG_VISIBLE)
+            | (u32::from(pixel_error.is_some()) * FLAG_PIXEL_ERROR_OVERRIDE)
+            | (u32::from(transition.is_some()) * FLAG_TRANSITION_OVERRIDE)
+            | (rule << OPACITY_OVERRIDE_SHIFT),
         layers: layer_mask,
     }
 }
@@ -201,7 +217,7 @@ type TreeData = (
 
 /// Keeps [`CompactInstances`] in step with the trees (spawned, moved,
 /// re-targeted, hidden, despawned), touching only trees that changed.
-#[allow(clippy::type_complexity)] // a Bevy system's parameters
+#[allow(clippy::type_complexity, clippy::too_many_arguments)] // a Bevy system's parameters
 pub(super) fn track_instances(
     settings: Res<ConiferLodSettings>,
     mut tracked: ResMut<CompactInstances>,
@@ -221,15 +237,23 @@ pub(super) fn track_instances(
     mut removed_layers: RemovedComponents<RenderLayers>,
     mut was_compact: Local<bool>,
     mut cpu_time: ResMut<super::ConiferLodCpuTime>,
+    mut commands: Commands,
 ) {
     let _timer = super::systems::CpuTimer::start(&mut cpu_time, true);
     let compact = settings.render_path == RenderPath::Compact;
     if !compact {
         if *was_compact {
+            for keys in tracked.species.values().filter_map(|s| s.phase_keys) {
+                keys.into_iter().for_each(|key| commands.entity(key).despawn());
+            }
             *tracked = CompactInstances::default();
         }
         *was_compact = false;
         return;
+    }
+    // Phase keys of species that lost their last tree go with them.
+    for keys in tracked.retired_keys.drain(..) {
+        keys.into_iter().for_each(|key| commands.entity(key).despawn());
     }
     for entity in removed_trees.read() {
         tracked.remove(entity);
@@ -241,6 +265,7 @@ pub(super) fn track_instances(
     if !*was_compact {
         all.iter().for_each(&mut upsert);
         *was_compact = true;
+        tracked.allocate_phase_keys(&mut commands);
         return;
     }
     changed.iter().for_each(&mut upsert);
@@ -249,6 +274,7 @@ pub(super) fn track_instances(
             upsert(tree);
         }
     }
+    tracked.allocate_phase_keys(&mut commands);
 }
 
 /// The render world's copy of a species: its compact arrays, its trees,
@@ -264,6 +290,8 @@ struct RenderSpecies {
     gpu: Option<SpeciesBuffers>,
     /// Render-world entities standing for the species' parts in phases.
     draw_entities: [Entity; PART_KINDS],
+    /// The main-world entities that key them there.
+    phase_keys: [MainEntity; PART_KINDS],
 }
 
 /// A species' GPU buffers.
@@ -321,8 +349,8 @@ pub struct CompactDrawItem {
 #[derive(Resource, Default)]
 pub struct RenderCompactSpecies {
     species: HashMap<AssetId<ConiferSpecies>, RenderSpecies>,
-    /// Draw entities of species that went away, to take out of the phases.
-    retired: Vec<Entity>,
+    /// Phase keys of species that went away, to take out of the phases.
+    retired: Vec<MainEntity>,
 }
 
 /// GPU memory the compact path allocated, summed from the sizes of the
@@ -405,7 +433,7 @@ fn extract_compact(
     }
     for id in gone {
         if let Some(species) = render.species.remove(&id) {
-            render.retired.extend(species.draw_entities);
+            render.retired.extend(species.phase_keys);
             for entity in species.draw_entities {
                 commands.entity(entity).despawn();
             }
@@ -418,6 +446,9 @@ fn extract_compact(
         let Some(compact) = asset.compact.as_ref() else {
             continue;
         };
+        let Some(keys) = tracked.phase_keys else {
+            continue;
+        };
         let entry = render.species.entry(id).or_insert_with(|| RenderSpecies {
             compact: compact.clone(),
             params: SpeciesParams::default(),
@@ -427,6 +458,7 @@ fn extract_compact(
             center: Vec3::ZERO,
             gpu: None,
             draw_entities: PartKind::ALL.map(|kind| commands.spawn(CompactDrawItem { species: id, kind }).id()),
+            phase_keys: keys.map(MainEntity::from),
         });
         if !Arc::ptr_eq(&entry.compact, compact) {
             // A reloaded record: new arrays.
@@ -570,6 +602,9 @@ pub struct CompactPipeline {
     cull_layout: BindGroupLayoutDescriptor,
     cull_pipeline: CachedComputePipelineId,
     no_vertices: MeshVertexBufferLayoutRef,
+    /// Whether indirect draws may start at an instance other than 0 (one
+    /// draw per tree needs it).
+    supported: bool,
 }
 
 /// The key of a compact draw pipeline: the view's mesh key and the part.
@@ -588,8 +623,16 @@ fn init_compact_pipeline(
     mesh_pipeline: Res<MeshPipeline>,
     prepass_pipeline: Option<Res<PrepassPipeline>>,
     pipeline_cache: Res<PipelineCache>,
+    device: Res<RenderDevice>,
     mut layouts: ResMut<MeshVertexBufferLayouts>,
 ) {
+    let supported = device.features().contains(WgpuFeatures::INDIRECT_FIRST_INSTANCE);
+    if !supported {
+        warn!(
+            "this adapter cannot start indirect draws at an instance (INDIRECT_FIRST_INSTANCE): \
+             RenderPath::Compact draws nothing here, use RenderPath::Meshes"
+        );
+    }
     let read = || storage_buffer_read_only_sized(false, None);
     let draw_layout = BindGroupLayoutDescriptor::new(
         "conifer compact draw",
@@ -646,6 +689,7 @@ fn init_compact_pipeline(
         cull_layout,
         cull_pipeline,
         no_vertices,
+        supported,
     });
 }
 
@@ -683,7 +727,8 @@ impl SpecializedRenderPipeline for CompactPipeline {
         }
         descriptor.layout.truncate(2);
         descriptor.layout.push(self.draw_layout.clone());
-        descriptor.primitive.cull_mode = None;
+        // Prisms are closed and wound as the CPU tessellator winds them.
+        descriptor.primitive.cull_mode = (!key.kind.is_lines()).then_some(Face::Back);
         descriptor
     }
 }
@@ -802,8 +847,15 @@ fn prepare_views(
         let Some((slope, perspective)) = super::view_error_slope(&view.clip_from_view, height) else {
             continue;
         };
+        let mut planes = frustum_planes(&clip_from_world);
+        if !perspective {
+            // Orthographic views are directional shadow cascades: casters
+            // between the light and the near plane still cast (they are
+            // flattened onto it), so the near plane culls nothing.
+            planes[5] = [0.0, 0.0, 0.0, 1.0];
+        }
         let cull_view = CullView {
-            planes: frustum_planes(&clip_from_world),
+            planes,
             world_position: view.world_from_view.translation().extend(1.0).to_array(),
             error_slope: slope,
             perspective: u32::from(perspective),
@@ -931,6 +983,9 @@ fn queue_compact(
     mut retired_draw_entities: ResMut<RetiredDrawEntities>,
     views: Query<&ExtractedView>,
 ) {
+    if !pipeline.supported {
+        return;
+    }
     let draw_opaque = opaque_draw_functions.read().id::<DrawCompact>();
     let draw_transparent = transparent_draw_functions.read().id::<DrawCompact>();
     let retired = std::mem::take(&mut render.retired);
@@ -940,7 +995,7 @@ fn queue_compact(
             continue;
         };
         for &entity in &retired {
-            opaque.remove(MainEntity::from(entity));
+            opaque.remove(entity);
         }
         let Some(transparent) = transparent_phases.get_mut(&view.retained_view_entity) else {
             continue;
@@ -956,7 +1011,7 @@ fn queue_compact(
 
             for kind in PartKind::ALL {
                 let entity = species.draw_entities[kind.index()];
-                let main_entity = MainEntity::from(entity);
+                let main_entity = species.phase_keys[kind.index()];
                 if !kind.is_lines() {
                     opaque.remove(main_entity);
                 }
@@ -1012,6 +1067,7 @@ fn queue_compact(
 
 /// Puts each species' parts in each shadow view's phase (directional
 /// cascades, point-light faces, spot lights).
+#[allow(clippy::too_many_arguments)] // a Bevy system's parameters
 fn queue_compact_shadows(
     pipeline: Res<CompactPipeline>,
     mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
@@ -1022,7 +1078,7 @@ fn queue_compact_shadows(
     mut shadow_phases: ResMut<ViewBinnedRenderPhases<Shadow>>,
     views: Query<&ExtractedView, With<LightEntity>>,
 ) {
-    if pipeline.prepass_layouts.is_none() {
+    if pipeline.prepass_layouts.is_none() || !pipeline.supported {
         return;
     }
     let draw = shadow_draw_functions.read().id::<DrawCompactShadow>();
@@ -1031,7 +1087,7 @@ fn queue_compact_shadows(
             continue;
         };
         for &entity in &retired.0 {
-            phase.remove(MainEntity::from(entity));
+            phase.remove(entity);
         }
         for (&id, species) in &render.species {
             // Queueing runs before this frame's buffers are prepared: a
@@ -1040,7 +1096,7 @@ fn queue_compact_shadows(
             let drawn = !species.instances.is_empty();
             for kind in PartKind::ALL {
                 let entity = species.draw_entities[kind.index()];
-                let main_entity = MainEntity::from(entity);
+                let main_entity = species.phase_keys[kind.index()];
                 phase.remove(main_entity);
                 if !drawn || !kind.present_in(&species.compact) {
                     continue;
@@ -1071,7 +1127,7 @@ fn queue_compact_shadows(
 /// Draw entities of species that went away this frame, taken out of the
 /// phases by the queue systems.
 #[derive(Resource, Default)]
-struct RetiredDrawEntities(Vec<Entity>);
+struct RetiredDrawEntities(Vec<MainEntity>);
 
 /// Culls every tree of every species for every view and writes the
 /// indirect draws (`conifer_cull.wgsl`).
