@@ -32,6 +32,12 @@ struct Scene {
 impl Scene {
     /// A 12,000-needle Scots pine (with wood segments) at the origin.
     fn new() -> Self {
+        Self::with_trees(&[])
+    }
+
+    /// The same, with trees at `early` spawned (on the compact path) before
+    /// the species has loaded, as a game does on its first frame.
+    fn with_trees(early: &[Transform]) -> Self {
         let dir = tempfile::tempdir().unwrap();
         let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
         std::fs::create_dir_all(&out).unwrap();
@@ -48,6 +54,12 @@ impl Scene {
         write_record(&record, &dir.path().join("pine.conifer")).unwrap();
         let mut renderer = HeadlessRenderer::new(&dir.path().to_string_lossy());
         let species: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
+        if !early.is_empty() {
+            renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
+        }
+        for &transform in early {
+            renderer.world_mut().spawn((ConiferFoliage(species.clone()), transform));
+        }
         HeadlessRenderer::spawn_lights(renderer.world_mut());
         renderer.load(&[species.clone().untyped()], 600).unwrap();
         let target = renderer.render_target(SIZE, SIZE);
@@ -231,4 +243,32 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     let memory = scene.memory();
     assert_eq!(memory.total(), 0, "{memory:?}");
     assert_eq!(memory.buffers, 0);
+}
+
+#[test]
+fn trees_spawned_before_their_species_loads_are_drawn() {
+    let mut scene = Scene::with_trees(&[Transform::from_xyz(0.0, 0.0, 500.0), Transform::IDENTITY]);
+    scene.look_from(6.0, 45.0);
+    let image = scene.shot("early_trees");
+    let pixels = covered(&image).iter().filter(|&&c| c).count();
+    assert!(pixels > 1000, "the second tree covers {pixels} pixels");
+}
+
+#[test]
+fn a_tree_after_a_culled_tree_is_drawn() {
+    let mut scene = Scene::new();
+    scene.set_path(RenderPath::Compact);
+    scene.look_from(6.0, 45.0);
+    // Instance 0 far behind the camera (culled), instance 1 in view.
+    scene.renderer.world_mut().spawn((
+        ConiferFoliage(scene.species.clone()),
+        Transform::from_xyz(0.0, 0.0, 500.0),
+    ));
+    scene
+        .renderer
+        .world_mut()
+        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY));
+    let image = scene.shot("second_instance");
+    let pixels = covered(&image).iter().filter(|&&c| c).count();
+    assert!(pixels > 1000, "the second tree covers {pixels} pixels");
 }

@@ -66,7 +66,7 @@ use bevy::render::render_resource::{
     SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
 };
 use bevy::render::render_resource::{Face, WgpuFeatures};
-use bevy::render::renderer::{RenderContext, RenderDevice, RenderQueue};
+use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::view::ExtractedView;
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
@@ -605,6 +605,12 @@ pub struct CompactPipeline {
     /// Whether indirect draws may start at an instance other than 0 (one
     /// draw per tree needs it).
     supported: bool,
+    /// Draw depth-only passes with one indirect draw per tree instead of
+    /// one multi-draw: Mesa's lavapipe (22.3) takes every draw of a
+    /// multi-draw in a pass without colour attachments from the first
+    /// tree's instance, so only that tree cast a shadow
+    /// (`tests/render_shadows.rs`).
+    split_depth_only_multi_draws: bool,
 }
 
 /// The key of a compact draw pipeline: the view's mesh key and the part.
@@ -624,8 +630,10 @@ fn init_compact_pipeline(
     prepass_pipeline: Option<Res<PrepassPipeline>>,
     pipeline_cache: Res<PipelineCache>,
     device: Res<RenderDevice>,
+    adapter: Res<RenderAdapterInfo>,
     mut layouts: ResMut<MeshVertexBufferLayouts>,
 ) {
+    let split_depth_only_multi_draws = adapter.driver.contains("llvmpipe") || adapter.name.contains("llvmpipe");
     let supported = device.features().contains(WgpuFeatures::INDIRECT_FIRST_INSTANCE);
     if !supported {
         warn!(
@@ -690,6 +698,7 @@ fn init_compact_pipeline(
         cull_pipeline,
         no_vertices,
         supported,
+        split_depth_only_multi_draws,
     });
 }
 
@@ -1157,11 +1166,12 @@ fn cull_trees(
 }
 
 /// Binds a species' compact arrays and the view's culling results and draws
-/// one part of every tree with one multi-draw-indirect.
-pub struct DrawCompactPart;
+/// one part of every tree with one multi-draw-indirect (`DEPTH_ONLY`: in
+/// a shadow pass).
+pub struct DrawCompactPart<const DEPTH_ONLY: bool>;
 
-impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
-    type Param = SRes<CompactViews>;
+impl<P: PhaseItem, const DEPTH_ONLY: bool> RenderCommand<P> for DrawCompactPart<DEPTH_ONLY> {
+    type Param = (SRes<CompactViews>, SRes<CompactPipeline>);
     type ViewQuery = Entity;
     type ItemQuery = Read<CompactDrawItem>;
 
@@ -1169,7 +1179,7 @@ impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
         _item: &P,
         view: ROQueryItem<'w, '_, Self::ViewQuery>,
         item: Option<ROQueryItem<'w, '_, Self::ItemQuery>>,
-        compact_views: SystemParamItem<'w, '_, Self::Param>,
+        (compact_views, pipeline): SystemParamItem<'w, '_, Self::Param>,
         pass: &mut TrackedRenderPass<'w>,
     ) -> RenderCommandResult {
         let Some(item) = item else {
@@ -1181,7 +1191,13 @@ impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
 
         pass.set_bind_group(2, &buffers.draw_bind_group, &[]);
         let offset = item.kind.index() as u64 * buffers.instance_count as u64 * DRAW_ARGS_BYTES;
-        pass.multi_draw_indirect(&buffers.args, offset, buffers.instance_count);
+        if DEPTH_ONLY && pipeline.split_depth_only_multi_draws {
+            for i in 0..u64::from(buffers.instance_count) {
+                pass.draw_indirect(&buffers.args, offset + i * DRAW_ARGS_BYTES);
+            }
+        } else {
+            pass.multi_draw_indirect(&buffers.args, offset, buffers.instance_count);
+        }
         RenderCommandResult::Success
     }
 }
@@ -1191,7 +1207,7 @@ pub type DrawCompactShadow = (
     SetItemPipeline,
     SetPrepassViewBindGroup<0>,
     SetPrepassViewEmptyBindGroup<1>,
-    DrawCompactPart,
+    DrawCompactPart<true>,
 );
 
 /// The draw function of every compact part.
@@ -1199,7 +1215,7 @@ pub type DrawCompact = (
     SetItemPipeline,
     SetMeshViewBindGroup<0>,
     SetMeshViewBindingArrayBindGroup<1>,
-    DrawCompactPart,
+    DrawCompactPart<false>,
 );
 
 fn shader_path(file: &str) -> bevy::asset::AssetPath<'static> {
