@@ -623,6 +623,7 @@ pub struct CompactPipelineKey {
     shadow: bool,
 }
 
+#[allow(clippy::too_many_arguments)] // a Bevy system's parameters
 fn init_compact_pipeline(
     mut commands: Commands,
     asset_server: Res<AssetServer>,
