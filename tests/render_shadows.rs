@@ -224,22 +224,7 @@ fn compact_path_far_tree_keeps_its_shadow_under_a_near_lamp() {
 #[test]
 fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
     let mut scene = ShadowScene::new();
-    // A low sun from +x: the crown's shadow falls 1–6 m toward −x.
-    scene.renderer.world_mut().spawn((
-        DirectionalLight {
-            illuminance: 2_500.0,
-            shadow_maps_enabled: true,
-            ..default()
-        },
-        Transform::from_xyz(5.0, 4.0, 0.0).looking_at(Vec3::ZERO, Vec3::Y),
-        CascadeShadowConfigBuilder {
-            num_cascades: 1,
-            maximum_distance: 16.0,
-            first_cascade_far_bound: 16.0,
-            ..default()
-        }
-        .build(),
-    ));
+    spawn_sun(scene.renderer.world_mut());
     // From 10 m above the shadow: the tree stands at the top edge, its
     // shadow fills the lower part.
     scene.camera(Vec3::new(-3.5, 0.0, 0.0), 10.0, 40.0);
@@ -249,15 +234,7 @@ fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
 #[test]
 fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
     let mut scene = ShadowScene::new();
-    scene.renderer.world_mut().spawn((
-        PointLight {
-            intensity: 2_000_000.0,
-            range: 30.0,
-            shadow_maps_enabled: true,
-            ..default()
-        },
-        Transform::from_xyz(3.0, 4.5, 0.0),
-    ));
+    spawn_lamp(scene.renderer.world_mut());
     // The camera is 80 m up (its cut is coarse lines), the lamp 3 m from the
     // crown (its cube faces need the fine lines and the trunk's prisms).
     scene.camera(Vec3::new(-3.0, 0.0, 0.0), 80.0, 8.0);

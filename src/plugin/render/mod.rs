@@ -307,19 +307,9 @@ struct SpeciesBuffers {
 }
 
 impl SpeciesBuffers {
-    fn bytes(&self) -> u64 {
-        [
-            &self.params,
-            &self.instances,
-            &self.needles,
-            &self.original_lines,
-            &self.merged_lines,
-            &self.wood_segments,
-            &self.wood_mesh,
-        ]
-        .iter()
-        .map(|b| b.size())
-        .sum()
+    /// Bytes of the species' parameters and instance buffer.
+    fn instance_bytes(&self) -> u64 {
+        self.params.size() + self.instances.size()
     }
 
     /// Bytes of the species' shared arrays (not its trees).
@@ -480,6 +470,14 @@ fn extract_compact(
     }
 }
 
+/// The new capacity of a buffer of `capacity` slots holding `len`: grown
+/// to the next power of two, shrunk back when under a quarter full, never
+/// below 64; `None` when it stays.
+fn resized_capacity(capacity: usize, len: usize) -> Option<usize> {
+    let fitting = len.next_power_of_two().max(64);
+    (len > capacity || (len * 4 < capacity && capacity > 64)).then_some(fitting)
+}
+
 /// A storage buffer holding `bytes` (at least 16 bytes: a binding cannot be empty).
 fn storage_buffer(device: &RenderDevice, label: &'static str, bytes: &[u8]) -> Buffer {
     let mut contents = bytes.to_vec();
@@ -543,22 +541,13 @@ fn prepare_species(
             species.instances_dirty = true;
         }
         let Some(gpu) = species.gpu.as_mut() else { continue };
-        if species.instances.len() > gpu.instance_capacity {
-            gpu.instance_capacity = species.instances.len().next_power_of_two();
+        // Grown by powers of two, shrunk back after most trees went away.
+        if let Some(capacity) = resized_capacity(gpu.instance_capacity, species.instances.len()) {
+            gpu.instance_capacity = capacity;
             gpu.instances = empty_buffer(
                 &device,
                 "conifer instances",
-                (gpu.instance_capacity * size_of::<GpuInstance>()) as u64,
-                BufferUsages::STORAGE,
-            );
-            species.instances_dirty = true;
-        } else if species.instances.len() * 4 < gpu.instance_capacity && gpu.instance_capacity > 64 {
-            // Shrink back after many trees went away.
-            gpu.instance_capacity = species.instances.len().next_power_of_two().max(64);
-            gpu.instances = empty_buffer(
-                &device,
-                "conifer instances",
-                (gpu.instance_capacity * size_of::<GpuInstance>()) as u64,
+                (capacity * size_of::<GpuInstance>()) as u64,
                 BufferUsages::STORAGE,
             );
             species.instances_dirty = true;
@@ -569,7 +558,7 @@ fn prepare_species(
         species.instances_dirty = false;
         queue.write_buffer(&gpu.params, 0, bytemuck::bytes_of(&species.params));
         memory.species_bytes.insert(id, gpu.species_bytes());
-        memory.instance_bytes.insert(id, gpu.bytes() - gpu.species_bytes());
+        memory.instance_bytes.insert(id, gpu.instance_bytes());
     }
 }
 
@@ -935,8 +924,7 @@ fn prepare_views(
             let view_species = match entry {
                 bevy::platform::collections::hash_map::Entry::Occupied(entry) => {
                     let v = entry.into_mut();
-                    if v.capacity < n || n * 4 < v.capacity && v.capacity > 64 {
-                        let capacity = n.next_power_of_two().max(64);
+                    if let Some(capacity) = resized_capacity(v.capacity, n) {
                         let (c, l, a) = fresh(capacity);
                         v.cull_view = c;
                         v.lods = l;
