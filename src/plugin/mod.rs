@@ -276,6 +276,14 @@ pub struct ConiferParts {
     pub wood: Option<Entity>,
 }
 
+impl ConiferParts {
+    /// Every part entity of the tree.
+    pub fn entities(&self) -> impl Iterator<Item = Entity> + '_ {
+        let wood = self.wood_prisms.into_iter().chain(self.wood);
+        self.lines.iter().copied().chain([self.prisms]).chain(wood)
+    }
+}
+
 /// Marks a mesh entity spawned by the plugin as part of a tree.
 #[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ConiferPart {

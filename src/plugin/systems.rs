@@ -225,8 +225,7 @@ pub(super) fn spawn_parts(
         // The compact path spawns nothing per tree; take away what the mesh
         // path spawned.
         for (entity, parts) in &with_parts {
-            let wood = parts.wood_prisms.into_iter().chain(parts.wood);
-            for part in parts.lines.iter().copied().chain([parts.prisms]).chain(wood) {
+            for part in parts.entities() {
                 commands.entity(part).try_despawn();
             }
             commands.entity(entity).remove::<ConiferParts>();
@@ -237,11 +236,8 @@ pub(super) fn spawn_parts(
         let Some(species) = species_assets.get(&foliage.0) else {
             continue;
         };
-        if let Some(parts) = parts {
-            let wood = parts.wood_prisms.into_iter().chain(parts.wood);
-            for part in parts.lines.iter().copied().chain([parts.prisms]).chain(wood) {
-                commands.entity(part).try_despawn();
-            }
+        for part in parts.iter().flat_map(|parts| parts.entities()) {
+            commands.entity(part).try_despawn();
         }
         let key = MaterialKey::new(foliage.0.id(), over);
         let set = match (&mut conifer_materials, &mut standard_materials) {

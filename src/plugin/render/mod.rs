@@ -307,13 +307,8 @@ struct SpeciesBuffers {
 }
 
 impl SpeciesBuffers {
-    /// Bytes of the species' parameters and instance buffer.
-    fn instance_bytes(&self) -> u64 {
-        self.params.size() + self.instances.size()
-    }
-
-    /// Bytes of the species' shared arrays (not its trees).
-    fn species_bytes(&self) -> u64 {
+    /// The species' shared arrays (not its trees).
+    fn arrays(&self) -> [&Buffer; 5] {
         [
             &self.needles,
             &self.original_lines,
@@ -321,10 +316,17 @@ impl SpeciesBuffers {
             &self.wood_segments,
             &self.wood_mesh,
         ]
-        .iter()
-        .map(|b| b.size())
-        .sum()
     }
+
+    /// Its parameters and instance buffer.
+    fn per_tree(&self) -> [&Buffer; 2] {
+        [&self.params, &self.instances]
+    }
+}
+
+/// Bytes allocated for `buffers`.
+fn allocated(buffers: &[&Buffer]) -> u64 {
+    buffers.iter().map(|b| b.size()).sum()
 }
 
 /// Marks the render-world entities that stand for a species' parts in the
@@ -339,7 +341,8 @@ pub struct CompactDrawItem {
 #[derive(Resource, Default)]
 pub struct RenderCompactSpecies {
     species: HashMap<AssetId<ConiferSpecies>, RenderSpecies>,
-    /// Phase keys of species that went away, to take out of the phases.
+    /// Phase keys of species that went away, to take out of the phases
+    /// (by `queue_compact`, then `queue_compact_shadows`, which clears it).
     retired: Vec<MainEntity>,
 }
 
@@ -366,10 +369,6 @@ impl CompactGpuMemory {
     }
 }
 
-fn linear(color: [f32; 4]) -> [f32; 4] {
-    color
-}
-
 fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: &ConiferLodSettings) -> SpeciesParams {
     let material = &species.record.material;
     let center = species.crown_center;
@@ -379,8 +378,8 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         crown_center: center.extend(radius).to_array(),
         grid: compact.grid.origin.extend(compact.grid.step).to_array(),
         wood_grid: compact.wood_grid.origin.extend(compact.wood_grid.step).to_array(),
-        needle_color: linear(material.needle_color),
-        wood_color: linear(material.wood_color),
+        needle_color: material.needle_color,
+        wood_color: material.wood_color,
         needle_count: compact.needles.len() as u32,
         original_line_count: compact.original_lines.len() as u32,
         merged_line_count: compact.merged_lines.len() as u32,
@@ -474,8 +473,12 @@ fn extract_compact(
 /// to the next power of two, shrunk back when under a quarter full, never
 /// below 64; `None` when it stays.
 fn resized_capacity(capacity: usize, len: usize) -> Option<usize> {
-    let fitting = len.next_power_of_two().max(64);
-    (len > capacity || (len * 4 < capacity && capacity > 64)).then_some(fitting)
+    (len > capacity || (len * 4 < capacity && capacity > 64)).then(|| initial_capacity(len))
+}
+
+/// The capacity a new buffer gets for `len` slots.
+fn initial_capacity(len: usize) -> usize {
+    len.next_power_of_two().max(64)
 }
 
 /// A storage buffer holding `bytes` (at least 16 bytes: a binding cannot be empty).
@@ -487,6 +490,12 @@ fn storage_buffer(device: &RenderDevice, label: &'static str, bytes: &[u8]) -> B
         contents: &contents,
         usage: BufferUsages::STORAGE | BufferUsages::COPY_DST,
     })
+}
+
+/// An instance buffer of `capacity` trees.
+fn instance_buffer(device: &RenderDevice, capacity: usize) -> Buffer {
+    let size = (capacity * size_of::<GpuInstance>()) as u64;
+    empty_buffer(device, "conifer instances", size, BufferUsages::STORAGE)
 }
 
 fn empty_buffer(device: &RenderDevice, label: &'static str, size: u64, usage: BufferUsages) -> Buffer {
@@ -514,19 +523,14 @@ fn prepare_species(
             let c = &species.compact;
             let mut wood_mesh: Vec<u32> = c.wood_indices.clone();
             wood_mesh.extend(c.wood_vertices.iter().flatten());
-            let capacity = species.instances.len().next_power_of_two().max(64);
+            let capacity = initial_capacity(species.instances.len());
             species.gpu = Some(SpeciesBuffers {
                 params: device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
                     label: Some("conifer species params"),
                     contents: bytemuck::bytes_of(&species.params),
                     usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST,
                 }),
-                instances: empty_buffer(
-                    &device,
-                    "conifer instances",
-                    (capacity * size_of::<GpuInstance>()) as u64,
-                    BufferUsages::STORAGE,
-                ),
+                instances: instance_buffer(&device, capacity),
                 instance_capacity: capacity,
                 needles: storage_buffer(&device, "conifer needles", bytemuck::cast_slice(&c.needles)),
                 original_lines: storage_buffer(
@@ -544,12 +548,7 @@ fn prepare_species(
         // Grown by powers of two, shrunk back after most trees went away.
         if let Some(capacity) = resized_capacity(gpu.instance_capacity, species.instances.len()) {
             gpu.instance_capacity = capacity;
-            gpu.instances = empty_buffer(
-                &device,
-                "conifer instances",
-                (capacity * size_of::<GpuInstance>()) as u64,
-                BufferUsages::STORAGE,
-            );
+            gpu.instances = instance_buffer(&device, capacity);
             species.instances_dirty = true;
         }
         if species.instances_dirty && !instance_bytes.is_empty() {
@@ -557,8 +556,8 @@ fn prepare_species(
         }
         species.instances_dirty = false;
         queue.write_buffer(&gpu.params, 0, bytemuck::bytes_of(&species.params));
-        memory.species_bytes.insert(id, gpu.species_bytes());
-        memory.instance_bytes.insert(id, gpu.instance_bytes());
+        memory.species_bytes.insert(id, allocated(&gpu.arrays()));
+        memory.instance_bytes.insert(id, allocated(&gpu.per_tree()));
     }
 }
 
@@ -572,6 +571,12 @@ struct ViewSpecies {
     cull_bind_group: BindGroup,
     draw_bind_group: BindGroup,
     used: bool,
+}
+
+impl ViewSpecies {
+    fn buffers(&self) -> [&Buffer; 3] {
+        [&self.cull_view, &self.lods, &self.args]
+    }
 }
 
 /// Per-view buffers of the compact path, keyed by (view entity, species).
@@ -937,7 +942,7 @@ fn prepare_views(
                     v
                 }
                 bevy::platform::collections::hash_map::Entry::Vacant(entry) => {
-                    let capacity = n.next_power_of_two().max(64);
+                    let capacity = initial_capacity(n);
                     let (c, l, a) = fresh(capacity);
                     let (cull, draw) = make_groups(&c, &l, &a);
                     entry.insert(ViewSpecies {
@@ -958,12 +963,14 @@ fn prepare_views(
         }
     }
     compact_views.views.retain(|_, v| v.used);
-    memory.view_bytes = compact_views
-        .views
+    memory.view_bytes = compact_views.views.values().map(|v| allocated(&v.buffers())).sum();
+    let species_buffers = render
+        .species
         .values()
-        .map(|v| v.cull_view.size() + v.lods.size() + v.args.size())
-        .sum();
-    memory.buffers = compact_views.views.len() * 3 + render.species.values().filter(|s| s.gpu.is_some()).count() * 7;
+        .filter_map(|s| s.gpu.as_ref())
+        .map(|gpu| gpu.arrays().len() + gpu.per_tree().len());
+    memory.buffers =
+        compact_views.views.values().map(|v| v.buffers().len()).sum::<usize>() + species_buffers.sum::<usize>();
 }
 
 /// Puts each species' parts in each view's opaque and transparent phases.
@@ -972,13 +979,12 @@ fn queue_compact(
     pipeline: Res<CompactPipeline>,
     mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
     pipeline_cache: Res<PipelineCache>,
-    mut render: ResMut<RenderCompactSpecies>,
+    render: Res<RenderCompactSpecies>,
     view_key_cache: Res<ViewKeyCache>,
     opaque_draw_functions: Res<DrawFunctions<Opaque3d>>,
     transparent_draw_functions: Res<DrawFunctions<Transparent3d>>,
     mut opaque_phases: ResMut<ViewBinnedRenderPhases<Opaque3d>>,
     mut transparent_phases: ResMut<ViewSortedRenderPhases<Transparent3d>>,
-    mut retired_draw_entities: ResMut<RetiredDrawEntities>,
     views: Query<&ExtractedView>,
 ) {
     if !pipeline.supported {
@@ -986,13 +992,12 @@ fn queue_compact(
     }
     let draw_opaque = opaque_draw_functions.read().id::<DrawCompact>();
     let draw_transparent = transparent_draw_functions.read().id::<DrawCompact>();
-    let retired = std::mem::take(&mut render.retired);
-    retired_draw_entities.0.clone_from(&retired);
+    let retired = &render.retired;
     for view in &views {
         let Some(opaque) = opaque_phases.get_mut(&view.retained_view_entity) else {
             continue;
         };
-        for &entity in &retired {
+        for &entity in retired {
             opaque.remove(entity);
         }
         let Some(transparent) = transparent_phases.get_mut(&view.retained_view_entity) else {
@@ -1070,12 +1075,13 @@ fn queue_compact_shadows(
     pipeline: Res<CompactPipeline>,
     mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
     pipeline_cache: Res<PipelineCache>,
-    render: Res<RenderCompactSpecies>,
-    retired: Res<RetiredDrawEntities>,
+    mut render: ResMut<RenderCompactSpecies>,
     shadow_draw_functions: Res<DrawFunctions<Shadow>>,
     mut shadow_phases: ResMut<ViewBinnedRenderPhases<Shadow>>,
     views: Query<&ExtractedView, With<LightEntity>>,
 ) {
+    // The last queue system: the retired keys are out of every phase after it.
+    let retired = std::mem::take(&mut render.retired);
     if pipeline.prepass_layouts.is_none() || !pipeline.supported {
         return;
     }
@@ -1084,7 +1090,7 @@ fn queue_compact_shadows(
         let Some(phase) = shadow_phases.get_mut(&view.retained_view_entity) else {
             continue;
         };
-        for &entity in &retired.0 {
+        for &entity in &retired {
             phase.remove(entity);
         }
         for (&id, species) in &render.species {
@@ -1121,11 +1127,6 @@ fn queue_compact_shadows(
         }
     }
 }
-
-/// Draw entities of species that went away this frame, taken out of the
-/// phases by the queue systems.
-#[derive(Resource, Default)]
-struct RetiredDrawEntities(Vec<MainEntity>);
 
 /// Culls every tree of every species for every view and writes the
 /// indirect draws (`conifer_cull.wgsl`).
@@ -1243,7 +1244,6 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<RenderCompactSpecies>()
         .init_resource::<CompactViews>()
         .init_resource::<CompactGpuMemory>()
-        .init_resource::<RetiredDrawEntities>()
         .init_resource::<SpecializedRenderPipelines<CompactPipeline>>()
         .add_render_command::<Opaque3d, DrawCompact>()
         .add_render_command::<Transparent3d, DrawCompact>()
