@@ -3,6 +3,7 @@
 //! exactly once, placed errors scale with their placement, flat records
 //! convert losslessly both ways, and the file round-trips.
 
+use bevy_conifer_lod::model::compact::{CompactSpecies, shader_threshold_code, threshold_code};
 use bevy_conifer_lod::model::record::CutStrategy;
 use bevy_conifer_lod::model::{
     BakeOptions, LodRecord, Needle, Placement, PrototypeInput, PrototypeRecord, TreeInput, bake, bake_prototypes,
@@ -107,6 +108,32 @@ proptest! {
             prop_assert_eq!(&direct, &flat.cut(e).sorted(), "e = {}", e);
             prop_assert_eq!(&direct, &flat.cut_with(e, CutStrategy::Intervals).sorted(), "e = {}", e);
             prop_assert!(flat.coverage(&direct).iter().all(|&c| c == 1), "e = {}: a needle not stood for once", e);
+        }
+    }
+
+    #[test]
+    fn gpu_placed_layout_draws_every_needle_once(input in prototype_tree()) {
+        // The compact layout's placed draws (CPU reference of the compute
+        // passes and vertex shaders): at every probe error each needle is
+        // stood for once, and the cut is the record's but for nodes whose
+        // interval ends within 0.2 % of the error (code rounding).
+        let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap().quantized().unwrap();
+        let flat = record.flatten().unwrap();
+        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        for e in probe_errors(&flat) {
+            for threshold in [threshold_code as fn(f32) -> u16, shader_threshold_code] {
+                let (drawn, _) = compact.placed_drawn(&record, threshold(e), e, threshold);
+                prop_assert!(flat.coverage(&drawn).iter().all(|&c| c == 1), "e = {}: a needle not stood for once", e);
+                let direct = record.cut(e);
+                let lines = |cut: &bevy_conifer_lod::model::Cut| -> std::collections::BTreeSet<u32> {
+                    cut.original_lines.iter().chain(&cut.merged_lines).copied().chain(cut.prisms.iter().map(|p| p.0 | 1 << 31)).collect()
+                };
+                for node in lines(&drawn).symmetric_difference(&lines(&direct)) {
+                    let node = node & !(1 << 31);
+                    let near = |x: f32| (x / e - 1.0).abs() < 2e-3;
+                    prop_assert!(near(flat.node_error(node)) || near(flat.parent_error(node)), "e = {}: node {}", e, node);
+                }
+            }
         }
     }
 

@@ -43,6 +43,9 @@
 
 use super::gpu_layout::WOOD_LINE_FADE;
 use super::metric::line_error;
+use super::needle::WoodSegment;
+use super::prism::TriangleMesh;
+use super::prototype::{Placement, PrototypeRecord};
 use super::quantize::{LOG_CODE_MAX, LOG_CODE_MIN, PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
 use super::record::{Cut, LodRecord, NO_PARENT};
 use super::{file, metric};
@@ -107,7 +110,67 @@ pub struct CompactSpecies {
     pub wood_indices: Vec<u32>,
     /// Smallest and largest merged-line error code (debug colours).
     pub merged_code_range: [u16; 2],
+    /// Entries of `needles`, `original_lines` and `merged_lines` that
+    /// belong to the tree itself (all of them for a flat species); the
+    /// prototypes' sections follow ([`CompactPrototype`]).
+    pub tree_counts: [u32; 3],
+    /// Shared prototypes (empty for a flat species).
+    pub prototypes: Vec<CompactPrototype>,
+    /// Where the prototypes stand, sorted by the parent error code of
+    /// their root line descending: the placements a view expands are a
+    /// prefix.
+    pub placements: Vec<CompactPlacement>,
 }
+
+/// One shared prototype of a placed species: its sections of the compact
+/// arrays, on its own grid, and how its placements' threshold codes are
+/// binned into draws.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompactPrototype {
+    /// The grid of its needles' ends (prototype metres).
+    pub grid: PositionGrid,
+    /// First entry and length of its needles (sorted by line-error code
+    /// descending within the section).
+    pub needles: [u32; 2],
+    /// First entry and length of its original-line order (needle indices
+    /// into the whole array).
+    pub original_lines: [u32; 2],
+    /// First entry and length of its merged lines (end references into the
+    /// whole needle array).
+    pub merged_lines: [u32; 2],
+    /// Lower edges of bands 1… (ascending): where the primitives a
+    /// placement processes ([`SectionPrefixes::total`]) fall geometrically
+    /// from all of the prototype's to one, so the placements of a band
+    /// need prefixes within a ratio of about 1.6 of each other.
+    pub band_edges: [u16; PLACED_BANDS as usize - 1],
+}
+
+/// A placement of a placed species, as the GPU reads it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CompactPlacement {
+    /// The prototype's index in [`CompactSpecies::prototypes`].
+    pub prototype: u32,
+    /// Rotation, translation and uniform scale (see [`Placement`]).
+    pub transform: Placement,
+    /// Error code of the level-2 parent of the placement's root line
+    /// ([`ROOT_PARENT_CODE`] without one): a view expands the placement iff
+    /// its threshold code is below it.
+    pub parent_code: u16,
+    /// The record's placement index.
+    pub source: u32,
+}
+
+/// Bands a prototype's placements are binned into by threshold code: one
+/// instanced draw per prototype, band and part, each drawing the longest
+/// prefix its placements need.
+pub const PLACED_BANDS: u32 = 16;
+
+/// Most prototypes a placed species holds (more, and the record is drawn flat).
+pub const MAX_PLACED_PROTOTYPES: usize = 1024;
+
+/// Most placements a placed species holds: a per-view entry packs the
+/// placement index in 15 bits.
+pub const MAX_PLACEMENTS: usize = 1 << 15;
 
 /// Bytes of each compact array.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -120,12 +183,14 @@ pub struct CompactBytes {
     pub merged_lines: u64,
     /// Wood segments, wood mesh vertices and indices.
     pub wood: u64,
+    /// Prototype table and placements (48 bytes each).
+    pub placements: u64,
 }
 
 impl CompactBytes {
     /// All of it.
     pub fn total(&self) -> u64 {
-        self.needles + self.original_lines + self.merged_lines + self.wood
+        self.needles + self.original_lines + self.merged_lines + self.wood + self.placements
     }
 }
 
@@ -148,6 +213,29 @@ pub struct Prefixes {
     pub wood_prisms: u32,
     /// Wood segments drawn as prisms or lines (`e < 64 · 2·r_max`).
     pub wood_lines: u32,
+}
+
+/// The prefixes of one section of the arrays (the tree's or a prototype's)
+/// at one threshold code.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SectionPrefixes {
+    /// Needles that are prisms (`c < code(2R)`).
+    pub prisms: u32,
+    /// The section's needles after the prisms (original lines whose own
+    /// code is `≤ c`).
+    pub after_prisms: u32,
+    /// Original lines whose parent code is above `c`.
+    pub original_by_parent: u32,
+    /// Merged lines whose parent code is above `c`.
+    pub merged_lines: u32,
+}
+
+impl SectionPrefixes {
+    /// Primitives a draw of these prefixes processes (original lines from
+    /// the shorter of the two ranges).
+    pub fn total(&self) -> u32 {
+        self.prisms + self.after_prisms.min(self.original_by_parent) + self.merged_lines
+    }
 }
 
 /// A needle-end reference: compact needle `needle`, at its tip or base.
@@ -240,6 +328,47 @@ fn parent_code(record: &LodRecord, node: u32) -> Result<u16, CompactError> {
     Ok(code_at_least(record.parent_error(node), "errors")?.min(MAX_THRESHOLD_CODE))
 }
 
+/// Wood segments sorted by `2·r_max` descending, and the wood mesh on its grid.
+type WoodLayout = (Vec<[f32; 8]>, PositionGrid, Vec<[u32; 3]>);
+
+fn wood_layout(wood: &[WoodSegment], mesh: &TriangleMesh) -> Result<WoodLayout, CompactError> {
+    let mut wood_segments: Vec<[f32; 8]> = wood
+        .iter()
+        .filter(|w| w.is_valid())
+        .map(|w| {
+            [
+                w.start.x,
+                w.start.y,
+                w.start.z,
+                w.start_radius,
+                w.end.x,
+                w.end.y,
+                w.end.z,
+                w.end_radius,
+            ]
+        })
+        .collect();
+    wood_segments.sort_by(|a, b| b[3].max(b[7]).total_cmp(&a[3].max(a[7])));
+    let wood_grid = if mesh.positions.is_empty() {
+        PositionGrid {
+            origin: Vec3::ZERO,
+            step: 1.0,
+        }
+    } else {
+        PositionGrid::covering(mesh.positions.iter().copied()).ok_or(CompactError::OutOfRange("wood mesh"))?
+    };
+    let wood_vertices = mesh
+        .positions
+        .iter()
+        .zip(&mesh.normals)
+        .map(|(&p, &normal)| {
+            let [x, y, z] = wood_grid.encode(p).map(u32::from);
+            [x | y << 16, z, u32::from_le_bytes(file::encode_normal(normal))]
+        })
+        .collect();
+    Ok((wood_segments, wood_grid, wood_vertices))
+}
+
 impl CompactSpecies {
     /// The compact layout of `record`.
     pub fn build(record: &LodRecord) -> Result<Self, CompactError> {
@@ -305,42 +434,8 @@ impl CompactSpecies {
         if merged_code_range[0] > merged_code_range[1] {
             merged_code_range = [0, 0];
         }
-        let mut wood_segments: Vec<[f32; 8]> = record
-            .wood
-            .iter()
-            .filter(|w| w.is_valid())
-            .map(|w| {
-                [
-                    w.start.x,
-                    w.start.y,
-                    w.start.z,
-                    w.start_radius,
-                    w.end.x,
-                    w.end.y,
-                    w.end.z,
-                    w.end_radius,
-                ]
-            })
-            .collect();
-        wood_segments.sort_by(|a, b| b[3].max(b[7]).total_cmp(&a[3].max(a[7])));
-        let mesh = &record.wood_mesh;
-        let wood_grid = if mesh.positions.is_empty() {
-            PositionGrid {
-                origin: Vec3::ZERO,
-                step: 1.0,
-            }
-        } else {
-            PositionGrid::covering(mesh.positions.iter().copied()).ok_or(CompactError::OutOfRange("wood mesh"))?
-        };
-        let wood_vertices = mesh
-            .positions
-            .iter()
-            .zip(&mesh.normals)
-            .map(|(&p, &normal)| {
-                let [x, y, z] = wood_grid.encode(p).map(u32::from);
-                [x | y << 16, z, u32::from_le_bytes(file::encode_normal(normal))]
-            })
-            .collect();
+        let (wood_segments, wood_grid, wood_vertices) = wood_layout(&record.wood, &record.wood_mesh)?;
+        let (original_len, merged_len) = (original.len() as u32, merged.len() as u32);
         Ok(Self {
             grid,
             max_sides: record.max_sides,
@@ -352,8 +447,11 @@ impl CompactSpecies {
             wood_segments,
             wood_grid,
             wood_vertices,
-            wood_indices: mesh.indices.clone(),
+            wood_indices: record.wood_mesh.indices.clone(),
             merged_code_range,
+            tree_counts: [n as u32, original_len, merged_len],
+            prototypes: Vec::new(),
+            placements: Vec::new(),
         })
     }
 
@@ -366,6 +464,7 @@ impl CompactSpecies {
             wood: 32 * self.wood_segments.len() as u64
                 + 12 * self.wood_vertices.len() as u64
                 + 4 * self.wood_indices.len() as u64,
+            placements: 48 * (self.prototypes.len() + self.placements.len()) as u64,
         }
     }
 
@@ -413,25 +512,41 @@ impl CompactSpecies {
         shader_log_decode(a >> 24 | (b >> 24) << 8)
     }
 
-    /// The prefix of every array a view at threshold code `code` and spatial
-    /// error `e` draws from (binary searches, as the compute pass does).
+    /// The prefix of every tree-level array a view at threshold code `code`
+    /// and spatial error `e` draws from (binary searches, as the compute
+    /// pass does).
     pub fn prefixes(&self, code: u16, e: f32) -> Prefixes {
-        let prisms = self.needles.partition_point(|w| (w[3] & 0xffff) as u16 > code);
-        let original = self
-            .original_lines
-            .partition_point(|&k| self.needle_parent_code(k) > code);
-        let merged = self.merged_lines.partition_point(|w| (w[2] >> 16) as u16 > code);
+        let [needles, original, merged] = self.tree_counts;
+        let section = self.section_prefixes([0, needles], [0, original], [0, merged], code);
         let wood_error = |w: &[f32; 8]| line_error(w[3].max(w[7]));
-        let after_prisms = self.needles.len() - prisms;
         Prefixes {
-            prisms: prisms as u32,
-            original_lines: original.min(after_prisms) as u32,
-            original_from_needles: after_prisms < original,
-            merged_lines: merged as u32,
+            prisms: section.prisms,
+            original_lines: section.original_by_parent.min(section.after_prisms),
+            original_from_needles: section.after_prisms < section.original_by_parent,
+            merged_lines: section.merged_lines,
             wood_prisms: self.wood_segments.partition_point(|w| e < wood_error(w)) as u32,
             wood_lines: self
                 .wood_segments
                 .partition_point(|w| e < WOOD_LINE_FADE * wood_error(w)) as u32,
+        }
+    }
+
+    /// The prefixes of prototype `k`'s sections at threshold code `code`.
+    pub fn prototype_prefixes(&self, k: usize, code: u16) -> SectionPrefixes {
+        let p = &self.prototypes[k];
+        self.section_prefixes(p.needles, p.original_lines, p.merged_lines, code)
+    }
+
+    /// Binary searches of one section (`[first, length]` of each array).
+    fn section_prefixes(&self, needles: [u32; 2], original: [u32; 2], merged: [u32; 2], code: u16) -> SectionPrefixes {
+        let range = |[first, length]: [u32; 2]| first as usize..(first + length) as usize;
+        let prisms = self.needles[range(needles)].partition_point(|w| (w[3] & 0xffff) as u16 > code) as u32;
+        SectionPrefixes {
+            prisms,
+            after_prisms: needles[1] - prisms,
+            original_by_parent: self.original_lines[range(original)]
+                .partition_point(|&k| self.needle_parent_code(k) > code) as u32,
+            merged_lines: self.merged_lines[range(merged)].partition_point(|w| (w[2] >> 16) as u16 > code) as u32,
         }
     }
 
@@ -466,10 +581,324 @@ impl CompactSpecies {
     }
 }
 
+/// One instanced draw of a placed species' view (per prototype and band):
+/// how many expanded placements it holds and the longest prefix of each of
+/// the prototype's sections they need (what `conifer_cull.wgsl`'s
+/// `count_placements` and `scan_placements` write).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PlacedDraw {
+    /// Expanded placements in the draw (its instance count).
+    pub placements: u32,
+    /// Most prisms any of them draws.
+    pub prisms: u32,
+    /// Most needles after the prisms.
+    pub after_prisms: u32,
+    /// Most original lines by parent code.
+    pub original_by_parent: u32,
+    /// Most merged lines.
+    pub merged_lines: u32,
+}
+
+impl PlacedDraw {
+    /// Whether the original lines are drawn from the needles after the
+    /// fewest prisms rather than from the parent-sorted order (the shorter).
+    pub fn original_from_needles(&self) -> bool {
+        self.after_prisms < self.original_by_parent
+    }
+
+    /// Original lines each instance processes.
+    pub fn original_lines(&self) -> u32 {
+        self.after_prisms.min(self.original_by_parent)
+    }
+}
+
+/// What one view draws of a placed tree: the expanded placements with
+/// their threshold codes and draws, as the compute passes find them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlacedView {
+    /// `(placement index, threshold code)` of each expanded placement.
+    pub expanded: Vec<(u32, u16)>,
+    /// One draw per `prototype · PLACED_BANDS + band`.
+    pub draws: Vec<PlacedDraw>,
+}
+
+impl CompactSpecies {
+    /// The compact layout of a tree of shared prototypes: the tree's own
+    /// section holds its level-2 merged lines (each with its two ends as a
+    /// needle that is never drawn) and wood; each prototype's needles and
+    /// level-1 lines are stored once, in its own frame, and placed by the
+    /// GPU. `flat` is `record.flatten()` (the level-2 lines' ends and areas
+    /// come from it).
+    ///
+    /// A record whose prototypes are not shared (every placement its own
+    /// prototype) or that has more than [`MAX_PLACED_PROTOTYPES`]
+    /// prototypes or [`MAX_PLACEMENTS`] placements gets the flat layout
+    /// ([`CompactSpecies::build`]) of `flat`.
+    pub fn build_placed(record: &PrototypeRecord, flat: &LodRecord) -> Result<Self, CompactError> {
+        let k_count = record.prototypes.len();
+        let p_count = record.placements.len();
+        if k_count >= p_count || k_count > MAX_PLACED_PROTOTYPES || p_count > MAX_PLACEMENTS {
+            return Self::build(flat);
+        }
+        let level2_first = (flat.node_count() - record.tree_merged.len()) as u32;
+        // The tree's section: a pseudo-needle per drawable level-2 line,
+        // holding its ends, with line-error code 0 (never a prism or an
+        // original line).
+        let mut ends = Vec::new();
+        let mut lines = Vec::new();
+        let mut merged_code_range = [u16::MAX, 0];
+        for k in 0..record.tree_merged.len() as u32 {
+            let node = level2_first + k;
+            let own = code_at_least(flat.node_error(node), "errors")?.min(MAX_THRESHOLD_CODE);
+            merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
+            let parent = parent_code(flat, node)?;
+            if parent <= own {
+                continue;
+            }
+            let [(a, _), (b, _)] = flat.node_ends(node);
+            let length = a.distance(b).max(1e-9);
+            let width = log_encode_nearest((flat.node_needle_area(node) / length).min(LOG_CODE_MAX))
+                .ok_or(CompactError::OutOfRange("line widths"))?;
+            ends.push([a, b]);
+            lines.push((parent, own, width, node));
+        }
+        if merged_code_range[0] > merged_code_range[1] {
+            merged_code_range = [0, 0];
+        }
+        let mut order: Vec<usize> = (0..lines.len()).collect();
+        order.sort_by_key(|&i| (std::cmp::Reverse(lines[i].0), lines[i].3));
+        let grid = PositionGrid::covering(ends.iter().flatten().copied().chain(std::iter::once(Vec3::ZERO)))
+            .ok_or(CompactError::OutOfRange("needle positions"))?;
+        let (wood_segments, wood_grid, wood_vertices) = wood_layout(&record.wood, &record.wood_mesh)?;
+        let mut species = Self {
+            grid,
+            max_sides: record.max_sides,
+            needles: Vec::new(),
+            needle_source: Vec::new(),
+            original_lines: Vec::new(),
+            merged_lines: Vec::new(),
+            merged_source: Vec::new(),
+            wood_segments,
+            wood_grid,
+            wood_vertices,
+            wood_indices: record.wood_mesh.indices.clone(),
+            merged_code_range,
+            tree_counts: [0; 3],
+            prototypes: Vec::new(),
+            placements: Vec::new(),
+        };
+        for (slot, &i) in order.iter().enumerate() {
+            let (parent, own, width, node) = lines[i];
+            let [a, b] = ends[i];
+            let [ax, ay, az] = grid.encode(a).map(u32::from);
+            let [bx, by, bz] = grid.encode(b).map(u32::from);
+            species.needles.push([ax | ay << 16, az | bx << 16, by | bz << 16, 0]);
+            species.needle_source.push(node);
+            let slot = slot as u32;
+            species.merged_lines.push([
+                end_reference(slot, false) | u32::from(width & 0xff) << 24,
+                end_reference(slot, true) | u32::from(width >> 8) << 24,
+                u32::from(own) | u32::from(parent) << 16,
+            ]);
+            species.merged_source.push(node);
+        }
+        species.merged_code_range = merged_code_range;
+        species.tree_counts = [species.needles.len() as u32, 0, species.merged_lines.len() as u32];
+        // The prototypes' sections, each built as a one-prototype record.
+        for prototype in &record.prototypes {
+            let alone = PrototypeRecord::from_parts(
+                String::new(),
+                vec![prototype.clone()],
+                vec![Placement::identity(0)],
+                Vec::new(),
+                Vec::new(),
+                Default::default(),
+                record.material,
+                record.max_sides,
+                record.bake.clone(),
+            )
+            .and_then(|r| r.flatten())
+            .map_err(|_| CompactError::OutOfRange("prototypes"))?;
+            let section = Self::build(&alone)?;
+            let needle_first = species.needles.len() as u32;
+            if needle_first as usize + section.needles.len() > MAX_COMPACT_NEEDLES {
+                return Err(CompactError::TooManyNeedles(
+                    needle_first as usize + section.needles.len(),
+                ));
+            }
+            let first = |len: usize, count: usize| [len as u32, count as u32];
+            let band_edges = section.band_edges();
+            species.prototypes.push(CompactPrototype {
+                grid: section.grid,
+                needles: first(species.needles.len(), section.needles.len()),
+                original_lines: first(species.original_lines.len(), section.original_lines.len()),
+                merged_lines: first(species.merged_lines.len(), section.merged_lines.len()),
+                band_edges,
+            });
+            species.needles.extend(&section.needles);
+            species.needle_source.extend(&section.needle_source);
+            species
+                .original_lines
+                .extend(section.original_lines.iter().map(|k| k + needle_first));
+            species
+                .merged_lines
+                .extend(section.merged_lines.iter().map(|&[a, b, codes]| {
+                    let shift = |w: u32| (w & 0xff00_0000) | ((w & 0x00ff_ffff) + 2 * needle_first);
+                    [shift(a), shift(b), codes]
+                }));
+            species.merged_source.extend(&section.merged_source);
+        }
+        // Placements by their root's parent code, descending.
+        for (p, placement) in record.placements.iter().enumerate() {
+            let root = record.flat_tree_node(p as u32);
+            species.placements.push(CompactPlacement {
+                prototype: placement.prototype,
+                transform: *placement,
+                parent_code: parent_code(flat, root)?,
+                source: p as u32,
+            });
+        }
+        species
+            .placements
+            .sort_by_key(|p| (std::cmp::Reverse(p.parent_code), p.source));
+        Ok(species)
+    }
+
+    /// A flat species' band edges as a prototype (see
+    /// [`CompactPrototype::band_edges`]): the first code at which the
+    /// processed primitives fall to each step of a geometric series.
+    fn band_edges(&self) -> [u16; PLACED_BANDS as usize - 1] {
+        let [needles, original, merged] = self.tree_counts;
+        let total = |code: u16| {
+            self.section_prefixes([0, needles], [0, original], [0, merged], code)
+                .total()
+        };
+        let mut codes: Vec<u16> = (0..needles)
+            .flat_map(|k| [self.needle_line_code(k), self.needle_parent_code(k)])
+            .chain((0..merged as usize).flat_map(|m| {
+                let (own, parent) = self.merged_codes(m);
+                [own, parent]
+            }))
+            .filter(|&c| c <= MAX_THRESHOLD_CODE)
+            .collect();
+        codes.sort_unstable();
+        codes.dedup();
+        let totals: Vec<u32> = codes.iter().map(|&c| total(c)).collect();
+        let most = f64::from(total(0).max(1));
+        // Half the edges where prisms turn into lines (quantiles of the
+        // needles' line codes), half geometric in the processed total.
+        let half = PLACED_BANDS as usize / 2;
+        let mut line_codes: Vec<u16> = (0..needles).map(|k| self.needle_line_code(k)).collect();
+        line_codes.sort_unstable();
+        let mut edges: Vec<u16> = (1..half)
+            .map(|b| line_codes[b * line_codes.len() / half])
+            .chain((1..=half).map(|b| {
+                let target = most.powf(1.0 - b as f64 / half as f64);
+                let at = totals.partition_point(|&t| f64::from(t) > target);
+                codes.get(at).copied().unwrap_or(MAX_THRESHOLD_CODE)
+            }))
+            .collect();
+        edges.sort_unstable();
+        std::array::from_fn(|b| edges[b])
+    }
+
+    /// Placements a view at threshold code `code` expands (a prefix).
+    pub fn expanded_placements(&self, code: u16) -> u32 {
+        self.placements.partition_point(|p| p.parent_code > code) as u32
+    }
+
+    /// The band of prototype `k` a placement at threshold code `code` is drawn in.
+    pub fn placement_band(&self, k: usize, code: u16) -> u32 {
+        self.prototypes[k]
+            .band_edges
+            .iter()
+            .filter(|&&edge| edge <= code)
+            .count() as u32
+    }
+
+    /// What the compute passes find for one tree at spatial error `e`
+    /// (tree metres) and threshold code `code`: each expanded placement's
+    /// own threshold code (`threshold(e / scale)`), and the per-draw counts
+    /// and longest prefixes.
+    pub fn placed_view(&self, code: u16, e: f32, threshold: fn(f32) -> u16) -> PlacedView {
+        let mut view = PlacedView {
+            expanded: Vec::new(),
+            draws: vec![PlacedDraw::default(); self.prototypes.len() * PLACED_BANDS as usize],
+        };
+        for j in 0..self.expanded_placements(code) {
+            let placement = &self.placements[j as usize];
+            let c = threshold(e / placement.transform.scale);
+            let k = placement.prototype as usize;
+            let p = self.prototype_prefixes(k, c);
+            let draw = &mut view.draws[k * PLACED_BANDS as usize + self.placement_band(k, c) as usize];
+            draw.placements += 1;
+            draw.prisms = draw.prisms.max(p.prisms);
+            draw.after_prisms = draw.after_prisms.max(p.after_prisms);
+            draw.original_by_parent = draw.original_by_parent.max(p.original_by_parent);
+            draw.merged_lines = draw.merged_lines.max(p.merged_lines);
+            view.expanded.push((j, c));
+        }
+        view
+    }
+
+    /// What the vertex shaders draw of a placed tree at threshold code
+    /// `code` and spatial error `e`: the tree's level-2 lines and, for each
+    /// expanded placement, its draw's prefixes filtered by the placement's
+    /// own threshold code, as a [`Cut`] in `record.flatten()`'s ids; and
+    /// how many primitives the draws processed.
+    pub fn placed_drawn(&self, record: &PrototypeRecord, code: u16, e: f32, threshold: fn(f32) -> u16) -> (Cut, u64) {
+        let mut cut = self.drawn(code, e);
+        let tree = self.prefixes(code, e);
+        let mut processed = u64::from(tree.merged_lines);
+        let view = self.placed_view(code, e, threshold);
+        for &(j, c) in &view.expanded {
+            let placement = &self.placements[j as usize];
+            let k = placement.prototype as usize;
+            let prototype = &self.prototypes[k];
+            let draw = view.draws[k * PLACED_BANDS as usize + self.placement_band(k, c) as usize];
+            let name = |local: u32| record.flat_local(placement.source as usize, local);
+            let placed_e = e / placement.transform.scale;
+            let first_needle = prototype.needles[0];
+            for i in 0..draw.prisms {
+                let needle = first_needle + i;
+                if c < self.needle_line_code(needle) {
+                    let sides = metric::prism_sides(
+                        metric::relative_error(placed_e, self.needle_radius(needle)),
+                        self.max_sides,
+                    );
+                    cut.prisms.push((name(self.needle_source[needle as usize]), sides));
+                }
+            }
+            let original: Vec<u32> = if draw.original_from_needles() {
+                let first = first_needle + prototype.needles[1] - draw.after_prisms;
+                (first..first + draw.after_prisms).collect()
+            } else {
+                let first = prototype.original_lines[0] as usize;
+                self.original_lines[first..first + draw.original_by_parent as usize].to_vec()
+            };
+            for needle in original {
+                if self.needle_line_code(needle) <= c && c < self.needle_parent_code(needle) {
+                    cut.original_lines.push(name(self.needle_source[needle as usize]));
+                }
+            }
+            let first_merged = prototype.merged_lines[0] as usize;
+            for m in first_merged..first_merged + draw.merged_lines as usize {
+                let (own, parent) = self.merged_codes(m);
+                if own <= c && c < parent {
+                    cut.merged_lines.push(name(self.merged_source[m]));
+                }
+            }
+            processed += u64::from(draw.prisms + draw.original_lines() + draw.merged_lines);
+        }
+        (cut, processed)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::generate::{GenerateOptions, Species, generate};
+    use crate::model::prototype::PrototypeRecord;
     use crate::model::{BakeOptions, bake};
 
     fn record(needles: usize, seed: u64) -> LodRecord {
@@ -621,5 +1050,100 @@ mod tests {
             CompactSpecies::build(&record),
             Err(CompactError::OutOfRange("needle positions"))
         );
+    }
+
+    fn placed_record(species: Species, needles: usize) -> (PrototypeRecord, LodRecord) {
+        let options = GenerateOptions {
+            seed: 4,
+            target_needles: Some(needles),
+        };
+        let input = crate::generate::generate_prototypes(species, &options);
+        let record = crate::model::bake_prototypes(&input, &BakeOptions::default(), &())
+            .expect("bake")
+            .quantized()
+            .expect("quantized");
+        let flat = record.flatten().expect("flatten");
+        (record, flat)
+    }
+
+    /// Nodes in one cut and not the other, each with its error and its
+    /// parent's error.
+    fn differing_nodes(flat: &LodRecord, a: &Cut, b: &Cut) -> Vec<(u32, f32, f32)> {
+        let nodes = |cut: &Cut| -> std::collections::BTreeSet<u32> {
+            cut.prisms
+                .iter()
+                .map(|p| p.0 | 1 << 31)
+                .chain(cut.original_lines.iter().copied())
+                .chain(cut.merged_lines.iter().copied())
+                .collect()
+        };
+        nodes(a)
+            .symmetric_difference(&nodes(b))
+            .map(|&node| {
+                let node = node & !(1 << 31);
+                (node, flat.node_error(node), flat.parent_error(node))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn placed_layout_stores_prototypes_once_and_draws_the_prototype_cut() {
+        for species in [Species::ScotsPine, Species::NorwaySpruce] {
+            let (record, flat) = placed_record(species, 30_000);
+            let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+            assert_eq!(compact.prototypes.len(), record.prototypes.len(), "{species:?}");
+            assert_eq!(compact.placements.len(), record.placements.len());
+            let stored = compact.needles.len() - compact.tree_counts[0] as usize;
+            assert_eq!(stored as u64, record.prototype_needle_count());
+            assert!(
+                compact
+                    .placements
+                    .windows(2)
+                    .all(|w| w[0].parent_code >= w[1].parent_code)
+            );
+            let ranges = flat.part_ranges();
+            let top = ranges.merged_lines.map_or(ranges.original_lines.max, |r| r.max);
+            let mut e = ranges.cylinders.min * 0.3;
+            let mut worst = 0.0f64;
+            let mut expanded_at_some = false;
+            while e < top * 3.0 {
+                for threshold in [threshold_code as fn(f32) -> u16, shader_threshold_code] {
+                    let code = threshold(e);
+                    let (drawn, processed) = compact.placed_drawn(&record, code, e, threshold);
+                    let coverage = flat.coverage(&drawn);
+                    assert!(
+                        coverage.iter().all(|&c| c == 1),
+                        "{species:?} e = {e}: a needle not covered once"
+                    );
+                    // The same cut as the record's, but for nodes whose
+                    // interval ends within a code step or two of `e`.
+                    let expected = record.cut(e).sorted();
+                    let drawn = drawn.sorted();
+                    for (node, own, parent) in differing_nodes(&flat, &drawn, &expected) {
+                        let near = |x: f32| (x / e - 1.0).abs() < 2e-3;
+                        assert!(
+                            near(own) || near(parent),
+                            "{species:?} e = {e}: node {node} [{own}, {parent})"
+                        );
+                    }
+                    let primitives =
+                        (drawn.prisms.len() + drawn.original_lines.len() + drawn.merged_lines.len()) as f64;
+                    worst = worst.max(processed as f64 / primitives.max(1.0));
+                    expanded_at_some |= compact.expanded_placements(code) > 0;
+                }
+                e *= 1.17;
+            }
+            assert!(expanded_at_some);
+            assert!(worst <= 2.0, "{species:?}: processed / drawn = {worst}");
+        }
+    }
+
+    #[test]
+    fn unshared_prototypes_get_the_flat_layout() {
+        let flat = record(500, 3);
+        let prototypes = PrototypeRecord::from_flat(&flat).unwrap();
+        let compact = CompactSpecies::build_placed(&prototypes, &flat).unwrap();
+        assert_eq!(compact, CompactSpecies::build(&flat).unwrap());
+        assert!(compact.prototypes.is_empty() && compact.placements.is_empty());
     }
 }

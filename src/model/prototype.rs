@@ -386,8 +386,9 @@ impl PrototypeRecord {
         self.tree_parent[node as usize]
     }
 
-    /// Flattened node id of local node `node` of placement `p`.
-    fn flat_local(&self, placement: usize, node: u32) -> u32 {
+    /// Flattened node id of local node `node` of placement `p` (see the
+    /// module docs for both numberings).
+    pub fn flat_local(&self, placement: usize, node: u32) -> u32 {
         let n = self.prototypes[self.placements[placement].prototype as usize]
             .needles
             .len() as u32;
@@ -398,8 +399,9 @@ impl PrototypeRecord {
         }
     }
 
-    /// Flattened node id of level-2 node `node`.
-    fn flat_tree_node(&self, node: u32) -> u32 {
+    /// Flattened node id of level-2 node `node` (a placement's root line
+    /// for `node < placements`).
+    pub fn flat_tree_node(&self, node: u32) -> u32 {
         let p_count = self.placements.len() as u32;
         if node < p_count {
             let prototype = &self.prototypes[self.placements[node as usize].prototype as usize];
