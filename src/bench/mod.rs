@@ -400,7 +400,7 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
         std::hint::black_box(decode_record(std::hint::black_box(&bytes)).ok());
     }) / 1e3;
     let build_ms = time_us(|| {
-        std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record).ok());
+        std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record, None).ok());
     }) / 1e3;
     let mesh_path = crate::model::gpu_layout::gpu_bytes(&record).total();
     let gpu = compact_gpu_bytes(&record)?;

@@ -67,6 +67,7 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
             } else {
                 RenderPath::Meshes
             },
+            ..ConiferLodSettings::default()
         };
     }
     let target = renderer.render_target(width, height);

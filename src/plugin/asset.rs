@@ -7,7 +7,7 @@ use crate::model::gpu_layout::{
     wood_segment_error,
 };
 use crate::model::prism::{TriangleMesh, append_wood_segment};
-use crate::model::{LodRecord, RecordError, WoodSegment, decode_record};
+use crate::model::{LodRecord, PrototypeRecord, RecordError, WoodSegment, decode_prototype_record};
 use bevy::asset::io::Reader;
 use bevy::asset::{AssetLoader, LoadContext, RenderAssetUsages};
 use bevy::camera::primitives::Aabb;
@@ -105,8 +105,11 @@ impl AssetLoader for ConiferRecordLoader {
     ) -> Result<ConiferSpecies, ConiferLoadError> {
         let mut bytes = Vec::new();
         reader.read_to_end(&mut bytes).await?;
-        let record = decode_record(&bytes)?;
-        let parts = SpeciesMeshes::build(&record)?;
+        // Shared prototypes stay shared on the compact path; the mesh path
+        // and the CPU-side cut use the flattened tree.
+        let prototypes = decode_prototype_record(&bytes)?;
+        let record = prototypes.flatten().map_err(RecordError::from)?;
+        let parts = SpeciesMeshes::build(&record, Some(&prototypes))?;
         Ok(parts.into_species(record, load_context))
     }
 
@@ -125,8 +128,23 @@ impl ConiferSpecies {
         meshes: &mut Assets<Mesh>,
         buffers: &mut Assets<ShaderBuffer>,
     ) -> Result<Self, ConiferLoadError> {
-        let parts = SpeciesMeshes::build(&record)?;
+        let parts = SpeciesMeshes::build(&record, None)?;
         Ok(parts.into_species(record, &mut (meshes, buffers)))
+    }
+
+    /// A species from a tree of shared prototypes made in code (e.g.
+    /// [`crate::model::bake_prototypes`] of
+    /// [`crate::generate::generate_prototypes`]), as
+    /// [`ConiferSpecies::from_record`]: the compact path keeps its
+    /// prototypes shared.
+    pub fn from_prototype_record(
+        record: &PrototypeRecord,
+        meshes: &mut Assets<Mesh>,
+        buffers: &mut Assets<ShaderBuffer>,
+    ) -> Result<Self, ConiferLoadError> {
+        let flat = record.flatten().map_err(RecordError::from)?;
+        let parts = SpeciesMeshes::build(&flat, Some(record))?;
+        Ok(parts.into_species(flat, &mut (meshes, buffers)))
     }
 }
 
@@ -161,8 +179,9 @@ pub struct SpeciesMeshes {
 }
 
 impl SpeciesMeshes {
-    /// Builds the meshes and buffer of `record`.
-    pub fn build(record: &LodRecord) -> Result<Self, ConiferLoadError> {
+    /// Builds the meshes and buffer of `record`; the compact layout from
+    /// `prototypes` (the same tree before flattening) when given.
+    pub fn build(record: &LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
         let prisms = prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.needle_count()))?;
         let wood = wood_prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.wood.len()))?;
         let lines = line_bands(record, MAX_LINE_BANDS)
@@ -190,7 +209,10 @@ impl SpeciesMeshes {
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
             max_merge_depth: merge_depths(record).into_iter().max().unwrap_or(0),
-            compact: match CompactSpecies::build(record) {
+            compact: match prototypes.map_or_else(
+                || CompactSpecies::build(record),
+                |prototypes| CompactSpecies::build_placed(prototypes, record),
+            ) {
                 Ok(compact) => Some(compact),
                 Err(error) => {
                     warn!("`{}` cannot be drawn by the compact render path: {error}", record.name);

@@ -172,6 +172,13 @@ pub struct ConiferLodSettings {
     pub debug_colors: bool,
     /// How trees are drawn (see [`RenderPath`]).
     pub render_path: RenderPath,
+    /// [`RenderPath::Compact`], trees of shared prototypes: most placements
+    /// one view (a camera, a shadow cascade or face) expands into their
+    /// prototypes' detail over all trees of a species (8 bytes each, twice,
+    /// per view). A tree whose placements do not fit that frame draws its
+    /// coarser cut (its level-2 lines). Default 131,072 (about 100 mature
+    /// trees within full detail of one view).
+    pub max_expanded_placements: u32,
 }
 
 /// How the plugin draws trees.
@@ -201,6 +208,7 @@ impl Default for ConiferLodSettings {
             enabled: true,
             debug_colors: false,
             render_path: RenderPath::default(),
+            max_expanded_placements: 1 << 17,
         }
     }
 }

@@ -62,8 +62,14 @@ struct SpeciesParams {
     wood_line_fade: f32,
     roughness: f32,
     reflectance: f32,
+    // 0 for a flat species
+    placement_count: u32,
+    prototype_count: u32,
+    // needles of the tree's section and the prototypes'
+    total_needle_count: u32,
     padding_a: u32,
     padding_b: u32,
+    padding_c: u32,
 }
 
 struct CullView {
@@ -74,7 +80,8 @@ struct CullView {
     error_slope: f32,
     perspective: u32,
     layers: u32,
-    padding: u32,
+    // expanded placements the view's entry buffers hold
+    entry_capacity: u32,
 }
 
 struct Instance {
@@ -96,6 +103,89 @@ struct InstanceLod {
     spatial_error: f32,
     pixel_error: f32,
     transition: f32,
+}
+
+// A shared prototype of a placed species (`gpu::GpuPrototype`).
+struct Prototype {
+    // needle grid: origin (xyz), step (w)
+    grid: vec4<f32>,
+    needle_first: u32,
+    needle_count: u32,
+    original_first: u32,
+    original_count: u32,
+    merged_first: u32,
+    merged_count: u32,
+    padding_a: u32,
+    padding_b: u32,
+    // lower edges of bands 1…, two 16-bit codes a word
+    band_edges: array<vec4<u32>, 2>,
+}
+
+// Where a prototype stands in the tree (`gpu::GpuPlacement`).
+struct Placement {
+    rotation: vec4<f32>,
+    // translation (xyz), uniform scale (w)
+    translation_scale: vec4<f32>,
+    prototype: u32,
+    // error code of its root line's level-2 parent
+    parent_code: u32,
+    padding_a: u32,
+    padding_b: u32,
+}
+
+// `model::compact::PLACED_BANDS`; the placed parts, each a block of
+// `prototype_count · PLACED_BANDS` draws.
+const PLACED_BANDS: u32 = 16u;
+const PLACED_KINDS: u32 = 3u;
+const PLACED_PRISMS: u32 = 0u;
+const PLACED_ORIGINAL_LINES: u32 = 1u;
+const PLACED_MERGED_LINES: u32 = 2u;
+// An expanded placement's entry: (tree, placement | ENTRY_FROM_NEEDLES | code << 16).
+const ENTRY_PLACEMENT_MASK: u32 = 0x7fffu;
+const ENTRY_FROM_NEEDLES: u32 = 0x8000u;
+const ENTRY_INVALID: u32 = 0xffffffffu;
+// The view's placement counters: a header, then per-draw arrays.
+const COUNTER_TOTAL: u32 = 0u;
+const COUNTER_ENTRIES: u32 = 1u;
+const COUNTER_HEADER: u32 = 4u;
+const ARRAY_COUNT: u32 = 0u;
+const ARRAY_CURSOR: u32 = 1u;
+const ARRAY_PRISMS: u32 = 2u;
+const ARRAY_AFTER_PRISMS: u32 = 3u;
+const ARRAY_BY_PARENT: u32 = 4u;
+const ARRAY_MERGED: u32 = 5u;
+const ARRAY_OFFSET: u32 = 6u;
+const ARRAY_FLAGS: u32 = 7u;
+
+// The band of `prototype` a placement at threshold code `code` is drawn in
+// (`model::compact::CompactSpecies::placement_band`).
+fn placement_band(prototype: Prototype, code: u32) -> u32 {
+    var band = 0u;
+    for (var b = 0u; b < PLACED_BANDS - 1u; b += 1u) {
+        let word = prototype.band_edges[b / 8u][(b / 2u) % 4u];
+        let edge = (word >> (16u * (b % 2u))) & 0xffffu;
+        band += select(0u, 1u, edge <= code);
+    }
+    return band;
+}
+
+// The tree-from-prototype matrix of a placement: rotation · (scale · p) + translation.
+fn placement_matrix(placement: Placement) -> mat4x4<f32> {
+    let q = placement.rotation;
+    let s = placement.translation_scale.w;
+    let x = q.x;
+    let y = q.y;
+    let z = q.z;
+    let w = q.w;
+    let col_x = vec3<f32>(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)) * s;
+    let col_y = vec3<f32>(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)) * s;
+    let col_z = vec3<f32>(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)) * s;
+    return mat4x4<f32>(
+        vec4<f32>(col_x, 0.0),
+        vec4<f32>(col_y, 0.0),
+        vec4<f32>(col_z, 0.0),
+        vec4<f32>(placement.translation_scale.xyz, 1.0),
+    );
 }
 
 struct DrawArgs {

@@ -18,9 +18,10 @@
 }
 #endif
 #import bevy_conifer_lod::compact_types::{
-    Instance, InstanceLod, SpeciesParams,
+    Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
-    instance_world_from_local, log_decode,
+    ENTRY_PLACEMENT_MASK, ENTRY_FROM_NEEDLES,
+    instance_world_from_local, log_decode, placement_matrix,
 }
 
 @group(2) @binding(0) var<uniform> species: SpeciesParams;
@@ -31,6 +32,9 @@
 @group(2) @binding(5) var<storage, read> merged_lines: array<u32>;
 @group(2) @binding(6) var<storage, read> wood_segments: array<vec4<f32>>;
 @group(2) @binding(7) var<storage, read> wood_mesh: array<u32>;
+@group(2) @binding(8) var<storage, read> placements: array<Placement>;
+@group(2) @binding(9) var<storage, read> prototypes: array<Prototype>;
+@group(2) @binding(10) var<storage, read> placed_entries: array<vec2<u32>>;
 
 const PI: f32 = 3.14159265358979;
 const TAU: f32 = 6.28318530717959;
@@ -90,22 +94,22 @@ fn grid_point(grid: vec4<f32>, x: u32, y: u32, z: u32) -> vec3<f32> {
     return grid.xyz + vec3<f32>(f32(x), f32(y), f32(z)) * grid.w;
 }
 
-fn needle_base(k: u32) -> vec3<f32> {
+fn needle_base(grid: vec4<f32>, k: u32) -> vec3<f32> {
     let w = needles[k];
-    return grid_point(species.grid, w.x & 0xffffu, w.x >> 16u, w.y & 0xffffu);
+    return grid_point(grid, w.x & 0xffffu, w.x >> 16u, w.y & 0xffffu);
 }
 
-fn needle_tip(k: u32) -> vec3<f32> {
+fn needle_tip(grid: vec4<f32>, k: u32) -> vec3<f32> {
     let w = needles[k];
-    return grid_point(species.grid, w.y >> 16u, w.z & 0xffffu, w.z >> 16u);
+    return grid_point(grid, w.y >> 16u, w.z & 0xffffu, w.z >> 16u);
 }
 
-fn end_position(reference: u32) -> vec3<f32> {
+fn end_position(grid: vec4<f32>, reference: u32) -> vec3<f32> {
     let k = (reference & 0xffffffu) >> 1u;
     if (reference & 1u) != 0u {
-        return needle_tip(k);
+        return needle_tip(grid, k);
     }
-    return needle_base(k);
+    return needle_base(grid, k);
 }
 
 // Sides of a prism of radius `radius` at spatial error `e`: ⌈π / arccos(1 − e/R)⌉.
@@ -222,9 +226,9 @@ fn base_color(kind: i32, amount: f32, alpha: f32) -> vec4<f32> {
 // A line of equivalent width `width` (metres) as coverage of its one-pixel
 // line: the paper's `T = 2R/e` (`paper_width` is 2R for an original line,
 // e(X) for a merged one), or the width over the pixel size.
-fn line_alpha(lod: InstanceLod, width: f32, paper_width: f32) -> f32 {
+fn line_alpha(lod: InstanceLod, spatial_error: f32, width: f32, paper_width: f32) -> f32 {
     let rule = (lod.code >> LOD_OPACITY_SHIFT) & 3u;
-    let e = max(lod.spatial_error, 1e-12);
+    let e = max(spatial_error, 1e-12);
     if rule == 0u {
         return min(paper_width / e, 1.0);
     }
@@ -241,19 +245,41 @@ fn line_color(color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
 #endif
 }
 
+// Draws of the tree's own parts have one instance, the tree; placed draws
+// one instance per expanded placement, whose entry names its tree,
+// placement and threshold code. Either way the vertex works in the frame
+// of what it draws (the tree, or the prototype), at that frame's error.
 @vertex
 fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance_index: u32) -> VertexOutput {
-    let instance = instances[instance_index];
-    let lod = instance_lods[instance_index];
+#ifdef CONIFER_PLACED
+    let entry = placed_entries[instance_index];
+    let tree = entry.x;
+    let placement = placements[entry.y & ENTRY_PLACEMENT_MASK];
+    let lod = instance_lods[tree];
+    let code = entry.y >> 16u;
+    let original_from_needles = (entry.y & ENTRY_FROM_NEEDLES) != 0u;
+    let spatial_error = lod.spatial_error / placement.translation_scale.w;
+    let world_from_local = instance_world_from_local(instances[tree]) * placement_matrix(placement);
+    let grid = prototypes[placement.prototype].grid;
+    // Shadow hash: the same per placement every frame.
+    let hash_tree = tree ^ ((entry.y & ENTRY_PLACEMENT_MASK) << 9u);
+#else
+    let tree = instance_index;
+    let lod = instance_lods[tree];
     let code = lod.code & LOD_CODE_MASK;
-    let world_from_local = instance_world_from_local(instance);
+    let original_from_needles = (lod.code & LOD_ORIGINAL_FROM_NEEDLES) != 0u;
+    let spatial_error = lod.spatial_error;
+    let world_from_local = instance_world_from_local(instances[tree]);
+    let grid = species.grid;
+    let hash_tree = tree;
+#endif
 
 #ifdef CONIFER_PRISMS
     let k = vertex_index / species.prism_vertices;
     let radius = 0.5 * log_decode(needles[k].w & 0xffffu);
-    let sides = prism_sides(radius, lod.spatial_error);
+    let sides = prism_sides(radius, spatial_error);
     let corner = prism_corner(vertex_index % species.prism_vertices);
-    let p = prism_vertex(needle_base(k), needle_tip(k), radius, radius, sides, corner);
+    let p = prism_vertex(needle_base(grid, k), needle_tip(grid, k), radius, radius, sides, corner);
     let m = max(species.max_sides, 3u);
     let amount = f32(m - sides) / max(f32(m - 3u), 1.0);
     return finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0));
@@ -263,7 +289,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let s = vertex_index / species.prism_vertices;
     let start = wood_segments[2u * s];
     let end = wood_segments[2u * s + 1u];
-    let sides = prism_sides(max(start.w, end.w), lod.spatial_error);
+    let sides = prism_sides(max(start.w, end.w), spatial_error);
     let corner = prism_corner(vertex_index % species.prism_vertices);
     let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner);
     let m = max(species.max_sides, 3u);
@@ -277,7 +303,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #ifdef CONIFER_ORIGINAL_LINES
     let line = vertex_index / 2u;
     var k = line;
-    if (lod.code & LOD_ORIGINAL_FROM_NEEDLES) == 0u {
+    if !original_from_needles {
         k = original_lines[line];
     }
     let w = needles[k].w;
@@ -286,11 +312,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let width = log_decode(own);
-    let alpha = line_alpha(lod, width, width) * lod.transition;
-    let base = needle_base(k);
-    let tip = needle_tip(k);
+    let alpha = line_alpha(lod, spatial_error, width, width) * lod.transition;
+    let base = needle_base(grid, k);
+    let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return finish_line(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha), k, instance_index));
+    return finish_line(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha), k, hash_tree));
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -303,13 +329,13 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let width = log_decode((a >> 24u) | ((b >> 24u) << 8u));
-    let alpha = line_alpha(lod, width, log_decode(own));
+    let alpha = line_alpha(lod, spatial_error, width, log_decode(own));
     let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
-    let start = end_position(a);
-    let end = end_position(b);
+    let start = end_position(grid, a);
+    let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return finish_line(position, end - start, world_from_local, line_color(base_color(1, amount, alpha), species.needle_count + line, instance_index));
+    return finish_line(position, end - start, world_from_local, line_color(base_color(1, amount, alpha), species.total_needle_count + line, hash_tree));
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -317,9 +343,9 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = wood_segments[2u * s];
     let end = wood_segments[2u * s + 1u];
     let width = start.w + end.w;
-    let alpha = line_alpha(lod, width, width);
+    let alpha = line_alpha(lod, spatial_error, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
-    return finish_line(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, instance_index));
+    return finish_line(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
 #endif
 
 #ifdef CONIFER_WOOD_MESH

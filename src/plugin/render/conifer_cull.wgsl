@@ -2,10 +2,21 @@
 // culling, and the indirect draw arguments of each part: the prefix of each
 // sorted array the tree's cut can use (binary searches). CPU reference:
 // `model::compact::CompactSpecies::prefixes`, `shader_threshold_code`.
+//
+// A species of shared prototypes also expands, per view, the placements
+// whose detail a tree's cut needs (a prefix of the placements sorted by
+// their root's parent code), and draws them instanced, one draw per
+// prototype and band (`cull` → `prepare_dispatch` → `count_placements` →
+// `scan_placements` → `scatter_placements`). CPU reference:
+// `model::compact::CompactSpecies::placed_view`.
 
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, CullView, DrawArgs,
     LOG_LN_MIN, LOG_LN_STEP, MAX_THRESHOLD_CODE, KIND_COUNT,
+    Prototype, Placement, PLACED_BANDS, PLACED_PRISMS, PLACED_ORIGINAL_LINES, PLACED_MERGED_LINES,
+    ENTRY_FROM_NEEDLES, ENTRY_INVALID, COUNTER_TOTAL, COUNTER_ENTRIES, COUNTER_HEADER,
+    ARRAY_COUNT, ARRAY_CURSOR, ARRAY_PRISMS, ARRAY_AFTER_PRISMS, ARRAY_BY_PARENT, ARRAY_MERGED, ARRAY_OFFSET, ARRAY_FLAGS,
+    placement_band,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale,
@@ -21,6 +32,16 @@
 @group(0) @binding(7) var<storage, read_write> instance_lods: array<InstanceLod>;
 @group(0) @binding(8) var<storage, read_write> draw_args: array<DrawArgs>;
 
+@group(1) @binding(0) var<storage, read> placements: array<Placement>;
+@group(1) @binding(1) var<storage, read> prototypes: array<Prototype>;
+@group(1) @binding(2) var<storage, read_write> counters: array<atomic<u32>>;
+@group(1) @binding(3) var<storage, read_write> entries: array<vec2<u32>>;
+@group(1) @binding(4) var<storage, read_write> sorted_entries: array<vec2<u32>>;
+@group(1) @binding(5) var<storage, read_write> placed_args: array<DrawArgs>;
+// Only `prepare_dispatch` binds it: the other passes read it as their
+// indirect dispatch.
+@group(2) @binding(0) var<storage, read_write> dispatch: array<u32>;
+
 fn threshold_code(e: f32) -> u32 {
     if !(e >= 1e-9) {
         return 0u;
@@ -29,10 +50,11 @@ fn threshold_code(e: f32) -> u32 {
     return u32(clamp(steps, 0.0, f32(MAX_THRESHOLD_CODE)));
 }
 
-// Needles whose line-error code is above `code` (they are prisms).
-fn prism_prefix(code: u32) -> u32 {
-    var lo = 0u;
-    var hi = species.needle_count;
+// Needles of `[first, first + count)` whose line-error code is above
+// `code` (they are prisms), counted from `first`.
+fn prism_prefix_in(first: u32, count: u32, code: u32) -> u32 {
+    var lo = first;
+    var hi = first + count;
     while lo < hi {
         let mid = (lo + hi) / 2u;
         if (needles[mid].w & 0xffffu) > code {
@@ -41,12 +63,12 @@ fn prism_prefix(code: u32) -> u32 {
             hi = mid;
         }
     }
-    return lo;
+    return lo - first;
 }
 
-fn original_prefix(code: u32) -> u32 {
-    var lo = 0u;
-    var hi = species.original_line_count;
+fn original_prefix_in(first: u32, count: u32, code: u32) -> u32 {
+    var lo = first;
+    var hi = first + count;
     while lo < hi {
         let mid = (lo + hi) / 2u;
         if (needles[original_lines[mid]].w >> 16u) > code {
@@ -55,15 +77,43 @@ fn original_prefix(code: u32) -> u32 {
             hi = mid;
         }
     }
-    return lo;
+    return lo - first;
 }
 
-fn merged_prefix(code: u32) -> u32 {
-    var lo = 0u;
-    var hi = species.merged_line_count;
+fn merged_prefix_in(first: u32, count: u32, code: u32) -> u32 {
+    var lo = first;
+    var hi = first + count;
     while lo < hi {
         let mid = (lo + hi) / 2u;
         if (merged_lines[3u * mid + 2u] >> 16u) > code {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo - first;
+}
+
+fn prism_prefix(code: u32) -> u32 {
+    return prism_prefix_in(0u, species.needle_count, code);
+}
+
+fn original_prefix(code: u32) -> u32 {
+    return original_prefix_in(0u, species.original_line_count, code);
+}
+
+fn merged_prefix(code: u32) -> u32 {
+    return merged_prefix_in(0u, species.merged_line_count, code);
+}
+
+// Placements whose root's parent code is above `code`: the ones a tree at
+// `code` expands.
+fn expanded_prefix(code: u32) -> u32 {
+    var lo = 0u;
+    var hi = species.placement_count;
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        if placements[mid].parent_code > code {
             lo = mid + 1u;
         } else {
             hi = mid;
@@ -147,7 +197,10 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     if species.lod_enabled == 0u {
         e = 0.0;
     }
-    let code = threshold_code(e);
+    var code = threshold_code(e);
+    if species.placement_count > 0u {
+        code = expand_placements(i, code);
+    }
     let prisms = prism_prefix(code);
     let by_parent = original_prefix(code);
     let after_prisms = species.needle_count - prisms;
@@ -176,4 +229,138 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     // Wood lines: the segments after the prisms, up to the fade.
     write_args(KIND_WOOD_LINES, i, 2u * (wood_lines - min(wood_prisms, wood_lines)), 2u * min(wood_prisms, wood_lines));
     write_args(KIND_WOOD_MESH, i, species.wood_index_count, 0u);
+}
+
+// Reserves tree `tree`'s expanded placements in the view's entry list and
+// writes them; returns the tree's threshold code. A tree whose placements
+// do not fit falls back to the code that expands none (its coarser cut
+// from the level-2 lines) and marks the part of its range that fits invalid.
+fn expand_placements(tree: u32, code: u32) -> u32 {
+    let expanded = expanded_prefix(code);
+    if expanded == 0u {
+        return code;
+    }
+    let base = atomicAdd(&counters[COUNTER_TOTAL], expanded);
+    let capacity = cull_view.entry_capacity;
+    if base + expanded > capacity || base + expanded < base {
+        for (var j = base; j < min(base + expanded, capacity); j += 1u) {
+            entries[j] = vec2<u32>(ENTRY_INVALID, ENTRY_INVALID);
+        }
+        return max(code, min(placements[0].parent_code, MAX_THRESHOLD_CODE));
+    }
+    for (var j = 0u; j < expanded; j += 1u) {
+        entries[base + j] = vec2<u32>(tree, j);
+    }
+    return code;
+}
+
+fn counter_index(array_index: u32, draw: u32) -> u32 {
+    return COUNTER_HEADER + array_index * species.prototype_count * PLACED_BANDS + draw;
+}
+
+// One thread: the entry count and the indirect dispatch over the entries.
+@compute @workgroup_size(1)
+fn prepare_dispatch() {
+    let entries_written = min(atomicLoad(&counters[COUNTER_TOTAL]), cull_view.entry_capacity);
+    atomicStore(&counters[COUNTER_ENTRIES], entries_written);
+    dispatch[0] = (entries_written + 63u) / 64u;
+    dispatch[1] = 1u;
+    dispatch[2] = 1u;
+}
+
+// The draw (prototype · PLACED_BANDS + band) of an entry whose placement
+// has threshold code `code`.
+fn entry_draw(placement: Placement, code: u32) -> u32 {
+    return placement.prototype * PLACED_BANDS + placement_band(prototypes[placement.prototype], code);
+}
+
+// Per entry: its placement's threshold code (the tree's error over the
+// placement's scale), its draw's count and longest prefixes.
+@compute @workgroup_size(64)
+fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= atomicLoad(&counters[COUNTER_ENTRIES]) {
+        return;
+    }
+    let entry = entries[i];
+    if entry.x == ENTRY_INVALID {
+        return;
+    }
+    let placement = placements[entry.y];
+    let e = instance_lods[entry.x].spatial_error / placement.translation_scale.w;
+    let code = threshold_code(e);
+    let prototype = prototypes[placement.prototype];
+    let draw = entry_draw(placement, code);
+    let prisms = prism_prefix_in(prototype.needle_first, prototype.needle_count, code);
+    atomicAdd(&counters[counter_index(ARRAY_COUNT, draw)], 1u);
+    atomicMax(&counters[counter_index(ARRAY_PRISMS, draw)], prisms);
+    atomicMax(&counters[counter_index(ARRAY_AFTER_PRISMS, draw)], prototype.needle_count - prisms);
+    atomicMax(
+        &counters[counter_index(ARRAY_BY_PARENT, draw)],
+        original_prefix_in(prototype.original_first, prototype.original_count, code),
+    );
+    atomicMax(
+        &counters[counter_index(ARRAY_MERGED, draw)],
+        merged_prefix_in(prototype.merged_first, prototype.merged_count, code),
+    );
+    entries[i] = vec2<u32>(entry.x, entry.y | (code << 16u));
+}
+
+fn write_placed(kind: u32, draw: u32, vertex_count: u32, instance_count: u32, first_vertex: u32, first_instance: u32) {
+    let slot = kind * species.prototype_count * PLACED_BANDS + draw;
+    let drawn = vertex_count > 0u && instance_count > 0u;
+    placed_args[slot].vertex_count = select(0u, vertex_count, drawn);
+    placed_args[slot].instance_count = select(0u, instance_count, drawn);
+    placed_args[slot].first_vertex = first_vertex;
+    placed_args[slot].first_instance = first_instance;
+}
+
+// One thread: each draw's first entry (a running sum of the counts) and its
+// indirect arguments; original lines come from the needles after the
+// fewest prisms or from the parent-sorted order, whichever is shorter.
+@compute @workgroup_size(1)
+fn scan_placements() {
+    var offset = 0u;
+    let draws = species.prototype_count * PLACED_BANDS;
+    for (var draw = 0u; draw < draws; draw += 1u) {
+        let prototype = prototypes[draw / PLACED_BANDS];
+        let count = atomicLoad(&counters[counter_index(ARRAY_COUNT, draw)]);
+        let prisms = atomicLoad(&counters[counter_index(ARRAY_PRISMS, draw)]);
+        let after_prisms = atomicLoad(&counters[counter_index(ARRAY_AFTER_PRISMS, draw)]);
+        let by_parent = atomicLoad(&counters[counter_index(ARRAY_BY_PARENT, draw)]);
+        let merged = atomicLoad(&counters[counter_index(ARRAY_MERGED, draw)]);
+        atomicStore(&counters[counter_index(ARRAY_OFFSET, draw)], offset);
+        write_placed(
+            PLACED_PRISMS, draw, prisms * species.prism_vertices, count,
+            prototype.needle_first * species.prism_vertices, offset,
+        );
+        if after_prisms < by_parent {
+            atomicStore(&counters[counter_index(ARRAY_FLAGS, draw)], ENTRY_FROM_NEEDLES);
+            let first = prototype.needle_first + prototype.needle_count - after_prisms;
+            write_placed(PLACED_ORIGINAL_LINES, draw, 2u * after_prisms, count, 2u * first, offset);
+        } else {
+            write_placed(PLACED_ORIGINAL_LINES, draw, 2u * by_parent, count, 2u * prototype.original_first, offset);
+        }
+        write_placed(PLACED_MERGED_LINES, draw, 2u * merged, count, 2u * prototype.merged_first, offset);
+        offset += count;
+    }
+}
+
+// Per entry: its slot in its draw's range of the sorted list.
+@compute @workgroup_size(64)
+fn scatter_placements(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= atomicLoad(&counters[COUNTER_ENTRIES]) {
+        return;
+    }
+    let entry = entries[i];
+    if entry.x == ENTRY_INVALID {
+        return;
+    }
+    let placement = placements[entry.y & 0xffffu];
+    let draw = entry_draw(placement, entry.y >> 16u);
+    let slot = atomicLoad(&counters[counter_index(ARRAY_OFFSET, draw)])
+        + atomicAdd(&counters[counter_index(ARRAY_CURSOR, draw)], 1u);
+    let flags = atomicLoad(&counters[counter_index(ARRAY_FLAGS, draw)]);
+    sorted_entries[slot] = vec2<u32>(entry.x, entry.y | flags);
 }

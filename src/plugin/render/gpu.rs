@@ -1,11 +1,12 @@
 //! The compact render path's GPU structs, mirrors of
 //! `compact_types.wgsl` (plain `#[repr(C)]`, uploaded as bytes).
 
-use crate::model::compact::CompactSpecies;
+use crate::model::compact::{CompactPlacement, CompactPrototype, CompactSpecies, PLACED_BANDS};
 use bytemuck::{Pod, Zeroable};
 
-/// Parts of a species, each drawn by one multi-draw-indirect (one draw per
-/// tree) from its own block of indirect arguments.
+/// Parts of a species, each drawn by one multi-draw-indirect from its own
+/// block of indirect arguments: one draw per tree for the tree's own
+/// parts, one instanced draw per prototype and band for the placed ones.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PartKind {
     /// Needles as prisms (opaque).
@@ -20,29 +21,49 @@ pub enum PartKind {
     WoodLines,
     /// The imported wood mesh (opaque).
     WoodMesh,
+    /// Expanded placements' needles as prisms (opaque).
+    PlacedPrisms,
+    /// Expanded placements' original lines (blended).
+    PlacedOriginalLines,
+    /// Expanded placements' level-1 merged lines (blended).
+    PlacedMergedLines,
 }
 
 impl PartKind {
     /// Every part, in the order of the indirect-argument blocks.
-    pub const ALL: [PartKind; 6] = [
+    pub const ALL: [PartKind; 9] = [
         PartKind::Prisms,
         PartKind::OriginalLines,
         PartKind::MergedLines,
         PartKind::WoodPrisms,
         PartKind::WoodLines,
         PartKind::WoodMesh,
+        PartKind::PlacedPrisms,
+        PartKind::PlacedOriginalLines,
+        PartKind::PlacedMergedLines,
     ];
 
-    /// Index of the part's block of indirect arguments (`KIND_*` in WGSL).
+    /// Index of the part in [`PartKind::ALL`]; for the tree's own parts,
+    /// of its block of per-tree indirect arguments (`KIND_*` in WGSL).
     pub fn index(self) -> usize {
         self as usize
+    }
+
+    /// For a placed part, the index of its block of per-draw arguments
+    /// (`PLACED_*` in WGSL).
+    pub fn placed_index(self) -> Option<usize> {
+        self.index().checked_sub(TREE_PART_KINDS)
     }
 
     /// Whether the part is drawn as blended lines.
     pub fn is_lines(self) -> bool {
         matches!(
             self,
-            PartKind::OriginalLines | PartKind::MergedLines | PartKind::WoodLines
+            PartKind::OriginalLines
+                | PartKind::MergedLines
+                | PartKind::WoodLines
+                | PartKind::PlacedOriginalLines
+                | PartKind::PlacedMergedLines
         )
     }
 
@@ -55,23 +76,35 @@ impl PartKind {
             PartKind::WoodPrisms => "CONIFER_WOOD_PRISMS",
             PartKind::WoodLines => "CONIFER_WOOD_LINES",
             PartKind::WoodMesh => "CONIFER_WOOD_MESH",
+            PartKind::PlacedPrisms => "CONIFER_PRISMS",
+            PartKind::PlacedOriginalLines => "CONIFER_ORIGINAL_LINES",
+            PartKind::PlacedMergedLines => "CONIFER_MERGED_LINES",
         }
     }
 
     /// Whether `species` has anything this part could draw.
     pub fn present_in(self, species: &CompactSpecies) -> bool {
         match self {
-            PartKind::Prisms => !species.needles.is_empty(),
-            PartKind::OriginalLines => !species.original_lines.is_empty(),
-            PartKind::MergedLines => !species.merged_lines.is_empty(),
+            PartKind::Prisms => species.tree_counts[0] > 0 && species.prototypes.is_empty(),
+            PartKind::OriginalLines => species.tree_counts[1] > 0,
+            PartKind::MergedLines => species.tree_counts[2] > 0,
             PartKind::WoodPrisms | PartKind::WoodLines => !species.wood_segments.is_empty(),
             PartKind::WoodMesh => !species.wood_indices.is_empty(),
+            PartKind::PlacedPrisms => !species.placements.is_empty(),
+            PartKind::PlacedOriginalLines => species.prototypes.iter().any(|p| p.needles[1] > 1),
+            PartKind::PlacedMergedLines => species.prototypes.iter().any(|p| p.merged_lines[1] > 0),
         }
     }
 }
 
-/// `KIND_COUNT` in WGSL.
+/// Every part (the phase keys of a species).
 pub const PART_KINDS: usize = PartKind::ALL.len();
+
+/// The tree's own parts, drawn once per tree (`KIND_COUNT` in WGSL).
+pub const TREE_PART_KINDS: usize = 6;
+
+/// The placed parts, drawn once per prototype and band (`PLACED_KINDS` in WGSL).
+pub const PLACED_PART_KINDS: usize = PART_KINDS - TREE_PART_KINDS;
 
 /// Instance flag: drawn at all (the tree's inherited visibility).
 pub const FLAG_VISIBLE: u32 = 1;
@@ -148,8 +181,14 @@ pub struct SpeciesParams {
     pub roughness: f32,
     /// Reflectance.
     pub reflectance: f32,
+    /// Placements (0 for a flat species).
+    pub placement_count: u32,
+    /// Prototypes (0 for a flat species).
+    pub prototype_count: u32,
+    /// Needles of the tree's own section and the prototypes'.
+    pub total_needle_count: u32,
     /// Padding to 16 bytes.
-    pub padding: [u32; 2],
+    pub padding: [u32; 3],
 }
 
 /// A view as the compute pass sees it (`CullView` in WGSL), 128 bytes.
@@ -166,8 +205,8 @@ pub struct CullView {
     pub perspective: u32,
     /// Render layers 0–31 the view sees.
     pub layers: u32,
-    /// Padding.
-    pub padding: u32,
+    /// Expanded placements the view's entry buffers hold.
+    pub entry_capacity: u32,
 }
 
 /// What the compute pass writes per tree and view (`InstanceLod`), 16 bytes.
@@ -181,3 +220,81 @@ pub fn prism_vertices(max_sides: u8) -> u32 {
     let m = u32::from(max_sides.max(3));
     6 * m + 6 * (m - 2)
 }
+
+/// A prototype of a placed species (`Prototype` in WGSL), 80 bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct GpuPrototype {
+    /// Its needle grid: origin, step.
+    pub grid: [f32; 4],
+    /// First entry and length of its needles, original-line order and
+    /// merged lines.
+    pub sections: [u32; 6],
+    /// Padding.
+    pub padding: [u32; 2],
+    /// Band edges, two 16-bit codes a word (the last half-word unused).
+    pub band_edges: [u32; PLACED_BANDS as usize / 2],
+}
+
+impl GpuPrototype {
+    /// The GPU form of `prototype`.
+    pub fn new(prototype: &CompactPrototype) -> Self {
+        let mut band_edges = [u32::from(u16::MAX) << 16; PLACED_BANDS as usize / 2];
+        for (b, &edge) in prototype.band_edges.iter().enumerate() {
+            let word = &mut band_edges[b / 2];
+            let shift = 16 * (b % 2);
+            *word = (*word & !(0xffff << shift)) | u32::from(edge) << shift;
+        }
+        let [n0, n1] = prototype.needles;
+        let [o0, o1] = prototype.original_lines;
+        let [m0, m1] = prototype.merged_lines;
+        Self {
+            grid: prototype.grid.origin.extend(prototype.grid.step).to_array(),
+            sections: [n0, n1, o0, o1, m0, m1],
+            padding: [0; 2],
+            band_edges,
+        }
+    }
+}
+
+/// A placement (`Placement` in WGSL), 48 bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct GpuPlacement {
+    /// Rotation quaternion (x, y, z, w).
+    pub rotation: [f32; 4],
+    /// Translation (xyz), uniform scale (w).
+    pub translation_scale: [f32; 4],
+    /// Prototype index.
+    pub prototype: u32,
+    /// Parent error code of its root line.
+    pub parent_code: u32,
+    /// Padding.
+    pub padding: [u32; 2],
+}
+
+impl GpuPlacement {
+    /// The GPU form of `placement`.
+    pub fn new(placement: &CompactPlacement) -> Self {
+        let t = &placement.transform;
+        Self {
+            rotation: t.rotation.to_array(),
+            translation_scale: t.translation.extend(t.scale).to_array(),
+            prototype: placement.prototype,
+            parent_code: u32::from(placement.parent_code),
+            padding: [0; 2],
+        }
+    }
+}
+
+/// One expanded placement of one view (`vec2<u32>` in WGSL), 8 bytes: its
+/// tree, then the placement index (15 bits), the original-lines-from-needles
+/// flag and its threshold code (16 bits).
+pub const PLACED_ENTRY_BYTES: u64 = 8;
+
+/// Words of a view's placement counters before the per-draw arrays.
+pub const PLACED_COUNTER_HEADER: u64 = 4;
+
+/// Per-draw arrays of a view's placement counters (count, cursor, four
+/// longest prefixes, offset, flags).
+pub const PLACED_COUNTER_ARRAYS: u64 = 8;

@@ -27,10 +27,13 @@ pub mod gpu;
 
 use self::gpu::{
     CullView, DRAW_ARGS_BYTES, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance,
-    INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS, PartKind, SpeciesParams, prism_vertices,
+    GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS,
+    PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
+    prism_vertices,
 };
 use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath};
 use crate::model::compact::CompactSpecies;
+use crate::model::compact::PLACED_BANDS;
 use crate::model::gpu_layout::WOOD_LINE_FADE;
 use bevy::asset::{embedded_asset, embedded_path};
 use bevy::camera::visibility::RenderLayers;
@@ -304,17 +307,21 @@ struct SpeciesBuffers {
     merged_lines: Buffer,
     wood_segments: Buffer,
     wood_mesh: Buffer,
+    placements: Buffer,
+    prototypes: Buffer,
 }
 
 impl SpeciesBuffers {
     /// The species' shared arrays (not its trees).
-    fn arrays(&self) -> [&Buffer; 5] {
+    fn arrays(&self) -> [&Buffer; 7] {
         [
             &self.needles,
             &self.original_lines,
             &self.merged_lines,
             &self.wood_segments,
             &self.wood_mesh,
+            &self.placements,
+            &self.prototypes,
         ]
     }
 
@@ -344,6 +351,8 @@ pub struct RenderCompactSpecies {
     /// Phase keys of species that went away, to take out of the phases
     /// (by `queue_compact`, then `queue_compact_shadows`, which clears it).
     retired: Vec<MainEntity>,
+    /// [`ConiferLodSettings::max_expanded_placements`].
+    max_expanded_placements: u32,
 }
 
 /// GPU memory the compact path allocated, summed from the sizes of the
@@ -380,9 +389,9 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         wood_grid: compact.wood_grid.origin.extend(compact.wood_grid.step).to_array(),
         needle_color: material.needle_color,
         wood_color: material.wood_color,
-        needle_count: compact.needles.len() as u32,
-        original_line_count: compact.original_lines.len() as u32,
-        merged_line_count: compact.merged_lines.len() as u32,
+        needle_count: compact.tree_counts[0],
+        original_line_count: compact.tree_counts[1],
+        merged_line_count: compact.tree_counts[2],
         wood_segment_count: compact.wood_segments.len() as u32,
         wood_index_count: compact.wood_indices.len() as u32,
         instance_count: 0,
@@ -401,7 +410,10 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         wood_line_fade: WOOD_LINE_FADE,
         roughness: material.roughness,
         reflectance: material.reflectance,
-        padding: [0; 2],
+        placement_count: compact.placements.len() as u32,
+        prototype_count: compact.prototypes.len() as u32,
+        total_needle_count: compact.needles.len() as u32,
+        padding: [0; 3],
     }
 }
 
@@ -414,6 +426,7 @@ fn extract_compact(
     mut render: ResMut<RenderCompactSpecies>,
 ) {
     let render = &mut *render;
+    render.max_expanded_placements = settings.max_expanded_placements;
     let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
     for &id in render.species.keys() {
         if !instances.species.contains_key(&id) || species_assets.get(id).is_none() {
@@ -481,10 +494,11 @@ fn initial_capacity(len: usize) -> usize {
     len.next_power_of_two().max(64)
 }
 
-/// A storage buffer holding `bytes` (at least 16 bytes: a binding cannot be empty).
+/// A storage buffer holding `bytes` (at least 128 bytes: a binding cannot
+/// be empty, nor shorter than one element of its array).
 fn storage_buffer(device: &RenderDevice, label: &'static str, bytes: &[u8]) -> Buffer {
     let mut contents = bytes.to_vec();
-    contents.resize(contents.len().max(16).next_multiple_of(4), 0);
+    contents.resize(contents.len().max(128).next_multiple_of(4), 0);
     device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
         label: Some(label),
         contents: &contents,
@@ -541,6 +555,16 @@ fn prepare_species(
                 merged_lines: storage_buffer(&device, "conifer merged lines", bytemuck::cast_slice(&c.merged_lines)),
                 wood_segments: storage_buffer(&device, "conifer wood segments", bytemuck::cast_slice(&c.wood_segments)),
                 wood_mesh: storage_buffer(&device, "conifer wood mesh", bytemuck::cast_slice(&wood_mesh)),
+                placements: storage_buffer(
+                    &device,
+                    "conifer placements",
+                    bytemuck::cast_slice(&c.placements.iter().map(GpuPlacement::new).collect::<Vec<_>>()),
+                ),
+                prototypes: storage_buffer(
+                    &device,
+                    "conifer prototypes",
+                    bytemuck::cast_slice(&c.prototypes.iter().map(GpuPrototype::new).collect::<Vec<_>>()),
+                ),
             });
             species.instances_dirty = true;
         }
@@ -568,14 +592,73 @@ struct ViewSpecies {
     args: Buffer,
     capacity: usize,
     instance_count: u32,
+    placed: PlacedViewBuffers,
     cull_bind_group: BindGroup,
+    /// The placed passes' group and `prepare_dispatch`'s.
+    placed_bind_groups: [BindGroup; 2],
     draw_bind_group: BindGroup,
     used: bool,
 }
 
 impl ViewSpecies {
-    fn buffers(&self) -> [&Buffer; 3] {
-        [&self.cull_view, &self.lods, &self.args]
+    fn buffers(&self) -> [&Buffer; 8] {
+        let p = &self.placed;
+        [
+            &self.cull_view,
+            &self.lods,
+            &self.args,
+            &p.counters,
+            &p.entries,
+            &p.sorted,
+            &p.args,
+            &p.dispatch,
+        ]
+    }
+}
+
+/// Per view and placed species: the expanded placements (as found, and
+/// sorted by draw), their counters, and the instanced draws' arguments
+/// (16-byte stand-ins for a flat species).
+struct PlacedViewBuffers {
+    counters: Buffer,
+    entries: Buffer,
+    sorted: Buffer,
+    args: Buffer,
+    dispatch: Buffer,
+    /// Entries `entries` and `sorted` hold.
+    entry_capacity: u32,
+    /// Draws of each placed part (prototypes × bands).
+    draws: u32,
+}
+
+impl PlacedViewBuffers {
+    fn new(device: &RenderDevice, entry_capacity: u32, draws: u32) -> Self {
+        let storage = BufferUsages::STORAGE;
+        let entry_bytes = u64::from(entry_capacity) * PLACED_ENTRY_BYTES;
+        Self {
+            counters: empty_buffer(
+                device,
+                "conifer placement counters",
+                4 * (PLACED_COUNTER_HEADER + PLACED_COUNTER_ARRAYS * u64::from(draws)),
+                storage,
+            ),
+            entries: empty_buffer(device, "conifer placement entries", entry_bytes, storage),
+            sorted: empty_buffer(device, "conifer sorted placement entries", entry_bytes, storage),
+            args: empty_buffer(
+                device,
+                "conifer placed draws",
+                u64::from(draws) * PLACED_PART_KINDS as u64 * DRAW_ARGS_BYTES,
+                storage | BufferUsages::INDIRECT,
+            ),
+            dispatch: empty_buffer(
+                device,
+                "conifer placement dispatch",
+                16,
+                storage | BufferUsages::INDIRECT,
+            ),
+            entry_capacity,
+            draws,
+        }
     }
 }
 
@@ -594,7 +677,11 @@ pub struct CompactPipeline {
     shader: Handle<Shader>,
     draw_layout: BindGroupLayoutDescriptor,
     cull_layout: BindGroupLayoutDescriptor,
-    cull_pipeline: CachedComputePipelineId,
+    placed_layout: BindGroupLayoutDescriptor,
+    dispatch_layout: BindGroupLayoutDescriptor,
+    /// `cull`, then the placed passes: `prepare_dispatch`,
+    /// `count_placements`, `scan_placements`, `scatter_placements`.
+    cull_pipelines: [CachedComputePipelineId; 5],
     no_vertices: MeshVertexBufferLayoutRef,
     /// Whether indirect draws may start at an instance other than 0 (one
     /// draw per tree needs it).
@@ -650,6 +737,9 @@ fn init_compact_pipeline(
                 read(),
                 read(),
                 read(),
+                read(),
+                read(),
+                read(),
             ),
         ),
     );
@@ -670,13 +760,44 @@ fn init_compact_pipeline(
             ),
         ),
     );
+    let placed_layout = BindGroupLayoutDescriptor::new(
+        "conifer compact placements",
+        &BindGroupLayoutEntries::sequential(
+            ShaderStages::COMPUTE,
+            (
+                read(),
+                read(),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+                storage_buffer_sized(false, None),
+            ),
+        ),
+    );
+    let dispatch_layout = BindGroupLayoutDescriptor::new(
+        "conifer compact placement dispatch",
+        &BindGroupLayoutEntries::single(ShaderStages::COMPUTE, storage_buffer_sized(false, None)),
+    );
     let cull_shader = asset_server.load(shader_path("conifer_cull.wgsl"));
-    let cull_pipeline = pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
-        label: Some("conifer compact cull".into()),
-        layout: vec![cull_layout.clone()],
-        shader: cull_shader,
-        entry_point: Some("cull".into()),
-        ..default()
+    let cull_pipelines = [
+        "cull",
+        "prepare_dispatch",
+        "count_placements",
+        "scan_placements",
+        "scatter_placements",
+    ]
+    .map(|entry_point| {
+        pipeline_cache.queue_compute_pipeline(ComputePipelineDescriptor {
+            label: Some(format!("conifer compact {entry_point}").into()),
+            layout: if entry_point == "prepare_dispatch" {
+                vec![cull_layout.clone(), placed_layout.clone(), dispatch_layout.clone()]
+            } else {
+                vec![cull_layout.clone(), placed_layout.clone()]
+            },
+            shader: cull_shader.clone(),
+            entry_point: Some(entry_point.into()),
+            ..default()
+        })
     });
     // The mesh pipeline builds the view layout and shader definitions from
     // a mesh layout; ours pulls its vertices, so its vertex buffers are
@@ -690,7 +811,9 @@ fn init_compact_pipeline(
         shader: asset_server.load(shader_path("conifer_compact.wgsl")),
         draw_layout,
         cull_layout,
-        cull_pipeline,
+        placed_layout,
+        dispatch_layout,
+        cull_pipelines,
         no_vertices,
         supported,
         split_depth_only_multi_draws,
@@ -724,6 +847,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
         if key.kind.is_lines() {
             defs.push("CONIFER_LINES".into());
         }
+        if key.kind.placed_index().is_some() {
+            defs.push("CONIFER_PLACED".into());
+        }
         descriptor.vertex.shader_defs.extend(defs.iter().cloned());
         if let Some(fragment) = descriptor.fragment.as_mut() {
             fragment.shader = self.shader.clone();
@@ -744,7 +870,10 @@ impl CompactPipeline {
         let Some((view_layout, empty_layout)) = self.prepass_layouts.clone() else {
             return RenderPipelineDescriptor::default();
         };
-        let defs: Vec<ShaderDefVal> = vec![kind.shader_def().into(), "CONIFER_SHADOW".into()];
+        let mut defs: Vec<ShaderDefVal> = vec![kind.shader_def().into(), "CONIFER_SHADOW".into()];
+        if kind.placed_index().is_some() {
+            defs.push("CONIFER_PLACED".into());
+        }
         RenderPipelineDescriptor {
             label: Some(format!("conifer compact shadow {kind:?}").into()),
             layout: vec![view_layout, empty_layout, self.draw_layout.clone()],
@@ -838,6 +967,8 @@ fn prepare_views(
     }
     let draw_layout = pipeline_cache.get_bind_group_layout(&pipeline.draw_layout);
     let cull_layout = pipeline_cache.get_bind_group_layout(&pipeline.cull_layout);
+    let placed_layout = pipeline_cache.get_bind_group_layout(&pipeline.placed_layout);
+    let dispatch_layout = pipeline_cache.get_bind_group_layout(&pipeline.dispatch_layout);
     for (view_entity, view, layers) in &views {
         if !opaque_phases.contains_key(&view.retained_view_entity)
             && !shadow_phases.contains_key(&view.retained_view_entity)
@@ -864,7 +995,7 @@ fn prepare_views(
             error_slope: slope,
             perspective: u32::from(perspective),
             layers: view_layers(layers),
-            padding: 0,
+            entry_capacity: 0,
         };
         for (&id, species) in &render.species {
             let Some(gpu) = species.gpu.as_ref() else { continue };
@@ -872,7 +1003,10 @@ fn prepare_views(
             if n == 0 {
                 continue;
             }
-            let entry = compact_views.views.entry((view_entity, id));
+            let placements = species.compact.placements.len();
+            let draws = species.compact.prototypes.len() as u32 * PLACED_BANDS;
+            let max_entries = render.max_expanded_placements.max(1) as usize;
+            let entries_needed = (n.saturating_mul(placements)).min(max_entries);
             let fresh = |capacity: usize| {
                 let cull_view = empty_buffer(
                     &device,
@@ -889,12 +1023,22 @@ fn prepare_views(
                 let args = empty_buffer(
                     &device,
                     "conifer indirect draws",
-                    capacity as u64 * DRAW_ARGS_BYTES * PART_KINDS as u64,
+                    capacity as u64 * DRAW_ARGS_BYTES * TREE_PART_KINDS as u64,
                     BufferUsages::STORAGE | BufferUsages::INDIRECT,
                 );
                 (cull_view, lods, args)
             };
-            let make_groups = |cull_view: &Buffer, lods: &Buffer, args: &Buffer| {
+            let placed_capacity = |current: Option<u32>| -> Option<u32> {
+                if placements == 0 {
+                    return current.is_none_or(|c| c != 0).then_some(0);
+                }
+                let resized = match current {
+                    None | Some(0) => Some(initial_capacity(entries_needed)),
+                    Some(c) => resized_capacity(c as usize, entries_needed),
+                };
+                resized.map(|c| c.min(max_entries) as u32)
+            };
+            let make_groups = |cull_view: &Buffer, lods: &Buffer, args: &Buffer, placed: &PlacedViewBuffers| {
                 let cull = device.create_bind_group(
                     "conifer compact cull",
                     &cull_layout,
@@ -910,6 +1054,23 @@ fn prepare_views(
                         args.as_entire_binding(),
                     )),
                 );
+                let placed_group = device.create_bind_group(
+                    "conifer compact placements",
+                    &placed_layout,
+                    &BindGroupEntries::sequential((
+                        gpu.placements.as_entire_binding(),
+                        gpu.prototypes.as_entire_binding(),
+                        placed.counters.as_entire_binding(),
+                        placed.entries.as_entire_binding(),
+                        placed.sorted.as_entire_binding(),
+                        placed.args.as_entire_binding(),
+                    )),
+                );
+                let dispatch_group = device.create_bind_group(
+                    "conifer compact placement dispatch",
+                    &dispatch_layout,
+                    &BindGroupEntries::single(placed.dispatch.as_entire_binding()),
+                );
                 let draw = device.create_bind_group(
                     "conifer compact draw",
                     &draw_layout,
@@ -922,11 +1083,14 @@ fn prepare_views(
                         gpu.merged_lines.as_entire_binding(),
                         gpu.wood_segments.as_entire_binding(),
                         gpu.wood_mesh.as_entire_binding(),
+                        gpu.placements.as_entire_binding(),
+                        gpu.prototypes.as_entire_binding(),
+                        placed.sorted.as_entire_binding(),
                     )),
                 );
-                (cull, draw)
+                (cull, [placed_group, dispatch_group], draw)
             };
-            let view_species = match entry {
+            let view_species = match compact_views.views.entry((view_entity, id)) {
                 bevy::platform::collections::hash_map::Entry::Occupied(entry) => {
                     let v = entry.into_mut();
                     if let Some(capacity) = resized_capacity(v.capacity, n) {
@@ -936,22 +1100,31 @@ fn prepare_views(
                         v.args = a;
                         v.capacity = capacity;
                     }
-                    let (cull, draw) = make_groups(&v.cull_view, &v.lods, &v.args);
+                    if let Some(entry_capacity) = placed_capacity(Some(v.placed.entry_capacity)) {
+                        v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws);
+                    } else if v.placed.draws != draws {
+                        v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws);
+                    }
+                    let (cull, placed, draw) = make_groups(&v.cull_view, &v.lods, &v.args, &v.placed);
                     v.cull_bind_group = cull;
+                    v.placed_bind_groups = placed;
                     v.draw_bind_group = draw;
                     v
                 }
                 bevy::platform::collections::hash_map::Entry::Vacant(entry) => {
                     let capacity = initial_capacity(n);
                     let (c, l, a) = fresh(capacity);
-                    let (cull, draw) = make_groups(&c, &l, &a);
+                    let placed = PlacedViewBuffers::new(&device, placed_capacity(None).unwrap_or(0), draws);
+                    let (cull, placed_group, draw) = make_groups(&c, &l, &a, &placed);
                     entry.insert(ViewSpecies {
                         cull_view: c,
                         lods: l,
                         args: a,
                         capacity,
                         instance_count: 0,
+                        placed,
                         cull_bind_group: cull,
+                        placed_bind_groups: placed_group,
                         draw_bind_group: draw,
                         used: false,
                     })
@@ -959,6 +1132,10 @@ fn prepare_views(
             };
             view_species.instance_count = n as u32;
             view_species.used = true;
+            let cull_view = CullView {
+                entry_capacity: view_species.placed.entry_capacity,
+                ..cull_view
+            };
             queue.write_buffer(&view_species.cull_view, 0, bytemuck::bytes_of(&cull_view));
         }
     }
@@ -1136,22 +1313,49 @@ fn cull_trees(
     pipeline_cache: Res<PipelineCache>,
     compact_views: Res<CompactViews>,
 ) {
-    let Some(cull) = pipeline_cache.get_compute_pipeline(pipeline.cull_pipeline) else {
+    let [
+        Some(cull),
+        Some(prepare_dispatch),
+        Some(count),
+        Some(scan),
+        Some(scatter),
+    ] = pipeline
+        .cull_pipelines
+        .map(|id| pipeline_cache.get_compute_pipeline(id))
+    else {
         return;
     };
     if compact_views.views.is_empty() {
         return;
     }
-    let mut pass = render_context
-        .command_encoder()
-        .begin_compute_pass(&ComputePassDescriptor {
-            label: Some("conifer compact cull"),
-            timestamp_writes: None,
-        });
-    pass.set_pipeline(cull);
+    let encoder = render_context.command_encoder();
     for view in compact_views.views.values() {
+        if view.placed.entry_capacity > 0 {
+            encoder.clear_buffer(&view.placed.counters, 0, None);
+        }
+    }
+    let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
+        label: Some("conifer compact cull"),
+        timestamp_writes: None,
+    });
+    for view in compact_views.views.values() {
+        pass.set_pipeline(cull);
         pass.set_bind_group(0, &view.cull_bind_group, &[]);
+        pass.set_bind_group(1, &view.placed_bind_groups[0], &[]);
         pass.dispatch_workgroups(view.instance_count.div_ceil(64), 1, 1);
+        if view.placed.entry_capacity == 0 {
+            continue;
+        }
+        // Expanded placements: counted into draws, offsets, sorted.
+        pass.set_pipeline(prepare_dispatch);
+        pass.set_bind_group(2, &view.placed_bind_groups[1], &[]);
+        pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(count);
+        pass.dispatch_workgroups_indirect(&view.placed.dispatch, 0);
+        pass.set_pipeline(scan);
+        pass.dispatch_workgroups(1, 1, 1);
+        pass.set_pipeline(scatter);
+        pass.dispatch_workgroups_indirect(&view.placed.dispatch, 0);
     }
 }
 
@@ -1180,13 +1384,20 @@ impl<P: PhaseItem, const DEPTH_ONLY: bool> RenderCommand<P> for DrawCompactPart<
         };
 
         pass.set_bind_group(2, &buffers.draw_bind_group, &[]);
-        let offset = item.kind.index() as u64 * buffers.instance_count as u64 * DRAW_ARGS_BYTES;
+        // One draw per tree for the tree's parts, one instanced draw per
+        // prototype and band for the placed ones.
+        let (args, draws, block) = match item.kind.placed_index() {
+            None => (&buffers.args, buffers.instance_count, item.kind.index()),
+            Some(_) if buffers.placed.entry_capacity == 0 => return RenderCommandResult::Skip,
+            Some(block) => (&buffers.placed.args, buffers.placed.draws, block),
+        };
+        let offset = block as u64 * u64::from(draws) * DRAW_ARGS_BYTES;
         if DEPTH_ONLY && pipeline.split_depth_only_multi_draws {
-            for i in 0..u64::from(buffers.instance_count) {
-                pass.draw_indirect(&buffers.args, offset + i * DRAW_ARGS_BYTES);
+            for i in 0..u64::from(draws) {
+                pass.draw_indirect(args, offset + i * DRAW_ARGS_BYTES);
             }
         } else {
-            pass.multi_draw_indirect(&buffers.args, offset, buffers.instance_count);
+            pass.multi_draw_indirect(args, offset, draws);
         }
         RenderCommandResult::Success
     }

@@ -1,0 +1,219 @@
+//! Shared prototypes on the compact render path, rendered on Mesa's
+//! lavapipe: a tree of prototypes drawn with its prototypes shared (placed
+//! by the GPU, expanded per view) looks like the same tree flattened, at
+//! every distance, with LOD off, and past the expansion capacity; and its
+//! species' GPU buffers hold each prototype once.
+//! Pictures go to `target/test-output/render/`.
+#![cfg(feature = "plugin")]
+
+use bevy::prelude::*;
+use bevy::render::storage::ShaderBuffer;
+use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
+use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
+use bevy_conifer_lod::plugin::CompactGpuMemory;
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::prelude::*;
+use std::path::PathBuf;
+
+const SIZE: u32 = 160;
+const BACKGROUND: [u8; 3] = [235, 237, 242];
+
+struct Scene {
+    renderer: HeadlessRenderer,
+    /// The tree with its prototypes shared.
+    placed: Handle<ConiferSpecies>,
+    /// The same tree flattened (every needle stored).
+    flat: Handle<ConiferSpecies>,
+    target: Handle<Image>,
+    camera: Entity,
+    crown: Vec3,
+    out: PathBuf,
+}
+
+impl Scene {
+    /// A 15,000-needle Scots pine grown as shoot prototypes, both ways.
+    fn new() -> Self {
+        let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+        std::fs::create_dir_all(&out).unwrap();
+        let input = generate_prototypes(
+            Species::ScotsPine,
+            &GenerateOptions {
+                seed: 3,
+                target_needles: Some(15_000),
+            },
+        );
+        let record: PrototypeRecord = bake_prototypes(&input, &BakeOptions::default(), &())
+            .unwrap()
+            .quantized()
+            .unwrap();
+        assert!(
+            record.prototypes.len() < record.placements.len() / 4,
+            "prototypes are shared"
+        );
+        let flat_record = record.flatten().unwrap();
+        let crown = flat_record.crown_center();
+        let mut renderer = HeadlessRenderer::new(".");
+        renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
+        let (placed, flat) = renderer
+            .world_mut()
+            .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+                world.resource_scope(|world, mut buffers: Mut<Assets<ShaderBuffer>>| {
+                    let placed = ConiferSpecies::from_prototype_record(&record, &mut meshes, &mut buffers).unwrap();
+                    let flat = ConiferSpecies::from_record(flat_record, &mut meshes, &mut buffers).unwrap();
+                    let compact = placed.compact.as_ref().unwrap();
+                    assert_eq!(compact.prototypes.len(), record.prototypes.len());
+                    let mut species = world.resource_mut::<Assets<ConiferSpecies>>();
+                    (species.add(placed), species.add(flat))
+                })
+            });
+        HeadlessRenderer::spawn_lights(renderer.world_mut());
+        let target = renderer.render_target(SIZE, SIZE);
+        let camera = renderer
+            .world_mut()
+            .spawn((
+                HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, 45f32.to_radians()),
+                Camera {
+                    clear_color: ClearColorConfig::Custom(Color::srgb_u8(BACKGROUND[0], BACKGROUND[1], BACKGROUND[2])),
+                    ..default()
+                },
+            ))
+            .id();
+        Self {
+            renderer,
+            placed,
+            flat,
+            target,
+            camera,
+            crown,
+            out,
+        }
+    }
+
+    fn look_from(&mut self, distance: f32, fov_deg: f32) {
+        let eye = self.crown + Vec3::Z * distance;
+        let world = self.renderer.world_mut();
+        *world.get_mut::<Transform>(self.camera).unwrap() =
+            Transform::from_translation(eye).looking_at(self.crown, Vec3::Y);
+        *world.get_mut::<Projection>(self.camera).unwrap() = Projection::Perspective(PerspectiveProjection {
+            fov: fov_deg.to_radians(),
+            ..default()
+        });
+    }
+
+    /// A picture of one tree of `species` at the origin.
+    fn shot(&mut self, species: &Handle<ConiferSpecies>, name: &str) -> image::RgbaImage {
+        let tree = self
+            .renderer
+            .world_mut()
+            .spawn((ConiferFoliage(species.clone()), Transform::IDENTITY))
+            .id();
+        // Buffers fill and pipelines compile over a few frames.
+        for _ in 0..3 {
+            self.renderer.update().unwrap();
+        }
+        let image = self.renderer.capture(&self.target, 20).unwrap();
+        image.save(self.out.join(format!("prototypes_{name}.png"))).unwrap();
+        self.renderer.world_mut().despawn(tree);
+        image
+    }
+
+    fn memory(&self) -> CompactGpuMemory {
+        self.renderer.world().resource::<CompactGpuMemory>().clone()
+    }
+}
+
+/// Pixels that differ from the background by more than 6 grey levels.
+fn covered(image: &image::RgbaImage) -> usize {
+    image
+        .pixels()
+        .filter(|p| (0..3).any(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs() > 6))
+        .count()
+}
+
+/// Mean |Δ| of the grey levels (0–255) over the pixels either picture covers.
+fn mean_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> f32 {
+    let is_covered = |p: &image::Rgba<u8>| (0..3).any(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs() > 6);
+    let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
+    let (mut sum, mut n) = (0.0f32, 0usize);
+    for (pa, pb) in a.pixels().zip(b.pixels()) {
+        if is_covered(pa) || is_covered(pb) {
+            sum += (grey(pa) - grey(pb)).abs();
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f32
+}
+
+fn assert_alike(what: &str, placed: &image::RgbaImage, flat: &image::RgbaImage) {
+    let (pp, pf) = (covered(placed), covered(flat));
+    let diff = mean_difference(placed, flat);
+    println!("{what}: covered pixels placed {pp}, flat {pf}; mean grey |Δ| {diff:.2}");
+    assert!(pf > 40, "{what}: the flat tree is drawn");
+    assert!(
+        (pp as f32 - pf as f32).abs() <= 0.08 * pf as f32,
+        "{what}: placed covers {pp} pixels, flat {pf}"
+    );
+    assert!(diff < 8.0, "{what}: mean grey difference {diff}");
+}
+
+#[test]
+fn placed_prototypes_draw_what_the_flattened_tree_draws() {
+    let mut scene = Scene::new();
+    let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
+    // Prisms close up, original lines, level-1 and level-2 merged lines.
+    for (distance, fov, what) in [
+        (1.5, 30.0, "prisms"),
+        (6.0, 45.0, "lines"),
+        (25.0, 25.0, "merged"),
+        (80.0, 12.0, "far"),
+    ] {
+        scene.look_from(distance, fov);
+        let a = scene.shot(&placed, &format!("{what}_placed"));
+        let b = scene.shot(&flat, &format!("{what}_flat"));
+        assert_alike(what, &a, &b);
+    }
+    // LOD off: every needle a prism, every placement expanded.
+    scene.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
+    scene.look_from(6.0, 45.0);
+    let a = scene.shot(&placed, "lod_off_placed");
+    let b = scene.shot(&flat, "lod_off_flat");
+    assert_alike("LOD off", &a, &b);
+}
+
+#[test]
+fn placed_species_hold_each_prototype_once() {
+    let mut scene = Scene::new();
+    scene.look_from(6.0, 45.0);
+    let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
+    scene.shot(&placed, "memory_placed");
+    let placed_bytes = scene.memory().species_bytes[&placed.id()];
+    scene.shot(&flat, "memory_flat");
+    let flat_bytes = scene.memory().species_bytes[&flat.id()];
+    println!("species buffers: placed {placed_bytes} B, flat {flat_bytes} B");
+    // A sapling's shoots are small (7 needles a placement here): its
+    // placements and level-2 lines weigh most; a mature tree's shoots hold
+    // hundreds (`conifer bench`: `prototype_gpu_bytes`).
+    assert!(
+        placed_bytes * 3 < flat_bytes,
+        "placed {placed_bytes} B is not a fraction of flat {flat_bytes} B"
+    );
+}
+
+#[test]
+fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
+    let mut scene = Scene::new();
+    scene.look_from(6.0, 45.0);
+    let placed = scene.placed.clone();
+    let full = scene.shot(&placed, "capacity_full");
+    // Room for one placement: the tree falls back to its level-2 lines.
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .max_expanded_placements = 1;
+    let coarse = scene.shot(&placed, "capacity_one");
+    let (f, c) = (covered(&full), covered(&coarse));
+    println!("covered pixels: full {f}, past capacity {c}");
+    assert!(c > f / 4, "the tree past capacity is still drawn ({c} of {f} pixels)");
+    assert!(mean_difference(&full, &coarse) > 0.5, "and coarser than the full cut");
+}
