@@ -15,7 +15,6 @@
 
 use bevy::input::mouse::AccumulatedMouseScroll;
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
@@ -154,7 +153,6 @@ fn setup(
     mut record: ResMut<TreeRecord>,
     target: Option<Res<HeadlessTarget>>,
     mut meshes: ResMut<Assets<Mesh>>,
-    mut buffers: ResMut<Assets<ShaderBuffer>>,
     mut species: ResMut<Assets<ConiferSpecies>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut settings: ResMut<ConiferLodSettings>,
@@ -164,7 +162,7 @@ fn setup(
     debug.enabled = !args.no_overlay;
     debug.always_collect_stats = true;
     let Some(record) = record.0.take() else { return };
-    match ConiferSpecies::from_record(record, &mut meshes, &mut buffers) {
+    match ConiferSpecies::from_record(record) {
         Ok(tree) => {
             let handle = species.add(tree);
             commands.spawn((ConiferFoliage(handle), Transform::IDENTITY));

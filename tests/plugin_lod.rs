@@ -151,7 +151,7 @@ fn error_matches_the_formula_and_representation_follows_distance() {
             species.max_wood_error > species.max_line_error,
             "the trunk is thicker than a needle"
         );
-        assert_eq!(parts.lines.len(), species.lines.len());
+        assert_eq!(parts.lines.len(), species.line_bands().len());
         assert_eq!(parts.lines.iter().all(|&e| hidden(e)), !s.lines_visible);
         let bands = line_bands(&species.record, MAX_LINE_BANDS);
         let (mut drawn, mut processed) = (0u64, 0u64);
@@ -382,7 +382,7 @@ fn no_mesh_asset_churn_and_no_orphans() {
     let species = app.world().resource::<Assets<ConiferSpecies>>();
     let parts_per_tree: Vec<usize> = handles
         .iter()
-        .map(|h| 2 + species.get(h).unwrap().lines.len())
+        .map(|h| 2 + species.get(h).unwrap().line_bands().len())
         .collect();
     assert_eq!(parts, (0..1000).map(|i| parts_per_tree[i % 4]).sum::<usize>());
     // Batching: every tree of a species draws the same meshes (one per part)

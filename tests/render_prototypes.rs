@@ -7,7 +7,6 @@
 #![cfg(feature = "plugin")]
 
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
 use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::CompactGpuMemory;
@@ -54,18 +53,12 @@ impl Scene {
         let crown = flat_record.crown_center();
         let mut renderer = HeadlessRenderer::new(".");
         renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
-        let (placed, flat) = renderer
-            .world_mut()
-            .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-                world.resource_scope(|world, mut buffers: Mut<Assets<ShaderBuffer>>| {
-                    let placed = ConiferSpecies::from_prototype_record(&record, &mut meshes, &mut buffers).unwrap();
-                    let flat = ConiferSpecies::from_record(flat_record, &mut meshes, &mut buffers).unwrap();
-                    let compact = placed.compact.as_ref().unwrap();
-                    assert_eq!(compact.prototypes.len(), record.prototypes.len());
-                    let mut species = world.resource_mut::<Assets<ConiferSpecies>>();
-                    (species.add(placed), species.add(flat))
-                })
-            });
+        let placed = ConiferSpecies::from_prototype_record(&record).unwrap();
+        let flat = ConiferSpecies::from_record(flat_record).unwrap();
+        let compact = placed.compact.as_ref().unwrap();
+        assert_eq!(compact.prototypes.len(), record.prototypes.len());
+        let mut species = renderer.world_mut().resource_mut::<Assets<ConiferSpecies>>();
+        let (placed, flat) = (species.add(placed), species.add(flat));
         HeadlessRenderer::spawn_lights(renderer.world_mut());
         let target = renderer.render_target(SIZE, SIZE);
         let camera = renderer
@@ -190,6 +183,9 @@ fn placed_species_hold_each_prototype_once() {
     scene.shot(&flat, "memory_flat");
     let flat_bytes = scene.memory().species_bytes[&flat.id()];
     println!("species buffers: placed {placed_bytes} B, flat {flat_bytes} B");
+    // Drawn by the compact path only: the mesh path's meshes were never built.
+    let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
+    assert!(species.get(&placed).unwrap().meshes.is_none() && species.get(&flat).unwrap().meshes.is_none());
     // A sapling's shoots are small (7 needles a placement here): its
     // placements and level-2 lines weigh most; a mature tree's shoots hold
     // hundreds (`conifer bench`: `prototype_gpu_bytes`).

@@ -7,7 +7,6 @@ use crate::model::{LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::HeadlessRenderer;
 use crate::plugin::{ConiferFoliage, ConiferSpecies, triangle_mesh};
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use std::time::Instant;
 
 /// How the forest's trees are drawn.
@@ -91,10 +90,7 @@ pub fn forest_frame_ms(
     for record in records {
         match method {
             ForestMethod::Ours | ForestMethod::OursCompact => {
-                let species = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-                    let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
-                    ConiferSpecies::from_record(record.clone(), &mut meshes, &mut buffers)
-                })?;
+                let species = ConiferSpecies::from_record(record.clone())?;
                 species_handles.push(world.resource_mut::<Assets<ConiferSpecies>>().add(species));
             }
             ForestMethod::Raw | ForestMethod::BevyLod => {

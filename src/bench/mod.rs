@@ -67,8 +67,11 @@ pub struct BenchOptions {
     pub forest_frames: usize,
     /// Where plots and pictures go.
     pub out_dir: PathBuf,
-    /// Parts to run (`bake`, `records`, `cuts`, `runtime`, `forest`); empty
-    /// runs them all.
+    /// Needles of the procedural prototype trees whose GPU bytes are
+    /// measured (one per species).
+    pub prototype_needles: usize,
+    /// Parts to run (`bake`, `records`, `prototypes`, `cuts`, `runtime`,
+    /// `forest`); empty runs them all.
     pub only: Vec<String>,
 }
 
@@ -92,6 +95,7 @@ impl BenchOptions {
             forest_needles: 5_000,
             forest_size: (640, 360),
             forest_frames: 2,
+            prototype_needles: 1_000_000,
             out_dir,
             only: Vec::new(),
         }
@@ -108,6 +112,7 @@ impl BenchOptions {
             forest_needles: 2_000,
             forest_size: (256, 144),
             forest_frames: 1,
+            prototype_needles: 50_000,
             ..Self::full(conifer, records_dir, out_dir)
         }
     }
@@ -175,6 +180,30 @@ pub struct RecordFigures {
     pub decode_ms: f64,
     /// Median time to build the GPU-ready meshes from the record, ms.
     pub build_ms: f64,
+}
+
+/// A procedural tree of shared shoot prototypes on the compact path.
+#[derive(Clone, Debug, Serialize)]
+pub struct PrototypeTreeFigures {
+    /// Needles once placed.
+    pub needles: u64,
+    /// Needles stored in its prototypes.
+    pub prototype_needles: u64,
+    /// Prototypes.
+    pub prototypes: usize,
+    /// Placements.
+    pub placements: usize,
+    /// Record file bytes (format 4).
+    pub file_bytes: u64,
+    /// GPU buffer bytes of the species, summed from the `wgpu` buffers the
+    /// render world created for it (`CompactGpuMemory::species_bytes`).
+    pub gpu_bytes: u64,
+    /// Per-view bytes of the one camera that drew it (culling, expanded
+    /// placements, indirect draws).
+    pub view_bytes: u64,
+    /// Whether the mesh path's meshes stayed unbuilt (always, on the
+    /// compact path).
+    pub mesh_path_unbuilt: bool,
 }
 
 /// Cut timings.
@@ -245,6 +274,8 @@ pub struct BenchReport {
     pub bake_exponent: f64,
     /// Shipped records by species.
     pub bytes_per_needle: BTreeMap<String, RecordFigures>,
+    /// Procedural prototype trees by species (`prototype_needles` needles).
+    pub prototype_trees: BTreeMap<String, PrototypeTreeFigures>,
     /// CPU cut selection.
     pub cut_us: Option<CutFigures>,
     /// The plugin's CPU time per frame, no rendering (mesh path).
@@ -400,7 +431,7 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
         std::hint::black_box(decode_record(std::hint::black_box(&bytes)).ok());
     }) / 1e3;
     let build_ms = time_us(|| {
-        std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record, None).ok());
+        std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record).ok());
     }) / 1e3;
     let mesh_path = crate::model::gpu_layout::gpu_bytes(&record).total();
     let gpu = compact_gpu_bytes(&record)?;
@@ -421,6 +452,47 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
 /// Bytes of the buffers the compact render path allocates for `record`'s
 /// species: one tree drawn headless, then `CompactGpuMemory` read back.
 fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
+    let species = crate::plugin::ConiferSpecies::from_record(record.clone())
+        .map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
+    Ok(compact_memory(species)?.0)
+}
+
+/// A 1,000,000-needle (by default) procedural tree of `species` as shoot
+/// prototypes: baked, loaded, drawn once by the compact path at 20 m, its
+/// buffers read back.
+fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeTreeFigures, BenchError> {
+    let input = crate::generate::generate_prototypes(
+        species,
+        &GenerateOptions {
+            seed: 0,
+            target_needles: Some(needles),
+        },
+    );
+    let failed = |e: String| BenchError::Record(species.name().into(), e);
+    let record =
+        crate::model::bake_prototypes(&input, &BakeOptions::default(), &()).map_err(|e| failed(e.to_string()))?;
+    let file_bytes = crate::model::encode_prototype_record(&record)
+        .map_err(|e| failed(e.to_string()))?
+        .len() as u64;
+    let record = record.quantized().map_err(|e| failed(e.to_string()))?;
+    let tree = crate::plugin::ConiferSpecies::from_prototype_record(&record).map_err(|e| failed(e.to_string()))?;
+    let (gpu_bytes, view_bytes, mesh_path_unbuilt) = compact_memory(tree)?;
+    Ok(PrototypeTreeFigures {
+        needles: record.needle_count(),
+        prototype_needles: record.prototype_needle_count(),
+        prototypes: record.prototypes.len(),
+        placements: record.placements.len(),
+        file_bytes,
+        gpu_bytes,
+        view_bytes,
+        mesh_path_unbuilt,
+    })
+}
+
+/// One tree of `species` drawn by the compact path headless at 20 m from
+/// its crown: the species' buffer bytes, the view's, and whether the mesh
+/// path's meshes stayed unbuilt.
+fn compact_memory(species: crate::plugin::ConiferSpecies) -> Result<(u64, u64, bool), BenchError> {
     use crate::plugin::headless::HeadlessRenderer;
     use crate::plugin::{CompactGpuMemory, ConiferFoliage, ConiferLodSettings, ConiferSpecies, RenderPath};
     use bevy::prelude::*;
@@ -428,17 +500,13 @@ fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
     let target = renderer.render_target(64, 64);
     let world = renderer.world_mut();
     world.resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
-    let species = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-        let mut buffers = world.resource_mut::<Assets<bevy::render::storage::ShaderBuffer>>();
-        ConiferSpecies::from_record(record.clone(), &mut meshes, &mut buffers)
-    });
-    let species = species.map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
+    let crown = species.crown_center;
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
-    let eye = record.crown_center() + Vec3::Z * 20.0;
+    let eye = crown + Vec3::Z * 20.0;
     world.spawn(HeadlessRenderer::camera_bundle(
         &target,
-        Transform::from_translation(eye).looking_at(record.crown_center(), Vec3::Y),
+        Transform::from_translation(eye).looking_at(crown, Vec3::Y),
         0.8,
     ));
     for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
@@ -446,13 +514,17 @@ fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
             .update()
             .map_err(|e| BenchError::Render(crate::eval::scene::EvalError::from(e)))?;
     }
-    Ok(renderer
+    let memory = renderer.world().resource::<CompactGpuMemory>();
+    let unbuilt = renderer
         .world()
-        .resource::<CompactGpuMemory>()
-        .species_bytes
-        .get(&handle.id())
-        .copied()
-        .unwrap_or(0))
+        .resource::<Assets<ConiferSpecies>>()
+        .get(&handle)
+        .is_some_and(|s| s.meshes.is_none());
+    Ok((
+        memory.species_bytes.get(&handle.id()).copied().unwrap_or(0),
+        memory.view_bytes,
+        unbuilt,
+    ))
 }
 
 /// Distances of the cut benchmark, metres.
@@ -518,6 +590,19 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
         }
     }
 
+    let mut prototype_trees = BTreeMap::new();
+    for species in Species::ALL.into_iter().filter(|_| options.runs("prototypes")) {
+        progress(&format!(
+            "{} as shoot prototypes, {} needles",
+            species.name(),
+            options.prototype_needles
+        ));
+        prototype_trees.insert(
+            species.name().to_string(),
+            prototype_tree_figures(species, options.prototype_needles)?,
+        );
+    }
+
     progress("cuts");
     let cut_us = options.runs("cuts").then(|| cut_figures(options.cut_needles));
 
@@ -559,6 +644,7 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
         bake_prototypes: prototype_bakes,
         bake_exponent,
         bytes_per_needle: records,
+        prototype_trees,
         cut_us,
         runtime,
         runtime_compact,

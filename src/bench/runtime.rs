@@ -38,10 +38,7 @@ fn species_assets(app: &mut App, records: &[LodRecord]) -> Vec<Handle<ConiferSpe
         .iter()
         .map(|record| {
             let world = app.world_mut();
-            let species = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
-                ConiferSpecies::from_record(record.clone(), &mut meshes, &mut buffers)
-            });
+            let species = ConiferSpecies::from_record(record.clone());
             let species = species.expect("benchmark records fit the GPU layout");
             world.resource_mut::<Assets<ConiferSpecies>>().add(species)
         })

@@ -17,7 +17,7 @@ pub struct BenchArgs {
     /// Directory for plots and forest pictures.
     #[arg(long, default_value = "target/bench")]
     pub out: PathBuf,
-    /// Run only these parts (bake, records, cuts, runtime, forest).
+    /// Run only these parts (bake, records, prototypes, cuts, runtime, forest).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
     /// Print one JSON object on stdout (otherwise a summary).
@@ -27,7 +27,7 @@ pub struct BenchArgs {
 
 pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let conifer = std::env::current_exe().context("cannot find the conifer executable for the bake runs")?;
-    const PARTS: [&str; 5] = ["bake", "records", "cuts", "runtime", "forest"];
+    const PARTS: [&str; 6] = ["bake", "records", "prototypes", "cuts", "runtime", "forest"];
     if let Some(bad) = args.only.iter().find(|p| !PARTS.contains(&p.as_str())) {
         anyhow::bail!("--only {bad:?}: the parts are {}", PARTS.join(", "));
     }
@@ -61,6 +61,17 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         println!(
             "{name}: {:.1} B/needle on disk, {:.1} B/needle on the GPU, decode {:.1} ms, build {:.1} ms",
             r.disk_bytes_per_needle, r.gpu_bytes_per_needle, r.decode_ms, r.build_ms
+        );
+    }
+    for (name, t) in &report.prototype_trees {
+        println!(
+            "{name}: {} needles as {} prototypes ({} needles) placed {} times: {:.2} MB on disk, {:.2} MB on the GPU",
+            t.needles,
+            t.prototypes,
+            t.prototype_needles,
+            t.placements,
+            t.file_bytes as f64 / 1e6,
+            t.gpu_bytes as f64 / 1e6
         );
     }
     for r in &report.runtime {

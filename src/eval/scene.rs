@@ -23,7 +23,7 @@ use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
     ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath,
-    SpeciesLineBand, line_mesh, triangle_mesh,
+    SpeciesLineBand, SpeciesMeshes, line_mesh, triangle_mesh,
 };
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
 use bevy::prelude::*;
@@ -108,12 +108,7 @@ pub(super) fn renderer_with_species(
         render_path: view.render_path,
         ..ConiferLodSettings::default()
     };
-    let species = renderer
-        .world_mut()
-        .resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-            let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
-            ConiferSpecies::from_record(record, &mut meshes, &mut buffers)
-        })?;
+    let species = ConiferSpecies::from_record(record)?;
     Ok((renderer, species))
 }
 
@@ -338,13 +333,18 @@ impl EvalScene {
             let band = sampled_line_band(&record, &order, keep);
             let mesh = world.resource_mut::<Assets<Mesh>>().add(line_mesh(band.buffers));
             let mut sampled = species.clone();
-            sampled.lines = vec![SpeciesLineBand {
+            let mut sampled_meshes = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
+                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
+                SpeciesMeshes::build(&record).map(|parts| parts.into_handles(&mut meshes, &mut buffers))
+            })?;
+            sampled_meshes.lines = vec![SpeciesLineBand {
                 mesh: mesh.clone(),
                 errors: BandErrors {
                     min_error: 0.0,
                     max_parent_error: f32::MAX,
                 },
             }];
+            sampled.meshes = Some(sampled_meshes);
             let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(sampled);
             world.spawn((
                 ConiferFoliage(handle),

@@ -16,12 +16,45 @@ use bevy::prelude::*;
 use bevy::render::storage::ShaderBuffer;
 use std::sync::Arc;
 
-/// One tree species, loaded from a `.conifer` record: the record itself and
-/// the meshes every instance shares.
+/// One tree species, loaded from a `.conifer` record: the record itself,
+/// its compact GPU layout, and (once a tree is drawn by the mesh path) the
+/// meshes every instance shares.
 #[derive(Asset, TypePath, Debug, Clone)]
 pub struct ConiferSpecies {
-    /// The LOD record (merge forest, needles, errors).
+    /// The LOD record (merge forest, needles, errors), flattened.
     pub record: Arc<LodRecord>,
+    /// The mesh path's meshes and buffers ([`RenderPath::Meshes`]): built
+    /// the first frame a tree of the species is drawn by that path, never
+    /// for a species only the compact path draws (a mature tree's would
+    /// weigh hundreds of megabytes).
+    ///
+    /// [`RenderPath::Meshes`]: super::RenderPath::Meshes
+    pub meshes: Option<SpeciesMeshHandles>,
+    /// Largest wood segment error `2·r_max`: no wood prism is drawn at or
+    /// above it.
+    pub max_wood_error: f32,
+    /// Tree-local bounds of needles and wood, widened by the largest needle radius.
+    pub aabb: Aabb,
+    /// Tree-local centre of the crown (where the viewing distance is measured to).
+    pub crown_center: Vec3,
+    /// Largest line error `2R`: no prism is drawn at or above it.
+    pub max_line_error: f32,
+    /// Smallest line error `2R`: no line is drawn below it.
+    pub min_line_error: f32,
+    /// Deepest merge level of the lines (0 without merged lines).
+    pub max_merge_depth: u32,
+    /// The record in the compact GPU layout of [`RenderPath::Compact`]
+    /// (`None` when the record does not fit it: more than 8,388,608
+    /// needles, or positions beyond 65 km); a tree of shared prototypes
+    /// keeps them shared.
+    ///
+    /// [`RenderPath::Compact`]: super::RenderPath::Compact
+    pub compact: Option<Arc<CompactSpecies>>,
+}
+
+/// The mesh path's shared meshes and buffers of a species.
+#[derive(Debug, Clone)]
+pub struct SpeciesMeshHandles {
     /// Every needle as an `Lmax`-slot prism (vertex codes; the needles are in
     /// `needles`). Drawn opaque.
     pub prisms: Handle<Mesh>,
@@ -39,27 +72,8 @@ pub struct ConiferSpecies {
     /// Imported wood triangles (glTF trees), an ordinary mesh; `None` if
     /// the record has none.
     pub wood: Option<Handle<Mesh>>,
-    /// Largest wood segment error `2·r_max`: no wood prism is drawn at or
-    /// above it.
-    pub max_wood_error: f32,
     /// Needle cylinders for the prism mesh's vertex shader.
     pub needles: Handle<ShaderBuffer>,
-    /// Tree-local bounds of needles and wood, widened by the largest needle radius.
-    pub aabb: Aabb,
-    /// Tree-local centre of the crown (where the viewing distance is measured to).
-    pub crown_center: Vec3,
-    /// Largest line error `2R`: no prism is drawn at or above it.
-    pub max_line_error: f32,
-    /// Smallest line error `2R`: no line is drawn below it.
-    pub min_line_error: f32,
-    /// Deepest merge level of the lines (0 without merged lines).
-    pub max_merge_depth: u32,
-    /// The record in the compact GPU layout of [`RenderPath::Compact`]
-    /// (`None` when the record does not fit it: more than 8,388,608
-    /// needles, or positions beyond 65 km).
-    ///
-    /// [`RenderPath::Compact`]: super::RenderPath::Compact
-    pub compact: Option<Arc<CompactSpecies>>,
 }
 
 /// One band of a species' lines (see [`line_bands`]).
@@ -101,16 +115,14 @@ impl AssetLoader for ConiferRecordLoader {
         &self,
         reader: &mut dyn Reader,
         _settings: &(),
-        load_context: &mut LoadContext<'_>,
+        _load_context: &mut LoadContext<'_>,
     ) -> Result<ConiferSpecies, ConiferLoadError> {
         let mut bytes = Vec::new();
         reader.read_to_end(&mut bytes).await?;
         // Shared prototypes stay shared on the compact path; the mesh path
         // and the CPU-side cut use the flattened tree.
         let prototypes = decode_prototype_record(&bytes)?;
-        let record = prototypes.flatten().map_err(RecordError::from)?;
-        let parts = SpeciesMeshes::build(&record, Some(&prototypes))?;
-        Ok(parts.into_species(record, load_context))
+        ConiferSpecies::from_prototype_record(&prototypes)
     }
 
     fn extensions(&self) -> &[&str] {
@@ -120,35 +132,56 @@ impl AssetLoader for ConiferRecordLoader {
 
 impl ConiferSpecies {
     /// A species from a record made in code (e.g. baked at build time or
-    /// at startup), its meshes added to `meshes` and `buffers`. Add the
-    /// result to `Assets<ConiferSpecies>` and spawn [`super::ConiferFoliage`]
-    /// with the handle.
-    pub fn from_record(
-        record: LodRecord,
-        meshes: &mut Assets<Mesh>,
-        buffers: &mut Assets<ShaderBuffer>,
-    ) -> Result<Self, ConiferLoadError> {
-        let parts = SpeciesMeshes::build(&record, None)?;
-        Ok(parts.into_species(record, &mut (meshes, buffers)))
+    /// at startup). Add it to `Assets<ConiferSpecies>` and spawn
+    /// [`super::ConiferFoliage`] with the handle.
+    pub fn from_record(record: LodRecord) -> Result<Self, ConiferLoadError> {
+        Self::new(record, None)
     }
 
     /// A species from a tree of shared prototypes made in code (e.g.
     /// [`crate::model::bake_prototypes`] of
     /// [`crate::generate::generate_prototypes`]), as
-    /// [`ConiferSpecies::from_record`]: the compact path keeps its
+    /// [`ConiferSpecies::from_record`]; the compact path keeps its
     /// prototypes shared.
-    pub fn from_prototype_record(
-        record: &PrototypeRecord,
-        meshes: &mut Assets<Mesh>,
-        buffers: &mut Assets<ShaderBuffer>,
-    ) -> Result<Self, ConiferLoadError> {
+    pub fn from_prototype_record(record: &PrototypeRecord) -> Result<Self, ConiferLoadError> {
         let flat = record.flatten().map_err(RecordError::from)?;
-        let parts = SpeciesMeshes::build(&flat, Some(record))?;
-        Ok(parts.into_species(flat, &mut (meshes, buffers)))
+        Self::new(flat, Some(record))
+    }
+
+    fn new(record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
+        let ranges = record.part_ranges();
+        let (lo, hi) = record.bounds();
+        let margin = Vec3::splat(ranges.original_lines.max * 0.5);
+        let compact = match prototypes.map_or_else(
+            || CompactSpecies::build(&record),
+            |prototypes| CompactSpecies::build_placed(prototypes, &record),
+        ) {
+            Ok(compact) => Some(Arc::new(compact)),
+            Err(error) => {
+                warn!("`{}` cannot be drawn by the compact render path: {error}", record.name);
+                None
+            }
+        };
+        Ok(Self {
+            max_wood_error: record.wood.iter().map(wood_segment_error).fold(0.0, f32::max),
+            aabb: Aabb::from_min_max(lo - margin, hi + margin),
+            crown_center: record.crown_center(),
+            max_line_error: ranges.original_lines.max,
+            min_line_error: ranges.original_lines.min,
+            max_merge_depth: merge_depths(&record).into_iter().max().unwrap_or(0),
+            compact,
+            meshes: None,
+            record: Arc::new(record),
+        })
+    }
+
+    /// The mesh path's line bands (empty until its meshes are built).
+    pub fn line_bands(&self) -> &[SpeciesLineBand] {
+        self.meshes.as_ref().map_or(&[], |m| &m.lines)
     }
 }
 
-/// The GPU-ready parts of a record, before they become assets.
+/// The mesh path's GPU-ready parts of a record, before they become assets.
 pub struct SpeciesMeshes {
     /// Prism mesh (vertex codes).
     pub prisms: Mesh,
@@ -160,37 +193,19 @@ pub struct SpeciesMeshes {
     pub wood_segments: ShaderBuffer,
     /// Imported wood triangles, if any.
     pub wood: Option<Mesh>,
-    /// Largest `2·r_max` of the wood segments.
-    pub max_wood_error: f32,
     /// Needle storage buffer.
     pub needles: ShaderBuffer,
-    /// Bounds.
-    pub aabb: Aabb,
-    /// Crown centre.
-    pub crown_center: Vec3,
-    /// Largest `2R`.
-    pub max_line_error: f32,
-    /// Smallest `2R`.
-    pub min_line_error: f32,
-    /// Deepest merge level.
-    pub max_merge_depth: u32,
-    /// The compact layout, if the record fits it.
-    pub compact: Option<CompactSpecies>,
 }
 
 impl SpeciesMeshes {
-    /// Builds the meshes and buffer of `record`; the compact layout from
-    /// `prototypes` (the same tree before flattening) when given.
-    pub fn build(record: &LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
+    /// Builds the meshes and buffers of `record`.
+    pub fn build(record: &LodRecord) -> Result<Self, ConiferLoadError> {
         let prisms = prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.needle_count()))?;
         let wood = wood_prism_buffers(record).ok_or(ConiferLoadError::TooManyNeedles(record.wood.len()))?;
         let lines = line_bands(record, MAX_LINE_BANDS)
             .into_iter()
             .map(|band| (line_mesh(band.buffers), band.errors))
             .collect();
-        let ranges = record.part_ranges();
-        let (lo, hi) = record.bounds();
-        let margin = Vec3::splat(ranges.original_lines.max * 0.5);
         Ok(Self {
             needles: ShaderBuffer::from(prisms.needles.clone()),
             prisms: prism_mesh(&prisms),
@@ -203,81 +218,25 @@ impl SpeciesMeshes {
                 wood.needles
             }),
             wood: (record.wood_mesh.triangle_count() > 0).then(|| wood_mesh(&[], &record.wood_mesh, 8)),
-            max_wood_error: record.wood.iter().map(wood_segment_error).fold(0.0, f32::max),
-            aabb: Aabb::from_min_max(lo - margin, hi + margin),
-            crown_center: record.crown_center(),
-            max_line_error: ranges.original_lines.max,
-            min_line_error: ranges.original_lines.min,
-            max_merge_depth: merge_depths(record).into_iter().max().unwrap_or(0),
-            compact: match prototypes.map_or_else(
-                || CompactSpecies::build(record),
-                |prototypes| CompactSpecies::build_placed(prototypes, record),
-            ) {
-                Ok(compact) => Some(compact),
-                Err(error) => {
-                    warn!("`{}` cannot be drawn by the compact render path: {error}", record.name);
-                    None
-                }
-            },
         })
     }
-}
 
-/// Where the meshes and buffer of a species become assets: the loader's
-/// labelled sub-assets, or the asset collections directly.
-trait SpeciesAssetSink {
-    fn add_mesh(&mut self, label: String, mesh: Mesh) -> Handle<Mesh>;
-    fn add_buffer(&mut self, label: &str, buffer: ShaderBuffer) -> Handle<ShaderBuffer>;
-}
-
-impl SpeciesAssetSink for LoadContext<'_> {
-    fn add_mesh(&mut self, label: String, mesh: Mesh) -> Handle<Mesh> {
-        self.add_labeled_asset(label, mesh)
-    }
-    fn add_buffer(&mut self, label: &str, buffer: ShaderBuffer) -> Handle<ShaderBuffer> {
-        self.add_labeled_asset(label.to_string(), buffer)
-    }
-}
-
-impl SpeciesAssetSink for (&mut Assets<Mesh>, &mut Assets<ShaderBuffer>) {
-    fn add_mesh(&mut self, _label: String, mesh: Mesh) -> Handle<Mesh> {
-        self.0.add(mesh)
-    }
-    fn add_buffer(&mut self, _label: &str, buffer: ShaderBuffer) -> Handle<ShaderBuffer> {
-        self.1.add(buffer)
-    }
-}
-
-impl SpeciesMeshes {
-    /// The species asset, its meshes (labelled `prisms`, `lines0`…,
-    /// `wood_prisms`, `wood`) and buffers (`needles`, `wood_segments`)
-    /// added to `sink`.
-    fn into_species(self, record: LodRecord, sink: &mut impl SpeciesAssetSink) -> ConiferSpecies {
-        ConiferSpecies {
-            prisms: sink.add_mesh("prisms".to_string(), self.prisms),
+    /// The meshes and buffers added to `meshes` and `buffers`.
+    pub fn into_handles(self, meshes: &mut Assets<Mesh>, buffers: &mut Assets<ShaderBuffer>) -> SpeciesMeshHandles {
+        SpeciesMeshHandles {
+            prisms: meshes.add(self.prisms),
             lines: self
                 .lines
                 .into_iter()
-                .enumerate()
-                .map(|(k, (mesh, errors))| SpeciesLineBand {
-                    mesh: sink.add_mesh(format!("lines{k}"), mesh),
+                .map(|(mesh, errors)| SpeciesLineBand {
+                    mesh: meshes.add(mesh),
                     errors,
                 })
                 .collect(),
-            wood_prisms: self
-                .wood_prisms
-                .map(|mesh| sink.add_mesh("wood_prisms".to_string(), mesh)),
-            wood_segments: sink.add_buffer("wood_segments", self.wood_segments),
-            wood: self.wood.map(|mesh| sink.add_mesh("wood".to_string(), mesh)),
-            max_wood_error: self.max_wood_error,
-            needles: sink.add_buffer("needles", self.needles),
-            aabb: self.aabb,
-            crown_center: self.crown_center,
-            max_line_error: self.max_line_error,
-            min_line_error: self.min_line_error,
-            max_merge_depth: self.max_merge_depth,
-            compact: self.compact.map(Arc::new),
-            record: Arc::new(record),
+            wood_prisms: self.wood_prisms.map(|mesh| meshes.add(mesh)),
+            wood_segments: buffers.add(self.wood_segments),
+            wood: self.wood.map(|mesh| meshes.add(mesh)),
+            needles: buffers.add(self.needles),
         }
     }
 }

@@ -60,8 +60,8 @@ mod render;
 mod systems;
 
 pub use asset::{
-    ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshes, line_mesh,
-    triangle_mesh, wood_mesh,
+    ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshHandles,
+    SpeciesMeshes, line_mesh, triangle_mesh, wood_mesh,
 };
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};

@@ -4,13 +4,14 @@
 use super::material::{ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferLodState, ConiferPart, ConiferParts, ConiferSpecies,
-    LineOpacity, RenderPath,
+    LineOpacity, RenderPath, SpeciesMeshHandles, SpeciesMeshes,
 };
 use bevy::camera::visibility::RenderLayers;
 use bevy::light::Cascades;
 use bevy::pbr::ExtendedMaterial;
-use bevy::platform::collections::HashMap;
+use bevy::platform::collections::{HashMap, HashSet};
 use bevy::prelude::*;
+use bevy::render::storage::ShaderBuffer;
 
 /// Wall time of the plugin's own systems (both sets), measured inside them.
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
@@ -144,6 +145,7 @@ fn base_colors(material: &crate::model::FoliageMaterial, debug_colors: bool) -> 
 
 fn make_materials(
     species: &ConiferSpecies,
+    species_meshes: &SpeciesMeshHandles,
     settings: &ConiferLodSettings,
     conifer_materials: &mut Assets<ConiferMaterial>,
     standard_materials: &mut Assets<StandardMaterial>,
@@ -158,7 +160,7 @@ fn make_materials(
     };
     let extension = ConiferLodExtension {
         lod: lod_uniform(species, settings),
-        needles: species.needles.clone(),
+        needles: species_meshes.needles.clone(),
     };
     let prisms = conifer_materials.add(ExtendedMaterial {
         base: base.clone(),
@@ -180,7 +182,7 @@ fn make_materials(
     let wood_prisms = conifer_materials.add(ExtendedMaterial {
         base: wood_base.clone(),
         extension: ConiferLodExtension {
-            needles: species.wood_segments.clone(),
+            needles: species_meshes.wood_segments.clone(),
             ..extension
         },
     });
@@ -213,9 +215,12 @@ pub(super) fn spawn_parts(
         )>,
     >,
     with_parts: Query<(Entity, &ConiferParts)>,
-    species_assets: Res<Assets<ConiferSpecies>>,
+    mut species_assets: ResMut<Assets<ConiferSpecies>>,
     settings: Res<ConiferLodSettings>,
     mut materials: ResMut<SpeciesMaterials>,
+    mut mesh_assets: Option<ResMut<Assets<Mesh>>>,
+    mut buffer_assets: Option<ResMut<Assets<ShaderBuffer>>>,
+    mut unbuildable: Local<HashSet<AssetId<ConiferSpecies>>>,
     mut conifer_materials: Option<ResMut<Assets<ConiferMaterial>>>,
     mut standard_materials: Option<ResMut<Assets<StandardMaterial>>>,
     mut cpu_time: ResMut<ConiferLodCpuTime>,
@@ -233,7 +238,30 @@ pub(super) fn spawn_parts(
         return;
     }
     for (entity, foliage, over, parts, layers) in &trees {
+        let id = foliage.0.id();
+        if species_assets.get(id).is_some_and(|s| s.meshes.is_none()) && !unbuildable.contains(&id) {
+            // The species' first tree on the mesh path: its meshes now.
+            let (Some(meshes), Some(buffers)) = (mesh_assets.as_deref_mut(), buffer_assets.as_deref_mut()) else {
+                continue;
+            };
+            let built = species_assets.get(id).map(|s| SpeciesMeshes::build(&s.record));
+            match built {
+                Some(Ok(parts)) => {
+                    if let Some(mut species) = species_assets.get_mut(id) {
+                        species.meshes = Some(parts.into_handles(meshes, buffers));
+                    }
+                }
+                Some(Err(error)) => {
+                    warn!("a species cannot be drawn by the mesh path: {error}");
+                    unbuildable.insert(id);
+                }
+                None => {}
+            }
+        }
         let Some(species) = species_assets.get(&foliage.0) else {
+            continue;
+        };
+        let Some(species_meshes) = species.meshes.as_ref() else {
             continue;
         };
         for part in parts.iter().flat_map(|parts| parts.entities()) {
@@ -245,7 +273,9 @@ pub(super) fn spawn_parts(
                 materials
                     .sets
                     .entry(key)
-                    .or_insert_with(|| make_materials(species, &key.settings(&settings), conifer, standard))
+                    .or_insert_with(|| {
+                        make_materials(species, species_meshes, &key.settings(&settings), conifer, standard)
+                    })
                     .clone(),
             ),
             _ => None,
@@ -279,17 +309,17 @@ pub(super) fn spawn_parts(
             child.id()
         };
         let parts = ConiferParts {
-            prisms: spawn(&species.prisms, ConiferPart::Prisms),
-            lines: species
+            prisms: spawn(&species_meshes.prisms, ConiferPart::Prisms),
+            lines: species_meshes
                 .lines
                 .iter()
                 .map(|band| spawn(&band.mesh, ConiferPart::Lines))
                 .collect(),
-            wood_prisms: species
+            wood_prisms: species_meshes
                 .wood_prisms
                 .as_ref()
                 .map(|mesh| spawn(mesh, ConiferPart::WoodPrisms)),
-            wood: species.wood.as_ref().map(|mesh| spawn(mesh, ConiferPart::Wood)),
+            wood: species_meshes.wood.as_ref().map(|mesh| spawn(mesh, ConiferPart::Wood)),
         };
         commands.entity(entity).insert(parts);
     }
@@ -554,7 +584,7 @@ pub(super) fn select_lod(
         }
         let mut line_bands = 0u32;
         if any_view && settings.enabled {
-            for (k, band) in species.lines.iter().enumerate().take(32) {
+            for (k, band) in species.line_bands().iter().enumerate().take(32) {
                 if band.errors.may_draw(part_min_e, part_max_e) {
                     line_bands |= 1 << k;
                 }
