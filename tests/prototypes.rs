@@ -317,6 +317,45 @@ fn bad_prototype_inputs_are_errors() {
         bake_prototypes(&input, &BakeOptions::default(), &()),
         Err(BakeError::NoNeedles)
     );
+    // A file's placement that degenerates a valid prototype (found by the
+    // fuzz target): a length that underflows, positions that overflow.
+    let long = Needle {
+        tip: Vec3::Y * 4.0,
+        ..needle
+    };
+    input.prototypes[0] = vec![
+        long,
+        Needle {
+            base: Vec3::X * 0.5,
+            ..long
+        },
+    ];
+    input.placements[1] = Placement::identity(0);
+    let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+    for scale in [1e-40f32, 3e38] {
+        let placements = vec![Placement {
+            scale,
+            ..Placement::identity(0)
+        }];
+        let rebuilt = PrototypeRecord::from_parts(
+            record.name.clone(),
+            record.prototypes.clone(),
+            placements,
+            Vec::new(),
+            Vec::new(),
+            Default::default(),
+            record.material,
+            record.max_sides,
+            record.bake.clone(),
+        );
+        assert!(
+            matches!(
+                rebuilt,
+                Err(bevy_conifer_lod::model::record::RecordInvalid::BadPlacement(0))
+            ),
+            "scale {scale}: {rebuilt:?}"
+        );
+    }
     // More placed needles than a record holds: refused before any work.
     let input = PrototypeInput {
         name: "huge".into(),

@@ -321,7 +321,17 @@ impl PrototypeRecord {
             let Some(prototype) = prototypes.get(placement.prototype as usize) else {
                 return Err(RecordInvalid::BadPlacement(p));
             };
-            if !placement.is_valid() {
+            // A valid prototype can still degenerate once placed (a scale
+            // that underflows a radius or overflows an error, a translation
+            // that swallows a length): the flattened tree must be valid.
+            // Errors are monotone, so the root's is the largest one scaled.
+            if !placement.is_valid()
+                || !placed_error(prototype, prototype.root(), placement.scale).is_finite()
+                || !prototype
+                    .needles
+                    .iter()
+                    .all(|n| placement.place_needle(n, 0).is_valid())
+            {
                 return Err(RecordInvalid::BadPlacement(p));
             }
             needle_offset.push(needles);

@@ -149,8 +149,13 @@ pub enum RecordInvalid {
         merged: usize,
     },
     /// A placement names a prototype that does not exist, or has a
-    /// non-finite number, a scale ≤ 0 or a rotation that is not a unit quaternion.
-    #[error("placement {0} is invalid (unknown prototype, non-finite number, scale ≤ 0 or rotation not unit)")]
+    /// non-finite number, a scale ≤ 0 or a rotation that is not a unit
+    /// quaternion, or makes its prototype degenerate (a needle without
+    /// length or radius, an infinite error).
+    #[error(
+        "placement {0} is invalid (unknown prototype, non-finite number, scale ≤ 0, rotation not unit, \
+         or its prototype degenerate once placed)"
+    )]
     BadPlacement(usize),
     /// The placements stand for more needles than a record may hold.
     #[error("the placements stand for {0} needles: a record holds at most 2^24")]

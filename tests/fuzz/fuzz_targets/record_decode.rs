@@ -8,11 +8,15 @@
 //! (its direct cut must equal its flattened record's cut) and the flat
 //! record; each must encode (format 4) and decode again to itself quantized,
 //! unless it holds what format 4 cannot (a format 3 record with a needle
-//! beyond 65 km or an error above 100 km: a typed error).
+//! beyond 65 km or an error above 100 km: a typed error). The tree of
+//! prototypes' compact GPU layout (`CompactSpecies::build_placed`: placed
+//! prototypes, or flat) is built too: an error or a layout whose draws
+//! stand for every needle once at every probe error.
 #![no_main]
 
 use bevy_conifer_lod::model::file::{FORMAT_VERSION, MAGIC};
 use bevy_conifer_lod::model::file::RecordError;
+use bevy_conifer_lod::model::compact::{CompactSpecies, threshold_code};
 use bevy_conifer_lod::model::{
     PrototypeRecord, decode_prototype_record, decode_record, encode_prototype_record, encode_record,
 };
@@ -38,6 +42,14 @@ fuzz_target!(|data: &[u8]| {
             let cut = prototypes.cut(e).sorted();
             assert_eq!(cut, flat.cut(e).sorted());
             assert!(flat.coverage(&cut).iter().all(|&c| c == 1));
+        }
+        if let Ok(compact) = CompactSpecies::build_placed(&prototypes, &flat) {
+            if !compact.placements.is_empty() {
+                for e in PROBES {
+                    let (drawn, _) = compact.placed_drawn(&prototypes, threshold_code(e), e, threshold_code);
+                    assert!(flat.coverage(&drawn).iter().all(|&c| c == 1), "placed draws at e = {e}");
+                }
+            }
         }
         match encode_prototype_record(&prototypes) {
             Ok(again) => assert_eq!(
