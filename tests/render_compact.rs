@@ -26,7 +26,7 @@ struct Scene {
     crown: Vec3,
     needles: usize,
     out: PathBuf,
-    _dir: tempfile::TempDir,
+    dir: tempfile::TempDir,
 }
 
 impl Scene {
@@ -81,7 +81,7 @@ impl Scene {
             crown,
             needles,
             out,
-            _dir: dir,
+            dir,
         }
     }
 
@@ -274,4 +274,154 @@ fn a_tree_after_a_culled_tree_is_drawn() {
     let image = scene.shot("second_instance");
     let pixels = covered(&image).iter().filter(|&&c| c).count();
     assert!(pixels > 1000, "the second tree covers {pixels} pixels");
+}
+
+/// A camera rendering into its own target (or a viewport of one).
+fn extra_camera(scene: &mut Scene, target: &Handle<Image>, distance: f32, viewport: Option<bevy::camera::Viewport>) {
+    let eye = scene.crown + Vec3::Z * distance;
+    scene.renderer.world_mut().spawn((
+        HeadlessRenderer::camera_bundle(
+            target,
+            Transform::from_translation(eye).looking_at(scene.crown, Vec3::Y),
+            45f32.to_radians(),
+        ),
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::srgb_u8(BACKGROUND[0], BACKGROUND[1], BACKGROUND[2])),
+            viewport,
+            order: 1 + distance as isize,
+            ..default()
+        },
+    ));
+}
+
+#[test]
+fn two_cameras_and_a_split_screen_each_get_their_own_cut() {
+    let mut scene = Scene::new();
+    scene.set_path(RenderPath::Compact);
+    scene
+        .renderer
+        .world_mut()
+        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY));
+    // The scene's camera at 1.5 m, a second one at 40 m into its own target.
+    scene.look_from(1.5, 45.0);
+    let far_target = scene.renderer.render_target(SIZE, SIZE);
+    extra_camera(&mut scene, &far_target, 40.0, None);
+    for _ in 0..3 {
+        scene.renderer.update().unwrap();
+    }
+    let mut images = scene
+        .renderer
+        .capture_all(&[scene.target.clone(), far_target], 20)
+        .unwrap();
+    let far = images.pop().unwrap();
+    let near = images.pop().unwrap();
+    near.save(scene.out.join("compact_two_cameras_near.png")).unwrap();
+    far.save(scene.out.join("compact_two_cameras_far.png")).unwrap();
+    let (pn, pf) = (
+        covered(&near).iter().filter(|&&c| c).count(),
+        covered(&far).iter().filter(|&&c| c).count(),
+    );
+    println!("two cameras: near {pn}, far {pf} covered pixels");
+    assert!(pn > 4 * pf && pf > 30, "near {pn}, far {pf}");
+
+    // Split screen: two viewports of one target, each its own view.
+    let split = scene.renderer.render_target(2 * SIZE, SIZE);
+    let half = |x: u32| bevy::camera::Viewport {
+        physical_position: UVec2::new(x, 0),
+        physical_size: UVec2::new(SIZE, SIZE),
+        ..default()
+    };
+    extra_camera(&mut scene, &split, 1.5, Some(half(0)));
+    extra_camera(&mut scene, &split, 40.0, Some(half(SIZE)));
+    for _ in 0..3 {
+        scene.renderer.update().unwrap();
+    }
+    let image = scene.renderer.capture(&split, 20).unwrap();
+    image.save(scene.out.join("compact_split_screen.png")).unwrap();
+    let left = image::imageops::crop_imm(&image, 0, 0, SIZE, SIZE).to_image();
+    let right = image::imageops::crop_imm(&image, SIZE, 0, SIZE, SIZE).to_image();
+    let (left_diff, right_diff) = (mean_difference(&left, &near), mean_difference(&right, &far));
+    println!(
+        "split screen: left |Δ| {left_diff:.2} against the near camera, right {right_diff:.2} against the far one"
+    );
+    assert!(left_diff < 3.0 && right_diff < 3.0);
+}
+
+#[test]
+fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
+    let mut scene = Scene::new();
+    scene.set_path(RenderPath::Compact);
+    scene.look_from(8.0, 45.0);
+    let tree = scene
+        .renderer
+        .world_mut()
+        .spawn((
+            ConiferFoliage(scene.species.clone()),
+            Transform::IDENTITY,
+            ConiferLodOverride {
+                pixel_error: Some(12.0),
+                ..default()
+            },
+        ))
+        .id();
+    let coarse = scene.shot("override_coarse");
+    scene
+        .renderer
+        .world_mut()
+        .entity_mut(tree)
+        .remove::<ConiferLodOverride>();
+    let restored = scene.shot("override_removed");
+    let (coarse_px, restored_px) = (
+        covered(&coarse).iter().filter(|&&c| c).count(),
+        covered(&restored).iter().filter(|&&c| c).count(),
+    );
+    println!("override: {coarse_px} covered pixels at ε = 12, {restored_px} after removal");
+    assert!(
+        mean_difference(&coarse, &restored) > 1.0,
+        "removing the override changes the cut"
+    );
+
+    // The same file rewritten with a different tree, reloaded.
+    let other = generate(
+        Species::NorwaySpruce,
+        &GenerateOptions {
+            seed: 9,
+            target_needles: Some(6_000),
+        },
+    );
+    let record = bake(&other, &BakeOptions::default(), &()).unwrap();
+    write_record(&record, &scene.dir.path().join("pine.conifer")).unwrap();
+    scene.renderer.world().resource::<AssetServer>().reload("pine.conifer");
+    let mut reloaded = None;
+    for _ in 0..200 {
+        scene.renderer.update().unwrap();
+        let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
+        if species
+            .get(&scene.species)
+            .is_some_and(|s| s.record.needle_count() == record.needle_count())
+        {
+            reloaded = Some(());
+            break;
+        }
+    }
+    assert!(reloaded.is_some(), "the record reloaded");
+    let after = scene.shot("reloaded");
+    // What a fresh scene draws of the new record.
+    let fresh = {
+        let mut fresh = Scene::new();
+        write_record(&record, &fresh.dir.path().join("spruce.conifer")).unwrap();
+        let handle: Handle<ConiferSpecies> = fresh.renderer.world().resource::<AssetServer>().load("spruce.conifer");
+        fresh.renderer.load(&[handle.clone().untyped()], 600).unwrap();
+        fresh.set_path(RenderPath::Compact);
+        fresh.crown = scene.crown;
+        fresh.look_from(8.0, 45.0);
+        fresh
+            .renderer
+            .world_mut()
+            .spawn((ConiferFoliage(handle), Transform::IDENTITY));
+        fresh.shot("reloaded_fresh")
+    };
+    let (diff_old, diff_fresh) = (mean_difference(&after, &restored), mean_difference(&after, &fresh));
+    println!("reloaded: |Δ| {diff_old:.2} from the old tree, {diff_fresh:.2} from a fresh load of the new one");
+    assert!(diff_fresh < 1.0 && diff_old > 3.0 * diff_fresh.max(0.3));
 }
