@@ -8,9 +8,10 @@
 
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
+use bevy_conifer_lod::model::compact::{CompactSpecies, PLACED_BANDS, PlacedDraw, shader_threshold_code};
 use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
-use bevy_conifer_lod::plugin::CompactGpuMemory;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback};
 use bevy_conifer_lod::prelude::*;
 use std::path::PathBuf;
 
@@ -212,4 +213,157 @@ fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
     println!("covered pixels: full {f}, past capacity {c}");
     assert!(c > f / 4, "the tree past capacity is still drawn ({c} of {f} pixels)");
     assert!(mean_difference(&full, &coarse) > 0.5, "and coarser than the full cut");
+}
+
+/// The per-tree draws the CPU reference (`CompactSpecies::prefixes`) gives
+/// for a tree at threshold code `code` and spatial error `e`, as the compute
+/// pass writes them: `[vertex count, first vertex]` of prisms, original
+/// lines and merged lines.
+fn reference_tree_draws(compact: &CompactSpecies, code: u16, e: f32) -> [[u32; 2]; 3] {
+    let p = compact.prefixes(code, e);
+    let prism_vertices = 12 * u32::from(compact.max_sides.max(3)) - 12;
+    [
+        [p.prisms * prism_vertices, 0],
+        [
+            2 * p.original_lines,
+            if p.original_from_needles { 2 * p.prisms } else { 0 },
+        ],
+        [2 * p.merged_lines, 0],
+    ]
+}
+
+#[test]
+fn gpu_draws_equal_the_cpu_reference() {
+    let mut scene = Scene::new();
+    scene.renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
+    let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
+    let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
+    let placed_compact = species.get(&placed).unwrap().compact.clone().unwrap();
+    let flat_compact = species.get(&flat).unwrap().compact.clone().unwrap();
+    let prototype_record = {
+        let input = generate_prototypes(
+            Species::ScotsPine,
+            &GenerateOptions {
+                seed: 3,
+                target_needles: Some(15_000),
+            },
+        );
+        bake_prototypes(&input, &BakeOptions::default(), &())
+            .unwrap()
+            .quantized()
+            .unwrap()
+    };
+    let flat_record = prototype_record.flatten().unwrap();
+    for distance in [1.5f32, 6.0, 25.0, 80.0] {
+        scene.look_from(distance, 45.0);
+        for (handle, compact) in [(&placed, &placed_compact), (&flat, &flat_compact)] {
+            scene.shot(handle, &format!("readback_{distance}m"));
+            let readback = scene.renderer.world().resource::<CompactReadback>().clone();
+            let view = readback
+                .views
+                .iter()
+                .find(|v| v.species == handle.id() && v.perspective)
+                .expect("the camera's results were read back");
+            let [code_word, e_bits, ..] = view.lods[0];
+            let (code, e) = ((code_word & 0xffff) as u16, f32::from_bits(e_bits));
+            assert!(
+                code.abs_diff(shader_threshold_code(e)) <= 1,
+                "tree code {code} at e = {e}"
+            );
+            // Per-tree draws: the GPU's binary searches are the CPU's.
+            let trees = view.lods.len();
+            for (kind, [vertices, first]) in reference_tree_draws(compact, code, e).into_iter().enumerate() {
+                let draw = view.tree_draws[kind * trees];
+                assert_eq!([draw[0], draw[2]], [vertices, first], "{distance} m, part {kind}");
+            }
+            // Placed draws: each entry's threshold code is the tree's error
+            // over its placement's scale; each draw counts its entries and
+            // holds the longest prefix they need.
+            let mut expected = vec![PlacedDraw::default(); compact.prototypes.len() * PLACED_BANDS as usize];
+            let mut processed = 0u64;
+            for &[tree, word] in &view.entries {
+                assert_eq!(tree, 0);
+                let j = (word & 0x7fff) as usize;
+                let c = (word >> 16) as u16;
+                let placement = &compact.placements[j];
+                let cpu = shader_threshold_code(e / placement.transform.scale);
+                assert!(c.abs_diff(cpu) <= 1, "entry code {c}, CPU {cpu}");
+                let k = placement.prototype as usize;
+                let p = compact.prototype_prefixes(k, c);
+                let d = &mut expected[k * PLACED_BANDS as usize + compact.placement_band(k, c) as usize];
+                d.placements += 1;
+                d.prisms = d.prisms.max(p.prisms);
+                d.after_prisms = d.after_prisms.max(p.after_prisms);
+                d.original_by_parent = d.original_by_parent.max(p.original_by_parent);
+                d.merged_lines = d.merged_lines.max(p.merged_lines);
+            }
+            assert_eq!(view.entries.len(), compact.expanded_placements(code) as usize);
+            let draws = expected.len();
+            let prism_vertices = 12 * u32::from(compact.max_sides.max(3)) - 12;
+            for (d, reference) in expected.iter().enumerate() {
+                let [prisms, original, merged] = [0, 1, 2].map(|part| view.placed_draws[part * draws + d]);
+                let count = |draw: [u32; 4]| if draw[0] == 0 { 0 } else { draw[1] };
+                assert_eq!(
+                    count(prisms).max(count(original)).max(count(merged)),
+                    if reference.prisms + reference.original_lines() + reference.merged_lines > 0 {
+                        reference.placements
+                    } else {
+                        0
+                    }
+                );
+                assert_eq!(
+                    prisms[0],
+                    if reference.placements > 0 {
+                        reference.prisms * prism_vertices
+                    } else {
+                        0
+                    }
+                );
+                assert_eq!(
+                    original[0],
+                    if reference.placements > 0 {
+                        2 * reference.original_lines()
+                    } else {
+                        0
+                    }
+                );
+                assert_eq!(
+                    merged[0],
+                    if reference.placements > 0 {
+                        2 * reference.merged_lines
+                    } else {
+                        0
+                    }
+                );
+                processed += u64::from(reference.placements)
+                    * u64::from(reference.prisms + reference.original_lines() + reference.merged_lines);
+            }
+            // What the vertex shaders process over what the cut holds.
+            let tree_processed: u64 = (0..3)
+                .map(|kind| {
+                    let draw = view.tree_draws[kind * trees];
+                    u64::from(draw[0] / if kind == 0 { prism_vertices } else { 2 })
+                })
+                .sum();
+            let cut = if compact.placements.is_empty() {
+                flat_record.cut(e)
+            } else {
+                compact
+                    .placed_drawn(&prototype_record, code, e, shader_threshold_code)
+                    .0
+            };
+            let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()) as f64;
+            let ratio = (tree_processed + processed) as f64 / in_cut.max(1.0);
+            println!(
+                "{distance} m, {}: {} expanded placements, processed / cut = {ratio:.2}",
+                if compact.placements.is_empty() {
+                    "flat"
+                } else {
+                    "placed"
+                },
+                view.entries.len()
+            );
+            assert!(ratio <= 2.0, "{distance} m: {ratio}");
+        }
+    }
 }

@@ -66,7 +66,7 @@ pub use asset::{
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
 pub use render::gpu::{GpuInstance, PartKind};
-pub use render::{CompactGpuMemory, CompactInstances};
+pub use render::{CompactGpuMemory, CompactInstances, CompactReadback, ViewReadback};
 pub use systems::{ConiferLodCpuTime, SpeciesMaterials, view_error_slope};
 
 use bevy::asset::AssetApp;

@@ -24,6 +24,9 @@
 //!   alpha test), so they cast the shadow of the coverage they draw.
 
 pub mod gpu;
+mod readback;
+
+pub use readback::{CompactReadback, ViewReadback};
 
 use self::gpu::{
     CullView, DRAW_ARGS_BYTES, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance,
@@ -516,7 +519,8 @@ fn empty_buffer(device: &RenderDevice, label: &'static str, size: u64, usage: Bu
     device.create_buffer(&BufferDescriptor {
         label: Some(label),
         size: size.max(16),
-        usage: usage | BufferUsages::COPY_DST,
+        // Copied from by `CompactReadback`.
+        usage: usage | BufferUsages::COPY_DST | BufferUsages::COPY_SRC,
         mapped_at_creation: false,
     })
 }
@@ -592,6 +596,8 @@ struct ViewSpecies {
     args: Buffer,
     capacity: usize,
     instance_count: u32,
+    /// A perspective view (cameras, point and spot lights).
+    perspective: bool,
     placed: PlacedViewBuffers,
     cull_bind_group: BindGroup,
     /// The placed passes' group and `prepare_dispatch`'s.
@@ -1122,6 +1128,7 @@ fn prepare_views(
                         args: a,
                         capacity,
                         instance_count: 0,
+                        perspective,
                         placed,
                         cull_bind_group: cull,
                         placed_bind_groups: placed_group,
@@ -1131,6 +1138,7 @@ fn prepare_views(
                 }
             };
             view_species.instance_count = n as u32;
+            view_species.perspective = perspective;
             view_species.used = true;
             let cull_view = CullView {
                 entry_capacity: view_species.placed.entry_capacity,
@@ -1312,6 +1320,8 @@ fn cull_trees(
     pipeline: Res<CompactPipeline>,
     pipeline_cache: Res<PipelineCache>,
     compact_views: Res<CompactViews>,
+    device: Res<RenderDevice>,
+    mut readbacks: ResMut<readback::PendingReadbacks>,
 ) {
     let [
         Some(cull),
@@ -1357,6 +1367,8 @@ fn cull_trees(
         pass.set_pipeline(scatter);
         pass.dispatch_workgroups_indirect(&view.placed.dispatch, 0);
     }
+    drop(pass);
+    readback::stage(encoder, &device, &compact_views, &mut readbacks);
 }
 
 /// Binds a species' compact arrays and the view's culling results and draws
@@ -1448,6 +1460,7 @@ pub(super) fn build(app: &mut App) {
         .load(shader_path("compact_types.wgsl"));
     app.insert_resource(CompactShaderLibrary(library));
     app.init_resource::<CompactGpuMemory>();
+    app.init_resource::<CompactReadback>();
     let Some(render_app) = app.get_sub_app_mut(RenderApp) else {
         return;
     };
@@ -1455,6 +1468,7 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<RenderCompactSpecies>()
         .init_resource::<CompactViews>()
         .init_resource::<CompactGpuMemory>()
+        .init_resource::<readback::PendingReadbacks>()
         .init_resource::<SpecializedRenderPipelines<CompactPipeline>>()
         .add_render_command::<Opaque3d, DrawCompact>()
         .add_render_command::<Transparent3d, DrawCompact>()
@@ -1465,7 +1479,15 @@ pub(super) fn build(app: &mut App) {
                 .after(MeshPipelineSystems)
                 .after(bevy::pbr::init_prepass_pipeline),
         )
-        .add_systems(ExtractSchedule, (extract_compact, publish_memory))
+        .add_systems(
+            ExtractSchedule,
+            (
+                extract_compact,
+                publish_memory,
+                readback::extract_request,
+                readback::publish,
+            ),
+        )
         .add_systems(
             Render,
             (
@@ -1475,6 +1497,7 @@ pub(super) fn build(app: &mut App) {
                 (queue_compact, queue_compact_shadows)
                     .chain()
                     .in_set(RenderSystems::QueueMeshes),
+                readback::collect.in_set(RenderSystems::Cleanup),
             ),
         )
         .add_systems(bevy::render::renderer::RenderGraph, cull_trees.before(camera_driver));

@@ -1,0 +1,172 @@
+//! Reading back what the compact path's compute passes wrote, for tests and
+//! benchmarks: per view and species, each tree's LOD, its per-tree draws,
+//! the placed draws and the sorted expanded placements. Opt-in
+//! ([`CompactReadback::enabled`]) and blocking (the render world waits for
+//! the copies each frame), so never on in a game.
+
+use super::{CompactViews, ConiferSpecies};
+use bevy::prelude::*;
+use bevy::render::render_resource::{Buffer, BufferDescriptor, BufferUsages, CommandEncoder};
+use bevy::render::renderer::RenderDevice;
+
+/// Main world: set `enabled` to have every frame's compute results read
+/// back; `views` then holds the last frame's (one frame late).
+#[derive(Resource, Clone, Debug, Default)]
+pub struct CompactReadback {
+    /// Read back every frame while `true`.
+    pub enabled: bool,
+    /// What the compute passes wrote for each view and species.
+    pub views: Vec<ViewReadback>,
+}
+
+/// What one view's compute passes wrote for one species.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewReadback {
+    /// The species.
+    pub species: AssetId<ConiferSpecies>,
+    /// Whether the view is a perspective one (cameras, point and spot
+    /// lights; directional cascades are not).
+    pub perspective: bool,
+    /// Per tree (instance slot): threshold code and flags, spatial error,
+    /// pixel error and transition as bits (`InstanceLod`).
+    pub lods: Vec<[u32; 4]>,
+    /// Per-tree indirect draws, one block of `trees` per tree part
+    /// (`PartKind::index`): vertex count, instance count, first vertex,
+    /// first instance.
+    pub tree_draws: Vec<[u32; 4]>,
+    /// Placed indirect draws, one block of `prototypes × PLACED_BANDS` per
+    /// placed part.
+    pub placed_draws: Vec<[u32; 4]>,
+    /// The expanded placements in draw order: tree, then placement (15
+    /// bits), the original-lines-from-needles flag and the threshold code.
+    pub entries: Vec<[u32; 2]>,
+}
+
+/// Render world: whether to read back, and the copies under way.
+#[derive(Resource, Default)]
+pub(super) struct PendingReadbacks {
+    pub(super) enabled: bool,
+    staged: Vec<Staged>,
+    done: Vec<ViewReadback>,
+}
+
+struct Staged {
+    species: AssetId<ConiferSpecies>,
+    perspective: bool,
+    buffer: Buffer,
+    /// Byte lengths of the lods, tree draws, placed draws, counters and
+    /// sorted entries in `buffer`, in that order.
+    lengths: [u64; 5],
+    trees: usize,
+    draws: usize,
+    entry_capacity: usize,
+}
+
+pub(super) fn extract_request(
+    request: bevy::render::Extract<Res<CompactReadback>>,
+    mut pending: ResMut<PendingReadbacks>,
+) {
+    pending.enabled = request.enabled;
+}
+
+/// Encodes copies of every view's results into staging buffers (after the
+/// compute pass).
+pub(super) fn stage(
+    encoder: &mut CommandEncoder,
+    device: &RenderDevice,
+    views: &CompactViews,
+    pending: &mut PendingReadbacks,
+) {
+    if !pending.enabled {
+        return;
+    }
+    for ((_, species), view) in &views.views {
+        let p = &view.placed;
+        let sources = [&view.lods, &view.args, &p.args, &p.counters, &p.sorted];
+        let lengths = sources.map(|b| b.size());
+        let buffer = device.create_buffer(&BufferDescriptor {
+            label: Some("conifer compact readback"),
+            size: lengths.iter().sum(),
+            usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut offset = 0;
+        for (source, length) in sources.into_iter().zip(lengths) {
+            encoder.copy_buffer_to_buffer(source, 0, &buffer, offset, length);
+            offset += length;
+        }
+        pending.staged.push(Staged {
+            species: *species,
+            perspective: view.perspective,
+            buffer,
+            lengths,
+            trees: view.instance_count as usize,
+            draws: p.draws as usize,
+            entry_capacity: p.entry_capacity as usize,
+        });
+    }
+}
+
+fn words(bytes: &[u8]) -> Vec<u32> {
+    bytes
+        .chunks_exact(4)
+        .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+        .collect()
+}
+
+/// After the frame is submitted: waits for the copies and decodes them.
+pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingReadbacks>) {
+    let staged = std::mem::take(&mut pending.staged);
+    if staged.is_empty() {
+        return;
+    }
+    for s in &staged {
+        s.buffer
+            .slice(..)
+            .map_async(bevy::render::render_resource::MapMode::Read, |_| {});
+    }
+    if device
+        .poll(bevy::render::render_resource::PollType::wait_indefinitely())
+        .is_err()
+    {
+        return;
+    }
+    let mut done = Vec::new();
+    for s in staged {
+        let bytes = s.buffer.slice(..).get_mapped_range().to_vec();
+        s.buffer.unmap();
+        let mut at = 0usize;
+        let mut part = |k: usize| {
+            let range = at..at + s.lengths[k] as usize;
+            at += s.lengths[k] as usize;
+            words(&bytes[range])
+        };
+        let (lods, tree, placed, counters, sorted) = (part(0), part(1), part(2), part(3), part(4));
+        let trees = s.trees;
+        let quads = |w: &[u32], n: usize| w.chunks_exact(4).take(n).map(|c| [c[0], c[1], c[2], c[3]]).collect();
+        let entry_count = counters.get(1).copied().unwrap_or(0) as usize;
+        done.push(ViewReadback {
+            species: s.species,
+            perspective: s.perspective,
+            lods: quads(&lods, trees),
+            tree_draws: quads(&tree, trees * super::TREE_PART_KINDS),
+            placed_draws: quads(&placed, s.draws * super::PLACED_PART_KINDS),
+            entries: sorted
+                .chunks_exact(2)
+                .take(entry_count.min(s.entry_capacity))
+                .map(|c| [c[0], c[1]])
+                .collect(),
+        });
+    }
+    pending.done = done;
+}
+
+/// Copies the last results to the main world.
+pub(super) fn publish(mut pending: ResMut<PendingReadbacks>, mut main_world: ResMut<bevy::render::MainWorld>) {
+    if pending.done.is_empty() {
+        return;
+    }
+    if let Some(mut target) = main_world.get_resource_mut::<CompactReadback>() {
+        target.views = std::mem::take(&mut pending.done);
+    }
+}
