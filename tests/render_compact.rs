@@ -6,6 +6,8 @@
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
+mod common;
+
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::compact::CompactSpecies;
@@ -13,10 +15,10 @@ use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
 use bevy_conifer_lod::plugin::CompactGpuMemory;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
+use common::{BACKGROUND, covered, covered_count, look_at_crown, mean_difference};
 use std::path::PathBuf;
 
 const SIZE: u32 = 192;
-const BACKGROUND: [u8; 3] = [235, 237, 242];
 
 struct Scene {
     renderer: HeadlessRenderer,
@@ -86,14 +88,7 @@ impl Scene {
     }
 
     fn look_from(&mut self, distance: f32, fov_deg: f32) {
-        let eye = self.crown + Vec3::Z * distance;
-        let world = self.renderer.world_mut();
-        *world.get_mut::<Transform>(self.camera).unwrap() =
-            Transform::from_translation(eye).looking_at(self.crown, Vec3::Y);
-        *world.get_mut::<Projection>(self.camera).unwrap() = Projection::Perspective(PerspectiveProjection {
-            fov: fov_deg.to_radians(),
-            ..default()
-        });
+        look_at_crown(self.renderer.world_mut(), self.camera, self.crown, distance, fov_deg);
     }
 
     fn set_path(&mut self, path: RenderPath) {
@@ -116,34 +111,6 @@ impl Scene {
     fn memory(&self) -> CompactGpuMemory {
         self.renderer.world().resource::<CompactGpuMemory>().clone()
     }
-}
-
-/// Pixels that differ from the background by more than 6 grey levels.
-fn covered(image: &image::RgbaImage) -> Vec<bool> {
-    image
-        .pixels()
-        .map(|p| {
-            (0..3)
-                .map(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs())
-                .max()
-                .unwrap()
-                > 6
-        })
-        .collect()
-}
-
-/// Mean |Δ| of the grey levels (0–255) over the pixels either picture covers.
-fn mean_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> f32 {
-    let (ca, cb) = (covered(a), covered(b));
-    let (mut sum, mut n) = (0.0f32, 0usize);
-    for (i, (pa, pb)) in a.pixels().zip(b.pixels()).enumerate() {
-        if ca[i] || cb[i] {
-            let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
-            sum += (grey(pa) - grey(pb)).abs();
-            n += 1;
-        }
-    }
-    sum / n.max(1) as f32
 }
 
 #[test]
@@ -180,7 +147,7 @@ fn compact_path_draws_what_the_mesh_path_draws() {
     // A hidden tree is not drawn.
     scene.renderer.world_mut().entity_mut(tree).insert(Visibility::Hidden);
     let hidden = scene.shot("hidden");
-    assert_eq!(covered(&hidden).iter().filter(|&&c| c).count(), 0);
+    assert_eq!(covered_count(&hidden), 0);
 }
 
 #[test]
@@ -200,7 +167,7 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
         );
     }
     let forest = scene.shot("forest");
-    assert!(covered(&forest).iter().filter(|&&c| c).count() > 1000);
+    assert!(covered_count(&forest) > 1000);
     let memory = scene.memory();
     let id = scene.species.id();
     let species_bytes = memory.species_bytes[&id];
@@ -253,7 +220,7 @@ fn trees_spawned_before_their_species_loads_are_drawn() {
     let mut scene = Scene::with_trees(&[Transform::from_xyz(0.0, 0.0, 500.0), Transform::IDENTITY]);
     scene.look_from(6.0, 45.0);
     let image = scene.shot("early_trees");
-    let pixels = covered(&image).iter().filter(|&&c| c).count();
+    let pixels = covered_count(&image);
     assert!(pixels > 1000, "the second tree covers {pixels} pixels");
 }
 
@@ -272,7 +239,7 @@ fn a_tree_after_a_culled_tree_is_drawn() {
         .world_mut()
         .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY));
     let image = scene.shot("second_instance");
-    let pixels = covered(&image).iter().filter(|&&c| c).count();
+    let pixels = covered_count(&image);
     assert!(pixels > 1000, "the second tree covers {pixels} pixels");
 }
 
@@ -317,10 +284,7 @@ fn two_cameras_and_a_split_screen_each_get_their_own_cut() {
     let near = images.pop().unwrap();
     near.save(scene.out.join("compact_two_cameras_near.png")).unwrap();
     far.save(scene.out.join("compact_two_cameras_far.png")).unwrap();
-    let (pn, pf) = (
-        covered(&near).iter().filter(|&&c| c).count(),
-        covered(&far).iter().filter(|&&c| c).count(),
-    );
+    let (pn, pf) = (covered_count(&near), covered_count(&far));
     println!("two cameras: near {pn}, far {pf} covered pixels");
     assert!(pn > 4 * pf && pf > 30, "near {pn}, far {pf}");
 
@@ -371,10 +335,7 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
         .entity_mut(tree)
         .remove::<ConiferLodOverride>();
     let restored = scene.shot("override_removed");
-    let (coarse_px, restored_px) = (
-        covered(&coarse).iter().filter(|&&c| c).count(),
-        covered(&restored).iter().filter(|&&c| c).count(),
-    );
+    let (coarse_px, restored_px) = (covered_count(&coarse), covered_count(&restored));
     println!("override: {coarse_px} covered pixels at ε = 12, {restored_px} after removal");
     assert!(
         mean_difference(&coarse, &restored) > 1.0,

@@ -6,6 +6,8 @@
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
+mod common;
+
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
 use bevy_conifer_lod::model::compact::{CompactSpecies, PLACED_BANDS, PlacedDraw, shader_threshold_code};
@@ -13,10 +15,10 @@ use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback};
 use bevy_conifer_lod::prelude::*;
+use common::{BACKGROUND, covered_count, look_at_crown, mean_difference};
 use std::path::PathBuf;
 
 const SIZE: u32 = 160;
-const BACKGROUND: [u8; 3] = [235, 237, 242];
 
 struct Scene {
     renderer: HeadlessRenderer,
@@ -84,14 +86,7 @@ impl Scene {
     }
 
     fn look_from(&mut self, distance: f32, fov_deg: f32) {
-        let eye = self.crown + Vec3::Z * distance;
-        let world = self.renderer.world_mut();
-        *world.get_mut::<Transform>(self.camera).unwrap() =
-            Transform::from_translation(eye).looking_at(self.crown, Vec3::Y);
-        *world.get_mut::<Projection>(self.camera).unwrap() = Projection::Perspective(PerspectiveProjection {
-            fov: fov_deg.to_radians(),
-            ..default()
-        });
+        look_at_crown(self.renderer.world_mut(), self.camera, self.crown, distance, fov_deg);
     }
 
     /// A picture of one tree of `species` at the origin.
@@ -116,30 +111,8 @@ impl Scene {
     }
 }
 
-/// Pixels that differ from the background by more than 6 grey levels.
-fn covered(image: &image::RgbaImage) -> usize {
-    image
-        .pixels()
-        .filter(|p| (0..3).any(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs() > 6))
-        .count()
-}
-
-/// Mean |Δ| of the grey levels (0–255) over the pixels either picture covers.
-fn mean_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> f32 {
-    let is_covered = |p: &image::Rgba<u8>| (0..3).any(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs() > 6);
-    let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
-    let (mut sum, mut n) = (0.0f32, 0usize);
-    for (pa, pb) in a.pixels().zip(b.pixels()) {
-        if is_covered(pa) || is_covered(pb) {
-            sum += (grey(pa) - grey(pb)).abs();
-            n += 1;
-        }
-    }
-    sum / n.max(1) as f32
-}
-
 fn assert_alike(what: &str, placed: &image::RgbaImage, flat: &image::RgbaImage) {
-    let (pp, pf) = (covered(placed), covered(flat));
+    let (pp, pf) = (covered_count(placed), covered_count(flat));
     let diff = mean_difference(placed, flat);
     println!("{what}: covered pixels placed {pp}, flat {pf}; mean grey |Δ| {diff:.2}");
     assert!(pf > 40, "{what}: the flat tree is drawn");
@@ -209,7 +182,7 @@ fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
         .resource_mut::<ConiferLodSettings>()
         .max_expanded_placements = 1;
     let coarse = scene.shot(&placed, "capacity_one");
-    let (f, c) = (covered(&full), covered(&coarse));
+    let (f, c) = (covered_count(&full), covered_count(&coarse));
     println!("covered pixels: full {f}, past capacity {c}");
     assert!(c > f / 4, "the tree past capacity is still drawn ({c} of {f} pixels)");
     assert!(mean_difference(&full, &coarse) > 0.5, "and coarser than the full cut");

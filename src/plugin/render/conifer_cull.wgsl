@@ -274,15 +274,21 @@ fn entry_draw(placement: Placement, code: u32) -> u32 {
     return placement.prototype * PLACED_BANDS + placement_band(prototypes[placement.prototype], code);
 }
 
+// Entry `i` of this frame's expanded placements; invalid past the last
+// one written or in the range of a tree that did not fit.
+fn written_entry(i: u32) -> vec2<u32> {
+    if i >= atomicLoad(&counters[COUNTER_ENTRIES]) {
+        return vec2<u32>(ENTRY_INVALID, ENTRY_INVALID);
+    }
+    return entries[i];
+}
+
 // Per entry: its placement's threshold code (the tree's error over the
 // placement's scale), its draw's count and longest prefixes.
 @compute @workgroup_size(64)
 fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
-    if i >= atomicLoad(&counters[COUNTER_ENTRIES]) {
-        return;
-    }
-    let entry = entries[i];
+    let entry = written_entry(i);
     if entry.x == ENTRY_INVALID {
         return;
     }
@@ -349,11 +355,7 @@ fn scan_placements() {
 // Per entry: its slot in its draw's range of the sorted list.
 @compute @workgroup_size(64)
 fn scatter_placements(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i >= atomicLoad(&counters[COUNTER_ENTRIES]) {
-        return;
-    }
-    let entry = entries[i];
+    let entry = written_entry(id.x);
     if entry.x == ENTRY_INVALID {
         return;
     }

@@ -1,0 +1,47 @@
+//! Helpers shared by the render tests: the background they clear to, which
+//! pixels a tree covers, how far two pictures differ, and a camera pointed
+//! at a crown.
+#![allow(dead_code)] // each test file uses its own subset
+
+use bevy::prelude::*;
+
+/// The clear colour of the render tests' cameras.
+pub const BACKGROUND: [u8; 3] = [235, 237, 242];
+
+/// Whether each pixel differs from the background by more than 6 grey levels.
+pub fn covered(image: &image::RgbaImage) -> Vec<bool> {
+    image
+        .pixels()
+        .map(|p| (0..3).any(|c| (p[c] as i32 - BACKGROUND[c] as i32).abs() > 6))
+        .collect()
+}
+
+/// How many pixels differ from the background by more than 6 grey levels.
+pub fn covered_count(image: &image::RgbaImage) -> usize {
+    covered(image).into_iter().filter(|&c| c).count()
+}
+
+/// Mean |Δ| of the grey levels (0–255) over the pixels either picture covers.
+pub fn mean_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> f32 {
+    let (ca, cb) = (covered(a), covered(b));
+    let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
+    let (mut sum, mut n) = (0.0f32, 0usize);
+    for (i, (pa, pb)) in a.pixels().zip(b.pixels()).enumerate() {
+        if ca[i] || cb[i] {
+            sum += (grey(pa) - grey(pb)).abs();
+            n += 1;
+        }
+    }
+    sum / n.max(1) as f32
+}
+
+/// Puts `camera` `distance` metres in front of `crown` (+z), looking at it
+/// with a vertical field of view of `fov_deg`.
+pub fn look_at_crown(world: &mut World, camera: Entity, crown: Vec3, distance: f32, fov_deg: f32) {
+    let eye = crown + Vec3::Z * distance;
+    *world.get_mut::<Transform>(camera).unwrap() = Transform::from_translation(eye).looking_at(crown, Vec3::Y);
+    *world.get_mut::<Projection>(camera).unwrap() = Projection::Perspective(PerspectiveProjection {
+        fov: fov_deg.to_radians(),
+        ..default()
+    });
+}
