@@ -15,7 +15,7 @@ use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
 use bevy_conifer_lod::plugin::CompactGpuMemory;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
-use common::{BACKGROUND, covered, covered_count, look_at_crown, mean_difference};
+use common::{BACKGROUND, background_camera, covered, covered_count, look_at_crown, mean_difference};
 use std::path::PathBuf;
 
 const SIZE: u32 = 192;
@@ -65,16 +65,7 @@ impl Scene {
         HeadlessRenderer::spawn_lights(renderer.world_mut());
         renderer.load(&[species.clone().untyped()], 600).unwrap();
         let target = renderer.render_target(SIZE, SIZE);
-        let camera = renderer
-            .world_mut()
-            .spawn((
-                HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, 45f32.to_radians()),
-                Camera {
-                    clear_color: ClearColorConfig::Custom(Color::srgb_u8(BACKGROUND[0], BACKGROUND[1], BACKGROUND[2])),
-                    ..default()
-                },
-            ))
-            .id();
+        let camera = background_camera(renderer.world_mut(), &target);
         Self {
             renderer,
             species,

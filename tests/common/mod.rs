@@ -45,3 +45,20 @@ pub fn look_at_crown(world: &mut World, camera: Entity, crown: Vec3, distance: f
         ..default()
     });
 }
+
+/// A 45° camera rendering into `target`, cleared to [`BACKGROUND`].
+pub fn background_camera(world: &mut World, target: &Handle<Image>) -> Entity {
+    world
+        .spawn((
+            bevy_conifer_lod::plugin::headless::HeadlessRenderer::camera_bundle(
+                target,
+                Transform::IDENTITY,
+                45f32.to_radians(),
+            ),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::srgb_u8(BACKGROUND[0], BACKGROUND[1], BACKGROUND[2])),
+                ..default()
+            },
+        ))
+        .id()
+}
