@@ -187,6 +187,14 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 176);
     assert_eq!(memory.view_bytes, 128 + 4096 * 16 + 6 * 4096 * 16 + placed_stand_ins);
     let buffers = memory.buffers;
+    // Frames with nothing replaced make no bind groups.
+    let made = memory.bind_group_sets_made;
+    scene.shot("forest_again");
+    assert_eq!(
+        scene.memory().bind_group_sets_made,
+        made,
+        "bind groups made again without a new buffer"
+    );
     // Most trees go: the buffers shrink back, none leak.
     for &tree in &trees[100..] {
         scene.renderer.world_mut().despawn(tree);

@@ -66,7 +66,7 @@ use bevy::render::render_resource::binding_types::{
     storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer_sized,
 };
 use bevy::render::render_resource::{
-    BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor,
+    BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor, BufferId,
     BufferUsages, CachedComputePipelineId, CompareFunction, ComputePassDescriptor, ComputePipelineDescriptor,
     DepthStencilState, FragmentState, PipelineCache, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
     SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
@@ -372,6 +372,9 @@ pub struct CompactGpuMemory {
     pub view_bytes: u64,
     /// Buffers alive.
     pub buffers: usize,
+    /// Sets of per-view bind groups made since the start: made again only
+    /// when a buffer they hold is replaced, never per frame.
+    pub bind_group_sets_made: u64,
 }
 
 impl CompactGpuMemory {
@@ -603,6 +606,9 @@ struct ViewSpecies {
     /// The placed passes' group and `prepare_dispatch`'s.
     placed_bind_groups: [BindGroup; 2],
     draw_bind_group: BindGroup,
+    /// The buffers the bind groups were made with: they are made again
+    /// only when one of them is replaced.
+    bound: Vec<BufferId>,
     used: bool,
 }
 
@@ -666,6 +672,16 @@ impl PlacedViewBuffers {
             draws,
         }
     }
+}
+
+/// Every buffer a view's bind groups for a species hold.
+fn bound_buffers(gpu: &SpeciesBuffers, view: &ViewSpecies) -> Vec<BufferId> {
+    gpu.arrays()
+        .into_iter()
+        .chain(gpu.per_tree())
+        .chain(view.buffers())
+        .map(Buffer::id)
+        .collect()
 }
 
 /// Per-view buffers of the compact path, keyed by (view entity, species).
@@ -1111,18 +1127,24 @@ fn prepare_views(
                     } else if v.placed.draws != draws {
                         v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws);
                     }
-                    let (cull, placed, draw) = make_groups(&v.cull_view, &v.lods, &v.args, &v.placed);
-                    v.cull_bind_group = cull;
-                    v.placed_bind_groups = placed;
-                    v.draw_bind_group = draw;
+                    let bound = bound_buffers(gpu, v);
+                    if bound != v.bound {
+                        memory.bind_group_sets_made += 1;
+                        let (cull, placed, draw) = make_groups(&v.cull_view, &v.lods, &v.args, &v.placed);
+                        v.cull_bind_group = cull;
+                        v.placed_bind_groups = placed;
+                        v.draw_bind_group = draw;
+                        v.bound = bound;
+                    }
                     v
                 }
                 bevy::platform::collections::hash_map::Entry::Vacant(entry) => {
                     let capacity = initial_capacity(n);
                     let (c, l, a) = fresh(capacity);
                     let placed = PlacedViewBuffers::new(&device, placed_capacity(None).unwrap_or(0), draws);
+                    memory.bind_group_sets_made += 1;
                     let (cull, placed_group, draw) = make_groups(&c, &l, &a, &placed);
-                    entry.insert(ViewSpecies {
+                    let v = entry.insert(ViewSpecies {
                         cull_view: c,
                         lods: l,
                         args: a,
@@ -1133,8 +1155,11 @@ fn prepare_views(
                         cull_bind_group: cull,
                         placed_bind_groups: placed_group,
                         draw_bind_group: draw,
+                        bound: Vec::new(),
                         used: false,
-                    })
+                    });
+                    v.bound = bound_buffers(gpu, v);
+                    v
                 }
             };
             view_species.instance_count = n as u32;
