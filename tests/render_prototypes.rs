@@ -331,3 +331,55 @@ fn gpu_draws_equal_the_cpu_reference() {
         }
     }
 }
+
+#[test]
+fn placed_prototypes_cast_the_flattened_tree_shadow() {
+    let mut scene = Scene::new();
+    let world = scene.renderer.world_mut();
+    let mut lights = world.query::<&mut DirectionalLight>();
+    for mut light in lights.iter_mut(world) {
+        light.shadow_maps_enabled = true;
+    }
+    let ground_mesh = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Plane3d::default().mesh().size(60.0, 60.0));
+    let ground_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgb(0.6, 0.6, 0.6),
+        perceptual_roughness: 1.0,
+        reflectance: 0.0,
+        ..default()
+    });
+    world.spawn((Mesh3d(ground_mesh), MeshMaterial3d(ground_material)));
+    // Straight down from 14 m over the tree: the ground and its shadow.
+    let camera = scene.camera;
+    *world.get_mut::<Transform>(camera).unwrap() =
+        Transform::from_translation(Vec3::Y * 14.0).looking_at(Vec3::ZERO, Vec3::X);
+    for _ in 0..3 {
+        scene.renderer.update().unwrap();
+    }
+    let bare = scene.renderer.capture(&scene.target, 20).unwrap();
+    let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
+    let a = scene.shot(&placed, "shadow_placed");
+    let b = scene.shot(&flat, "shadow_flat");
+    // Darkening of the ground by the tree and its shadow, and how the two differ.
+    let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
+    let darkening = |image: &image::RgbaImage| -> f32 {
+        image
+            .pixels()
+            .zip(bare.pixels())
+            .map(|(p, q)| (grey(q) - grey(p)).max(0.0))
+            .sum::<f32>()
+            / image.pixels().len() as f32
+    };
+    let (da, db) = (darkening(&a), darkening(&b));
+    let difference = a
+        .pixels()
+        .zip(b.pixels())
+        .map(|(p, q)| (grey(p) - grey(q)).abs())
+        .sum::<f32>()
+        / a.pixels().len() as f32;
+    println!("shadow: darkening placed {da:.2}, flat {db:.2}; mean |Δ| {difference:.2} of 255");
+    assert!(db > 1.0, "the flat tree darkens the ground");
+    assert!((da - db).abs() <= 0.05 * db, "placed {da}, flat {db}");
+    assert!(difference < 1.0);
+}
