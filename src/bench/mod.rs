@@ -204,6 +204,12 @@ pub struct PrototypeTreeFigures {
     /// Whether the mesh path's meshes stayed unbuilt (always, on the
     /// compact path).
     pub mesh_path_unbuilt: bool,
+    /// Camera distances of `processed_over_cut`, metres (64 px, 0.8 rad).
+    pub distances: Vec<f32>,
+    /// Prisms and lines the vertex shaders process (counted from the
+    /// indirect draws the GPU wrote, read back) over those in the cut (the
+    /// CPU reference at the GPU's codes), at each distance.
+    pub processed_over_cut: Vec<f64>,
 }
 
 /// Cut timings.
@@ -454,7 +460,7 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
 fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
     let species = crate::plugin::ConiferSpecies::from_record(record.clone())
         .map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
-    Ok(compact_memory(species)?.0)
+    Ok(compact_memory(species, &[], |_| {})?.0)
 }
 
 /// A 1,000,000-needle (by default) procedural tree of `species` as shoot
@@ -476,7 +482,16 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
         .len() as u64;
     let record = record.quantized().map_err(|e| failed(e.to_string()))?;
     let tree = crate::plugin::ConiferSpecies::from_prototype_record(&record).map_err(|e| failed(e.to_string()))?;
-    let (gpu_bytes, view_bytes, mesh_path_unbuilt) = compact_memory(tree)?;
+    let compact = tree.compact.clone().ok_or_else(|| failed("no compact layout".into()))?;
+    let distances = vec![5.0f32, 20.0, 80.0];
+    let mut processed_over_cut = Vec::new();
+    let (gpu_bytes, view_bytes, mesh_path_unbuilt) = compact_memory(tree, &distances, |view| {
+        let [code, e_bits, ..] = view.lods[0];
+        let (code, e) = ((code & 0xffff) as u16, f32::from_bits(e_bits));
+        let (cut, _) = compact.placed_drawn(&record, code, e, crate::model::compact::shader_threshold_code);
+        let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()).max(1);
+        processed_over_cut.push(view.processed_primitives(record.max_sides) as f64 / in_cut as f64);
+    })?;
     Ok(PrototypeTreeFigures {
         needles: record.needle_count(),
         prototype_needles: record.prototype_needle_count(),
@@ -486,15 +501,24 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
         gpu_bytes,
         view_bytes,
         mesh_path_unbuilt,
+        distances,
+        processed_over_cut,
     })
 }
 
 /// One tree of `species` drawn by the compact path headless at 20 m from
 /// its crown: the species' buffer bytes, the view's, and whether the mesh
-/// path's meshes stayed unbuilt.
-fn compact_memory(species: crate::plugin::ConiferSpecies) -> Result<(u64, u64, bool), BenchError> {
+/// path's meshes stayed unbuilt; then at each of `distances`, the camera's
+/// compute results read back and handed to `read`.
+fn compact_memory(
+    species: crate::plugin::ConiferSpecies,
+    distances: &[f32],
+    mut read: impl FnMut(&crate::plugin::ViewReadback),
+) -> Result<(u64, u64, bool), BenchError> {
     use crate::plugin::headless::HeadlessRenderer;
-    use crate::plugin::{CompactGpuMemory, ConiferFoliage, ConiferLodSettings, ConiferSpecies, RenderPath};
+    use crate::plugin::{
+        CompactGpuMemory, CompactReadback, ConiferFoliage, ConiferLodSettings, ConiferSpecies, RenderPath,
+    };
     use bevy::prelude::*;
     let mut renderer = HeadlessRenderer::new(".");
     let target = renderer.render_target(64, 64);
@@ -503,23 +527,39 @@ fn compact_memory(species: crate::plugin::ConiferSpecies) -> Result<(u64, u64, b
     let crown = species.crown_center;
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
-    let eye = crown + Vec3::Z * 20.0;
-    world.spawn(HeadlessRenderer::camera_bundle(
-        &target,
-        Transform::from_translation(eye).looking_at(crown, Vec3::Y),
-        0.8,
-    ));
+    let at = |distance: f32| Transform::from_translation(crown + Vec3::Z * distance).looking_at(crown, Vec3::Y);
+    let camera = world
+        .spawn(HeadlessRenderer::camera_bundle(&target, at(20.0), 0.8))
+        .id();
     for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
         renderer
             .update()
             .map_err(|e| BenchError::Render(crate::eval::scene::EvalError::from(e)))?;
     }
-    let memory = renderer.world().resource::<CompactGpuMemory>();
+    let memory = renderer.world().resource::<CompactGpuMemory>().clone();
     let unbuilt = renderer
         .world()
         .resource::<Assets<ConiferSpecies>>()
         .get(&handle)
         .is_some_and(|s| s.meshes.is_none());
+    renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
+    for &distance in distances {
+        *renderer.world_mut().get_mut::<Transform>(camera).expect("the camera") = at(distance);
+        // The frame that culls, then the one that publishes its results.
+        for _ in 0..2 {
+            renderer
+                .update()
+                .map_err(|e| BenchError::Render(crate::eval::scene::EvalError::from(e)))?;
+        }
+        let readback = renderer.world().resource::<CompactReadback>();
+        if let Some(view) = readback
+            .views
+            .iter()
+            .find(|v| v.species == handle.id() && v.perspective)
+        {
+            read(view);
+        }
+    }
     Ok((
         memory.species_bytes.get(&handle.id()).copied().unwrap_or(0),
         memory.view_bytes,

@@ -42,6 +42,41 @@ pub struct ViewReadback {
     pub entries: Vec<[u32; 2]>,
 }
 
+impl ViewReadback {
+    /// Prisms and needle lines the vertex shaders process for this view,
+    /// counted from the indirect draws the compute passes wrote: the
+    /// per-tree draws of prisms, original and merged lines, and every
+    /// placed draw (vertices over vertices a primitive, times instances).
+    pub fn processed_primitives(&self, max_sides: u8) -> u64 {
+        let prism_vertices = u64::from(super::gpu::prism_vertices(max_sides));
+        let per_primitive = |part: usize| if part == 0 { prism_vertices } else { 2 };
+        let count = |draw: &[u32; 4], part: usize| u64::from(draw[0]) / per_primitive(part) * u64::from(draw[1]);
+        let trees = self.lods.len();
+        let tree: u64 = (0..3)
+            .flat_map(|part| {
+                self.tree_draws
+                    .iter()
+                    .skip(part * trees)
+                    .take(trees)
+                    .map(move |d| (d, part))
+            })
+            .map(|(d, part)| count(d, part))
+            .sum();
+        let draws = self.placed_draws.len() / super::PLACED_PART_KINDS;
+        let placed: u64 = (0..3)
+            .flat_map(|part| {
+                self.placed_draws
+                    .iter()
+                    .skip(part * draws)
+                    .take(draws)
+                    .map(move |d| (d, part))
+            })
+            .map(|(d, part)| count(d, part))
+            .sum();
+        tree + placed
+    }
+}
+
 /// Render world: whether to read back, and the copies under way.
 #[derive(Resource, Default)]
 pub(super) struct PendingReadbacks {
