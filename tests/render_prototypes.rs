@@ -244,7 +244,6 @@ fn gpu_draws_equal_the_cpu_reference() {
             // over its placement's scale; each draw counts its entries and
             // holds the longest prefix they need.
             let mut expected = vec![PlacedDraw::default(); compact.prototypes.len() * PLACED_BANDS as usize];
-            let mut processed = 0u64;
             for &[tree, word] in &view.entries {
                 assert_eq!(tree, 0);
                 let j = (word & 0x7fff) as usize;
@@ -299,16 +298,8 @@ fn gpu_draws_equal_the_cpu_reference() {
                         0
                     }
                 );
-                processed += u64::from(reference.placements)
-                    * u64::from(reference.prisms + reference.original_lines() + reference.merged_lines);
             }
             // What the vertex shaders process over what the cut holds.
-            let tree_processed: u64 = (0..3)
-                .map(|kind| {
-                    let draw = view.tree_draws[kind * trees];
-                    u64::from(draw[0] / if kind == 0 { prism_vertices } else { 2 })
-                })
-                .sum();
             let cut = if compact.placements.is_empty() {
                 flat_record.cut(e)
             } else {
@@ -317,7 +308,7 @@ fn gpu_draws_equal_the_cpu_reference() {
                     .0
             };
             let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()) as f64;
-            let ratio = (tree_processed + processed) as f64 / in_cut.max(1.0);
+            let ratio = view.processed_primitives(compact.max_sides) as f64 / in_cut.max(1.0);
             println!(
                 "{distance} m, {}: {} expanded placements, processed / cut = {ratio:.2}",
                 if compact.placements.is_empty() {
