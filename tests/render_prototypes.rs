@@ -15,7 +15,7 @@ use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback};
 use bevy_conifer_lod::prelude::*;
-use common::{background_camera, covered_count, look_at_crown, mean_difference};
+use common::{background_camera, covered_count, look_at_crown, mean_difference, spawn_ground};
 use std::path::PathBuf;
 
 const SIZE: u32 = 160;
@@ -331,16 +331,7 @@ fn placed_prototypes_cast_the_flattened_tree_shadow() {
     for mut light in lights.iter_mut(world) {
         light.shadow_maps_enabled = true;
     }
-    let ground_mesh = world
-        .resource_mut::<Assets<Mesh>>()
-        .add(Plane3d::default().mesh().size(60.0, 60.0));
-    let ground_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-        base_color: Color::srgb(0.6, 0.6, 0.6),
-        perceptual_roughness: 1.0,
-        reflectance: 0.0,
-        ..default()
-    });
-    world.spawn((Mesh3d(ground_mesh), MeshMaterial3d(ground_material)));
+    spawn_ground(world);
     // Straight down from 14 m over the tree: the ground and its shadow.
     let camera = scene.camera;
     *world.get_mut::<Transform>(camera).unwrap() =

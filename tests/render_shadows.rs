@@ -6,6 +6,8 @@
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
+mod common;
+
 use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
@@ -13,6 +15,7 @@ use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
 use bevy_conifer_lod::preview::srgb_to_linear;
+use common::spawn_ground;
 use std::path::PathBuf;
 
 const SIZE: u32 = 256;
@@ -98,16 +101,7 @@ impl ShadowScene {
             brightness: 150.0,
             ..default()
         });
-        let ground_mesh = world
-            .resource_mut::<Assets<Mesh>>()
-            .add(Plane3d::default().mesh().size(60.0, 60.0));
-        let ground_material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
-            base_color: Color::srgb(0.6, 0.6, 0.6),
-            perceptual_roughness: 1.0,
-            reflectance: 0.0,
-            ..default()
-        });
-        world.spawn((Mesh3d(ground_mesh), MeshMaterial3d(ground_material)));
+        spawn_ground(world);
         renderer.load(&[handle.untyped()], 600).unwrap();
         let target = renderer.render_target(SIZE, SIZE);
         Self {

@@ -62,3 +62,17 @@ pub fn background_camera(world: &mut World, target: &Handle<Image>) -> Entity {
         ))
         .id()
 }
+
+/// A 60 m grey ground plane (matte) at y = 0, for shadows to fall on.
+pub fn spawn_ground(world: &mut World) -> Entity {
+    let mesh = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Plane3d::default().mesh().size(60.0, 60.0));
+    let material = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::srgb(0.6, 0.6, 0.6),
+        perceptual_roughness: 1.0,
+        reflectance: 0.0,
+        ..default()
+    });
+    world.spawn((Mesh3d(mesh), MeshMaterial3d(material))).id()
+}
