@@ -252,13 +252,7 @@ fn gpu_draws_equal_the_cpu_reference() {
                 let cpu = shader_threshold_code(e / placement.transform.scale);
                 assert!(c.abs_diff(cpu) <= 1, "entry code {c}, CPU {cpu}");
                 let k = placement.prototype as usize;
-                let p = compact.prototype_prefixes(k, c);
-                let d = &mut expected[k * PLACED_BANDS as usize + compact.placement_band(k, c) as usize];
-                d.placements += 1;
-                d.prisms = d.prisms.max(p.prisms);
-                d.after_prisms = d.after_prisms.max(p.after_prisms);
-                d.original_by_parent = d.original_by_parent.max(p.original_by_parent);
-                d.merged_lines = d.merged_lines.max(p.merged_lines);
+                expected[compact.placed_draw_index(k, c)].add(compact.prototype_prefixes(k, c));
             }
             assert_eq!(view.entries.len(), compact.expanded_placements(code) as usize);
             let draws = expected.len();
@@ -266,38 +260,13 @@ fn gpu_draws_equal_the_cpu_reference() {
             for (d, reference) in expected.iter().enumerate() {
                 let [prisms, original, merged] = [0, 1, 2].map(|part| view.placed_draws[part * draws + d]);
                 let count = |draw: [u32; 4]| if draw[0] == 0 { 0 } else { draw[1] };
-                assert_eq!(
-                    count(prisms).max(count(original)).max(count(merged)),
-                    if reference.prisms + reference.original_lines() + reference.merged_lines > 0 {
-                        reference.placements
-                    } else {
-                        0
-                    }
-                );
-                assert_eq!(
-                    prisms[0],
-                    if reference.placements > 0 {
-                        reference.prisms * prism_vertices
-                    } else {
-                        0
-                    }
-                );
-                assert_eq!(
-                    original[0],
-                    if reference.placements > 0 {
-                        2 * reference.original_lines()
-                    } else {
-                        0
-                    }
-                );
-                assert_eq!(
-                    merged[0],
-                    if reference.placements > 0 {
-                        2 * reference.merged_lines
-                    } else {
-                        0
-                    }
-                );
+                // A draw without placements needs no prefix: `longest` stays 0.
+                let longest = reference.longest;
+                let placements = if longest.total() > 0 { reference.placements } else { 0 };
+                assert_eq!(count(prisms).max(count(original)).max(count(merged)), placements);
+                assert_eq!(prisms[0], longest.prisms * prism_vertices);
+                assert_eq!(original[0], 2 * longest.original_lines());
+                assert_eq!(merged[0], 2 * longest.merged_lines);
             }
             // What the vertex shaders process over what the cut holds.
             let cut = if compact.placements.is_empty() {

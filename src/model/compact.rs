@@ -231,10 +231,31 @@ pub struct SectionPrefixes {
 }
 
 impl SectionPrefixes {
-    /// Primitives a draw of these prefixes processes (original lines from
-    /// the shorter of the two ranges).
+    /// Whether the original lines are drawn from the needles after the
+    /// prisms rather than from the parent-sorted order: the shorter range.
+    pub fn original_from_needles(&self) -> bool {
+        self.after_prisms < self.original_by_parent
+    }
+
+    /// Original lines a draw of these prefixes processes (the shorter range).
+    pub fn original_lines(&self) -> u32 {
+        self.after_prisms.min(self.original_by_parent)
+    }
+
+    /// Primitives a draw of these prefixes processes.
     pub fn total(&self) -> u32 {
-        self.prisms + self.after_prisms.min(self.original_by_parent) + self.merged_lines
+        self.prisms + self.original_lines() + self.merged_lines
+    }
+
+    /// Each prefix the longer of `self`'s and `other`'s (what one draw
+    /// serving both needs).
+    pub fn max(self, other: Self) -> Self {
+        Self {
+            prisms: self.prisms.max(other.prisms),
+            after_prisms: self.after_prisms.max(other.after_prisms),
+            original_by_parent: self.original_by_parent.max(other.original_by_parent),
+            merged_lines: self.merged_lines.max(other.merged_lines),
+        }
     }
 }
 
@@ -328,6 +349,33 @@ fn parent_code(record: &LodRecord, node: u32) -> Result<u16, CompactError> {
     Ok(code_at_least(record.parent_error(node), "errors")?.min(MAX_THRESHOLD_CODE))
 }
 
+/// Error code and parent error code of merged node `node` of `record`,
+/// rounded up (the parent's is [`ROOT_PARENT_CODE`] for a root): the line
+/// can be in a cut iff the parent's is above its own.
+fn merged_line_codes(record: &LodRecord, node: u32) -> Result<(u16, u16), CompactError> {
+    let own = code_at_least(record.node_error(node), "errors")?.min(MAX_THRESHOLD_CODE);
+    Ok((own, parent_code(record, node)?))
+}
+
+/// Equivalent width code of merged node `node` of `record`: its needles'
+/// summed side area over its length.
+fn merged_line_width(record: &LodRecord, node: u32) -> Result<u16, CompactError> {
+    let [(a, _), (b, _)] = record.node_ends(node);
+    let length = a.distance(b).max(1e-9);
+    log_encode_nearest((record.node_needle_area(node) / length).min(LOG_CODE_MAX))
+        .ok_or(CompactError::OutOfRange("line widths"))
+}
+
+/// The three words of a merged line: its two end references with the width
+/// code split over their top bytes, then its own and parent codes.
+fn merged_line_words(ends: [u32; 2], width: u16, own: u16, parent: u16) -> [u32; 3] {
+    [
+        ends[0] | u32::from(width & 0xff) << 24,
+        ends[1] | u32::from(width >> 8) << 24,
+        u32::from(own) | u32::from(parent) << 16,
+    ]
+}
+
 /// Wood segments sorted by `2·r_max` descending, and the wood mesh on its grid.
 type WoodLayout = (Vec<[f32; 8]>, PositionGrid, Vec<[u32; 3]>);
 
@@ -412,23 +460,14 @@ impl CompactSpecies {
         let mut merged_code_range = [u16::MAX, 0];
         for (m, line) in record.merged.iter().enumerate() {
             let node = (n + m) as u32;
-            let own = code_at_least(line.error, "errors")?.min(MAX_THRESHOLD_CODE);
+            let (own, parent) = merged_line_codes(record, node)?;
             merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
-            let parent = parent_code(record, node)?;
             if parent <= own {
                 continue;
             }
-            let [(a, _), (b, _)] = record.node_ends(node);
-            let length = a.distance(b).max(1e-9);
-            let width = log_encode_nearest((record.node_needle_area(node) / length).min(LOG_CODE_MAX))
-                .ok_or(CompactError::OutOfRange("line widths"))?;
+            let width = merged_line_width(record, node)?;
             let end = |e: u32| end_reference(compact_of[(e / 2) as usize], e % 2 == 1);
-            let words = [
-                end(line.ends[0]) | u32::from(width & 0xff) << 24,
-                end(line.ends[1]) | u32::from(width >> 8) << 24,
-                u32::from(own) | u32::from(parent) << 16,
-            ];
-            merged.push((parent, node, words));
+            merged.push((parent, node, merged_line_words(line.ends.map(end), width, own, parent)));
         }
         merged.sort_by_key(|&(parent, node, _)| (std::cmp::Reverse(parent), node));
         if merged_code_range[0] > merged_code_range[1] {
@@ -521,8 +560,8 @@ impl CompactSpecies {
         let wood_error = |w: &[f32; 8]| line_error(w[3].max(w[7]));
         Prefixes {
             prisms: section.prisms,
-            original_lines: section.original_by_parent.min(section.after_prisms),
-            original_from_needles: section.after_prisms < section.original_by_parent,
+            original_lines: section.original_lines(),
+            original_from_needles: section.original_from_needles(),
             merged_lines: section.merged_lines,
             wood_prisms: self.wood_segments.partition_point(|w| e < wood_error(w)) as u32,
             wood_lines: self
@@ -589,26 +628,16 @@ impl CompactSpecies {
 pub struct PlacedDraw {
     /// Expanded placements in the draw (its instance count).
     pub placements: u32,
-    /// Most prisms any of them draws.
-    pub prisms: u32,
-    /// Most needles after the prisms.
-    pub after_prisms: u32,
-    /// Most original lines by parent code.
-    pub original_by_parent: u32,
-    /// Most merged lines.
-    pub merged_lines: u32,
+    /// Each prefix the longest any of them needs (original lines from the
+    /// needles after the fewest prisms or by parent code, the shorter).
+    pub longest: SectionPrefixes,
 }
 
 impl PlacedDraw {
-    /// Whether the original lines are drawn from the needles after the
-    /// fewest prisms rather than from the parent-sorted order (the shorter).
-    pub fn original_from_needles(&self) -> bool {
-        self.after_prisms < self.original_by_parent
-    }
-
-    /// Original lines each instance processes.
-    pub fn original_lines(&self) -> u32 {
-        self.after_prisms.min(self.original_by_parent)
+    /// Adds a placement needing `prefixes`.
+    pub fn add(&mut self, prefixes: SectionPrefixes) {
+        self.placements += 1;
+        self.longest = self.longest.max(prefixes);
     }
 }
 
@@ -616,9 +645,10 @@ impl PlacedDraw {
 /// their threshold codes and draws, as the compute passes find them.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PlacedView {
-    /// `(placement index, threshold code)` of each expanded placement.
-    pub expanded: Vec<(u32, u16)>,
-    /// One draw per `prototype · PLACED_BANDS + band`.
+    /// `(placement index, threshold code, draw)` of each expanded placement.
+    pub expanded: Vec<(u32, u16, usize)>,
+    /// One draw per `prototype · PLACED_BANDS + band`
+    /// ([`CompactSpecies::placed_draw_index`]).
     pub draws: Vec<PlacedDraw>,
 }
 
@@ -649,16 +679,13 @@ impl CompactSpecies {
         let mut merged_code_range = [u16::MAX, 0];
         for k in 0..record.tree_merged.len() as u32 {
             let node = level2_first + k;
-            let own = code_at_least(flat.node_error(node), "errors")?.min(MAX_THRESHOLD_CODE);
+            let (own, parent) = merged_line_codes(flat, node)?;
             merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
-            let parent = parent_code(flat, node)?;
             if parent <= own {
                 continue;
             }
+            let width = merged_line_width(flat, node)?;
             let [(a, _), (b, _)] = flat.node_ends(node);
-            let length = a.distance(b).max(1e-9);
-            let width = log_encode_nearest((flat.node_needle_area(node) / length).min(LOG_CODE_MAX))
-                .ok_or(CompactError::OutOfRange("line widths"))?;
             ends.push([a, b]);
             lines.push((parent, own, width, node));
         }
@@ -695,11 +722,8 @@ impl CompactSpecies {
             species.needles.push([ax | ay << 16, az | bx << 16, by | bz << 16, 0]);
             species.needle_source.push(node);
             let slot = slot as u32;
-            species.merged_lines.push([
-                end_reference(slot, false) | u32::from(width & 0xff) << 24,
-                end_reference(slot, true) | u32::from(width >> 8) << 24,
-                u32::from(own) | u32::from(parent) << 16,
-            ]);
+            let ends = [end_reference(slot, false), end_reference(slot, true)];
+            species.merged_lines.push(merged_line_words(ends, width, own, parent));
             species.merged_source.push(node);
         }
         species.merged_code_range = merged_code_range;
@@ -816,6 +840,12 @@ impl CompactSpecies {
             .count() as u32
     }
 
+    /// The draw (`prototype · PLACED_BANDS + band`) a placement of
+    /// prototype `k` at threshold code `code` is drawn by.
+    pub fn placed_draw_index(&self, k: usize, code: u16) -> usize {
+        k * PLACED_BANDS as usize + self.placement_band(k, code) as usize
+    }
+
     /// What the compute passes find for one tree at spatial error `e`
     /// (tree metres) and threshold code `code`: each expanded placement's
     /// own threshold code (`threshold(e / scale)`), and the per-draw counts
@@ -829,14 +859,9 @@ impl CompactSpecies {
             let placement = &self.placements[j as usize];
             let c = threshold(e / placement.transform.scale);
             let k = placement.prototype as usize;
-            let p = self.prototype_prefixes(k, c);
-            let draw = &mut view.draws[k * PLACED_BANDS as usize + self.placement_band(k, c) as usize];
-            draw.placements += 1;
-            draw.prisms = draw.prisms.max(p.prisms);
-            draw.after_prisms = draw.after_prisms.max(p.after_prisms);
-            draw.original_by_parent = draw.original_by_parent.max(p.original_by_parent);
-            draw.merged_lines = draw.merged_lines.max(p.merged_lines);
-            view.expanded.push((j, c));
+            let draw = self.placed_draw_index(k, c);
+            view.draws[draw].add(self.prototype_prefixes(k, c));
+            view.expanded.push((j, c, draw));
         }
         view
     }
@@ -851,11 +876,10 @@ impl CompactSpecies {
         let tree = self.prefixes(code, e);
         let mut processed = u64::from(tree.merged_lines);
         let view = self.placed_view(code, e, threshold);
-        for &(j, c) in &view.expanded {
+        for &(j, c, draw) in &view.expanded {
             let placement = &self.placements[j as usize];
-            let k = placement.prototype as usize;
-            let prototype = &self.prototypes[k];
-            let draw = view.draws[k * PLACED_BANDS as usize + self.placement_band(k, c) as usize];
+            let prototype = &self.prototypes[placement.prototype as usize];
+            let draw = view.draws[draw].longest;
             let name = |local: u32| record.flat_local(placement.source as usize, local);
             let placed_e = e / placement.transform.scale;
             let first_needle = prototype.needles[0];
@@ -888,7 +912,7 @@ impl CompactSpecies {
                     cut.merged_lines.push(name(self.merged_source[m]));
                 }
             }
-            processed += u64::from(draw.prisms + draw.original_lines() + draw.merged_lines);
+            processed += u64::from(draw.total());
         }
         (cut, processed)
     }

@@ -239,23 +239,25 @@ pub(super) fn spawn_parts(
     }
     for (entity, foliage, over, parts, layers) in &trees {
         let id = foliage.0.id();
-        if species_assets.get(id).is_some_and(|s| s.meshes.is_none()) && !unbuildable.contains(&id) {
+        let unbuilt = species_assets
+            .get(id)
+            .filter(|s| s.meshes.is_none() && !unbuildable.contains(&id));
+        if let Some(species) = unbuilt {
             // The species' first tree on the mesh path: its meshes now.
             let (Some(meshes), Some(buffers)) = (mesh_assets.as_deref_mut(), buffer_assets.as_deref_mut()) else {
                 continue;
             };
-            let built = species_assets.get(id).map(|s| SpeciesMeshes::build(&s.record));
-            match built {
-                Some(Ok(parts)) => {
+            match SpeciesMeshes::build(&species.record) {
+                Ok(parts) => {
+                    let handles = parts.into_handles(meshes, buffers);
                     if let Some(mut species) = species_assets.get_mut(id) {
-                        species.meshes = Some(parts.into_handles(meshes, buffers));
+                        species.meshes = Some(handles);
                     }
                 }
-                Some(Err(error)) => {
+                Err(error) => {
                     warn!("a species cannot be drawn by the mesh path: {error}");
                     unbuildable.insert(id);
                 }
-                None => {}
             }
         }
         let Some(species) = species_assets.get(&foliage.0) else {

@@ -602,14 +602,20 @@ struct ViewSpecies {
     /// A perspective view (cameras, point and spot lights).
     perspective: bool,
     placed: PlacedViewBuffers,
-    cull_bind_group: BindGroup,
-    /// The placed passes' group and `prepare_dispatch`'s.
-    placed_bind_groups: [BindGroup; 2],
-    draw_bind_group: BindGroup,
-    /// The buffers the bind groups were made with: they are made again
-    /// only when one of them is replaced.
+    /// Made by `prepare_views` before the view is culled or drawn.
+    groups: Option<ViewBindGroups>,
+    /// The buffers `groups` were made with: they are made again only when
+    /// one of them is replaced.
     bound: Vec<BufferId>,
     used: bool,
+}
+
+/// A view's bind groups for one species.
+struct ViewBindGroups {
+    cull: BindGroup,
+    /// The placed passes' group and `prepare_dispatch`'s.
+    placed: [BindGroup; 2],
+    draw: BindGroup,
 }
 
 impl ViewSpecies {
@@ -1050,13 +1056,15 @@ fn prepare_views(
                 );
                 (cull_view, lods, args)
             };
-            let placed_capacity = |current: Option<u32>| -> Option<u32> {
+            // The entry capacity a view's placement buffers of `current`
+            // entries should have, when it changes (0 for a flat species).
+            let placed_capacity = |current: u32| -> Option<u32> {
                 if placements == 0 {
-                    return current.is_none_or(|c| c != 0).then_some(0);
+                    return (current != 0).then_some(0);
                 }
                 let resized = match current {
-                    None | Some(0) => Some(initial_capacity(entries_needed)),
-                    Some(c) => resized_capacity(c as usize, entries_needed),
+                    0 => Some(initial_capacity(entries_needed)),
+                    c => resized_capacity(c as usize, entries_needed),
                 };
                 resized.map(|c| c.min(max_entries) as u32)
             };
@@ -1110,66 +1118,51 @@ fn prepare_views(
                         placed.sorted.as_entire_binding(),
                     )),
                 );
-                (cull, [placed_group, dispatch_group], draw)
-            };
-            let view_species = match compact_views.views.entry((view_entity, id)) {
-                bevy::platform::collections::hash_map::Entry::Occupied(entry) => {
-                    let v = entry.into_mut();
-                    if let Some(capacity) = resized_capacity(v.capacity, n) {
-                        let (c, l, a) = fresh(capacity);
-                        v.cull_view = c;
-                        v.lods = l;
-                        v.args = a;
-                        v.capacity = capacity;
-                    }
-                    if let Some(entry_capacity) = placed_capacity(Some(v.placed.entry_capacity)) {
-                        v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws);
-                    } else if v.placed.draws != draws {
-                        v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws);
-                    }
-                    let bound = bound_buffers(gpu, v);
-                    if bound != v.bound {
-                        memory.bind_group_sets_made += 1;
-                        let (cull, placed, draw) = make_groups(&v.cull_view, &v.lods, &v.args, &v.placed);
-                        v.cull_bind_group = cull;
-                        v.placed_bind_groups = placed;
-                        v.draw_bind_group = draw;
-                        v.bound = bound;
-                    }
-                    v
-                }
-                bevy::platform::collections::hash_map::Entry::Vacant(entry) => {
-                    let capacity = initial_capacity(n);
-                    let (c, l, a) = fresh(capacity);
-                    let placed = PlacedViewBuffers::new(&device, placed_capacity(None).unwrap_or(0), draws);
-                    memory.bind_group_sets_made += 1;
-                    let (cull, placed_group, draw) = make_groups(&c, &l, &a, &placed);
-                    let v = entry.insert(ViewSpecies {
-                        cull_view: c,
-                        lods: l,
-                        args: a,
-                        capacity,
-                        instance_count: 0,
-                        perspective,
-                        placed,
-                        cull_bind_group: cull,
-                        placed_bind_groups: placed_group,
-                        draw_bind_group: draw,
-                        bound: Vec::new(),
-                        used: false,
-                    });
-                    v.bound = bound_buffers(gpu, v);
-                    v
+                ViewBindGroups {
+                    cull,
+                    placed: [placed_group, dispatch_group],
+                    draw,
                 }
             };
-            view_species.instance_count = n as u32;
-            view_species.perspective = perspective;
-            view_species.used = true;
+            let v = compact_views.views.entry((view_entity, id)).or_insert_with(|| {
+                let capacity = initial_capacity(n);
+                let (cull_view, lods, args) = fresh(capacity);
+                ViewSpecies {
+                    cull_view,
+                    lods,
+                    args,
+                    capacity,
+                    instance_count: 0,
+                    perspective,
+                    placed: PlacedViewBuffers::new(&device, placed_capacity(0).unwrap_or(0), draws),
+                    groups: None,
+                    bound: Vec::new(),
+                    used: false,
+                }
+            });
+            if let Some(capacity) = resized_capacity(v.capacity, n) {
+                (v.cull_view, v.lods, v.args) = fresh(capacity);
+                v.capacity = capacity;
+            }
+            if let Some(entry_capacity) = placed_capacity(v.placed.entry_capacity) {
+                v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws);
+            } else if v.placed.draws != draws {
+                v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws);
+            }
+            let bound = bound_buffers(gpu, v);
+            if bound != v.bound {
+                memory.bind_group_sets_made += 1;
+                v.groups = Some(make_groups(&v.cull_view, &v.lods, &v.args, &v.placed));
+                v.bound = bound;
+            }
+            v.instance_count = n as u32;
+            v.perspective = perspective;
+            v.used = true;
             let cull_view = CullView {
-                entry_capacity: view_species.placed.entry_capacity,
+                entry_capacity: v.placed.entry_capacity,
                 ..cull_view
             };
-            queue.write_buffer(&view_species.cull_view, 0, bytemuck::bytes_of(&cull_view));
+            queue.write_buffer(&v.cull_view, 0, bytemuck::bytes_of(&cull_view));
         }
     }
     compact_views.views.retain(|_, v| v.used);
@@ -1374,16 +1367,17 @@ fn cull_trees(
         timestamp_writes: None,
     });
     for view in compact_views.views.values() {
+        let Some(groups) = &view.groups else { continue };
         pass.set_pipeline(cull);
-        pass.set_bind_group(0, &view.cull_bind_group, &[]);
-        pass.set_bind_group(1, &view.placed_bind_groups[0], &[]);
+        pass.set_bind_group(0, &groups.cull, &[]);
+        pass.set_bind_group(1, &groups.placed[0], &[]);
         pass.dispatch_workgroups(view.instance_count.div_ceil(64), 1, 1);
         if view.placed.entry_capacity == 0 {
             continue;
         }
         // Expanded placements: counted into draws, offsets, sorted.
         pass.set_pipeline(prepare_dispatch);
-        pass.set_bind_group(2, &view.placed_bind_groups[1], &[]);
+        pass.set_bind_group(2, &groups.placed[1], &[]);
         pass.dispatch_workgroups(1, 1, 1);
         pass.set_pipeline(count);
         pass.dispatch_workgroups_indirect(&view.placed.dispatch, 0);
@@ -1419,8 +1413,10 @@ impl<P: PhaseItem, const DEPTH_ONLY: bool> RenderCommand<P> for DrawCompactPart<
         let Some(buffers) = compact_views.into_inner().views.get(&(view, item.species)) else {
             return RenderCommandResult::Skip;
         };
-
-        pass.set_bind_group(2, &buffers.draw_bind_group, &[]);
+        let Some(groups) = &buffers.groups else {
+            return RenderCommandResult::Skip;
+        };
+        pass.set_bind_group(2, &groups.draw, &[]);
         // One draw per tree for the tree's parts, one instanced draw per
         // prototype and band for the placed ones.
         let (args, draws, block) = match item.kind.placed_index() {

@@ -51,28 +51,18 @@ impl ViewReadback {
         let prism_vertices = u64::from(super::gpu::prism_vertices(max_sides));
         let per_primitive = |part: usize| if part == 0 { prism_vertices } else { 2 };
         let count = |draw: &[u32; 4], part: usize| u64::from(draw[0]) / per_primitive(part) * u64::from(draw[1]);
-        let trees = self.lods.len();
-        let tree: u64 = (0..3)
-            .flat_map(|part| {
-                self.tree_draws
-                    .iter()
-                    .skip(part * trees)
-                    .take(trees)
-                    .map(move |d| (d, part))
-            })
-            .map(|(d, part)| count(d, part))
-            .sum();
-        let draws = self.placed_draws.len() / super::PLACED_PART_KINDS;
-        let placed: u64 = (0..3)
-            .flat_map(|part| {
-                self.placed_draws
-                    .iter()
-                    .skip(part * draws)
-                    .take(draws)
-                    .map(move |d| (d, part))
-            })
-            .map(|(d, part)| count(d, part))
-            .sum();
+        // The first three blocks (prisms, original lines, merged lines) of
+        // `block` draws each.
+        let needle_parts = |draws: &[[u32; 4]], block: usize| -> u64 {
+            draws
+                .chunks(block.max(1))
+                .take(3)
+                .enumerate()
+                .flat_map(|(part, block)| block.iter().map(move |d| count(d, part)))
+                .sum()
+        };
+        let tree = needle_parts(&self.tree_draws, self.lods.len());
+        let placed = needle_parts(&self.placed_draws, self.placed_draws.len() / super::PLACED_PART_KINDS);
         tree + placed
     }
 }
