@@ -30,7 +30,6 @@ fn every_method_renders_and_is_measured() {
             pixel_error: 1.0,
             transition: 0.5,
             supersampling: 4,
-            render_path: bevy_conifer_lod::plugin::RenderPath::Meshes,
         },
         dolly_steps: 4,
         timed_frames: 1,

@@ -1,25 +1,25 @@
 //! The plugin's systems under `MinimalPlugins` (no renderer): loading
 //! records, the per-tree spatial error against the paper's formula, the
 //! representation as the camera backs off, settings taking effect, several
-//! cameras, defined results without a usable camera, and no per-frame asset
-//! churn.
+//! cameras, defined results without a usable camera, the GPU instances
+//! following 100,000 trees, and no asset churn.
 #![cfg(feature = "plugin")]
 
 use bevy::asset::{AssetPlugin, LoadState};
 use bevy::camera::{CameraProjection, Viewport};
 use bevy::ecs::system::RunSystemOnce;
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
-use bevy_conifer_lod::model::gpu_layout::{KIND_WOOD_LINE, line_bands, line_visible};
 use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake, write_record};
-use bevy_conifer_lod::plugin::{ConiferPart, ConiferParts, MAX_LINE_BANDS, SpeciesMaterials};
+use bevy_conifer_lod::plugin::CompactInstances;
 use bevy_conifer_lod::prelude::*;
 
 const HEIGHT_PX: u32 = 720;
 const FOV_DEG: f32 = 45.0;
 
-/// An app with the plugin and just what it needs, loading from `dir`.
+/// An app with the plugin and just what it needs, loading from `dir`; the
+/// CPU keeps every tree's [`ConiferLodState`] (as for the debug overlay's
+/// stats), and mesh assets exist so that any the plugin made would show.
 fn app(dir: &std::path::Path) -> App {
     let mut app = App::new();
     app.add_plugins((
@@ -31,7 +31,10 @@ fn app(dir: &std::path::Path) -> App {
         TransformPlugin,
     ))
     .init_asset::<Mesh>()
-    .init_asset::<ShaderBuffer>()
+    .insert_resource(ConiferLodDebug {
+        always_collect_stats: true,
+        ..default()
+    })
     .add_plugins(ConiferLodPlugin);
     app
 }
@@ -115,8 +118,12 @@ fn error_matches_the_formula_and_representation_follows_distance() {
         .unwrap()
         .clone();
     assert!(
-        app.world().get::<ConiferParts>(tree).is_some(),
-        "parts spawned once loaded"
+        app.world().get::<Children>(tree).is_none(),
+        "nothing is spawned for a tree"
+    );
+    assert!(
+        species.max_wood_error > species.max_line_error,
+        "the trunk is thicker than a needle"
     );
 
     let mut saw = (false, false, false);
@@ -136,42 +143,8 @@ fn error_matches_the_formula_and_representation_follows_distance() {
         saw.0 |= s.prisms_visible && !s.lines_visible;
         saw.1 |= s.prisms_visible && s.lines_visible;
         saw.2 |= !s.prisms_visible && s.lines_visible;
-        // Hidden parts follow the state, and the shown line bands hold the
-        // whole cut (the vertex shader draws exactly the cut's lines from them).
-        let parts = app.world().get::<ConiferParts>(tree).unwrap().clone();
-        let hidden = |e: Entity| *app.world().get::<Visibility>(e).unwrap() == Visibility::Hidden;
-        assert_eq!(hidden(parts.prisms), !s.prisms_visible);
         // Trunk and branches: prisms while the thickest segment is above the error.
         assert_eq!(s.wood_prisms_visible, expected < species.max_wood_error, "{distance} m");
-        assert_eq!(
-            hidden(parts.wood_prisms.expect("generated trees have wood")),
-            !s.wood_prisms_visible
-        );
-        assert!(
-            species.max_wood_error > species.max_line_error,
-            "the trunk is thicker than a needle"
-        );
-        assert_eq!(parts.lines.len(), species.line_bands().len());
-        assert_eq!(parts.lines.iter().all(|&e| hidden(e)), !s.lines_visible);
-        let bands = line_bands(&species.record, MAX_LINE_BANDS);
-        let (mut drawn, mut processed) = (0u64, 0u64);
-        for (band, &entity) in bands.iter().zip(&parts.lines) {
-            let visible_lines = band
-                .buffers
-                .lod
-                .chunks(2)
-                .filter(|l| l[0][3] != KIND_WOOD_LINE && line_visible(l[0], expected))
-                .count() as u64;
-            if hidden(entity) {
-                assert_eq!(visible_lines, 0, "{distance} m: a hidden band holds cut lines");
-            } else {
-                drawn += visible_lines;
-                processed += band.buffers.line_count() as u64;
-            }
-        }
-        let cut = species.record.cut(expected);
-        assert_eq!(drawn, species.record.cut_stats(&cut).line_segments, "{distance} m");
-        assert!(processed >= drawn);
     }
     assert_eq!(
         saw,
@@ -209,14 +182,14 @@ fn settings_and_overrides_take_effect_next_frame() {
 }
 
 #[test]
-fn opacity_override_gets_its_own_materials_and_parts_take_the_render_layers() {
+fn overrides_visibility_and_render_layers_reach_the_gpu_instance() {
     use bevy::camera::visibility::RenderLayers;
-    use bevy_conifer_lod::plugin::ConiferMaterial;
+    use bevy_conifer_lod::plugin::{
+        FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, OPACITY_OVERRIDE_SHIFT,
+    };
     let dir = tempfile::tempdir().unwrap();
     let crown = write_tree(dir.path(), "spruce.conifer");
     let mut app = app(dir.path());
-    // Material assets without a renderer: the plugin makes its materials.
-    app.init_asset::<ConiferMaterial>().init_asset::<StandardMaterial>();
     app.world_mut().spawn(camera(30.0));
     let (ours, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
     let paper = app
@@ -225,45 +198,37 @@ fn opacity_override_gets_its_own_materials_and_parts_take_the_render_layers() {
             ConiferFoliage(handle),
             ConiferLodOverride {
                 line_opacity: Some(LineOpacity::Paper),
-                ..default()
+                pixel_error: Some(0.5),
+                // A NaN override is ignored: the tree takes the global δ.
+                transition: Some(f32::NAN),
             },
-            RenderLayers::layer(3),
+            RenderLayers::from_layers(&[0, 3]),
         ))
         .id();
-    for _ in 0..3 {
-        app.update();
+    // No renderer here: what Bevy's visibility propagation would set.
+    for tree in [ours, paper] {
+        app.world_mut().entity_mut(tree).insert(InheritedVisibility::VISIBLE);
     }
-    // The global default is area-preserving (rule 1); the override is the paper's (rule 0).
-    let rule = |tree: Entity| {
-        let parts = app.world().get::<ConiferParts>(tree).expect("parts spawned");
-        let material = app
-            .world()
-            .get::<MeshMaterial3d<ConiferMaterial>>(parts.lines[0])
-            .expect("line material");
-        app.world()
-            .resource::<Assets<ConiferMaterial>>()
-            .get(&material.0)
-            .unwrap()
-            .extension
-            .lod
-            .opacity_rule
-    };
-    assert_eq!((rule(ours), rule(paper)), (1, 0));
-    assert_eq!(app.world().resource::<SpeciesMaterials>().len(), 2);
-    // Every part of the layered tree is on its layer; the other tree's parts have none.
-    let parts = app.world().get::<ConiferParts>(paper).unwrap().clone();
-    let all: Vec<Entity> = parts
-        .lines
-        .iter()
-        .copied()
-        .chain([parts.prisms])
-        .chain(parts.wood_prisms)
-        .collect();
-    for part in all {
-        assert_eq!(app.world().get::<RenderLayers>(part), Some(&RenderLayers::layer(3)));
-    }
-    let ours_parts = app.world().get::<ConiferParts>(ours).unwrap();
-    assert!(app.world().get::<RenderLayers>(ours_parts.prisms).is_none());
+    app.update();
+    let instance = |app: &App, tree: Entity| *app.world().resource::<CompactInstances>().get(tree).unwrap().1;
+    let (a, b) = (instance(&app, ours), instance(&app, paper));
+    assert_eq!(a.flags, FLAG_VISIBLE, "no override");
+    assert_eq!(a.layers, 1, "the default layer");
+    assert_eq!(
+        b.flags,
+        FLAG_VISIBLE | FLAG_PIXEL_ERROR_OVERRIDE | (1 << OPACITY_OVERRIDE_SHIFT)
+    );
+    assert_eq!(b.flags & FLAG_TRANSITION_OVERRIDE, 0);
+    assert_eq!((b.pixel_error, b.layers), (0.5, 0b1001));
+    // Removing the override and the layers, and hiding the tree, reach it
+    // next frame.
+    app.world_mut()
+        .entity_mut(paper)
+        .remove::<(ConiferLodOverride, RenderLayers)>()
+        .insert(InheritedVisibility::HIDDEN);
+    app.update();
+    let b = instance(&app, paper);
+    assert_eq!((b.flags, b.layers), (0, 1));
 }
 
 #[test]
@@ -350,7 +315,7 @@ fn count_mesh_events(mut events: MessageReader<AssetEvent<Mesh>>, mut count: Res
 }
 
 #[test]
-fn no_mesh_asset_churn_and_no_orphans() {
+fn no_asset_churn_and_nothing_left_behind() {
     // 1,000 trees of 4 species, a camera flying through them.
     let dir = tempfile::tempdir().unwrap();
     let mut app = app(dir.path());
@@ -378,26 +343,12 @@ fn no_mesh_asset_churn_and_no_orphans() {
     app.update();
     app.update();
     let warm = app.world().resource::<MeshEvents>().0;
-    let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
-    let species = app.world().resource::<Assets<ConiferSpecies>>();
-    let parts_per_tree: Vec<usize> = handles
-        .iter()
-        .map(|h| 2 + species.get(h).unwrap().line_bands().len())
-        .collect();
-    assert_eq!(parts, (0..1000).map(|i| parts_per_tree[i % 4]).sum::<usize>());
-    // Batching: every tree of a species draws the same meshes (one per part)
-    // and, without overrides, one material per part kind.
-    let meshes: std::collections::HashSet<AssetId<Mesh>> = app
-        .world_mut()
-        .query::<&Mesh3d>()
-        .iter(app.world())
-        .map(|m| m.0.id())
-        .collect();
-    assert_eq!(meshes.len(), parts_per_tree.iter().sum::<usize>());
-    println!(
-        "1000 trees of 4 species: {} distinct meshes ({:?} parts per tree)",
-        meshes.len(),
-        parts_per_tree
+    assert_eq!(warm, 0, "the plugin makes no mesh");
+    assert_eq!(app.world().resource::<CompactInstances>().len(), 1000);
+    assert_eq!(
+        app.world_mut().query::<&Children>().iter(app.world()).count(),
+        0,
+        "nothing is spawned per tree"
     );
     // The camera flies through the stand for 120 frames, changing the
     // representation of most trees: no mesh is created or modified.
@@ -464,20 +415,16 @@ fn no_mesh_asset_churn_and_no_orphans() {
     for _ in 0..3 {
         app.update();
     }
-    let parts = app.world_mut().query::<&ConiferPart>().iter(app.world()).count();
-    assert_eq!(parts, 0, "no orphaned part entities");
+    assert!(
+        app.world().resource::<CompactInstances>().is_empty(),
+        "no instance left"
+    );
     assert_eq!(
         app.world().resource::<Assets<ConiferSpecies>>().len(),
         0,
         "species unloaded"
     );
-    assert_eq!(
-        app.world().resource::<Assets<Mesh>>().len(),
-        0,
-        "its meshes went with it"
-    );
-    assert_eq!(app.world().resource::<Assets<ShaderBuffer>>().len(), 0);
-    assert!(app.world().resource::<SpeciesMaterials>().is_empty());
+    assert_eq!(app.world().resource::<Assets<Mesh>>().len(), 0);
 }
 
 #[test]
@@ -522,14 +469,9 @@ fn debug_overlay_switches_colours_and_counts_the_cut() {
     app.update();
     assert!(!app.world().resource::<ConiferLodSettings>().debug_colors);
     app.world_mut().resource_mut::<ConiferLodDebug>().enabled = true;
-    // No renderer here: mark every part as seen, as visibility checking would.
-    let parts: Vec<Entity> = app
-        .world_mut()
-        .query_filtered::<Entity, With<ConiferPart>>()
-        .iter(app.world())
-        .collect();
-    for part in parts {
-        *app.world_mut().get_mut::<ViewVisibility>(part).unwrap() = ViewVisibility::VISIBLE;
+    // No renderer here: what Bevy's visibility propagation would set.
+    for entity in [tree, far] {
+        app.world_mut().entity_mut(entity).insert(InheritedVisibility::VISIBLE);
     }
     app.update();
     assert!(
@@ -598,7 +540,8 @@ fn scattered_forest_spawns_one_tree_per_placement() {
     for (entity, placement) in spawned.iter().zip(kept) {
         let transform = *app.world().get::<Transform>(*entity).unwrap();
         assert_eq!(transform, placement_transform(placement));
-        assert!(app.world().get::<ConiferParts>(*entity).is_some(), "parts spawned");
+        let tracked = app.world().resource::<CompactInstances>().get(*entity);
+        assert!(tracked.is_some(), "drawn by the GPU instances");
     }
 }
 
@@ -651,7 +594,7 @@ fn tree_seen_from_300_m() -> (tempfile::TempDir, App, Entity, ConiferLodState) {
 }
 
 #[test]
-fn shadow_cascades_keep_the_parts_they_need() {
+fn shadow_cascades_reach_the_lod_state() {
     use bevy::light::cascade::{Cascade, Cascades};
     let (_dir, mut app, tree, far) = tree_seen_from_300_m();
     assert!(
@@ -681,10 +624,6 @@ fn shadow_cascades_keep_the_parts_they_need() {
     app.update();
     let lit = state(&app, tree);
     assert!(lit.wood_prisms_visible, "the trunk casts its shadow as prisms");
-    assert!(
-        lit.line_bands.count_ones() > far.line_bands.count_ones(),
-        "finer bands for the shadow"
-    );
     assert_eq!(
         lit.min_spatial_error, far.min_spatial_error,
         "the camera's error is unchanged"
@@ -699,7 +638,7 @@ fn shadow_cascades_keep_the_parts_they_need() {
 }
 
 #[test]
-fn point_and_spot_light_shadows_keep_the_parts_they_need() {
+fn point_and_spot_light_shadows_reach_the_lod_state() {
     let (_dir, mut app, tree, far) = tree_seen_from_300_m();
     assert!(!far.prisms_visible, "the camera alone sees no prism at 300 m");
 
@@ -720,12 +659,6 @@ fn point_and_spot_light_shadows_keep_the_parts_they_need() {
     app.update();
     let lit = state(&app, tree);
     assert!(lit.wood_prisms_visible, "the trunk casts the lamp's shadow as prisms");
-    assert!(
-        lit.line_bands.count_ones() > far.line_bands.count_ones(),
-        "finer bands for the lamp's shadow: {:b} vs {:b}",
-        lit.line_bands,
-        far.line_bands
-    );
     assert_eq!(
         lit.min_spatial_error, far.min_spatial_error,
         "the camera's error is unchanged"
@@ -755,21 +688,18 @@ fn point_and_spot_light_shadows_keep_the_parts_they_need() {
         spot.wood_prisms_visible,
         "the spot light's shadow needs the trunk's prisms"
     );
-    assert!(spot.line_bands.count_ones() > far.line_bands.count_ones());
 }
 
-/// The compact path's instance tracking under churn: 100,000 trees of two
+/// The instance tracking under churn: 100,000 trees of two
 /// species spawned, moved, re-targeted and mostly despawned; every tree's
 /// GPU instance follows its transform and species, nothing is left of
 /// despawned trees, and no mesh asset is made or touched after warm-up.
 #[test]
-fn compact_instances_follow_100k_trees_in_churn() {
-    use bevy_conifer_lod::plugin::CompactInstances;
+fn instances_follow_100k_trees_in_churn() {
     let dir = tempfile::tempdir().unwrap();
     let crown = write_tree(dir.path(), "spruce.conifer");
     std::fs::copy(dir.path().join("spruce.conifer"), dir.path().join("spruce2.conifer")).unwrap();
     let mut app = app(dir.path());
-    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
     app.world_mut().spawn(camera(5.0));
     let (first, a) = spawn_tree(&mut app, "spruce.conifer", crown);
     let (second, b) = spawn_tree(&mut app, "spruce2.conifer", crown);
@@ -845,17 +775,8 @@ fn compact_instances_follow_100k_trees_in_churn() {
     }
     app.update();
     check(&app, &alive);
-    // The mesh path takes over: nothing is tracked; back again: all of them.
-    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Meshes;
-    app.update();
-    assert!(app.world().resource::<CompactInstances>().is_empty());
-    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
-    app.update();
-    app.update();
-    check(&app, &alive);
-    // Nothing per tree on the compact path: no mesh asset made or changed
-    // while trees moved, changed and went (the switch to the mesh path
-    // spawned parts, which use the species' existing meshes).
+    // Nothing per tree: no mesh asset made or changed while trees moved,
+    // changed and went.
     for _ in 0..3 {
         app.update();
     }

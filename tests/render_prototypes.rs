@@ -1,4 +1,4 @@
-//! Shared prototypes on the compact render path, rendered on Mesa's
+//! Shared prototypes on the render path, rendered on Mesa's
 //! lavapipe: a tree of prototypes drawn with its prototypes shared (placed
 //! by the GPU, expanded per view) looks like the same tree flattened, at
 //! every distance, with LOD off, and past the expansion capacity; and its
@@ -55,10 +55,9 @@ impl Scene {
         let flat_record = record.flatten().unwrap();
         let crown = flat_record.crown_center();
         let mut renderer = HeadlessRenderer::new(".");
-        renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
         let placed = ConiferSpecies::from_prototype_record(&record).unwrap();
         let flat = ConiferSpecies::from_record(flat_record).unwrap();
-        let compact = placed.compact.as_ref().unwrap();
+        let compact = &placed.compact;
         assert_eq!(compact.prototypes.len(), record.prototypes.len());
         let mut species = renderer.world_mut().resource_mut::<Assets<ConiferSpecies>>();
         let (placed, flat) = (species.add(placed), species.add(flat));
@@ -148,9 +147,6 @@ fn placed_species_hold_each_prototype_once() {
     scene.shot(&flat, "memory_flat");
     let flat_bytes = scene.memory().species_bytes[&flat.id()];
     println!("species buffers: placed {placed_bytes} B, flat {flat_bytes} B");
-    // Drawn by the compact path only: the mesh path's meshes were never built.
-    let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
-    assert!(species.get(&placed).unwrap().meshes.is_none() && species.get(&flat).unwrap().meshes.is_none());
     // A sapling's shoots are small (7 needles a placement here): its
     // placements and level-2 lines weigh most; a mature tree's shoots hold
     // hundreds (`conifer bench`: `prototype_gpu_bytes`).
@@ -202,8 +198,8 @@ fn gpu_draws_equal_the_cpu_reference() {
     scene.renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
     let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
     let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
-    let placed_compact = species.get(&placed).unwrap().compact.clone().unwrap();
-    let flat_compact = species.get(&flat).unwrap().compact.clone().unwrap();
+    let placed_compact = species.get(&placed).unwrap().compact.clone();
+    let flat_compact = species.get(&flat).unwrap().compact.clone();
     let prototype_record = {
         let input = generate_prototypes(
             Species::ScotsPine,

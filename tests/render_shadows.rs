@@ -62,14 +62,8 @@ struct ShadowScene {
 }
 
 impl ShadowScene {
-    /// A 20,000-needle Scots pine at the origin on a grey ground, drawn by
-    /// the mesh path.
+    /// A 20,000-needle Scots pine at the origin on a grey ground.
     fn new() -> Self {
-        Self::with_path(RenderPath::Meshes)
-    }
-
-    /// The same scene drawn by `path`.
-    fn with_path(path: RenderPath) -> Self {
         let dir = tempfile::tempdir().unwrap();
         let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
         std::fs::create_dir_all(&out).unwrap();
@@ -83,15 +77,12 @@ impl ShadowScene {
         let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
         write_record(&record, &dir.path().join("pine.conifer")).unwrap();
         let mut renderer = HeadlessRenderer::new(&dir.path().to_string_lossy());
-        renderer.world_mut().resource_mut::<ConiferLodSettings>().render_path = path;
         let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
-        if path == RenderPath::Compact {
-            // A tree out of every view first, so the tree measured is not
-            // its species' first instance (multi-draws start at it).
-            renderer
-                .world_mut()
-                .spawn((ConiferFoliage(handle.clone()), Transform::from_xyz(-500.0, 0.0, 0.0)));
-        }
+        // A tree out of every view first, so the tree measured is not its
+        // species' first instance (multi-draws start at it).
+        renderer
+            .world_mut()
+            .spawn((ConiferFoliage(handle.clone()), Transform::from_xyz(-500.0, 0.0, 0.0)));
         let tree = renderer
             .world_mut()
             .spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY))
@@ -197,22 +188,6 @@ fn spawn_lamp(world: &mut World) {
         },
         Transform::from_xyz(3.0, 4.5, 0.0),
     ));
-}
-
-#[test]
-fn compact_path_line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
-    let mut scene = ShadowScene::with_path(RenderPath::Compact);
-    spawn_sun(scene.renderer.world_mut());
-    scene.camera(Vec3::new(-3.5, 0.0, 0.0), 10.0, 40.0);
-    scene.assert_line_shadow_like_prisms("compact_sun", SIZE * 3 / 10..SIZE, 0.15);
-}
-
-#[test]
-fn compact_path_far_tree_keeps_its_shadow_under_a_near_lamp() {
-    let mut scene = ShadowScene::with_path(RenderPath::Compact);
-    spawn_lamp(scene.renderer.world_mut());
-    scene.camera(Vec3::new(-3.0, 0.0, 0.0), 80.0, 8.0);
-    scene.assert_line_shadow_like_prisms("compact_lamp", 90..SIZE, 0.2);
 }
 
 #[test]

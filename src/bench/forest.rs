@@ -12,10 +12,8 @@ use std::time::Instant;
 /// How the forest's trees are drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum ForestMethod {
-    /// The plugin, mesh path (`RenderPath::Meshes`).
+    /// The plugin.
     Ours,
-    /// The plugin, compact path (`RenderPath::Compact`).
-    OursCompact,
     /// Every needle an `Lmax`-sided prism, no LOD.
     Raw,
     /// meshoptimizer LODs switched by `VisibilityRange` with crossfades.
@@ -76,9 +74,6 @@ pub fn forest_frame_ms(
     let extent = side as f32 * TREE_SPACING;
     let world = renderer.world_mut();
     HeadlessRenderer::spawn_lights(world);
-    if method == ForestMethod::OursCompact {
-        world.resource_mut::<crate::plugin::ConiferLodSettings>().render_path = crate::plugin::RenderPath::Compact;
-    }
     // Per species: what each tree spawns.
     type Parts = Vec<(
         Handle<Mesh>,
@@ -89,7 +84,7 @@ pub fn forest_frame_ms(
     let mut species_handles: Vec<Handle<ConiferSpecies>> = Vec::new();
     for record in records {
         match method {
-            ForestMethod::Ours | ForestMethod::OursCompact => {
+            ForestMethod::Ours => {
                 let species = ConiferSpecies::from_record(record.clone())?;
                 species_handles.push(world.resource_mut::<Assets<ConiferSpecies>>().add(species));
             }
@@ -123,7 +118,7 @@ pub fn forest_frame_ms(
     for i in 0..instances {
         let transform = place(i, side);
         match method {
-            ForestMethod::Ours | ForestMethod::OursCompact => {
+            ForestMethod::Ours => {
                 world.spawn((
                     ConiferFoliage(species_handles[i % species_handles.len()].clone()),
                     transform,

@@ -17,7 +17,6 @@ pub mod runtime;
 use crate::generate::{GenerateOptions, Species, generate};
 use crate::model::record::CutStrategy;
 use crate::model::{BakeOptions, LodRecord, PixelError, ViewParams, bake, decode_record};
-use crate::plugin::RenderPath;
 use forest::{ForestMethod, forest_frame_ms};
 use runtime::RuntimeFigures;
 use serde::Serialize;
@@ -164,8 +163,7 @@ pub struct RecordFigures {
     pub file_bytes: u64,
     /// File bytes per needle.
     pub disk_bytes_per_needle: f64,
-    /// GPU buffer bytes of the species on the compact render path: the
-    /// sizes of the `wgpu` buffers the render world created for it
+    /// GPU buffer bytes of the species: the sizes of the `wgpu` buffers the render world created for it
     /// (`CompactGpuMemory::species_bytes`), per-tree and per-view buffers
     /// not included.
     pub gpu_bytes: u64,
@@ -173,16 +171,13 @@ pub struct RecordFigures {
     pub gpu_bytes_per_needle: f64,
     /// Whether `gpu_bytes` was read from the allocated buffers (always).
     pub gpu_bytes_measured: bool,
-    /// The mesh path's buffers (prisms, line bands, wood prisms) per
-    /// needle, from their lengths.
-    pub mesh_path_gpu_bytes_per_needle: f64,
     /// Median time to decode and validate the file from memory, ms.
     pub decode_ms: f64,
-    /// Median time to build the GPU-ready meshes from the record, ms.
+    /// Median time to build the compact GPU arrays from the record, ms.
     pub build_ms: f64,
 }
 
-/// A procedural tree of shared shoot prototypes on the compact path.
+/// A procedural tree of shared shoot prototypes, drawn.
 #[derive(Clone, Debug, Serialize)]
 pub struct PrototypeTreeFigures {
     /// Needles once placed.
@@ -201,9 +196,6 @@ pub struct PrototypeTreeFigures {
     /// Per-view bytes of the one camera that drew it (culling, expanded
     /// placements, indirect draws).
     pub view_bytes: u64,
-    /// Whether the mesh path's meshes stayed unbuilt (always, on the
-    /// compact path).
-    pub mesh_path_unbuilt: bool,
     /// Camera distances of `processed_over_cut`, metres (64 px, 0.8 rad).
     pub distances: Vec<f32>,
     /// Prisms and lines the vertex shaders process (counted from the
@@ -236,14 +228,8 @@ pub struct RenderRatio {
     pub raw_over_ours: f64,
     /// `bevy-lod` frame time over `ours`.
     pub bevylod_over_ours: f64,
-    /// `bevy-lod` frame time over `ours-compact`.
-    pub bevylod_over_ours_compact: f64,
-    /// Median frame ms, the plugin (mesh path).
+    /// Median frame ms, the plugin.
     pub ours_ms: f64,
-    /// Median frame ms, the plugin on the compact path.
-    pub ours_compact_ms: f64,
-    /// The compact path without MSAA, ms.
-    pub ours_compact_no_msaa_ms: f64,
     /// Median frame ms, raw meshes.
     pub raw_ms: f64,
     /// Median frame ms, meshoptimizer LODs with `VisibilityRange`.
@@ -284,10 +270,8 @@ pub struct BenchReport {
     pub prototype_trees: BTreeMap<String, PrototypeTreeFigures>,
     /// CPU cut selection.
     pub cut_us: Option<CutFigures>,
-    /// The plugin's CPU time per frame, no rendering (mesh path).
+    /// The plugin's CPU time per frame, no rendering.
     pub runtime: Vec<RuntimeFigures>,
-    /// The same on the compact path.
-    pub runtime_compact: Vec<RuntimeFigures>,
     /// The rendered forest.
     pub render_ratio: Option<RenderRatio>,
     /// The GPU machine's figures, or why there are none.
@@ -437,9 +421,8 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
         std::hint::black_box(decode_record(std::hint::black_box(&bytes)).ok());
     }) / 1e3;
     let build_ms = time_us(|| {
-        std::hint::black_box(crate::plugin::SpeciesMeshes::build(&record).ok());
+        std::hint::black_box(crate::model::compact::CompactSpecies::build(&record).ok());
     }) / 1e3;
-    let mesh_path = crate::model::gpu_layout::gpu_bytes(&record).total();
     let gpu = compact_gpu_bytes(&record)?;
     let needles = record.needle_count().max(1);
     Ok(RecordFigures {
@@ -449,13 +432,12 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
         gpu_bytes: gpu,
         gpu_bytes_per_needle: gpu as f64 / needles as f64,
         gpu_bytes_measured: true,
-        mesh_path_gpu_bytes_per_needle: mesh_path as f64 / needles as f64,
         decode_ms,
         build_ms,
     })
 }
 
-/// Bytes of the buffers the compact render path allocates for `record`'s
+/// Bytes of the buffers the render path allocates for `record`'s
 /// species: one tree drawn headless, then `CompactGpuMemory` read back.
 fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
     let species = crate::plugin::ConiferSpecies::from_record(record.clone())
@@ -482,10 +464,10 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
         .len() as u64;
     let record = record.quantized().map_err(|e| failed(e.to_string()))?;
     let tree = crate::plugin::ConiferSpecies::from_prototype_record(&record).map_err(|e| failed(e.to_string()))?;
-    let compact = tree.compact.clone().ok_or_else(|| failed("no compact layout".into()))?;
+    let compact = tree.compact.clone();
     let distances = vec![5.0f32, 20.0, 80.0];
     let mut processed_over_cut = Vec::new();
-    let (gpu_bytes, view_bytes, mesh_path_unbuilt) = compact_memory(tree, &distances, |view| {
+    let (gpu_bytes, view_bytes) = compact_memory(tree, &distances, |view| {
         let [code, e_bits, ..] = view.lods[0];
         let (code, e) = ((code & 0xffff) as u16, f32::from_bits(e_bits));
         let (cut, _) = compact.placed_drawn(&record, code, e, crate::model::compact::shader_threshold_code);
@@ -500,30 +482,25 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
         file_bytes,
         gpu_bytes,
         view_bytes,
-        mesh_path_unbuilt,
         distances,
         processed_over_cut,
     })
 }
 
-/// One tree of `species` drawn by the compact path headless at 20 m from
-/// its crown: the species' buffer bytes, the view's, and whether the mesh
-/// path's meshes stayed unbuilt; then at each of `distances`, the camera's
+/// One tree of `species` drawn headless at 20 m from its crown: the
+/// species' buffer bytes and the view's; then at each of `distances`, the camera's
 /// compute results read back and handed to `read`.
 fn compact_memory(
     species: crate::plugin::ConiferSpecies,
     distances: &[f32],
     mut read: impl FnMut(&crate::plugin::ViewReadback),
-) -> Result<(u64, u64, bool), BenchError> {
+) -> Result<(u64, u64), BenchError> {
     use crate::plugin::headless::HeadlessRenderer;
-    use crate::plugin::{
-        CompactGpuMemory, CompactReadback, ConiferFoliage, ConiferLodSettings, ConiferSpecies, RenderPath,
-    };
+    use crate::plugin::{CompactGpuMemory, CompactReadback, ConiferFoliage, ConiferSpecies};
     use bevy::prelude::*;
     let mut renderer = HeadlessRenderer::new(".");
     let target = renderer.render_target(64, 64);
     let world = renderer.world_mut();
-    world.resource_mut::<ConiferLodSettings>().render_path = RenderPath::Compact;
     let crown = species.crown_center;
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
@@ -537,11 +514,6 @@ fn compact_memory(
             .map_err(|e| BenchError::Render(crate::eval::scene::EvalError::from(e)))?;
     }
     let memory = renderer.world().resource::<CompactGpuMemory>().clone();
-    let unbuilt = renderer
-        .world()
-        .resource::<Assets<ConiferSpecies>>()
-        .get(&handle)
-        .is_some_and(|s| s.meshes.is_none());
     renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
     for &distance in distances {
         *renderer.world_mut().get_mut::<Transform>(camera).expect("the camera") = at(distance);
@@ -563,7 +535,6 @@ fn compact_memory(
     Ok((
         memory.species_bytes.get(&handle.id()).copied().unwrap_or(0),
         memory.view_bytes,
-        unbuilt,
     ))
 }
 
@@ -646,7 +617,7 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     progress("cuts");
     let cut_us = options.runs("cuts").then(|| cut_figures(options.cut_needles));
 
-    let (mut runtime, mut runtime_compact) = (Vec::new(), Vec::new());
+    let mut runtime = Vec::new();
     let runtime_records = if options.runs("runtime") {
         species_records(5_000)
     } else {
@@ -654,18 +625,7 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     };
     for &instances in options.instances.iter().filter(|_| options.runs("runtime")) {
         progress(&format!("run time, {instances} trees"));
-        runtime.push(runtime::runtime(
-            &runtime_records,
-            instances,
-            options.runtime_frames,
-            RenderPath::Meshes,
-        ));
-        runtime_compact.push(runtime::runtime(
-            &runtime_records,
-            instances,
-            options.runtime_frames,
-            RenderPath::Compact,
-        ));
+        runtime.push(runtime::runtime(&runtime_records, instances, options.runtime_frames));
     }
 
     let render_ratio = if options.runs("forest") {
@@ -687,7 +647,6 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
         prototype_trees,
         cut_us,
         runtime,
-        runtime_compact,
         render_ratio,
         gpu: "no GPU machine was lent to this session (the device tool's status: not drawn); no absolute GPU figures"
             .into(),
@@ -704,8 +663,6 @@ fn forest_figures(
     let mut forest_ms = BTreeMap::new();
     for (name, method, msaa) in [
         ("ours", ForestMethod::Ours, true),
-        ("ours-compact", ForestMethod::OursCompact, true),
-        ("ours-compact-no-msaa", ForestMethod::OursCompact, false),
         ("raw", ForestMethod::Raw, true),
         ("bevy-lod", ForestMethod::BevyLod, true),
         ("ours-no-msaa", ForestMethod::Ours, false),
@@ -731,10 +688,7 @@ fn forest_figures(
     Ok(RenderRatio {
         raw_over_ours: forest_ms["raw"] / ours,
         bevylod_over_ours: forest_ms["bevy-lod"] / ours,
-        bevylod_over_ours_compact: forest_ms["bevy-lod"] / forest_ms["ours-compact"].max(1e-9),
         ours_ms: forest_ms["ours"],
-        ours_compact_ms: forest_ms["ours-compact"],
-        ours_compact_no_msaa_ms: forest_ms["ours-compact-no-msaa"],
         raw_ms: forest_ms["raw"],
         bevylod_ms: forest_ms["bevy-lod"],
         ours_no_msaa_ms: forest_ms["ours-no-msaa"],

@@ -7,21 +7,18 @@ use crate::prelude::*;
 use bevy::asset::AssetPlugin;
 use bevy::camera::Viewport;
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use serde::Serialize;
 use std::time::Instant;
 
 /// The plugin's CPU cost at one instance count.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct RuntimeFigures {
-    /// The render path measured.
-    pub render_path: &'static str,
     /// Trees.
     pub instances: usize,
     /// Median frame time with the plugin's systems, ms.
     pub frame_ms_with_plugin: f64,
-    /// Median frame time with the plugin's sets disabled (the trees, their
-    /// part entities and Bevy's own systems remain), ms.
+    /// Median frame time with the plugin's sets disabled (the trees and
+    /// Bevy's own systems remain), ms.
     pub frame_ms_without_plugin: f64,
     /// The plugin's whole cost per frame: with − without, ms (at least 0).
     pub cpu_ms_per_frame: f64,
@@ -48,23 +45,14 @@ fn species_assets(app: &mut App, records: &[LodRecord]) -> Vec<Handle<ConiferSpe
 /// Median frame time and median plugin-systems time (ms) of `frames`
 /// frames with `instances` trees of `records` (cycled) on a 6 m grid and a
 /// 1920×1080 camera flying across it at 10 m per frame.
-fn run(
-    records: &[LodRecord],
-    instances: usize,
-    frames: usize,
-    with_plugin_systems: bool,
-    path: RenderPath,
-) -> (f64, f64) {
+fn run(records: &[LodRecord], instances: usize, frames: usize, with_plugin_systems: bool) -> (f64, f64) {
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, AssetPlugin::default(), TransformPlugin))
-        .init_asset::<Mesh>()
-        .init_asset::<ShaderBuffer>()
         .add_plugins(ConiferLodPlugin);
-    app.world_mut().resource_mut::<ConiferLodSettings>().render_path = path;
     if !with_plugin_systems {
         app.configure_sets(
             PostUpdate,
-            (ConiferLodSet::Prepare, ConiferLodSet::Select, ConiferLodSet::Instances).run_if(|| false),
+            (ConiferLodSet::Select, ConiferLodSet::Instances).run_if(|| false),
         );
     }
     let handles = species_assets(&mut app, records);
@@ -118,16 +106,12 @@ fn run(
 
 /// The plugin's CPU cost per frame at `instances` trees of `records`:
 /// frames with and without its system sets, and its own systems' time.
-pub fn runtime(records: &[LodRecord], instances: usize, frames: usize, path: RenderPath) -> RuntimeFigures {
-    let (with, systems) = run(records, instances, frames, true, path);
-    let (without, _) = run(records, instances, frames, false, path);
+pub fn runtime(records: &[LodRecord], instances: usize, frames: usize) -> RuntimeFigures {
+    let (with, systems) = run(records, instances, frames, true);
+    let (without, _) = run(records, instances, frames, false);
     let cpu = (with - without).max(0.0);
     let per = |ms: f64| ms * 1e6 / instances.max(1) as f64;
     RuntimeFigures {
-        render_path: match path {
-            RenderPath::Meshes => "meshes",
-            RenderPath::Compact => "compact",
-        },
         instances,
         frame_ms_with_plugin: with,
         frame_ms_without_plugin: without,

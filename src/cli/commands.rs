@@ -4,8 +4,8 @@ use super::{BakeArgs, CutArgs, ExportArgs, InspectArgs, PreviewArgs, ViewArgs};
 use crate::export::write_cut_glb;
 use crate::generate::{GenerateOptions, Species, generate, generate_prototypes};
 use crate::import::{ImportOptions, ImportReport, import_gltf_prototypes};
+use crate::model::compact::{CompactSpecies, threshold_code};
 use crate::model::file::FORMAT_VERSION;
-use crate::model::gpu_layout::{LINE_BANDS, line_bands, lines_processed};
 use crate::model::merge::PartnerSearch;
 use crate::model::metric::{PixelError, ViewParams, line_opacity, relative_error};
 use crate::model::record::{ErrorRange, LodRecord};
@@ -429,11 +429,12 @@ pub struct CutReport {
     pub primitives: u64,
     /// Mean opacity of the original lines drawn, `δ · 2/ρ` (paper), or null.
     pub mean_original_line_opacity: Option<f32>,
-    /// Lines (needle and wood) in the line bands the plugin draws at this
-    /// error: what its vertex shader runs on.
-    pub gpu_lines_processed: u64,
-    /// All lines of the plugin's line meshes.
-    pub gpu_lines_total: u64,
+    /// Lines (original, merged and wood) in the prefixes the plugin's
+    /// indirect draws cover at this error: what its vertex shaders run on
+    /// (null when the record does not fit the GPU layout).
+    pub gpu_lines_processed: Option<u64>,
+    /// All lines of the plugin's GPU arrays (null as above).
+    pub gpu_lines_total: Option<u64>,
 }
 
 pub(super) fn view_params(view: &ViewArgs) -> ViewParams {
@@ -449,7 +450,7 @@ pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
     let e = view_params(view).spatial_error(view.distance);
     let cut = record.cut(e);
     let stats = record.cut_stats(&cut);
-    let bands = line_bands(record, LINE_BANDS);
+    let compact = CompactSpecies::build(record).ok();
     let opacity_sum: f32 = cut
         .original_lines
         .iter()
@@ -469,8 +470,13 @@ pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
         primitives: stats.primitives(),
         mean_original_line_opacity: (!cut.original_lines.is_empty())
             .then(|| opacity_sum / cut.original_lines.len() as f32),
-        gpu_lines_processed: lines_processed(&bands, e),
-        gpu_lines_total: bands.iter().map(|b| b.buffers.line_count() as u64).sum(),
+        gpu_lines_processed: compact.as_ref().map(|c| {
+            let p = c.prefixes(threshold_code(e), e);
+            u64::from(p.original_lines + p.merged_lines + p.wood_lines - p.wood_prisms)
+        }),
+        gpu_lines_total: compact
+            .as_ref()
+            .map(|c| (c.needles.len() + c.merged_lines.len() + c.wood_segments.len()) as u64),
     }
 }
 

@@ -54,9 +54,6 @@ pub struct EvalArgs {
     /// Print the report as one JSON object on stdout (otherwise a table).
     #[arg(long)]
     pub json: bool,
-    /// Draw the plugin's methods with the compact render path (v2).
-    #[arg(long)]
-    pub compact: bool,
 }
 
 /// The paper's Table 1 distances (metres).
@@ -98,11 +95,6 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
             pixel_error: args.pixel_error,
             transition: args.transition,
             supersampling,
-            render_path: if args.compact {
-                crate::plugin::RenderPath::Compact
-            } else {
-                crate::plugin::RenderPath::Meshes
-            },
         },
         dolly_steps: args.dolly_steps.unwrap_or(if args.quick { 16 } else { 150 }),
         timed_frames: args.frames.unwrap_or(if args.quick { 2 } else { 5 }),

@@ -2,7 +2,7 @@
 
 use crate::model::read_record;
 use crate::plugin::headless::HeadlessRenderer;
-use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath};
+use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, LineOpacity};
 use anyhow::Context;
 use bevy::prelude::*;
 use std::path::PathBuf;
@@ -22,10 +22,6 @@ pub struct RenderArgs {
     /// Use the paper's line opacity (2/ρ) instead of the area-preserving default.
     #[arg(long)]
     pub paper: bool,
-    /// Draw with the compact render path (v2: storage buffers, GPU culling,
-    /// indirect draws) instead of the mesh path.
-    #[arg(long)]
-    pub compact: bool,
     /// Output PNG.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -62,11 +58,6 @@ pub(super) fn render(args: &RenderArgs) -> anyhow::Result<()> {
             },
             enabled: true,
             debug_colors: args.overlay,
-            render_path: if args.compact {
-                RenderPath::Compact
-            } else {
-                RenderPath::Meshes
-            },
             ..ConiferLodSettings::default()
         };
     }

@@ -11,23 +11,28 @@
 //!   (50/25/12/6 %), switched by Bevy's `VisibilityRange` with its dithered
 //!   crossfade, each level entering where its simplification error reaches
 //!   the pixel error.
-//! * `sampling`: the plugin's prisms and wood, and instead of merged lines a
-//!   random sample of the original lines, as many as `ours` draws at that
-//!   distance, their opacity scaled up by the sampling factor.
+//! * `sampling`: the paper's rejected alternative to merging (§3): the
+//!   prisms and wood of `ours`' cut, and instead of merged lines a random
+//!   sample of the original lines, as many as `ours` draws at that
+//!   distance, their opacity scaled up by the sampling factor. Built on the
+//!   CPU for each distance as ordinary meshes (`StandardMaterial`, the
+//!   lines blended with their opacity as vertex alpha).
 
 use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
-use crate::model::gpu_layout::{BandErrors, WOOD_LINE_FADE, sampled_line_band, sampling_order, wood_segment_error};
 use crate::model::metric::{line_error, prism_sides};
-use crate::model::prism::{TriangleMesh, append_wood_segment, prism_triangle_count};
+use crate::model::prism::{
+    TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, wood_segment_error,
+};
 use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
-    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath,
-    SpeciesLineBand, SpeciesMeshes, line_mesh, triangle_mesh,
+    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity,
+    triangle_mesh,
 };
+use bevy::asset::RenderAssetUsages;
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
+use bevy::mesh::PrimitiveTopology;
 use bevy::prelude::*;
-use bevy::render::storage::ShaderBuffer;
 use image::RgbaImage;
 use std::time::Instant;
 
@@ -105,7 +110,6 @@ pub(super) fn renderer_with_species(
     *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
         pixel_error: view.pixel_error,
         transition: view.transition,
-        render_path: view.render_path,
         ..ConiferLodSettings::default()
     };
     let species = ConiferSpecies::from_record(record)?;
@@ -128,8 +132,6 @@ pub struct EvalView {
     /// Reference supersampling per axis (at least 4 for the issue's
     /// "4×4 per pixel").
     pub supersampling: u32,
-    /// How the plugin's methods (`paper`, `ours`) are drawn.
-    pub render_path: RenderPath,
 }
 
 impl EvalView {
@@ -189,11 +191,17 @@ struct View {
 }
 
 struct SamplingState {
-    mesh: Handle<Mesh>,
+    /// The cut's needle prisms.
+    prisms: Handle<Mesh>,
+    /// The wood prisms.
+    wood: Handle<Mesh>,
+    /// The sampled needle lines and the wood lines.
+    lines: Handle<Mesh>,
     order: Vec<u32>,
-    keep: usize,
     /// Needle line errors `2R`, sorted.
     line_errors: Vec<f32>,
+    /// The spatial error the meshes were built for.
+    built_for: Option<f32>,
 }
 
 /// Why the scene could not be built or rendered.
@@ -325,39 +333,44 @@ impl EvalScene {
             }
         }
 
-        // sampling: the plugin's species with one band of sampled lines.
+        // sampling: meshes rebuilt for each distance (`set_distance`).
         let mut sampling = None;
         if methods.contains(&Method::Sampling) {
-            let order = sampling_order(record.needle_count(), 0x5A3D);
-            let keep = record.needle_count();
-            let band = sampled_line_band(&record, &order, keep);
-            let mesh = world.resource_mut::<Assets<Mesh>>().add(line_mesh(band.buffers));
-            let mut sampled = species.clone();
-            let mut sampled_meshes = world.resource_scope(|world, mut meshes: Mut<Assets<Mesh>>| {
-                let mut buffers = world.resource_mut::<Assets<ShaderBuffer>>();
-                SpeciesMeshes::build(&record).map(|parts| parts.into_handles(&mut meshes, &mut buffers))
-            })?;
-            sampled_meshes.lines = vec![SpeciesLineBand {
-                mesh: mesh.clone(),
-                errors: BandErrors {
-                    min_error: 0.0,
-                    max_parent_error: f32::MAX,
-                },
-            }];
-            sampled.meshes = Some(sampled_meshes);
-            let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(sampled);
-            world.spawn((
-                ConiferFoliage(handle),
-                Transform::IDENTITY,
-                RenderLayers::layer(Method::Sampling.layer()),
-            ));
+            let m = &record.material;
+            let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
+            let lines_material = materials.add(StandardMaterial {
+                // The vertex colours carry each line's colour and opacity.
+                base_color: Color::WHITE,
+                perceptual_roughness: m.roughness,
+                reflectance: m.reflectance,
+                alpha_mode: AlphaMode::Blend,
+                cull_mode: None,
+                ..default()
+            });
+            let mut meshes = world.resource_mut::<Assets<Mesh>>();
+            let empty = triangle_mesh(&TriangleMesh::default());
+            let (prisms, wood, lines) = (meshes.add(empty.clone()), meshes.add(empty), meshes.add(empty_lines()));
+            for (mesh, material) in [
+                (&prisms, &needle_material),
+                (&wood, &wood_material),
+                (&lines, &lines_material),
+            ] {
+                world.spawn((
+                    Mesh3d(mesh.clone()),
+                    MeshMaterial3d(material.clone()),
+                    Transform::IDENTITY,
+                    RenderLayers::layer(Method::Sampling.layer()),
+                ));
+            }
             let mut line_errors: Vec<f32> = record.needles.iter().map(|n| line_error(n.radius)).collect();
             line_errors.sort_by(f32::total_cmp);
             sampling = Some(SamplingState {
-                mesh,
-                order,
-                keep,
+                prisms,
+                wood,
+                lines,
+                order: sampling_order(record.needle_count(), 0x5A3D),
                 line_errors,
+                built_for: None,
             });
         }
 
@@ -455,20 +468,22 @@ impl EvalScene {
                 *t = transform;
             }
         }
+        let e = self.view.params().spatial_error(distance);
         let keep = self.sampling_keep(distance);
         if let Some(sampling) = &mut self.sampling
-            && keep != sampling.keep
+            && sampling.built_for != Some(e)
         {
-            sampling.keep = keep;
-            let band = sampled_line_band(&self.record, &sampling.order, keep);
-            let handle = sampling.mesh.clone();
-            if let Some(mut mesh) = self
-                .renderer
-                .world_mut()
-                .resource_mut::<Assets<Mesh>>()
-                .get_mut(&handle)
-            {
-                *mesh = line_mesh(band.buffers);
+            sampling.built_for = Some(e);
+            let sampled = sampled_meshes(&self.record, &sampling.order, keep, e, self.view.pixel_error);
+            let mut meshes = self.renderer.world_mut().resource_mut::<Assets<Mesh>>();
+            for (handle, mesh) in [
+                (&sampling.prisms, triangle_mesh(&sampled.prisms)),
+                (&sampling.wood, triangle_mesh(&sampled.wood)),
+                (&sampling.lines, sampled.lines),
+            ] {
+                if let Some(mut slot) = meshes.get_mut(handle) {
+                    *slot = mesh;
+                }
             }
         }
     }
@@ -777,6 +792,94 @@ pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardM
         ..default()
     });
     (needles, wood)
+}
+
+/// A random order of `count` items (a permutation of `0..count` from a
+/// seeded stream): item `i` is kept by a sample of `k` when `order[i] < k`,
+/// so samples of growing size are nested and a dolly does not reshuffle.
+pub fn sampling_order(count: usize, seed: u64) -> Vec<u32> {
+    use rand::SeedableRng;
+    use rand::seq::SliceRandom;
+    let mut ranks: Vec<u32> = (0..count as u32).collect();
+    let mut stream = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    ranks.shuffle(&mut stream);
+    ranks
+}
+
+/// The `sampling` method at spatial error `e` (pixel error `pixel_error`):
+/// the prisms of the record's cut and the wood prisms as `ours` draws them,
+/// and as lines the needles with `order[i] < keep` that are lines at `e`
+/// (`2R ≤ e`), never merged, each as opaque as `needles / keep` of them
+/// would be (`min(2R · scale · ε / e, 1)`, the area-preserving opacity of a
+/// line `scale` times as wide), plus the wood lines (`2r̄ · ε / e` until
+/// [`WOOD_LINE_FADE`] times their error). `keep` is clamped to
+/// `1..=needles`; `order` has one entry per needle ([`sampling_order`]).
+pub fn sampled_meshes(record: &LodRecord, order: &[u32], keep: usize, e: f32, pixel_error: f32) -> SampledMeshes {
+    let needles = record.needle_count();
+    let keep = keep.clamp(1, needles.max(1));
+    let scale = needles as f32 / keep as f32;
+    let (mut prisms, mut wood) = (TriangleMesh::default(), TriangleMesh::default());
+    for (needle, sides) in record.cut(e).prisms {
+        append_prism(&mut prisms, &record.needles[needle as usize], sides);
+    }
+    let [nr, ng, nb, _] = record.material.needle_color;
+    let [wr, wg, wb, _] = record.material.wood_color;
+    let opacity = |width: f32| (width * pixel_error / e.max(1e-12)).min(1.0);
+    let (mut positions, mut normals, mut colors) = (Vec::new(), Vec::new(), Vec::new());
+    let mut line = |[a, b]: [Vec3; 2], normal: Vec3, color: [f32; 4]| {
+        positions.extend([a.to_array(), b.to_array()]);
+        normals.extend([normal.to_array(); 2]);
+        colors.extend([color; 2]);
+    };
+    for (needle, &rank) in record.needles.iter().zip(order) {
+        let error = line_error(needle.radius);
+        if (rank as usize) < keep && error <= e {
+            line(
+                [needle.base, needle.tip],
+                needle.normal,
+                [nr, ng, nb, opacity(error * scale)],
+            );
+        }
+    }
+    for segment in &record.wood {
+        let error = wood_segment_error(segment);
+        if error.is_nan() || error <= 0.0 || segment.start == segment.end {
+            continue;
+        }
+        let radius = segment.start_radius.max(segment.end_radius);
+        if e < error {
+            append_wood_segment(&mut wood, segment, u32::from(prism_sides(e / radius, record.max_sides)));
+        } else if e < error * WOOD_LINE_FADE {
+            let normal = (segment.end - segment.start)
+                .normalize_or_zero()
+                .any_orthonormal_vector();
+            let width = segment.start_radius + segment.end_radius;
+            line([segment.start, segment.end], normal, [wr, wg, wb, opacity(width)]);
+        }
+    }
+    let lines = Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, colors);
+    SampledMeshes { prisms, wood, lines }
+}
+
+/// What the `sampling` method draws at one error ([`sampled_meshes`]).
+pub struct SampledMeshes {
+    /// Needle prisms (the record's cut).
+    pub prisms: TriangleMesh,
+    /// Wood segment prisms.
+    pub wood: TriangleMesh,
+    /// Sampled needle lines and wood lines, opacity in the vertex alpha.
+    pub lines: Mesh,
+}
+
+/// A line mesh without lines.
+fn empty_lines() -> Mesh {
+    Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, Vec::<[f32; 3]>::new())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, Vec::<[f32; 3]>::new())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, Vec::<[f32; 4]>::new())
 }
 
 /// Wood triangles and lines the plugin draws at spatial error `e`: a

@@ -41,10 +41,9 @@
 //! nodes above a cut than nodes in it, so a prefix holds at most twice the
 //! cut's lines).
 
-use super::gpu_layout::WOOD_LINE_FADE;
 use super::metric::line_error;
 use super::needle::WoodSegment;
-use super::prism::TriangleMesh;
+use super::prism::{TriangleMesh, WOOD_LINE_FADE};
 use super::prototype::{Placement, PrototypeRecord};
 use super::quantize::{LOG_CODE_MAX, LOG_CODE_MIN, PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
 use super::record::{Cut, LodRecord, NO_PARENT};
@@ -918,6 +917,25 @@ impl CompactSpecies {
     }
 }
 
+/// PCG hash (Jarzynski and Olano, *Hash Functions for GPU Rendering*,
+/// JCGT 2020), as `conifer_compact.wgsl` computes it.
+pub fn pcg_hash(value: u32) -> u32 {
+    let state = value.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// CPU reference of the lines' shadow test (`conifer_compact.wgsl`):
+/// whether the fragment at shadow-map texel `texel` of line `line` of
+/// instance `tree`, whose opacity is `alpha`, writes depth. It does with
+/// probability `alpha`, independently between lines and trees, so a
+/// line's shadow covers what its blended colour covers and overlapping
+/// lines compose as `1 − Π(1 − aᵢ)`.
+pub fn shadow_texel_kept(texel: [u32; 2], line: u32, tree: u32, alpha: f32) -> bool {
+    let h = pcg_hash(texel[0] ^ pcg_hash(texel[1] ^ pcg_hash(line ^ pcg_hash(tree))));
+    (h >> 8) as f32 * (1.0 / 16_777_216.0) < alpha
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -959,26 +977,98 @@ mod tests {
     }
 
     #[test]
-    fn prism_corners_follow_the_cpu_tessellation() {
-        use crate::model::gpu_layout::{CAP_BIT, SLOT_BITS, TIP_BIT, prism_buffers};
+    fn slot_prisms_collapse_to_the_cpu_prisms() {
+        use crate::model::prism::{append_prism, prism_triangle_count};
+        // A vertex as (end, cap, ring corner); triangles rotated to start at
+        // their smallest vertex, so the winding is kept.
+        type Corner = (bool, bool, u32);
+        let canonical = |mut tri: [Corner; 3]| {
+            let start = (0..3).min_by_key(|&k| tri[k]).unwrap();
+            tri.rotate_left(start);
+            tri
+        };
         for max_sides in [3u8, 4, 7, 8, 12] {
-            let mut record = record(200, 3);
-            record.max_sides = max_sides;
-            let buffers = prism_buffers(&record).unwrap();
-            let per_prism = buffers.indices.len() / record.needle_count();
-            assert_eq!(per_prism as u32, 12 * u32::from(max_sides) - 12);
-            for (local, &index) in buffers.indices[..per_prism].iter().enumerate() {
-                let code = buffers.codes[index as usize];
-                let expected = (code & ((1 << SLOT_BITS) - 1), code & TIP_BIT != 0, code & CAP_BIT != 0);
-                assert_eq!(
-                    prism_corner(local as u32, max_sides),
-                    expected,
-                    "Lmax {max_sides}, vertex {local}"
-                );
+            for sides in 3..=max_sides {
+                let m = u32::from(sides);
+                // What the shader draws: `prism_corner`, then slot k moves to
+                // corner ⌊k·m/Lmax⌋ (collapsed triangles have no area).
+                let mut gpu: Vec<[Corner; 3]> = (0..12 * u32::from(max_sides) - 12)
+                    .map(|local| {
+                        let (slot, at_tip, cap) = prism_corner(local, max_sides);
+                        (at_tip, cap, slot * m / u32::from(max_sides))
+                    })
+                    .collect::<Vec<_>>()
+                    .chunks(3)
+                    .map(|t| [t[0], t[1], t[2]])
+                    .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+                    .map(canonical)
+                    .collect();
+                // What `append_prism` builds: base ring, tip ring, base cap,
+                // tip cap, `m` vertices each.
+                let needle = crate::model::Needle {
+                    base: Vec3::ZERO,
+                    tip: Vec3::Y,
+                    radius: 0.01,
+                    normal: Vec3::X,
+                    group: 0,
+                };
+                let mut cpu_mesh = TriangleMesh::default();
+                append_prism(&mut cpu_mesh, &needle, sides);
+                let corner = |i: u32| {
+                    let ring = i / m;
+                    (ring % 2 == 1, ring >= 2, i % m)
+                };
+                let mut cpu: Vec<[Corner; 3]> = cpu_mesh
+                    .indices
+                    .chunks(3)
+                    .map(|t| canonical([corner(t[0]), corner(t[1]), corner(t[2])]))
+                    .collect();
+                assert_eq!(cpu.len() as u32, prism_triangle_count(sides));
+                gpu.sort();
+                cpu.sort();
+                assert_eq!(gpu, cpu, "Lmax {max_sides}, {sides} sides");
             }
         }
     }
 
+    #[test]
+    fn hashed_shadow_texels_cover_the_line_opacity() {
+        let kept = |line: u32, tree: u32, alpha: f32| {
+            (0..256u32)
+                .flat_map(|y| (0..256u32).map(move |x| [x, y]))
+                .filter(|&t| shadow_texel_kept(t, line, tree, alpha))
+                .count() as f32
+                / 65_536.0
+        };
+        for alpha in [0.0, 0.05, 0.3, 0.5, 0.9, 1.0] {
+            let fraction = kept(17, 3, alpha);
+            assert!((fraction - alpha).abs() < 0.01, "alpha {alpha}: {fraction}");
+        }
+        // Overlapping lines are independent: together they cover what
+        // blending them gives, 1 − Π(1 − aᵢ).
+        let alphas = [0.3f32, 0.5, 0.2];
+        let covered = (0..256u32)
+            .flat_map(|y| (0..256u32).map(move |x| [x, y]))
+            .filter(|&t| {
+                alphas
+                    .iter()
+                    .enumerate()
+                    .any(|(line, &a)| shadow_texel_kept(t, line as u32, 9, a))
+            })
+            .count() as f32
+            / 65_536.0;
+        let blended = 1.0 - alphas.iter().map(|a| 1.0 - a).product::<f32>();
+        assert!((covered - blended).abs() < 0.01, "{covered} vs {blended}");
+        // The same line of another tree uses other texels.
+        let same = (0..65_536u32)
+            .filter(|&i| {
+                let t = [i % 256, i / 256];
+                shadow_texel_kept(t, 5, 1, 0.5) == shadow_texel_kept(t, 5, 2, 0.5)
+            })
+            .count() as f32
+            / 65_536.0;
+        assert!((same - 0.5).abs() < 0.02, "{same}");
+    }
     #[test]
     fn ring_basis_is_orthonormal() {
         for axis in [

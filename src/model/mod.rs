@@ -9,14 +9,12 @@
 //! * [`prototype`]: a tree as shared prototypes placed many times (record format 3).
 //! * [`cut_count`]: the cut's primitive counts at any error without a traversal.
 //! * [`file`]: the binary record file.
-//! * [`compact`]: the compact GPU arrays of render path v2 and the CPU reference of its passes.
-//! * [`gpu_layout`]: the GPU-ready arrays of a record and the CPU reference of the shader.
+//! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
 
 pub mod bake;
 pub mod compact;
 pub mod cut_count;
 pub mod file;
-pub mod gpu_layout;
 pub mod merge;
 pub mod metric;
 pub mod needle;

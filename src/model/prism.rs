@@ -2,11 +2,22 @@
 //! drawn as an `m`-sided prism, rebuilt from the cylinder at load time rather
 //! than stored.
 
-use super::metric::MIN_PRISM_SIDES;
+use super::metric::{MIN_PRISM_SIDES, line_error};
 use super::needle::{Needle, WoodSegment};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::f32::consts::TAU;
+
+/// Factor between a wood line's error (`2·r_max`) and the error where it is
+/// dropped: there its coverage `2r/e` is below 1/64 (about 4 of 255 grey
+/// levels on a one-pixel line), so it leaves without a visible pop.
+pub const WOOD_LINE_FADE: f32 = 64.0;
+
+/// A wood segment's error `2·r_max`: it is a prism below, a wood line from
+/// it on, until [`WOOD_LINE_FADE`] times that.
+pub fn wood_segment_error(segment: &WoodSegment) -> f32 {
+    line_error(segment.start_radius.max(segment.end_radius))
+}
 
 /// Triangles of one capped `sides`-sided prism: `2m` for the sides plus
 /// `m − 2` for each of the two caps.

@@ -20,9 +20,10 @@
 
 use super::{
     ConiferFoliage, ConiferLodCpuTime, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState,
-    ConiferParts, ConiferSpecies, LineOpacity, view_error_slope,
+    ConiferSpecies, LineOpacity, view_error_slope,
 };
 use crate::model::CutCounter;
+use bevy::camera::CameraProjection;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -191,8 +192,13 @@ fn sync_debug_colors(debug: Res<ConiferLodDebug>, mut settings: ResMut<ConiferLo
 #[allow(clippy::type_complexity, clippy::too_many_arguments)] // a Bevy system
 fn collect_stats(
     debug: Res<ConiferLodDebug>,
-    trees: Query<(&ConiferFoliage, &ConiferLodState, Option<&ConiferParts>)>,
-    visibility: Query<&ViewVisibility>,
+    trees: Query<(
+        &ConiferFoliage,
+        &ConiferLodState,
+        &GlobalTransform,
+        &InheritedVisibility,
+    )>,
+    cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     species_assets: Res<Assets<ConiferSpecies>>,
     mut counters: ResMut<SpeciesCounters>,
     settings: Res<ConiferLodSettings>,
@@ -210,16 +216,25 @@ fn collect_stats(
         ..default()
     };
     counters.0.retain(|id, _| species_assets.contains(*id));
-    for (foliage, state, parts) in &trees {
+    // The cameras' frusta, computed here so that they hold without Bevy's
+    // frustum system.
+    let frusta: Vec<bevy::camera::primitives::Frustum> = cameras
+        .iter()
+        .filter(|(camera, _, _)| camera.is_active)
+        .map(|(_, transform, projection)| projection.compute_frustum(transform))
+        .collect();
+    for (foliage, state, transform, visibility) in &trees {
         next.instances += 1;
-        let (Some(parts), Some(species)) = (parts, species_assets.get(&foliage.0)) else {
+        let Some(species) = species_assets.get(&foliage.0) else {
             continue;
         };
-        let seen = std::iter::once(parts.prisms)
-            .chain(parts.wood_prisms)
-            .chain(parts.wood)
-            .chain(parts.lines.iter().copied())
-            .any(|part| visibility.get(part).is_ok_and(|v| v.get()));
+        // The GPU culls each tree's box against each view's frustum; the
+        // same test here.
+        let affine = transform.affine();
+        let seen = visibility.get()
+            && frusta
+                .iter()
+                .any(|frustum| frustum.intersects_obb(&species.aabb, &affine, true, false));
         if !seen || state.views == 0 {
             continue;
         }

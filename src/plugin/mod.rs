@@ -20,62 +20,50 @@
 //!
 //! ## How it draws
 //!
-//! Two render paths, chosen by [`ConiferLodSettings::render_path`]; both
-//! compute each tree's spatial error per view (each camera and each shadow
-//! view gets its own LOD) and draw exactly the paper's cut, lines casting
-//! the shadow of the coverage they draw (a hashed alpha test).
-//!
-//! * [`RenderPath::Meshes`] (v1, the default): a [`ConiferSpecies`] asset
-//!   holds meshes shared by all its instances: every needle as an
-//!   `Lmax`-slot prism, and every original and merged line, with each
-//!   primitive's error interval as vertex data (the lines split into a few
-//!   bands by parent error). Each tree spawns ~13 child entities; the vertex
-//!   shader keeps the cut; per frame the CPU hides a species' prism part or
-//!   line bands on instances where no primitive of that part can be in the
-//!   cut, and records each instance's [`ConiferLodState`]. ~690 GPU bytes a
-//!   needle.
-//! * [`RenderPath::Compact`] (v2): the species' compact arrays
-//!   ([`crate::model::compact`], ~32 bytes a needle) in storage buffers,
-//!   one instance buffer per species updated only for trees that changed,
-//!   and per view a compute pass that culls every tree and writes the
-//!   indirect draws of the prefixes of its cut (one multi-draw-indirect per
-//!   species and part); nothing is spawned per tree, and the CPU does no
-//!   per-tree work while trees stand still. Lit by Bevy's PBR functions.
-//!   Measured in `docs/bench` and `tests/render_compact.rs`.
+//! A [`ConiferSpecies`] asset holds the record's compact arrays
+//! ([`crate::model::compact`], ~32 bytes a needle; a tree of shared
+//! prototypes keeps them shared) in storage buffers that the vertex shader
+//! pulls from; each species keeps one instance buffer, updated only for the
+//! trees that changed. Per view (each camera, each directional cascade,
+//! each point-light face and spot light) a compute pass computes every
+//! tree's spatial error, culls it, and writes the indirect draws of the
+//! prefixes its cut needs: one multi-draw-indirect per species and part,
+//! nothing spawned per tree, no per-tree CPU work while trees stand still.
+//! Lines cast the shadow of the coverage they draw (a hashed alpha test);
+//! lighting, fog, shadows and tonemapping are Bevy's. Needs compute shaders
+//! and indirect draws with a first instance (`INDIRECT_FIRST_INSTANCE`:
+//! Vulkan, Metal, DX12, WebGPU where the browser has it; not WebGL 2).
+//! Measured in `docs/bench` and `tests/render_compact.rs`.
 //!
 //! ## System sets
 //!
 //! All run in `PostUpdate`. After transform propagation and Bevy's shadow
-//! cascades, before visibility checks: [`ConiferLodSet::Prepare`] (spawn
-//! the mesh parts of newly loaded trees, keep materials in sync with the
-//! settings), then [`ConiferLodSet::Select`] (per-instance spatial error
-//! and part visibility). After visibility propagation:
-//! [`ConiferLodSet::Instances`] (the compact path's instance tracking).
+//! cascades, before visibility checks: [`ConiferLodSet::Select`] (each
+//! tree's [`ConiferLodState`] on the CPU, while the debug overlay reads
+//! it). After visibility propagation: [`ConiferLodSet::Instances`] (the
+//! trees that changed, for the render world's instance buffers).
 
 mod asset;
 mod debug;
 pub mod headless;
-mod material;
 mod render;
 mod systems;
 
-pub use asset::{
-    ConiferLoadError, ConiferRecordLoader, ConiferSpecies, MAX_LINE_BANDS, SpeciesLineBand, SpeciesMeshHandles,
-    SpeciesMeshes, line_mesh, triangle_mesh, wood_mesh,
-};
+pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, triangle_mesh, wood_mesh};
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
-pub use material::{ATTRIBUTE_LINE_LOD, ATTRIBUTE_PRISM_CODE, ConiferLodExtension, ConiferLodUniform, ConiferMaterial};
-pub use render::gpu::{GpuInstance, PartKind};
+pub use render::gpu::{
+    FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, OPACITY_OVERRIDE_SHIFT, PartKind,
+};
 pub use render::{CompactGpuMemory, CompactInstances, CompactReadback, ViewReadback};
-pub use systems::{ConiferLodCpuTime, SpeciesMaterials, view_error_slope};
+pub use systems::{ConiferLodCpuTime, view_error_slope};
 
 use bevy::asset::AssetApp;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 
-/// Adds continuous conifer LOD: the `.conifer` asset loader, the foliage
-/// material, and the systems of [`ConiferLodSet`].
+/// Adds continuous conifer LOD: the `.conifer` asset loader, the systems
+/// of [`ConiferLodSet`] and the render path.
 ///
 /// Needs Bevy's asset, mesh and (for drawing) render/PBR plugins; without a
 /// render app (e.g. `MinimalPlugins` in tests) it still loads records and
@@ -88,13 +76,11 @@ impl Plugin for ConiferLodPlugin {
         app.init_asset::<ConiferSpecies>()
             .init_asset_loader::<ConiferRecordLoader>()
             .init_resource::<ConiferLodSettings>()
-            .init_resource::<SpeciesMaterials>()
             .init_resource::<ConiferLodCpuTime>()
             .init_resource::<CompactInstances>()
             .configure_sets(
                 PostUpdate,
-                (ConiferLodSet::Prepare, ConiferLodSet::Select)
-                    .chain()
+                ConiferLodSet::Select
                     .after(TransformSystems::Propagate)
                     // The cascades of this frame's cameras, which the
                     // selection reads for the shadows.
@@ -109,19 +95,11 @@ impl Plugin for ConiferLodPlugin {
             .add_systems(
                 PostUpdate,
                 (
-                    (
-                        systems::release_unused_materials,
-                        systems::spawn_parts,
-                        systems::sync_materials,
-                    )
-                        .chain()
-                        .in_set(ConiferLodSet::Prepare),
                     systems::select_lod.in_set(ConiferLodSet::Select),
                     render::track_instances.in_set(ConiferLodSet::Instances),
                 ),
             );
         if app.is_plugin_added::<bevy::pbr::PbrPlugin>() {
-            material::build(app);
             render::build(app);
         }
     }
@@ -130,15 +108,12 @@ impl Plugin for ConiferLodPlugin {
 /// The plugin's system sets, in `PostUpdate`, in this order.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ConiferLodSet {
-    /// Spawns the mesh parts of trees whose species just loaded, and keeps
-    /// the species' materials in sync with [`ConiferLodSettings`].
-    Prepare,
-    /// Computes every instance's [`ConiferLodState`] and hides parts that
-    /// cannot draw anything at its error.
+    /// Computes every tree's [`ConiferLodState`] on the CPU while the debug
+    /// overlay (or its stats) reads it; the GPU chooses what is drawn.
     Select,
-    /// [`RenderPath::Compact`]: records the trees that were spawned, moved,
-    /// hidden, re-targeted or despawned in [`CompactInstances`] (after
-    /// Bevy's visibility propagation, which it reads).
+    /// Records the trees that were spawned, moved, hidden, re-targeted or
+    /// despawned in [`CompactInstances`] (after Bevy's visibility
+    /// propagation, which it reads).
     Instances,
 }
 
@@ -170,33 +145,13 @@ pub struct ConiferLodSettings {
     /// Colour needles by representation (prisms blue, original lines green,
     /// merged lines yellow to red).
     pub debug_colors: bool,
-    /// How trees are drawn (see [`RenderPath`]).
-    pub render_path: RenderPath,
-    /// [`RenderPath::Compact`], trees of shared prototypes: most placements
+    /// Trees of shared prototypes: most placements
     /// one view (a camera, a shadow cascade or face) expands into their
     /// prototypes' detail over all trees of a species (8 bytes each, twice,
     /// per view). A tree whose placements do not fit that frame draws its
     /// coarser cut (its level-2 lines). Default 131,072 (about 100 mature
     /// trees within full detail of one view).
     pub max_expanded_placements: u32,
-}
-
-/// How the plugin draws trees.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
-pub enum RenderPath {
-    /// Render path v1: each tree gets child entities with the species'
-    /// prism, line-band and wood meshes (a `MaterialExtension` of
-    /// `StandardMaterial`), chosen per vertex; the CPU hides parts a tree
-    /// cannot use. Draws shadows (hashed for lines).
-    #[default]
-    Meshes,
-    /// Render path v2: compact storage buffers pulled by the vertex shader
-    /// (~32 bytes a needle), one instance buffer per species, and per view
-    /// (cameras and shadow views) a compute pass that culls trees and
-    /// writes indirect draws of the prefixes their cuts need; nothing
-    /// spawned per tree. Needs indirect draws with a first instance
-    /// (`INDIRECT_FIRST_INSTANCE`: Vulkan, Metal, DX12; not WebGL).
-    Compact,
 }
 
 impl Default for ConiferLodSettings {
@@ -207,7 +162,6 @@ impl Default for ConiferLodSettings {
             line_opacity: LineOpacity::default(),
             enabled: true,
             debug_colors: false,
-            render_path: RenderPath::default(),
             max_expanded_placements: 1 << 17,
         }
     }
@@ -225,14 +179,14 @@ impl ConiferLodSettings {
 
 /// A tree: spawn it with a `Transform` and it is drawn with continuous LOD.
 ///
-/// Its mesh parts are child entities; they take the tree's `RenderLayers`
-/// (if any) when they are spawned.
+/// Nothing is spawned for it: the species' instance buffer holds its
+/// transform, override, visibility and `RenderLayers` (if any).
 #[derive(Component, Clone, Debug, PartialEq, Eq)]
 #[require(Transform, Visibility, ConiferLodState)]
 pub struct ConiferFoliage(pub Handle<ConiferSpecies>);
 
 /// Per-tree override of the global [`ConiferLodSettings`] (e.g. a hero tree
-/// with a finer pixel error). Trees with equal overrides share materials.
+/// with a finer pixel error).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
 pub struct ConiferLodOverride {
     /// Pixel error ε for this tree.
@@ -245,9 +199,9 @@ pub struct ConiferLodOverride {
 }
 
 /// What a tree's LOD is this frame, over every active camera (written by
-/// [`ConiferLodSet::Select`]). On [`RenderPath::Compact`] the GPU chooses
-/// alone and the CPU keeps this up to date only while the debug overlay
-/// (or its stats) is on.
+/// [`ConiferLodSet::Select`]). The GPU chooses what is drawn on its own;
+/// the CPU keeps this up to date only while the debug overlay (or its
+/// stats) is on.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
 pub struct ConiferLodState {
     /// Smallest spatial error over the views (tree-local metres); infinite
@@ -265,44 +219,6 @@ pub struct ConiferLodState {
     pub wood_prisms_visible: bool,
     /// Whether any line can be drawn in some view.
     pub lines_visible: bool,
-    /// Bit `k` set: line band `k` of the species can draw in some view
-    /// (cameras and shadow cascades).
-    pub line_bands: u32,
-}
-
-/// The mesh entities of a tree (its children), spawned once its species
-/// has loaded.
-#[derive(Component, Clone, Debug, PartialEq, Eq)]
-pub struct ConiferParts {
-    /// The prism part.
-    pub prisms: Entity,
-    /// The line parts, one per band of [`ConiferSpecies::lines`].
-    pub lines: Vec<Entity>,
-    /// The wood segment prisms (trunk and branches), if the species has wood.
-    pub wood_prisms: Option<Entity>,
-    /// Imported wood triangles, if the species has them.
-    pub wood: Option<Entity>,
-}
-
-impl ConiferParts {
-    /// Every part entity of the tree.
-    pub fn entities(&self) -> impl Iterator<Item = Entity> + '_ {
-        let wood = self.wood_prisms.into_iter().chain(self.wood);
-        self.lines.iter().copied().chain([self.prisms]).chain(wood)
-    }
-}
-
-/// Marks a mesh entity spawned by the plugin as part of a tree.
-#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ConiferPart {
-    /// Prisms.
-    Prisms,
-    /// Lines of one band.
-    Lines,
-    /// Wood segment prisms.
-    WoodPrisms,
-    /// Imported wood triangles.
-    Wood,
 }
 
 /// The transform of a scatter placement: at its position, turned by its yaw

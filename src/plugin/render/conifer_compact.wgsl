@@ -374,7 +374,7 @@ fn pcg(value: u32) -> u32 {
 
 // Shadows of translucent lines: each fragment is kept with the line's
 // opacity, by a hash of its texel, line and tree, so a line casts the
-// shadow of the coverage it draws (`model::gpu_layout::shadow_texel_kept`).
+// shadow of the coverage it draws (`model::compact::shadow_texel_kept`).
 @fragment
 fn fragment(in: VertexOutput) {
     let line = u32(in.color.r + 0.5);

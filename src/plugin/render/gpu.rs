@@ -175,7 +175,7 @@ pub struct SpeciesParams {
     pub transition: f32,
     /// Global opacity rule (0 paper, 1 area-preserving).
     pub opacity_rule: u32,
-    /// `gpu_layout::WOOD_LINE_FADE`.
+    /// `prism::WOOD_LINE_FADE`.
     pub wood_line_fade: f32,
     /// Perceptual roughness.
     pub roughness: f32,

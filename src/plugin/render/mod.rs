@@ -1,5 +1,4 @@
-//! Render path v2 ([`RenderPath::Compact`](super::RenderPath::Compact)):
-//! one set of compact storage buffers per species, one instance buffer per
+//! The render path: one set of compact storage buffers per species, one instance buffer per
 //! species, and per view a compute pass that culls every tree and writes
 //! the indirect draws of the prefixes its cut needs. Nothing is spawned per
 //! tree; the CPU only copies the instances that changed.
@@ -34,10 +33,10 @@ use self::gpu::{
     PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
     prism_vertices,
 };
-use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity, RenderPath};
+use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity};
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
-use crate::model::gpu_layout::WOOD_LINE_FADE;
+use crate::model::prism::WOOD_LINE_FADE;
 use bevy::asset::{embedded_asset, embedded_path};
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::core_3d::{
@@ -225,7 +224,6 @@ type TreeData = (
 /// re-targeted, hidden, despawned), touching only trees that changed.
 #[allow(clippy::type_complexity, clippy::too_many_arguments)] // a Bevy system's parameters
 pub(super) fn track_instances(
-    settings: Res<ConiferLodSettings>,
     mut tracked: ResMut<CompactInstances>,
     changed: Query<
         TreeData,
@@ -241,22 +239,11 @@ pub(super) fn track_instances(
     mut removed_trees: RemovedComponents<ConiferFoliage>,
     mut removed_overrides: RemovedComponents<ConiferLodOverride>,
     mut removed_layers: RemovedComponents<RenderLayers>,
-    mut was_compact: Local<bool>,
+    mut started: Local<bool>,
     mut cpu_time: ResMut<super::ConiferLodCpuTime>,
     mut commands: Commands,
 ) {
     let _timer = super::systems::CpuTimer::start(&mut cpu_time, true);
-    let compact = settings.render_path == RenderPath::Compact;
-    if !compact {
-        if *was_compact {
-            for keys in tracked.species.values().filter_map(|s| s.phase_keys) {
-                keys.into_iter().for_each(|key| commands.entity(key).despawn());
-            }
-            *tracked = CompactInstances::default();
-        }
-        *was_compact = false;
-        return;
-    }
     // Phase keys of species that lost their last tree go with them.
     for keys in tracked.retired_keys.drain(..) {
         keys.into_iter().for_each(|key| commands.entity(key).despawn());
@@ -268,9 +255,9 @@ pub(super) fn track_instances(
         let instance = gpu_instance(transform, over, visibility.get(), layers);
         tracked.upsert(entity, foliage.0.id(), instance);
     };
-    if !*was_compact {
+    if !*started {
         all.iter().for_each(&mut upsert);
-        *was_compact = true;
+        *started = true;
         tracked.allocate_phase_keys(&mut commands);
         return;
     }
@@ -451,9 +438,7 @@ fn extract_compact(
         let Some(asset) = species_assets.get(id) else {
             continue;
         };
-        let Some(compact) = asset.compact.as_ref() else {
-            continue;
-        };
+        let compact = &asset.compact;
         let Some(keys) = tracked.phase_keys else {
             continue;
         };
@@ -748,7 +733,8 @@ fn init_compact_pipeline(
     if !supported {
         warn!(
             "this adapter cannot start indirect draws at an instance (INDIRECT_FIRST_INSTANCE): \
-             RenderPath::Compact draws nothing here, use RenderPath::Meshes"
+             the conifer plugin draws no trees here (it needs Vulkan, Metal, DX12 or a WebGPU \
+             with `indirect-first-instance`)"
         );
     }
     let read = || storage_buffer_read_only_sized(false, None);
