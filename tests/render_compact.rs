@@ -122,11 +122,13 @@ fn the_plugin_covers_what_the_needles_cover() {
     let mut scene = EvalScene::new(record, &[Method::Ours], view).unwrap();
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
-    for (distance, what, bound) in [
-        (2.0, "prisms", 0.06),
-        (6.0, "lines", 0.05),
-        (30.0, "merged", 0.05),
-        (90.0, "far", 0.08),
+    // (distance, name, coverage error bound, mean coverage bound relative
+    // to the reference's: the far tree is 8 pixels tall).
+    for (distance, what, bound, relative) in [
+        (2.0, "prisms", 0.06, 0.15),
+        (6.0, "lines", 0.03, 0.1),
+        (30.0, "merged", 0.03, 0.1),
+        (90.0, "far", 0.04, 0.35),
     ] {
         scene.set_distance(distance);
         let frame = scene.capture().unwrap();
@@ -143,7 +145,7 @@ fn the_plugin_covers_what_the_needles_cover() {
         assert!(reference > 0.02, "{what}: the reference shows the tree");
         assert!(error < bound, "{what}: coverage error {error}");
         assert!(
-            (mine - reference).abs() < 0.25 * reference,
+            (mine - reference).abs() < relative * reference,
             "{what}: mean coverage {mine} vs {reference}"
         );
     }
