@@ -50,7 +50,7 @@ pub mod plugin;
 pub mod prelude {
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
-        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferSpecies, LineOpacity, conifer_lod_keys,
-        spawn_forest,
+        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferSpecies, LineLighting, LineOpacity,
+        conifer_lod_keys, spawn_forest,
     };
 }

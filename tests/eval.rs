@@ -30,6 +30,8 @@ fn every_method_renders_and_is_measured() {
             pixel_error: 1.0,
             transition: 0.5,
             supersampling: 4,
+            sun: Default::default(),
+            line_lighting: Default::default(),
         },
         dolly_steps: 4,
         timed_frames: 1,

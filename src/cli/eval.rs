@@ -1,8 +1,9 @@
 //! `conifer eval`: every method against the supersampled reference, headless.
 
-use crate::eval::scene::{EvalView, Method};
+use crate::eval::scene::{EvalSun, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::read_record;
+use crate::plugin::LineLighting;
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 
@@ -54,6 +55,14 @@ pub struct EvalArgs {
     /// Print the report as one JSON object on stdout (otherwise a table).
     #[arg(long)]
     pub json: bool,
+    /// Where the sun stands: `front` (high, behind the camera), `side` (low,
+    /// across the view) or `back` (low, behind the tree: back light).
+    #[arg(long, default_value = "front")]
+    pub sun: String,
+    /// How the plugin lights lines: `cylinder` (the default) or
+    /// `facing-strip` (a strip turned toward the viewer).
+    #[arg(long, default_value = "cylinder")]
+    pub line_lighting: String,
 }
 
 /// The paper's Table 1 distances (metres).
@@ -84,6 +93,15 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
     if supersampling < 4 {
         bail!("--supersampling must be at least 4 (the reference is 4x4 per pixel or finer)");
     }
+    let sun = EvalSun::ALL
+        .into_iter()
+        .find(|s| s.name() == args.sun)
+        .with_context(|| format!("--sun {:?}: the suns are front, side, back", args.sun))?;
+    let line_lighting = match args.line_lighting.as_str() {
+        "cylinder" => LineLighting::Cylinder,
+        "facing-strip" => LineLighting::FacingStrip,
+        other => bail!("--line-lighting {other:?}: cylinder or facing-strip"),
+    };
     let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
     let options = EvalOptions {
         methods,
@@ -95,6 +113,8 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
             pixel_error: args.pixel_error,
             transition: args.transition,
             supersampling,
+            sun,
+            line_lighting,
         },
         dolly_steps: args.dolly_steps.unwrap_or(if args.quick { 16 } else { 150 }),
         timed_frames: args.frames.unwrap_or(if args.quick { 2 } else { 5 }),
@@ -123,16 +143,17 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// The report as a Markdown table (the README's form).
 pub fn print_table(report: &EvalReport) {
     println!(
-        "| method | distance (m) | coverage error | colour error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
+        "| method | distance (m) | coverage error | colour error | crown colour error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, method) in &report.methods {
         for d in &method.distances {
             println!(
-                "| {name} | {:.2} | {:.4} | {:.2} | {:.3} | {} | {} | {} | {} | {:.1} |",
+                "| {name} | {:.2} | {:.4} | {:.2} | {:.2} | {:.3} | {} | {} | {} | {} | {:.1} |",
                 d.distance,
                 d.coverage_error,
                 d.color_error,
+                d.crown_color_error,
                 d.perceptual,
                 d.shadow_coverage_error.map_or("–".to_string(), |e| format!("{e:.4}")),
                 d.triangles,

@@ -176,6 +176,34 @@ pub fn color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) ->
     Ok(sum as f64 / (3.0 * rect.area() as f64))
 }
 
+/// Reference coverage from which a pixel is in the crown's outline
+/// ([`crown_color_error`]): 10 %.
+pub const CROWN_COVERAGE: u8 = 26;
+
+/// Mean absolute difference of the RGB channels, 0–255, over the pixels of
+/// `rect` the reference's crown covers (coverage at least
+/// [`CROWN_COVERAGE`]): the colour of the tree itself, not diluted by the
+/// background round it as [`color_error`]'s box is. 0 when the reference
+/// covers none.
+pub fn crown_color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) -> Result<f64, MeasureError> {
+    check_sizes(reference, test, rect)?;
+    let (sum, count) = rect
+        .pixels()
+        .map(|(x, y)| (reference.get_pixel(x, y).0, test.get_pixel(x, y).0))
+        .filter(|(a, _)| a[3] >= CROWN_COVERAGE)
+        .fold((0u64, 0u64), |(sum, count), (a, b)| {
+            (
+                sum + (0..3).map(|c| u64::from(a[c].abs_diff(b[c]))).sum::<u64>(),
+                count + 1,
+            )
+        });
+    Ok(if count == 0 {
+        0.0
+    } else {
+        sum as f64 / (3.0 * count as f64)
+    })
+}
+
 /// Mean coverage (alpha / 255) over `rect`: 0 for a blank render.
 pub fn mean_coverage(image: &RgbaImage, rect: &PixelRect) -> f64 {
     if rect.area() == 0 || rect.x1 > image.width() || rect.y1 > image.height() {
@@ -301,6 +329,17 @@ mod tests {
         b.put_pixel(0, 0, Rgba([40, 100, 100, 0]));
         assert!((coverage_error(&a, &b, &rect).unwrap() - 1.0 / 16.0).abs() < 1e-12);
         assert!((color_error(&a, &b, &rect).unwrap() - 60.0 / 48.0).abs() < 1e-12);
+        // The crown's colour: only where the reference covers; a background
+        // picture (coverage 0) has no crown.
+        assert!((crown_color_error(&a, &b, &rect).unwrap() - 60.0 / 48.0).abs() < 1e-12);
+        let mut outline = a.clone();
+        for x in 0..4 {
+            for y in 2..4 {
+                outline.put_pixel(x, y, Rgba([200, 200, 200, 0]));
+            }
+        }
+        assert!((crown_color_error(&outline, &b, &rect).unwrap() - 60.0 / 24.0).abs() < 1e-12);
+        assert_eq!(crown_color_error(&flat(4, 4, [0; 4]), &b, &rect).unwrap(), 0.0);
         // A rectangle without that pixel sees no error.
         let inner = PixelRect {
             x0: 1,
@@ -320,6 +359,7 @@ mod tests {
             y1: 3,
         };
         assert_eq!(color_error(&a, &b, &empty), Err(MeasureError::EmptyRect));
+        assert_eq!(crown_color_error(&a, &b, &empty), Err(MeasureError::EmptyRect));
         let outside = PixelRect {
             x0: 0,
             y0: 0,

@@ -50,6 +50,9 @@ pub struct DistanceReport {
     pub coverage_error: f64,
     /// Mean absolute RGB difference from the reference over the same box, 0–255.
     pub color_error: f64,
+    /// Mean absolute RGB difference over the reference crown's pixels only
+    /// (coverage ≥ 10 %), 0–255: the tree's colour, undiluted by background.
+    pub crown_color_error: f64,
     /// Mean FLIP error (NVIDIA's perceptual difference, `nv-flip`) over the
     /// same box, in [0, 1].
     pub perceptual: f64,
@@ -136,6 +139,10 @@ pub struct EvalReport {
     pub pixel_error: f32,
     /// Transition δ.
     pub transition: f32,
+    /// Where the sun stood (`front`, `side`, `back`).
+    pub sun: String,
+    /// How the plugin's methods lit their lines (`Cylinder`, `FacingStrip`).
+    pub line_lighting: String,
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -293,6 +300,7 @@ pub fn evaluate(
                 distance,
                 coverage_error: measure::coverage_error(&frame.reference, picture, &rect)?,
                 color_error: measure::color_error(&frame.reference, picture, &rect)?,
+                crown_color_error: measure::crown_color_error(&frame.reference, picture, &rect)?,
                 perceptual: flip_error(&frame.reference, picture, &rect)?,
                 triangles: counts.triangles,
                 lines: counts.lines,
@@ -433,6 +441,8 @@ pub fn evaluate(
         fov_deg: options.view.fov_deg,
         pixel_error: options.view.pixel_error,
         transition: options.view.transition,
+        sun: options.view.sun.name().into(),
+        line_lighting: format!("{:?}", options.view.line_lighting),
         needles,
         dolly_distances: dolly,
         bevy_lod_levels: scene.lod_levels().to_vec(),

@@ -26,8 +26,8 @@ use crate::model::prism::{
 use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
-    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity,
-    triangle_mesh,
+    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineLighting,
+    LineOpacity, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
@@ -110,6 +110,7 @@ pub(super) fn renderer_with_species(
     *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
         pixel_error: view.pixel_error,
         transition: view.transition,
+        line_lighting: view.line_lighting,
         ..ConiferLodSettings::default()
     };
     let species = ConiferSpecies::from_record(record)?;
@@ -132,6 +133,51 @@ pub struct EvalView {
     /// Reference supersampling per axis (at least 4 for the issue's
     /// "4×4 per pixel").
     pub supersampling: u32,
+    /// Where the sun stands.
+    pub sun: EvalSun,
+    /// How the plugin's methods light their lines.
+    pub line_lighting: LineLighting,
+}
+
+/// Where the sun of `conifer eval`'s scene stands (the camera looks at the
+/// crown along −Z).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EvalSun {
+    /// High behind the camera's right shoulder, 48° up (the headless
+    /// renderer's sun).
+    #[default]
+    Front,
+    /// Low, 15° up, from the camera's right, across the view: half of every
+    /// needle is in its own shade.
+    Side,
+    /// Low, 15° up, from behind the tree toward the camera: back light.
+    Back,
+}
+
+impl EvalSun {
+    /// Every sun, in order.
+    pub const ALL: [EvalSun; 3] = [EvalSun::Front, EvalSun::Side, EvalSun::Back];
+
+    /// Its name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            EvalSun::Front => "front",
+            EvalSun::Side => "side",
+            EvalSun::Back => "back",
+        }
+    }
+
+    /// The sun's transform (a directional light shines along its −Z).
+    pub fn transform(self) -> Transform {
+        let low = 15f32.to_radians();
+        let from = match self {
+            EvalSun::Front => Vec3::new(4.0, 8.0, 6.0),
+            EvalSun::Side => Vec3::new(low.cos(), low.sin(), 0.0),
+            EvalSun::Back => Vec3::new(0.0, low.sin(), -low.cos()),
+        };
+        Transform::from_translation(from).looking_at(Vec3::ZERO, Vec3::Y)
+    }
 }
 
 impl EvalView {
@@ -263,7 +309,7 @@ impl EvalScene {
         let all_layers = RenderLayers::from_layers(&[0, 1, 2, 3, 4, 5, 6]);
         let world = renderer.world_mut();
         let sun = HeadlessRenderer::spawn_lights(world);
-        world.entity_mut(sun).insert(all_layers);
+        world.entity_mut(sun).insert((all_layers, view.sun.transform()));
 
         // The plugin's methods.
         let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species.clone());

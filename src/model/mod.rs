@@ -10,6 +10,7 @@
 //! * [`cut_count`]: the cut's primitive counts at any error without a traversal.
 //! * [`file`]: the binary record file.
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
+//! * [`shading`]: how a line is lit, as the cylinder it stands for.
 
 pub mod bake;
 pub mod compact;
@@ -22,6 +23,7 @@ pub mod prism;
 pub mod prototype;
 pub mod quantize;
 pub mod record;
+pub mod shading;
 
 pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_prototypes};
 pub use cut_count::{CutCounter, CutCounts};

@@ -23,7 +23,6 @@ use super::{
     ConiferSpecies, LineOpacity, view_error_slope,
 };
 use crate::model::CutCounter;
-use bevy::camera::CameraProjection;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;

@@ -129,6 +129,22 @@ pub enum LineOpacity {
     AreaPreserving,
 }
 
+/// How lines are lit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
+pub enum LineLighting {
+    /// As the cylinder (or bundle along its chord) a line stands for: the
+    /// radiance of its visible half averaged over its projected width
+    /// (Kajiya–Kay's integral, Bevy's BRDF at four normals across the
+    /// width; [`crate::model::shading`]). A line lit from the side or
+    /// behind is as dark as the needle's prism would be.
+    #[default]
+    Cylinder,
+    /// As a flat strip turned toward the viewer (render path v2 before the
+    /// cylinder; the paper lights a line with one stored normal): every line
+    /// is lit from the front, up to 4/π brighter than its cylinder.
+    FacingStrip,
+}
+
 /// Run-time LOD settings, shared by every tree; change them at any time.
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
 pub struct ConiferLodSettings {
@@ -140,6 +156,8 @@ pub struct ConiferLodSettings {
     pub transition: f32,
     /// Opacity rule of lines.
     pub line_opacity: LineOpacity,
+    /// How lines are lit.
+    pub line_lighting: LineLighting,
     /// `false` draws every needle as a prism of `Lmax` sides (LOD off).
     pub enabled: bool,
     /// Colour needles by representation (prisms blue, original lines green,
@@ -160,6 +178,7 @@ impl Default for ConiferLodSettings {
             pixel_error: 1.0,
             transition: 1.0,
             line_opacity: LineOpacity::default(),
+            line_lighting: LineLighting::default(),
             enabled: true,
             debug_colors: false,
             max_expanded_placements: 1 << 17,

@@ -17,6 +17,23 @@
     mesh_types::MESH_FLAGS_SHADOW_RECEIVER_BIT,
 }
 #endif
+#ifdef CONIFER_LINES
+#ifndef CONIFER_SHADOW
+#ifndef CONIFER_FACING_STRIP
+#import bevy_pbr::{
+    mesh_view_bindings as view_bindings,
+    mesh_view_types,
+    lighting,
+    clustered_forward as clustering,
+    shadows,
+    ambient,
+}
+#ifdef ENVIRONMENT_MAP
+#import bevy_pbr::environment_map
+#endif
+#endif
+#endif
+#endif
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
@@ -42,6 +59,7 @@ const TAU: f32 = 6.28318530717959;
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
     @location(0) world_position: vec4<f32>,
+    // A prism's normal; a line's direction (the axis of what it stands for).
     @location(1) world_normal: vec3<f32>,
 #ifdef CONIFER_SHADOW
     @location(2) @interpolate(flat) color: vec4<f32>,
@@ -76,18 +94,10 @@ fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: 
     return out;
 }
 
-// A line's normal: perpendicular to it, toward the viewer (the lit side of
-// the cylinder it stands for).
+// A line carries its world direction where a prism carries its normal: the
+// fragment lights the cylinder round it.
 fn finish_line(local_position: vec3<f32>, local_tangent: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
-    var out = finish(local_position, local_tangent, world_from_local, color);
-    let tangent = out.world_normal;
-    let to_viewer = normalize(view.world_position - out.world_position.xyz);
-    var normal = to_viewer - tangent * dot(tangent, to_viewer);
-    if dot(normal, normal) < 1e-12 {
-        normal = to_viewer;
-    }
-    out.world_normal = normalize(normal);
-    return out;
+    return finish(local_position, local_tangent, world_from_local, color);
 }
 
 fn grid_point(grid: vec4<f32>, x: u32, y: u32, z: u32) -> vec3<f32> {
@@ -386,6 +396,144 @@ fn fragment(in: VertexOutput) {
     }
 }
 #else
+#ifdef CONIFER_LINES
+#ifndef CONIFER_FACING_STRIP
+// Four-point Gauss–Legendre rule on [−1, 1]: offsets across a cylinder's
+// projected width and their weights (they sum to 2).
+fn across_offset(k: u32) -> f32 {
+    let node = select(0.33998104358, 0.86113631159, (k & 1u) != 0u);
+    return select(-node, node, k >= 2u);
+}
+
+fn across_weight(k: u32) -> f32 {
+    return select(0.65214515486, 0.34785484514, (k & 1u) != 0u);
+}
+
+// The lighting input of the cylinder's surface point at offset `s` across
+// its projected width (`s` in [−1, 1]; the normal turns from `toward`,
+// facing the viewer, to `side`).
+fn across(input: ptr<function, lighting::LightingInput>, toward: vec3<f32>, side: vec3<f32>, s: f32) {
+    let n = sqrt(max(1.0 - s * s, 0.0)) * toward + s * side;
+    let NdotV = max(dot(n, (*input).V), 0.0001);
+    (*input).layers[lighting::LAYER_BASE].N = n;
+    (*input).layers[lighting::LAYER_BASE].NdotV = NdotV;
+    (*input).layers[lighting::LAYER_BASE].R = reflect(-(*input).V, n);
+    (*input).F_ab = lighting::F_AB((*input).layers[lighting::LAYER_BASE].perceptual_roughness, NdotV);
+}
+
+// A line stands for a cylinder (an original line) or a bundle of them along
+// its chord (a merged line): its colour is the cylinder's radiance averaged
+// over its visible width (CPU reference: `model::shading`), Bevy's BRDF (Burley diffuse, GGX specular) and
+// lights evaluated at four normals across the visible half (Gauss–Legendre
+// in the projected width, where a uniform measure is the average the pixel
+// sees) rather than at one normal facing the viewer, which lights every
+// line from the front. Each light's shadow is fetched once, at the axis.
+fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
+    let V = in.V;
+    var T = axis;
+    if dot(T, T) < 1e-24 {
+        T = vec3<f32>(0.0, 1.0, 0.0);
+    }
+    T = normalize(T);
+    var toward = V - T * dot(T, V);
+    if dot(toward, toward) < 1e-8 {
+        // Seen along its axis: any normal of the ring.
+        toward = cross(T, select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 0.0, 1.0), abs(T.x) > 0.9));
+    }
+    toward = normalize(toward);
+    let side = cross(T, toward);
+
+    let base = in.material.base_color.rgb;
+    let perceptual_roughness = in.material.perceptual_roughness;
+    var input: lighting::LightingInput;
+    input.layers[lighting::LAYER_BASE].perceptual_roughness = perceptual_roughness;
+    input.layers[lighting::LAYER_BASE].roughness = lighting::perceptualRoughnessToRoughness(perceptual_roughness);
+    input.P = in.world_position.xyz;
+    input.V = V;
+    input.diffuse_color = pbr_functions::calculate_diffuse_color(base, 0.0, 0.0, 0.0);
+    input.metallic = 0.0;
+    input.F0_dielectric = pbr_functions::calculate_F0_dielectric(in.material.reflectance);
+    input.F0_metallic = base;
+
+    let view_z = dot(vec4<f32>(
+        view_bindings::view.view_from_world[0].z,
+        view_bindings::view.view_from_world[1].z,
+        view_bindings::view.view_from_world[2].z,
+        view_bindings::view.view_from_world[3].z
+    ), in.world_position);
+    let cluster_index = clustering::view_fragment_cluster_index(in.frag_coord.xy, view_z, in.is_orthographic);
+    var ranges = clustering::unpack_clusterable_object_index_ranges(cluster_index);
+    let receiver = (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u;
+
+    var direct = vec3<f32>(0.0);
+    for (var i: u32 = ranges.first_point_light_index_offset; i < ranges.first_spot_light_index_offset; i = i + 1u) {
+        let light_id = clustering::get_clusterable_object_id(i);
+        var shadow = 1.0;
+        if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            shadow = shadows::fetch_point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
+        }
+        var sum = vec3<f32>(0.0);
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            across(&input, toward, side, across_offset(k));
+            sum += across_weight(k) * lighting::point_light(light_id, &input, true, true);
+        }
+        direct += 0.5 * sum * shadow;
+    }
+    for (var i: u32 = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i = i + 1u) {
+        let light_id = clustering::get_clusterable_object_id(i);
+        var shadow = 1.0;
+        if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            shadow = shadows::fetch_spot_shadow(
+                light_id,
+                in.world_position,
+                toward,
+                view_bindings::clustered_lights.data[light_id].shadow_map_near_z,
+                in.frag_coord.xy,
+            );
+        }
+        var sum = vec3<f32>(0.0);
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            across(&input, toward, side, across_offset(k));
+            sum += across_weight(k) * lighting::spot_light(light_id, &input, true);
+        }
+        direct += 0.5 * sum * shadow;
+    }
+    for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
+        var shadow = 1.0;
+        if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            shadow = shadows::fetch_directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
+        }
+        var sum = vec3<f32>(0.0);
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            across(&input, toward, side, across_offset(k));
+            sum += across_weight(k) * lighting::directional_light(i, &input, true);
+        }
+        direct += 0.5 * sum * shadow;
+    }
+
+    // Indirect light is the same all round the ring to the precision of
+    // Bevy's split-sum terms: taken at the normal facing the viewer.
+    across(&input, toward, side, 0.0);
+    var indirect = vec3<f32>(0.0);
+#ifdef ENVIRONMENT_MAP
+    let environment = environment_map::environment_map_light(&input, &ranges, false);
+    indirect += environment.diffuse * in.diffuse_occlusion + environment.specular * in.specular_occlusion;
+#endif
+    indirect += ambient::ambient_light(
+        in.world_position,
+        toward,
+        V,
+        input.layers[lighting::LAYER_BASE].NdotV,
+        input.diffuse_color,
+        pbr_functions::calculate_F0(base, 0.0, in.material.reflectance),
+        perceptual_roughness,
+        in.diffuse_occlusion,
+    );
+    return vec4<f32>(view_bindings::view.exposure * (direct + indirect), in.material.base_color.a);
+}
+#endif
+#endif
+
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
@@ -406,7 +554,20 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     pbr_input.V = pbr_functions::calculate_view(in.world_position, pbr_input.is_orthographic);
     pbr_input.N = pbr_input.world_normal;
     pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;
+#ifdef CONIFER_FACING_STRIP
+    // A strip turned toward the viewer (`LineLighting::FacingStrip`).
+    var normal = pbr_input.V - pbr_input.world_normal * dot(pbr_input.world_normal, pbr_input.V);
+    if dot(normal, normal) < 1e-12 {
+        normal = pbr_input.V;
+    }
+    pbr_input.world_normal = normalize(normal);
+    pbr_input.N = pbr_input.world_normal;
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
+#else ifdef CONIFER_LINES
+    var color = cylinder_lighting(pbr_input, in.world_normal);
+#else
+    var color = pbr_functions::apply_pbr_lighting(pbr_input);
+#endif
     color = pbr_functions::main_pass_post_lighting_processing(pbr_input, color);
     return color;
 }

@@ -33,7 +33,7 @@ use self::gpu::{
     PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
     prism_vertices,
 };
-use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineOpacity};
+use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineLighting, LineOpacity};
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
 use crate::model::prism::WOOD_LINE_FADE;
@@ -343,6 +343,8 @@ pub struct RenderCompactSpecies {
     retired: Vec<MainEntity>,
     /// [`ConiferLodSettings::max_expanded_placements`].
     max_expanded_placements: u32,
+    /// [`ConiferLodSettings::line_lighting`].
+    line_lighting: LineLighting,
 }
 
 /// GPU memory the compact path allocated, summed from the sizes of the
@@ -420,6 +422,7 @@ fn extract_compact(
 ) {
     let render = &mut *render;
     render.max_expanded_placements = settings.max_expanded_placements;
+    render.line_lighting = settings.line_lighting;
     let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
     for &id in render.species.keys() {
         if !instances.species.contains_key(&id) || species_assets.get(id).is_none() {
@@ -715,6 +718,18 @@ pub struct CompactPipelineKey {
     /// A depth-only shadow pipeline (prepass view layout, hashed alpha
     /// test for lines).
     shadow: bool,
+    /// Lines lit as strips facing the viewer ([`LineLighting::FacingStrip`]).
+    facing_strip: bool,
+}
+
+/// The view's key for lines: a line is a pixel wide or less, so the
+/// shadow it receives is one hardware-filtered tap (2×2 PCF) of the shadow
+/// map instead of the view's wider filter: the filter's width would blur
+/// across the pixel the line covers, not along the needles it stands for,
+/// and its taps are most of a software rasterizer's cost per line fragment.
+fn line_view_key(view_key: MeshPipelineKey) -> MeshPipelineKey {
+    (view_key - MeshPipelineKey::SHADOW_FILTER_METHOD_RESERVED_BITS)
+        | MeshPipelineKey::SHADOW_FILTER_METHOD_HARDWARE_2X2
 }
 
 #[allow(clippy::too_many_arguments)] // a Bevy system's parameters
@@ -860,6 +875,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
         ];
         if key.kind.is_lines() {
             defs.push("CONIFER_LINES".into());
+            if key.facing_strip {
+                defs.push("CONIFER_FACING_STRIP".into());
+            }
         }
         if key.kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
@@ -1210,24 +1228,33 @@ fn queue_compact(
                 if !drawn || !kind.present_in(&species.compact) {
                     continue;
                 }
-                let (topology, blend) = if kind.is_lines() {
-                    (PrimitiveTopology::LineList, MeshPipelineKey::BLEND_ALPHA)
+                let (topology, blend, mesh_view_key) = if kind.is_lines() {
+                    (
+                        PrimitiveTopology::LineList,
+                        MeshPipelineKey::BLEND_ALPHA,
+                        line_view_key(view_key),
+                    )
                 } else {
-                    (PrimitiveTopology::TriangleList, MeshPipelineKey::empty())
+                    (PrimitiveTopology::TriangleList, MeshPipelineKey::empty(), view_key)
                 };
                 let key = CompactPipelineKey {
-                    mesh_key: view_key
+                    mesh_key: mesh_view_key
                         | blend
                         | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
                     kind,
                     shadow: false,
+                    facing_strip: kind.is_lines() && render.line_lighting == LineLighting::FacingStrip,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 if kind.is_lines() {
                     transparent.add_transient(Transparent3d {
                         sorting_info: TransparentSortingInfo3d::Sorted {
                             mesh_center: species.center,
-                            depth_bias: 0.0,
+                            // A species' wood lines are drawn before its
+                            // foliage lines (as if a millimetre farther):
+                            // trunk and branches stand inside the crown, so
+                            // needles blend over them, not wood over needles.
+                            depth_bias: if kind == PartKind::WoodLines { -1e-3 } else { 0.0 },
                         },
                         entity: (entity, main_entity),
                         pipeline: pipeline_id,
@@ -1298,6 +1325,7 @@ fn queue_compact_shadows(
                     mesh_key: MeshPipelineKey::DEPTH_PREPASS,
                     kind,
                     shadow: true,
+                    facing_strip: false,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 phase.add(
