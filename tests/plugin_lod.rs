@@ -643,8 +643,8 @@ fn point_and_spot_light_shadows_reach_the_lod_state() {
     assert!(!far.prisms_visible, "the camera alone sees no prism at 300 m");
 
     // A lamp 3 m from the crown: its cube faces (1,024 texels over 90°)
-    // have 6 mm texels there, so the tree's shadow needs wood prisms and
-    // finer line bands than the far camera.
+    // have 6 mm texels there, so the tree's shadow needs wood prisms the
+    // far camera does not.
     let lamp = app
         .world_mut()
         .spawn((

@@ -21,6 +21,18 @@ use std::path::PathBuf;
 
 const SIZE: u32 = 192;
 
+/// The 12,000-needle Scots pine (with wood segments) the tests draw.
+fn pine() -> bevy_conifer_lod::model::LodRecord {
+    let tree = generate(
+        Species::ScotsPine,
+        &GenerateOptions {
+            seed: 2,
+            target_needles: Some(12_000),
+        },
+    );
+    bake(&tree, &BakeOptions::default(), &()).unwrap()
+}
+
 struct Scene {
     renderer: HeadlessRenderer,
     species: Handle<ConiferSpecies>,
@@ -44,14 +56,7 @@ impl Scene {
         let dir = tempfile::tempdir().unwrap();
         let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
         std::fs::create_dir_all(&out).unwrap();
-        let tree = generate(
-            Species::ScotsPine,
-            &GenerateOptions {
-                seed: 2,
-                target_needles: Some(12_000),
-            },
-        );
-        let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+        let record = pine();
         let crown = record.crown_center();
         let needles = record.needle_count();
         write_record(&record, &dir.path().join("pine.conifer")).unwrap();
@@ -103,14 +108,7 @@ impl Scene {
 fn the_plugin_covers_what_the_needles_cover() {
     use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
     use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
-    let tree = generate(
-        Species::ScotsPine,
-        &GenerateOptions {
-            seed: 2,
-            target_needles: Some(12_000),
-        },
-    );
-    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    let record = pine();
     let view = EvalView {
         width: SIZE,
         height: SIZE,
@@ -312,7 +310,7 @@ fn lines_are_lit_as_the_cylinders_they_stand_for() {
     // 30 m: every needle is a line (original or merged).
     scene.look_from(30.0, 12.0);
     let eye = scene.crown + Vec3::Z * 30.0;
-    let mut grey = |scene: &mut Scene, from: Vec3, lighting: LineLighting, name: &str| {
+    let grey = |scene: &mut Scene, from: Vec3, lighting: LineLighting, name: &str| {
         let world = scene.renderer.world_mut();
         let mut suns = world.query_filtered::<&mut Transform, With<DirectionalLight>>();
         for mut sun in suns.iter_mut(world) {

@@ -93,7 +93,7 @@ impl BenchOptions {
             forest_instances: 1_000,
             forest_needles: 5_000,
             forest_size: (640, 360),
-            forest_frames: 2,
+            forest_frames: 5,
             prototype_needles: 1_000_000,
             out_dir,
             only: Vec::new(),

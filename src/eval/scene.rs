@@ -394,7 +394,9 @@ impl EvalScene {
                 ..default()
             });
             let mut meshes = world.resource_mut::<Assets<Mesh>>();
-            let empty = triangle_mesh(&TriangleMesh::default());
+            let mut empty = TriangleMesh::default();
+            never_empty(&mut empty);
+            let empty = triangle_mesh(&empty);
             let (prisms, wood, lines) = (meshes.add(empty.clone()), meshes.add(empty), meshes.add(empty_lines()));
             for (mesh, material) in [
                 (&prisms, &needle_material),
@@ -903,14 +905,23 @@ pub fn sampled_meshes(record: &LodRecord, order: &[u32], keep: usize, e: f32, pi
             line([segment.start, segment.end], normal, [wr, wg, wb, opacity(width)]);
         }
     }
+    if positions.is_empty() {
+        return SampledMeshes {
+            prisms,
+            wood,
+            lines: empty_lines(),
+        }
+        .never_empty();
+    }
     let lines = Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
         .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
         .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
         .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, colors);
-    SampledMeshes { prisms, wood, lines }
+    SampledMeshes { prisms, wood, lines }.never_empty()
 }
 
-/// What the `sampling` method draws at one error ([`sampled_meshes`]).
+/// What the `sampling` method draws at one error ([`sampled_meshes`]);
+/// a piece with nothing to draw holds one primitive of no size.
 pub struct SampledMeshes {
     /// Needle prisms (the record's cut).
     pub prisms: TriangleMesh,
@@ -920,12 +931,32 @@ pub struct SampledMeshes {
     pub lines: Mesh,
 }
 
-/// A line mesh without lines.
+impl SampledMeshes {
+    fn never_empty(mut self) -> Self {
+        never_empty(&mut self.prisms);
+        never_empty(&mut self.wood);
+        self
+    }
+}
+
+/// A line mesh that draws nothing: one transparent line of no length
+/// (Bevy's mesh allocator holds no empty mesh).
 fn empty_lines() -> Mesh {
     Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, Vec::<[f32; 3]>::new())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, Vec::<[f32; 3]>::new())
-        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, Vec::<[f32; 4]>::new())
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32; 3]; 2])
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; 2])
+        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, vec![[0.0f32; 4]; 2])
+}
+
+/// Gives an empty mesh one triangle of no area, which draws nothing (Bevy's
+/// mesh allocator holds no empty mesh).
+fn never_empty(mesh: &mut TriangleMesh) {
+    if mesh.indices.is_empty() {
+        *mesh = TriangleMesh::default();
+        mesh.positions = vec![Vec3::ZERO; 3];
+        mesh.normals = vec![Vec3::Y; 3];
+        mesh.indices = vec![0, 1, 2];
+    }
 }
 
 /// Wood triangles and lines the plugin draws at spatial error `e`: a

@@ -73,8 +73,8 @@ struct ViewLod {
 }
 
 /// One directional-light shadow cascade: an orthographic view whose
-/// spatial error is its texel size (`ε · texel`); the shader gives it its
-/// own cut, so the CPU keeps the line bands it needs visible.
+/// spatial error is its texel size (`ε · texel`); the GPU gives it its own
+/// cut, and the state reports what it may draw.
 struct ShadowLod {
     clip_from_world: Mat4,
     texel_size: f32,
