@@ -12,7 +12,7 @@
 //!   parent's error code. Sorted by line-error code descending, so the
 //!   needles a view draws as prisms (`e < 2R`) are a prefix. A prism's
 //!   radius is half the decoded line error (at most 0.049 % wide), and its
-//!   ring is oriented by [`ring_basis`] from the axis alone.
+//!   ring faces the view ([`prism_ring`]).
 //! * **Original lines**, 4 bytes: needle indices sorted by parent error code
 //!   descending, so the lines whose parent error is above the view's are a
 //!   prefix.
@@ -301,8 +301,8 @@ pub fn shader_log_decode(code: u32) -> f32 {
 }
 
 /// An orthonormal pair perpendicular to the unit `axis` (Duff et al.,
-/// *Building an Orthonormal Basis, Revisited*, JCGT 2017), as the shader
-/// builds a prism's ring.
+/// *Building an Orthonormal Basis, Revisited*, JCGT 2017): the shader's
+/// ring of a prism seen along its axis.
 pub fn ring_basis(axis: Vec3) -> (Vec3, Vec3) {
     let sign = 1.0f32.copysign(axis.z);
     let a = -1.0 / (sign + axis.z);
@@ -311,6 +311,32 @@ pub fn ring_basis(axis: Vec3) -> (Vec3, Vec3) {
         Vec3::new(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x),
         Vec3::new(b, sign + axis.y * axis.y * a, -axis.y),
     )
+}
+
+/// The ring of a `sides`-sided prism round unit `axis` seen from
+/// `toward` (the direction to the view), as the shader builds it: corner
+/// `k`'s radial direction is `u·cos(2πk/m + phase) + v·sin(…)`, with `u`
+/// toward the view across the axis and `v = axis × u`; the first corner
+/// faces the view when `m` is odd and the phase is half a step when `m` is
+/// 2 mod 4, so the silhouette is centred on the axis and as wide as an
+/// inscribed `m`-gon gets (`2r·cos(π/2m)` for odd `m`, `2r` for even): a
+/// three-sided prism covers `√3·r` on each side of its axis's pixel rather
+/// than anywhere from `1.5·r` to `√3·r` off centre, as a ring fixed to the
+/// needle would. Returns `(u, v, phase)`.
+pub fn prism_ring(axis: Vec3, toward: Vec3, sides: u8) -> (Vec3, Vec3, f32) {
+    let m = u32::from(sides.max(3));
+    let across = toward - axis * axis.dot(toward);
+    let u = if across.length_squared() < 1e-12 * toward.length_squared().max(1e-30) {
+        ring_basis(axis).0
+    } else {
+        across.normalize()
+    };
+    let phase = if m % 4 == 2 {
+        std::f32::consts::PI / m as f32
+    } else {
+        0.0
+    };
+    (u, axis.cross(u), phase)
 }
 
 /// Which ring slot, end (`true` at the tip) and cap vertex `local` of an
@@ -1069,6 +1095,38 @@ mod tests {
             / 65_536.0;
         assert!((same - 0.5).abs() < 0.02, "{same}");
     }
+    proptest::proptest! {
+        /// A prism's ring faces the view: its silhouette across the view is
+        /// centred on the axis and `2r·cos(π/2m)` wide (odd `m`) or `2r`
+        /// (even), the widest an inscribed polygon gets.
+        #[test]
+        fn prism_rings_face_the_view(
+            ax in (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0),
+            to in (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0),
+            sides in 3u8..=12,
+        ) {
+            let axis = Vec3::new(ax.0, ax.1, ax.2);
+            let toward = Vec3::new(to.0, to.1, to.2);
+            proptest::prop_assume!(axis.length() > 0.1 && toward.length() > 0.1);
+            let axis = axis.normalize();
+            proptest::prop_assume!(axis.cross(toward.normalize()).length() > 0.05);
+            let (u, v, phase) = prism_ring(axis, toward, sides);
+            proptest::prop_assert!(u.dot(axis).abs() < 1e-4 && v.dot(axis).abs() < 1e-4 && u.dot(toward) > 0.0);
+            // Corners projected on the sideways axis (what the view sees).
+            let m = f32::from(sides);
+            let across: Vec<f32> = (0..sides)
+                .map(|k| {
+                    let angle = std::f32::consts::TAU * f32::from(k) / m + phase;
+                    (u * angle.cos() + v * angle.sin()).dot(v)
+                })
+                .collect();
+            let (lo, hi) = across.iter().fold((f32::MAX, f32::MIN), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+            let widest = if sides % 2 == 1 { 2.0 * (std::f32::consts::PI / (2.0 * m)).cos() } else { 2.0 };
+            proptest::prop_assert!((hi - lo - widest).abs() < 1e-4, "{sides} sides: {} vs {widest}", hi - lo);
+            proptest::prop_assert!((hi + lo).abs() < 1e-4, "centred");
+        }
+    }
+
     #[test]
     fn ring_basis_is_orthonormal() {
         for axis in [

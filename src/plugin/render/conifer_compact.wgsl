@@ -181,21 +181,45 @@ struct PrismVertex {
     normal: vec3<f32>,
 }
 
-fn prism_vertex(base: vec3<f32>, tip: vec3<f32>, base_radius: f32, tip_radius: f32, sides: u32, corner: PrismCorner) -> PrismVertex {
+// The direction to the view from `local_point`, in the frame of
+// `world_from_local` (a rotation and a uniform scale, whose transpose maps
+// directions back up to that scale): toward the camera in a perspective
+// view, the view's backward axis in an orthographic one (directional
+// shadow maps).
+fn toward_view_local(world_from_local: mat4x4<f32>, local_point: vec3<f32>) -> vec3<f32> {
+    var toward = view.world_from_view[2].xyz;
+    if view.clip_from_view[3][3] != 1.0 {
+        toward = view.world_position - (world_from_local * vec4<f32>(local_point, 1.0)).xyz;
+    }
+    let m = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
+    return transpose(m) * toward;
+}
+
+// A vertex of an `sides`-sided prism whose ring faces the view: its first
+// corner toward the viewer (odd sides) or half a step off (sides 2 mod 4),
+// so the silhouette is centred on the axis and as wide as an inscribed
+// polygon gets, `2r·cos(π/2m)` odd, `2r` even (CPU reference:
+// `model::compact::prism_ring`).
+fn prism_vertex(base: vec3<f32>, tip: vec3<f32>, base_radius: f32, tip_radius: f32, sides: u32, corner: PrismCorner, toward: vec3<f32>) -> PrismVertex {
     let m = max(species.max_sides, 3u);
     let k = corner.slot * sides / m;
-    let angle = TAU * f32(k) / f32(sides);
+    let phase = select(0.0, PI / f32(sides), sides % 4u == 2u);
+    let angle = TAU * f32(k) / f32(sides) + phase;
     var axis = tip - base;
     if dot(axis, axis) < 1e-24 {
         axis = vec3<f32>(0.0, 1.0, 0.0);
     }
     axis = normalize(axis);
-    // Duff et al., JCGT 2017 (`model::compact::ring_basis`).
-    let sign = select(-1.0, 1.0, axis.z >= 0.0);
-    let a = -1.0 / (sign + axis.z);
-    let b = axis.x * axis.y * a;
-    let u = vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
-    let v = vec3<f32>(b, sign + axis.y * axis.y * a, -axis.y);
+    var u = toward - axis * dot(axis, toward);
+    if dot(u, u) < 1e-12 * max(dot(toward, toward), 1e-30) {
+        // Seen along the axis: Duff et al., JCGT 2017 (`model::compact::ring_basis`).
+        let sign = select(-1.0, 1.0, axis.z >= 0.0);
+        let a = -1.0 / (sign + axis.z);
+        let b = axis.x * axis.y * a;
+        u = vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
+    }
+    u = normalize(u);
+    let v = cross(axis, u);
     let radial = u * cos(angle) + v * sin(angle);
     var out: PrismVertex;
     let end = select(base, tip, corner.at_tip);
@@ -289,7 +313,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let radius = 0.5 * log_decode(needles[k].w & 0xffffu);
     let sides = prism_sides(radius, spatial_error);
     let corner = prism_corner(vertex_index % species.prism_vertices);
-    let p = prism_vertex(needle_base(grid, k), needle_tip(grid, k), radius, radius, sides, corner);
+    let base = needle_base(grid, k);
+    let tip = needle_tip(grid, k);
+    let toward = toward_view_local(world_from_local, 0.5 * (base + tip));
+    let p = prism_vertex(base, tip, radius, radius, sides, corner, toward);
     let m = max(species.max_sides, 3u);
     let amount = f32(m - sides) / max(f32(m - 3u), 1.0);
     return finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0));
@@ -301,7 +328,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let end = wood_segments[2u * s + 1u];
     let sides = prism_sides(max(start.w, end.w), spatial_error);
     let corner = prism_corner(vertex_index % species.prism_vertices);
-    let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner);
+    let toward = toward_view_local(world_from_local, 0.5 * (start.xyz + end.xyz));
+    let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner, toward);
     let m = max(species.max_sides, 3u);
     var color = base_color(2, 0.0, 1.0);
     if species.debug_colors != 0u {
