@@ -782,3 +782,91 @@ fn instances_follow_100k_trees_in_churn() {
     }
     assert_eq!(mesh_events(&mut app), 0);
 }
+
+/// Inspectors (bevy-inspector-egui) and Bevy's remote protocol work through
+/// reflection: the settings resource is read and written through the type
+/// registry, a tree's override is inserted and its LOD state read the same
+/// way, and the change takes effect like any other.
+#[test]
+fn settings_overrides_and_state_are_reflected() {
+    use bevy::ecs::reflect::{AppTypeRegistry, ReflectComponent, ReflectResource};
+    use bevy::reflect::{PartialReflect, ReflectMut, ReflectRef};
+    let dir = tempfile::tempdir().unwrap();
+    let crown = write_tree(dir.path(), "spruce.conifer");
+    let mut app = app(dir.path());
+    app.add_plugins(ConiferLodDebugPlugin);
+    app.world_mut().spawn(camera(30.0));
+    let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
+    let before = state(&app, tree).min_spatial_error;
+    let registry = app.world().resource::<AppTypeRegistry>().clone();
+    let registry = registry.read();
+    use std::any::TypeId;
+    for (name, id) in [
+        ("ConiferLodSettings", TypeId::of::<ConiferLodSettings>()),
+        ("ConiferLodDebug", TypeId::of::<ConiferLodDebug>()),
+        ("ConiferLodStats", TypeId::of::<ConiferLodStats>()),
+        (
+            "ConiferLodCpuTime",
+            TypeId::of::<bevy_conifer_lod::plugin::ConiferLodCpuTime>(),
+        ),
+        ("ConiferFoliage", TypeId::of::<ConiferFoliage>()),
+        ("ConiferLodOverride", TypeId::of::<ConiferLodOverride>()),
+        ("ConiferLodState", TypeId::of::<ConiferLodState>()),
+    ] {
+        assert!(
+            registry.get_type_data::<ReflectComponent>(id).is_some(),
+            "{name} is registered"
+        );
+    }
+    // Write ε through the resource's reflection (a resource is the
+    // component of its own entity).
+    let id = std::any::TypeId::of::<ConiferLodSettings>();
+    assert!(registry.get_type_data::<ReflectResource>(id).is_some());
+    let settings = registry
+        .get_type_data::<ReflectComponent>(id)
+        .expect("ConiferLodSettings reflects as its entity's component");
+    let component = app.world().component_id::<ConiferLodSettings>().unwrap();
+    let holder = app.world().resource_entities().get(component).unwrap();
+    {
+        let mut entity = app.world_mut().entity_mut(holder);
+        let mut reflected = settings.reflect_mut(&mut entity).unwrap();
+        let ReflectMut::Struct(fields) = reflected.reflect_mut() else {
+            panic!("a struct");
+        };
+        fields.field_mut("pixel_error").unwrap().apply(&2.0f32);
+    }
+    assert_eq!(app.world().resource::<ConiferLodSettings>().pixel_error, 2.0);
+    app.update();
+    let after = state(&app, tree).min_spatial_error;
+    assert!((after / before - 2.0).abs() < 1e-5, "{before} → {after}");
+    // Insert an override through the component's reflection.
+    let overrides = registry
+        .get_type_data::<ReflectComponent>(std::any::TypeId::of::<ConiferLodOverride>())
+        .expect("ConiferLodOverride reflects as a component");
+    let value = ConiferLodOverride {
+        pixel_error: Some(0.5),
+        ..default()
+    };
+    overrides.insert(
+        &mut app.world_mut().entity_mut(tree),
+        value.as_partial_reflect(),
+        &registry,
+    );
+    app.update();
+    assert_eq!(app.world().get::<ConiferLodOverride>(tree), Some(&value));
+    // Read the state through reflection.
+    let states = registry
+        .get_type_data::<ReflectComponent>(std::any::TypeId::of::<ConiferLodState>())
+        .expect("ConiferLodState reflects as a component");
+    let entity = app.world().entity(tree);
+    let reflected = states.reflect(entity).unwrap();
+    let ReflectRef::Struct(fields) = reflected.reflect_ref() else {
+        panic!("a struct");
+    };
+    let error = fields
+        .field("min_spatial_error")
+        .unwrap()
+        .try_downcast_ref::<f32>()
+        .copied();
+    assert!((error.unwrap() / before - 0.5).abs() < 1e-5, "{error:?}");
+}

@@ -38,6 +38,8 @@ impl Plugin for ConiferLodDebugPlugin {
     fn build(&self, app: &mut App) {
         app.init_resource::<ConiferLodDebug>()
             .init_resource::<ConiferLodStats>()
+            .register_type::<ConiferLodDebug>()
+            .register_type::<ConiferLodStats>()
             .init_resource::<SpeciesCounters>()
             .init_resource::<FrameRate>()
             .add_systems(
@@ -56,7 +58,8 @@ impl Plugin for ConiferLodDebugPlugin {
 }
 
 /// What the overlay shows; change it at any time.
-#[derive(Resource, Clone, Copy, Debug, PartialEq)]
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Resource, Default, Debug, Clone)]
 pub struct ConiferLodDebug {
     /// Master switch: nothing below is shown while `false`.
     pub enabled: bool,
@@ -91,7 +94,8 @@ impl Default for ConiferLodDebug {
 /// always with [`ConiferLodDebug::always_collect_stats`]).
 /// Counts are of the cut at each visible tree's finest view, computed
 /// exactly by [`CutCounter`] (no traversal).
-#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Reflect)]
+#[reflect(Resource, Default, Debug, Clone)]
 pub struct ConiferLodStats {
     /// Trees.
     pub instances: u64,

@@ -78,6 +78,12 @@ impl Plugin for ConiferLodPlugin {
             .init_resource::<ConiferLodSettings>()
             .init_resource::<ConiferLodCpuTime>()
             .init_resource::<CompactInstances>()
+            // Inspectors and Bevy's remote protocol see and edit these.
+            .register_type::<ConiferLodSettings>()
+            .register_type::<ConiferFoliage>()
+            .register_type::<ConiferLodOverride>()
+            .register_type::<ConiferLodState>()
+            .register_type::<ConiferLodCpuTime>()
             .configure_sets(
                 PostUpdate,
                 ConiferLodSet::Select
@@ -147,6 +153,7 @@ pub enum LineLighting {
 
 /// Run-time LOD settings, shared by every tree; change them at any time.
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Resource, Default, Debug, Clone)]
 pub struct ConiferLodSettings {
     /// Pixel error ε: how many pixels of deviation the simplification may
     /// cause. Larger is faster and coarser. Default 1.
@@ -200,13 +207,15 @@ impl ConiferLodSettings {
 ///
 /// Nothing is spawned for it: the species' instance buffer holds its
 /// transform, override, visibility and `RenderLayers` (if any).
-#[derive(Component, Clone, Debug, PartialEq, Eq)]
+#[derive(Component, Clone, Debug, PartialEq, Eq, Reflect)]
+#[reflect(Component, Debug, Clone)]
 #[require(Transform, Visibility, ConiferLodState)]
 pub struct ConiferFoliage(pub Handle<ConiferSpecies>);
 
 /// Per-tree override of the global [`ConiferLodSettings`] (e.g. a hero tree
 /// with a finer pixel error).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq, Reflect)]
+#[reflect(Component, Default, Debug, Clone)]
 pub struct ConiferLodOverride {
     /// Pixel error ε for this tree.
     pub pixel_error: Option<f32>,
@@ -221,7 +230,8 @@ pub struct ConiferLodOverride {
 /// [`ConiferLodSet::Select`]). The GPU chooses what is drawn on its own;
 /// the CPU keeps this up to date only while the debug overlay (or its
 /// stats) is on.
-#[derive(Component, Clone, Copy, Debug, PartialEq)]
+#[derive(Component, Clone, Copy, Debug, PartialEq, Reflect)]
+#[reflect(Component, Default, Debug, Clone)]
 pub struct ConiferLodState {
     /// Smallest spatial error over the views (tree-local metres); infinite
     /// with no camera.

@@ -6,7 +6,8 @@ use bevy::light::Cascades;
 use bevy::prelude::*;
 
 /// Wall time of the plugin's own systems (both sets), measured inside them.
-#[derive(Resource, Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Reflect)]
+#[reflect(Resource, Default, Debug, Clone)]
 pub struct ConiferLodCpuTime {
     /// The plugin's systems' time in the last complete frame.
     pub last_frame: std::time::Duration,
