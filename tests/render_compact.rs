@@ -16,7 +16,7 @@ use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
 use bevy_conifer_lod::plugin::CompactGpuMemory;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
-use common::{BACKGROUND, background_camera, covered_count, look_at_crown, mean_difference};
+use common::{BACKGROUND, background_camera, covered_count, covered_grey, look_at_crown, mean_difference};
 use std::path::PathBuf;
 
 const SIZE: u32 = 192;
@@ -79,6 +79,15 @@ impl Scene {
             out,
             dir,
         }
+    }
+
+    /// A tree of the scene's species at `transform`.
+    fn spawn_tree(&mut self, transform: Transform) -> Entity {
+        let species = self.species.clone();
+        self.renderer
+            .world_mut()
+            .spawn((ConiferFoliage(species), transform))
+            .id()
     }
 
     fn look_from(&mut self, distance: f32, fov_deg: f32) {
@@ -154,11 +163,7 @@ fn the_plugin_covers_what_the_needles_cover() {
 #[test]
 fn a_hidden_tree_is_not_drawn() {
     let mut scene = Scene::new();
-    let tree = scene
-        .renderer
-        .world_mut()
-        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY))
-        .id();
+    let tree = scene.spawn_tree(Transform::IDENTITY);
     scene.look_from(6.0, 45.0);
     assert!(covered_count(&scene.shot("shown")) > 1000);
     scene.renderer.world_mut().entity_mut(tree).insert(Visibility::Hidden);
@@ -173,13 +178,7 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     let mut trees = Vec::new();
     for i in 0..3000 {
         let (x, z) = ((i % 60) as f32 * 5.0 - 150.0, -((i / 60) as f32) * 5.0);
-        trees.push(
-            scene
-                .renderer
-                .world_mut()
-                .spawn((ConiferFoliage(scene.species.clone()), Transform::from_xyz(x, 0.0, z)))
-                .id(),
-        );
+        trees.push(scene.spawn_tree(Transform::from_xyz(x, 0.0, z)));
     }
     let forest = scene.shot("forest");
     assert!(covered_count(&forest) > 1000);
@@ -252,14 +251,8 @@ fn a_tree_after_a_culled_tree_is_drawn() {
     let mut scene = Scene::new();
     scene.look_from(6.0, 45.0);
     // Instance 0 far behind the camera (culled), instance 1 in view.
-    scene.renderer.world_mut().spawn((
-        ConiferFoliage(scene.species.clone()),
-        Transform::from_xyz(0.0, 0.0, 500.0),
-    ));
-    scene
-        .renderer
-        .world_mut()
-        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY));
+    scene.spawn_tree(Transform::from_xyz(0.0, 0.0, 500.0));
+    scene.spawn_tree(Transform::IDENTITY);
     let image = scene.shot("second_instance");
     let pixels = covered_count(&image);
     assert!(pixels > 1000, "the second tree covers {pixels} pixels");
@@ -283,19 +276,6 @@ fn extra_camera(scene: &mut Scene, target: &Handle<Image>, distance: f32, viewpo
     ));
 }
 
-/// Mean grey level (0–255) of the pixels a picture covers.
-fn covered_grey(image: &image::RgbaImage) -> f32 {
-    let covered = common::covered(image);
-    let (sum, n) = image
-        .pixels()
-        .zip(covered)
-        .filter(|(_, c)| *c)
-        .fold((0.0f32, 0usize), |(sum, n), (p, _)| {
-            (sum + (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0, n + 1)
-        });
-    sum / n.max(1) as f32
-}
-
 /// Lines lit as cylinders: with the sun behind the camera a line shows the
 /// cylinder's front-lit half (π/4 of a strip facing the sun), with the sun
 /// across the view half of it is lit where a strip facing the viewer gets
@@ -303,10 +283,7 @@ fn covered_grey(image: &image::RgbaImage) -> f32 {
 #[test]
 fn lines_are_lit_as_the_cylinders_they_stand_for() {
     let mut scene = Scene::new();
-    scene
-        .renderer
-        .world_mut()
-        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY));
+    scene.spawn_tree(Transform::IDENTITY);
     // 30 m: every needle is a line (original or merged).
     scene.look_from(30.0, 12.0);
     let eye = scene.crown + Vec3::Z * 30.0;
@@ -343,10 +320,7 @@ fn lines_are_lit_as_the_cylinders_they_stand_for() {
 #[test]
 fn two_cameras_and_a_split_screen_each_get_their_own_cut() {
     let mut scene = Scene::new();
-    scene
-        .renderer
-        .world_mut()
-        .spawn((ConiferFoliage(scene.species.clone()), Transform::IDENTITY));
+    scene.spawn_tree(Transform::IDENTITY);
     // The scene's camera at 1.5 m, a second one at 40 m into its own target.
     scene.look_from(1.5, 45.0);
     let far_target = scene.renderer.render_target(SIZE, SIZE);

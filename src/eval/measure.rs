@@ -163,6 +163,11 @@ pub fn coverage_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect)
     Ok(sum as f64 / (255.0 * rect.area() as f64))
 }
 
+/// Sum of the absolute differences of two pixels' RGB channels.
+fn rgb_difference(a: [u8; 4], b: [u8; 4]) -> u64 {
+    (0..3).map(|c| u64::from(a[c].abs_diff(b[c]))).sum()
+}
+
 /// Mean absolute difference of the RGB channels over `rect`, 0–255.
 pub fn color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) -> Result<f64, MeasureError> {
     check_sizes(reference, test, rect)?;
@@ -170,7 +175,7 @@ pub fn color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) ->
         .pixels()
         .map(|(x, y)| {
             let (a, b) = (reference.get_pixel(x, y).0, test.get_pixel(x, y).0);
-            (0..3).map(|c| u64::from(a[c].abs_diff(b[c]))).sum::<u64>()
+            rgb_difference(a, b)
         })
         .sum();
     Ok(sum as f64 / (3.0 * rect.area() as f64))
@@ -192,10 +197,7 @@ pub fn crown_color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRe
         .map(|(x, y)| (reference.get_pixel(x, y).0, test.get_pixel(x, y).0))
         .filter(|(a, _)| a[3] >= CROWN_COVERAGE)
         .fold((0u64, 0u64), |(sum, count), (a, b)| {
-            (
-                sum + (0..3).map(|c| u64::from(a[c].abs_diff(b[c]))).sum::<u64>(),
-                count + 1,
-            )
+            (sum + rgb_difference(a, b), count + 1)
         });
     Ok(if count == 0 {
         0.0

@@ -905,18 +905,11 @@ pub fn sampled_meshes(record: &LodRecord, order: &[u32], keep: usize, e: f32, pi
             line([segment.start, segment.end], normal, [wr, wg, wb, opacity(width)]);
         }
     }
-    if positions.is_empty() {
-        return SampledMeshes {
-            prisms,
-            wood,
-            lines: empty_lines(),
-        }
-        .never_empty();
-    }
-    let lines = Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, colors);
+    let lines = if positions.is_empty() {
+        empty_lines()
+    } else {
+        line_mesh(positions, normals, colors)
+    };
     SampledMeshes { prisms, wood, lines }.never_empty()
 }
 
@@ -942,10 +935,15 @@ impl SampledMeshes {
 /// A line mesh that draws nothing: one transparent line of no length
 /// (Bevy's mesh allocator holds no empty mesh).
 fn empty_lines() -> Mesh {
+    line_mesh(vec![[0.0; 3]; 2], vec![[0.0, 1.0, 0.0]; 2], vec![[0.0; 4]; 2])
+}
+
+/// A `LineList` mesh of positions, normals and colours (two per line).
+fn line_mesh(positions: Vec<[f32; 3]>, normals: Vec<[f32; 3]>, colors: Vec<[f32; 4]>) -> Mesh {
     Mesh::new(PrimitiveTopology::LineList, RenderAssetUsages::RENDER_WORLD)
-        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, vec![[0.0f32; 3]; 2])
-        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; 2])
-        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, vec![[0.0f32; 4]; 2])
+        .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_NORMAL, normals)
+        .with_inserted_attribute(Mesh::ATTRIBUTE_COLOR, colors)
 }
 
 /// Gives an empty mesh one triangle of no area, which draws nothing (Bevy's

@@ -325,18 +325,13 @@ pub fn ring_basis(axis: Vec3) -> (Vec3, Vec3) {
 /// needle would. Returns `(u, v, phase)`.
 pub fn prism_ring(axis: Vec3, toward: Vec3, sides: u8) -> (Vec3, Vec3, f32) {
     let m = u32::from(sides.max(3));
-    let across = toward - axis * axis.dot(toward);
-    let u = if across.length_squared() < 1e-12 * toward.length_squared().max(1e-30) {
-        ring_basis(axis).0
-    } else {
-        across.normalize()
-    };
+    let (u, v) = super::shading::visible_frame(axis, toward);
     let phase = if m % 4 == 2 {
         std::f32::consts::PI / m as f32
     } else {
         0.0
     };
-    (u, axis.cross(u), phase)
+    (u, v, phase)
 }
 
 /// Which ring slot, end (`true` at the tip) and cap vertex `local` of an

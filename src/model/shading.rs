@@ -24,13 +24,18 @@ pub const ACROSS_NODES: [(f32, f32); 4] = [
 ];
 
 /// The frame of a cylinder's visible half: the normal facing the viewer
-/// and the sideways one (`axis × toward`). Both unit vectors; a cylinder
-/// seen along its axis gets any normal of its ring.
+/// and the sideways one (`axis × toward`), both unit vectors, as the
+/// shader's `facing_axis` turns a line's cylinder and a prism's ring. A
+/// cylinder seen along its axis gets the ring normal of
+/// [`super::compact::ring_basis`].
 pub fn visible_frame(axis: Vec3, to_viewer: Vec3) -> (Vec3, Vec3) {
     let axis = axis.try_normalize().unwrap_or(Vec3::Y);
-    let toward = (to_viewer - axis * axis.dot(to_viewer))
-        .try_normalize()
-        .unwrap_or_else(|| axis.any_orthonormal_vector());
+    let across = to_viewer - axis * axis.dot(to_viewer);
+    let toward = if across.length_squared() >= 1e-12 * to_viewer.length_squared().max(1e-30) {
+        across.normalize()
+    } else {
+        super::compact::ring_basis(axis).0
+    };
     (toward, axis.cross(toward))
 }
 

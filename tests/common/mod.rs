@@ -21,10 +21,24 @@ pub fn covered_count(image: &image::RgbaImage) -> usize {
     covered(image).into_iter().filter(|&c| c).count()
 }
 
+/// A pixel's grey level (0–255): the mean of its RGB channels.
+pub fn grey(p: &image::Rgba<u8>) -> f32 {
+    (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0
+}
+
+/// Mean grey level of the pixels a picture covers.
+pub fn covered_grey(image: &image::RgbaImage) -> f32 {
+    let (sum, n) = image
+        .pixels()
+        .zip(covered(image))
+        .filter(|(_, c)| *c)
+        .fold((0.0f32, 0usize), |(sum, n), (p, _)| (sum + grey(p), n + 1));
+    sum / n.max(1) as f32
+}
+
 /// Mean |Δ| of the grey levels (0–255) over the pixels either picture covers.
 pub fn mean_difference(a: &image::RgbaImage, b: &image::RgbaImage) -> f32 {
     let (ca, cb) = (covered(a), covered(b));
-    let grey = |p: &image::Rgba<u8>| (p[0] as f32 + p[1] as f32 + p[2] as f32) / 3.0;
     let (mut sum, mut n) = (0.0f32, 0usize);
     for (i, (pa, pb)) in a.pixels().zip(b.pixels()).enumerate() {
         if ca[i] || cb[i] {

@@ -94,12 +94,6 @@ fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: 
     return out;
 }
 
-// A line carries its world direction where a prism carries its normal: the
-// fragment lights the cylinder round it.
-fn finish_line(local_position: vec3<f32>, local_tangent: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
-    return finish(local_position, local_tangent, world_from_local, color);
-}
-
 fn grid_point(grid: vec4<f32>, x: u32, y: u32, z: u32) -> vec3<f32> {
     return grid.xyz + vec3<f32>(f32(x), f32(y), f32(z)) * grid.w;
 }
@@ -181,6 +175,21 @@ struct PrismVertex {
     normal: vec3<f32>,
 }
 
+// The unit normal of the unit `axis` that faces `toward` (the direction to
+// the view): a prism's ring and a line's cylinder are turned by it. Seen
+// along the axis, Duff et al.'s basis (JCGT 2017). CPU reference:
+// `model::shading::visible_frame`.
+fn facing_axis(axis: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
+    let across = toward - axis * dot(axis, toward);
+    if dot(across, across) >= 1e-12 * max(dot(toward, toward), 1e-30) {
+        return normalize(across);
+    }
+    let sign = select(-1.0, 1.0, axis.z >= 0.0);
+    let a = -1.0 / (sign + axis.z);
+    let b = axis.x * axis.y * a;
+    return vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
+}
+
 // The direction to the view from `local_point`, in the frame of
 // `world_from_local` (a rotation and a uniform scale, whose transpose maps
 // directions back up to that scale): toward the camera in a perspective
@@ -210,15 +219,7 @@ fn prism_vertex(base: vec3<f32>, tip: vec3<f32>, base_radius: f32, tip_radius: f
         axis = vec3<f32>(0.0, 1.0, 0.0);
     }
     axis = normalize(axis);
-    var u = toward - axis * dot(axis, toward);
-    if dot(u, u) < 1e-12 * max(dot(toward, toward), 1e-30) {
-        // Seen along the axis: Duff et al., JCGT 2017 (`model::compact::ring_basis`).
-        let sign = select(-1.0, 1.0, axis.z >= 0.0);
-        let a = -1.0 / (sign + axis.z);
-        let b = axis.x * axis.y * a;
-        u = vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
-    }
-    u = normalize(u);
+    let u = facing_axis(axis, toward);
     let v = cross(axis, u);
     let radial = u * cos(angle) + v * sin(angle);
     var out: PrismVertex;
@@ -354,7 +355,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return finish_line(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha), k, hash_tree));
+    return finish(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha), k, hash_tree));
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -373,7 +374,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = end_position(grid, a);
     let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return finish_line(position, end - start, world_from_local, line_color(base_color(1, amount, alpha), species.total_needle_count + line, hash_tree));
+    return finish(position, end - start, world_from_local, line_color(base_color(1, amount, alpha), species.total_needle_count + line, hash_tree));
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -383,7 +384,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let width = start.w + end.w;
     let alpha = line_alpha(lod, spatial_error, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
-    return finish_line(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
+    return finish(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
 #endif
 
 #ifdef CONIFER_WOOD_MESH
@@ -463,12 +464,7 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
         T = vec3<f32>(0.0, 1.0, 0.0);
     }
     T = normalize(T);
-    var toward = V - T * dot(T, V);
-    if dot(toward, toward) < 1e-8 {
-        // Seen along its axis: any normal of the ring.
-        toward = cross(T, select(vec3<f32>(1.0, 0.0, 0.0), vec3<f32>(0.0, 0.0, 1.0), abs(T.x) > 0.9));
-    }
-    toward = normalize(toward);
+    let toward = facing_axis(T, V);
     let side = cross(T, toward);
 
     let base = in.material.base_color.rgb;

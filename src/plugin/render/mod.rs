@@ -239,7 +239,6 @@ pub(super) fn track_instances(
     mut removed_trees: RemovedComponents<ConiferFoliage>,
     mut removed_overrides: RemovedComponents<ConiferLodOverride>,
     mut removed_layers: RemovedComponents<RenderLayers>,
-    mut started: Local<bool>,
     mut cpu_time: ResMut<super::ConiferLodCpuTime>,
     mut commands: Commands,
 ) {
@@ -255,12 +254,8 @@ pub(super) fn track_instances(
         let instance = gpu_instance(transform, over, visibility.get(), layers);
         tracked.upsert(entity, foliage.0.id(), instance);
     };
-    if !*started {
-        all.iter().for_each(&mut upsert);
-        *started = true;
-        tracked.allocate_phase_keys(&mut commands);
-        return;
-    }
+    // A system's first run sees every component as changed: trees spawned
+    // before the plugin's first frame are tracked here too.
     changed.iter().for_each(&mut upsert);
     for entity in removed_overrides.read().chain(removed_layers.read()) {
         if let Ok(tree) = all.get(entity) {
