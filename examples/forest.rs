@@ -12,7 +12,10 @@
 //! needle a full prism, to feel the difference); `P` the paper's line
 //! opacity vs ours.
 //!
-//! The trees are the shipped records under `assets/trees/`; the scatter is
+//! The trees are grown from the presets at startup, three seeds per
+//! species, with no asset files (baked in the background and cached, see
+//! `ConiferPresets`; `--records` loads the shipped records under
+//! `assets/trees/` instead); the scatter is
 //! [`bevy_conifer_lod::scatter::Scatter`] (blue noise, clearings from a
 //! density noise, no trees on slopes over 32°).
 
@@ -28,13 +31,17 @@ use bevy_conifer_lod::scatter::{HeightMap, Scatter};
 use clap::Parser;
 use std::path::PathBuf;
 
-/// The four shipped species, and their share of the forest.
-const SPECIES: [(&str, f32); 4] = [
-    ("trees/scots-pine.conifer", 4.0),
-    ("trees/norway-spruce.conifer", 3.0),
-    ("trees/eastern-white-pine.conifer", 2.0),
-    ("trees/lawson-cypress.conifer", 1.0),
+/// The four species, their shipped records, and their share of the forest.
+const SPECIES: [(Species, &str, f32); 4] = [
+    (Species::ScotsPine, "trees/scots-pine.conifer", 4.0),
+    (Species::NorwaySpruce, "trees/norway-spruce.conifer", 3.0),
+    (Species::EasternWhitePine, "trees/eastern-white-pine.conifer", 2.0),
+    (Species::LawsonCypress, "trees/lawson-cypress.conifer", 1.0),
 ];
+
+/// Trees of different seeds per species (a forest of one tree per species
+/// repeats itself).
+const SEEDS_PER_SPECIES: u64 = 3;
 
 /// Half the side of the terrain, metres.
 const HALF_SIZE: f32 = 300.0;
@@ -73,6 +80,10 @@ struct Args {
     /// Start with LOD off (all prisms).
     #[arg(long)]
     lod_off: bool,
+    /// Load the shipped records under `assets/trees/` (one tree per
+    /// species) instead of growing the presets.
+    #[arg(long)]
+    records: bool,
     /// Camera: `overview` (above the valley), `ground` (eye level in the
     /// trees) or `x,y,z:x,y,z` (eye and target).
     #[arg(long, default_value = "overview")]
@@ -84,7 +95,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (eye, target) = camera_view(&args.view)?;
     if !args.headless {
         App::new()
-            .add_plugins((DefaultPlugins, ConiferLodPlugin, ConiferLodDebugPlugin))
+            .add_plugins((
+                DefaultPlugins,
+                ConiferLodPlugin::default(),
+                ConiferLodDebugPlugin::default(),
+            ))
             .insert_resource(args)
             .insert_resource(CameraStart { eye, target })
             .add_systems(Startup, setup)
@@ -102,14 +117,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let screenshot = args.screenshot.clone();
     let assets = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
     let mut renderer = HeadlessRenderer::with_setup(assets, |app| {
-        app.add_plugins(ConiferLodDebugPlugin)
+        app.add_plugins(ConiferLodDebugPlugin::default())
             .insert_resource(args)
             .insert_resource(CameraStart { eye, target })
             .add_systems(Startup, setup);
     });
     let image = renderer.render_target(width, height);
     renderer.world_mut().insert_resource(HeadlessTarget(image.clone()));
-    // Startup scatters the trees and starts loading their records; then
+    // Startup scatters the trees and starts baking (or loading) them; then
     // wait for them and let meshes and pipelines reach the GPU.
     let begin = std::time::Instant::now();
     renderer.update()?;
@@ -280,6 +295,7 @@ fn setup(
     start: Res<CameraStart>,
     target: Option<Res<HeadlessTarget>>,
     asset_server: Res<AssetServer>,
+    mut presets: ConiferPresets,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut settings: ResMut<ConiferLodSettings>,
@@ -305,8 +321,21 @@ fn setup(
         })),
     ));
 
-    let species: Vec<Handle<ConiferSpecies>> = SPECIES.iter().map(|(path, _)| asset_server.load(*path)).collect();
-    let weights: Vec<f32> = SPECIES.iter().map(|(_, w)| *w).collect();
+    let (species, weights): (Vec<Handle<ConiferSpecies>>, Vec<f32>) = if args.records {
+        SPECIES
+            .iter()
+            .map(|&(_, path, weight)| (asset_server.load(path), weight))
+            .unzip()
+    } else {
+        SPECIES
+            .iter()
+            .flat_map(|&(species, _, weight)| (0..SEEDS_PER_SPECIES).map(move |seed| (species, seed, weight)))
+            .map(|(species, seed, weight)| {
+                let handle = presets.load(Preset::new(species).with_seed(seed));
+                (handle, weight / SEEDS_PER_SPECIES as f32)
+            })
+            .unzip()
+    };
     let placements = Scatter::new(
         Vec2::splat(-HALF_SIZE + 5.0),
         Vec2::splat(HALF_SIZE - 5.0),

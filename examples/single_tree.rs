@@ -95,7 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let scene_args = args.clone();
     let scene = move |app: &mut App| {
-        app.add_plugins(ConiferLodDebugPlugin)
+        app.add_plugins(ConiferLodDebugPlugin::default())
             .insert_resource(orbit)
             .insert_resource(TreeRecord(Some(record)))
             .insert_resource(scene_args)
@@ -104,7 +104,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     if !args.headless {
         let mut app = App::new();
-        app.add_plugins((DefaultPlugins, ConiferLodPlugin));
+        app.add_plugins((DefaultPlugins, ConiferLodPlugin::default()));
         scene(&mut app);
         app.run();
         return Ok(());

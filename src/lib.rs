@@ -48,9 +48,10 @@ pub mod plugin;
 /// The types a Bevy user needs: `use bevy_conifer_lod::prelude::*;`.
 #[cfg(feature = "plugin")]
 pub mod prelude {
+    pub use crate::generate::{Preset, Species};
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
-        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferSpecies, LineLighting, LineOpacity,
-        conifer_lod_keys, spawn_forest,
+        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, LineLighting,
+        LineOpacity, PresetCache, conifer_lod_keys, spawn_forest,
     };
 }

@@ -21,6 +21,17 @@ const FOV_DEG: f32 = 45.0;
 /// CPU keeps every tree's [`ConiferLodState`] (as for the debug overlay's
 /// stats), and mesh assets exist so that any the plugin made would show.
 fn app(dir: &std::path::Path) -> App {
+    app_with(
+        dir,
+        ConiferLodPlugin {
+            preset_cache: PresetCache::Directory(dir.join("preset-cache")),
+            ..default()
+        },
+    )
+}
+
+/// [`app`] with this plugin.
+fn app_with(dir: &std::path::Path, plugin: ConiferLodPlugin) -> App {
     let mut app = App::new();
     app.add_plugins((
         MinimalPlugins,
@@ -35,8 +46,30 @@ fn app(dir: &std::path::Path) -> App {
         always_collect_stats: true,
         ..default()
     })
-    .add_plugins(ConiferLodPlugin);
+    .add_plugins(plugin);
     app
+}
+
+/// Updates `app` until `handle` has loaded or failed (`Err` with Bevy's
+/// message).
+fn wait_for(app: &mut App, handle: &Handle<ConiferSpecies>) -> Result<(), String> {
+    for _ in 0..2_000 {
+        app.update();
+        match app.world().resource::<AssetServer>().load_state(handle) {
+            LoadState::Loaded => return Ok(()),
+            LoadState::Failed(error) => return Err(error.to_string()),
+            _ => std::thread::sleep(std::time::Duration::from_millis(5)),
+        }
+    }
+    panic!("{handle:?} neither loaded nor failed");
+}
+
+/// Loads `preset` through [`ConiferPresets`] in `app`.
+fn load_preset(app: &mut App, preset: &str) -> Handle<ConiferSpecies> {
+    let preset = preset.to_owned();
+    app.world_mut()
+        .run_system_once(move |mut presets: ConiferPresets| presets.load_named(&preset))
+        .unwrap()
 }
 
 fn write_tree(dir: &std::path::Path, name: &str) -> Vec3 {
@@ -455,7 +488,7 @@ fn debug_overlay_switches_colours_and_counts_the_cut() {
     let dir = tempfile::tempdir().unwrap();
     let crown = write_tree(dir.path(), "spruce.conifer");
     let mut app = app(dir.path());
-    app.add_plugins(ConiferLodDebugPlugin);
+    app.add_plugins(ConiferLodDebugPlugin::default());
     app.world_mut().spawn(camera(6.0));
     let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
     // A second tree far behind: two instances, two different cuts.
@@ -549,7 +582,7 @@ fn scattered_forest_spawns_one_tree_per_placement() {
 fn lod_keys_change_the_settings_and_the_overlay() {
     let dir = tempfile::tempdir().unwrap();
     let mut app = app(dir.path());
-    app.add_plugins(ConiferLodDebugPlugin)
+    app.add_plugins(ConiferLodDebugPlugin::default())
         .init_resource::<ButtonInput<KeyCode>>()
         .add_systems(Update, conifer_lod_keys);
     let press = |app: &mut App, key: KeyCode| {
@@ -794,7 +827,7 @@ fn settings_overrides_and_state_are_reflected() {
     let dir = tempfile::tempdir().unwrap();
     let crown = write_tree(dir.path(), "spruce.conifer");
     let mut app = app(dir.path());
-    app.add_plugins(ConiferLodDebugPlugin);
+    app.add_plugins(ConiferLodDebugPlugin::default());
     app.world_mut().spawn(camera(30.0));
     let (tree, _) = spawn_tree(&mut app, "spruce.conifer", crown);
     let before = state(&app, tree).min_spatial_error;
@@ -869,4 +902,144 @@ fn settings_overrides_and_state_are_reflected() {
         .try_downcast_ref::<f32>()
         .copied();
     assert!((error.unwrap() / before - 0.5).abs() < 1e-5, "{error:?}");
+}
+
+#[test]
+fn presets_load_without_files_and_come_back_from_the_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let preset: Preset = "scots-pine?seed=4&needles=3000".parse().unwrap();
+    let cached = dir
+        .path()
+        .join("preset-cache")
+        .join(bevy_conifer_lod::plugin::cache_file_name(&preset));
+
+    // First start: baked in the background, drawn, written to the cache.
+    let mut run = app(dir.path());
+    let handle = load_preset(&mut run, "scots-pine?seed=4&needles=3000");
+    assert_eq!(
+        load_preset(&mut run, "scots-pine?needles=3000&seed=4"),
+        handle,
+        "one handle per preset"
+    );
+    wait_for(&mut run, &handle).unwrap();
+    let baked = preset.bake().unwrap().flatten().unwrap();
+    let species = run
+        .world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(&handle)
+        .unwrap()
+        .clone();
+    assert_eq!(species.record.needles, baked.needles, "the preset's own tree");
+    let tree = run
+        .world_mut()
+        .spawn((ConiferFoliage(handle), Transform::default()))
+        .id();
+    run.world_mut().spawn(camera(30.0));
+    run.update();
+    assert!(state(&run, tree).lines_visible, "the tree is drawn");
+    assert!(run.world().resource::<CompactInstances>().len() == 1);
+    let on_disk = bevy_conifer_lod::model::read_prototype_record(&cached).unwrap();
+    assert_eq!(
+        on_disk.flatten().unwrap().needles,
+        baked.needles,
+        "the cache holds the bake"
+    );
+
+    // Next start reads the cache: a different record put there is what loads.
+    let other = Preset::new(Species::NorwaySpruce).with_needles(1_500).bake().unwrap();
+    bevy_conifer_lod::model::write_prototype_record(&other, &cached).unwrap();
+    let mut run = app(dir.path());
+    let handle = load_preset(&mut run, &preset.to_string());
+    wait_for(&mut run, &handle).unwrap();
+    let species = run.world().resource::<Assets<ConiferSpecies>>().get(&handle).unwrap();
+    assert_eq!(
+        species.record.needles,
+        other.flatten().unwrap().needles,
+        "read from the cache"
+    );
+
+    // A cache file that no longer decodes is baked again and rewritten.
+    std::fs::write(&cached, b"CONIFLOD truncated").unwrap();
+    let mut run = app(dir.path());
+    let handle = load_preset(&mut run, &preset.to_string());
+    wait_for(&mut run, &handle).unwrap();
+    let species = run.world().resource::<Assets<ConiferSpecies>>().get(&handle).unwrap();
+    assert_eq!(species.record.needles, baked.needles);
+    let on_disk = bevy_conifer_lod::model::read_prototype_record(&cached).unwrap();
+    assert_eq!(
+        on_disk.flatten().unwrap().needles,
+        baked.needles,
+        "the cache is whole again"
+    );
+
+    // Without a cache nothing is written.
+    let mut run = app_with(
+        dir.path(),
+        ConiferLodPlugin {
+            preset_cache: PresetCache::Off,
+            ..default()
+        },
+    );
+    std::fs::remove_file(&cached).unwrap();
+    let handle = load_preset(&mut run, &preset.to_string());
+    wait_for(&mut run, &handle).unwrap();
+    assert!(!cached.exists());
+}
+
+#[test]
+fn bad_trees_fail_with_what_to_do_and_are_not_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    write_tree(dir.path(), "spruce.conifer");
+    let mut future = std::fs::read(dir.path().join("spruce.conifer")).unwrap();
+    let version = bevy_conifer_lod::model::file::FORMAT_VERSION + 1;
+    future[8..12].copy_from_slice(&version.to_le_bytes());
+    std::fs::write(dir.path().join("future.conifer"), &future).unwrap();
+    let mut app = app(dir.path());
+    app.world_mut().spawn(camera(30.0));
+
+    let unknown = load_preset(&mut app, "norwy-spruce");
+    let missing: Handle<ConiferSpecies> = app.world().resource::<AssetServer>().load("trees/missing.conifer");
+    let newer: Handle<ConiferSpecies> = app.world().resource::<AssetServer>().load("future.conifer");
+    let needles = load_preset(&mut app, "scots-pine?needles=0");
+    let trees: Vec<Entity> = [&unknown, &missing, &newer, &needles]
+        .into_iter()
+        .map(|handle| {
+            app.world_mut()
+                .spawn((ConiferFoliage(handle.clone()), Transform::default()))
+                .id()
+        })
+        .collect();
+
+    let error = wait_for(&mut app, &unknown).unwrap_err();
+    assert!(
+        error.contains("norwy-spruce") && error.contains("norway-spruce") && error.contains("conifer bake"),
+        "{error}"
+    );
+    let error = wait_for(&mut app, &missing).unwrap_err();
+    assert!(error.contains("missing.conifer"), "{error}");
+    let error = wait_for(&mut app, &newer).unwrap_err();
+    assert!(
+        error.contains("future.conifer") && error.contains("newer") && error.contains("update bevy_conifer_lod"),
+        "{error}"
+    );
+    let error = wait_for(&mut app, &needles).unwrap_err();
+    assert!(
+        error.contains("scots-pine?needles=0") && error.contains("no needles"),
+        "{error}"
+    );
+
+    // The systems run on; no species arrives, so none of these trees has
+    // anything to draw, and none is counted in a view.
+    for _ in 0..3 {
+        app.update();
+    }
+    let species = app.world().resource::<Assets<ConiferSpecies>>();
+    assert!(
+        [&unknown, &missing, &newer, &needles]
+            .iter()
+            .all(|h| !species.contains(*h))
+    );
+    for tree in trees {
+        assert_eq!(state(&app, tree).views, 0);
+    }
 }

@@ -48,7 +48,7 @@ fn species_assets(app: &mut App, records: &[LodRecord]) -> Vec<Handle<ConiferSpe
 fn run(records: &[LodRecord], instances: usize, frames: usize, with_plugin_systems: bool) -> (f64, f64) {
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, AssetPlugin::default(), TransformPlugin))
-        .add_plugins(ConiferLodPlugin);
+        .add_plugins(ConiferLodPlugin::default());
     if !with_plugin_systems {
         app.configure_sets(
             PostUpdate,

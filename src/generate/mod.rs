@@ -22,6 +22,7 @@
 mod foliage;
 mod geometry;
 mod params;
+mod preset;
 mod random;
 mod skeleton;
 mod spray;
@@ -32,6 +33,7 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use self::params::SpeciesParams;
+pub use self::preset::{Preset, PresetParseError};
 use self::random::{Stream, TreeRng};
 use crate::model::{PrototypeInput, TreeInput};
 

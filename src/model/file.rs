@@ -63,6 +63,20 @@ pub const OLDEST_READ_VERSION: u32 = 2;
 /// Size of the fixed header before the payload.
 pub const HEADER_BYTES: usize = 24;
 
+/// What to do about a record of format `found`, which this build (reading
+/// `OLDEST_READ_VERSION..=supported`) cannot read.
+fn unsupported_version_advice(found: &u32, supported: &u32) -> String {
+    if found > supported {
+        format!(
+            "record format version {found} is newer than this build of bevy_conifer_lod reads (versions {OLDEST_READ_VERSION} to {supported}): update bevy_conifer_lod, or re-bake the tree with this version's `conifer bake`"
+        )
+    } else {
+        format!(
+            "record format version {found} is too old for this build (it reads versions {OLDEST_READ_VERSION} to {supported}): re-bake the tree with this version's `conifer bake`"
+        )
+    }
+}
+
 /// Why a record could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum RecordError {
@@ -73,9 +87,7 @@ pub enum RecordError {
     #[error("not a conifer LOD record (bad magic number)")]
     NotARecord,
     /// The file was written by another format version.
-    #[error(
-        "record format version {found} is not supported (this build reads versions 2 to {supported}): re-bake the tree with this version of `conifer bake`"
-    )]
+    #[error("{}", unsupported_version_advice(.found, .supported))]
     UnsupportedVersion {
         /// Version in the file.
         found: u32,

@@ -3,8 +3,8 @@
 use crate::model::compact::{CompactError, CompactSpecies};
 use crate::model::prism::{TriangleMesh, append_wood_segment, wood_segment_error};
 use crate::model::{LodRecord, PrototypeRecord, RecordError, WoodSegment, decode_prototype_record};
-use bevy::asset::io::Reader;
-use bevy::asset::{AssetLoader, LoadContext, RenderAssetUsages};
+use bevy::asset::io::{AssetReaderError, Reader};
+use bevy::asset::{AssetLoadError, AssetLoadFailedEvent, AssetLoader, LoadContext, RenderAssetUsages};
 use bevy::camera::primitives::Aabb;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
@@ -46,6 +46,23 @@ pub enum ConiferLoadError {
     /// needles, or errors or positions out of its range).
     #[error("the record cannot be drawn: {0}")]
     Layout(#[from] CompactError),
+}
+
+/// Logs, once per failed load of a species, what to do about it (Bevy has
+/// logged the error itself): trees of a species that failed are simply not
+/// drawn.
+pub(crate) fn explain_failed_loads(mut failures: MessageReader<AssetLoadFailedEvent<ConiferSpecies>>) {
+    for failure in failures.read() {
+        let advice = match &failure.error {
+            AssetLoadError::AssetReaderError(AssetReaderError::NotFound(_)) => format!(
+                "`{}` does not exist: bake it with `conifer bake --preset NAME -o assets/{}` (or `conifer bake TREE.glb`), or grow a preset from code with `ConiferPresets`",
+                failure.path, failure.path
+            ),
+            _ if failure.path.path().as_os_str().is_empty() => "see the error above".to_owned(),
+            _ => format!("`{}` did not load (see the error above)", failure.path),
+        };
+        warn!("conifer trees of this species are not drawn: {advice}");
+    }
 }
 
 /// Loads `.conifer` records as [`ConiferSpecies`].

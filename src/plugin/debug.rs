@@ -13,7 +13,7 @@
 //! }
 //!
 //! App::new()
-//!     .add_plugins((DefaultPlugins, ConiferLodPlugin, ConiferLodDebugPlugin))
+//!     .add_plugins((DefaultPlugins, ConiferLodPlugin::default(), ConiferLodDebugPlugin::default()))
 //!     .add_systems(Update, toggle)
 //!     .run();
 //! ```
@@ -31,13 +31,30 @@ use bevy::prelude::*;
 /// by default), and keeps [`ConiferLodStats`] up to date while it is on.
 /// Add it after [`super::ConiferLodPlugin`]; gizmos and the panel appear
 /// only where Bevy's gizmo and UI plugins are present.
+///
+/// ```no_run
+/// use bevy::prelude::*;
+/// use bevy_conifer_lod::prelude::*;
+///
+/// // The overlay on from the first frame (F3 toggles it with `conifer_lod_keys`).
+/// let overlay = ConiferLodDebugPlugin {
+///     debug: ConiferLodDebug { enabled: true, ..default() },
+/// };
+/// App::new().add_plugins((DefaultPlugins, ConiferLodPlugin::default(), overlay));
+/// ```
 #[derive(Clone, Copy, Debug, Default)]
-pub struct ConiferLodDebugPlugin;
+pub struct ConiferLodDebugPlugin {
+    /// The first value of the [`ConiferLodDebug`] resource (a resource the
+    /// app already has is kept).
+    pub debug: ConiferLodDebug,
+}
 
 impl Plugin for ConiferLodDebugPlugin {
     fn build(&self, app: &mut App) {
-        app.init_resource::<ConiferLodDebug>()
-            .init_resource::<ConiferLodStats>()
+        if !app.world().contains_resource::<ConiferLodDebug>() {
+            app.insert_resource(self.debug);
+        }
+        app.init_resource::<ConiferLodStats>()
             .register_type::<ConiferLodDebug>()
             .register_type::<ConiferLodStats>()
             .init_resource::<SpeciesCounters>()

@@ -113,7 +113,7 @@ impl HeadlessRenderer {
                 })
                 .disable::<WinitPlugin>(),
         )
-        .add_plugins(ConiferLodPlugin);
+        .add_plugins(ConiferLodPlugin::default());
         setup(&mut app);
         app.finish();
         app.cleanup();

@@ -13,7 +13,7 @@
 //! }
 //!
 //! App::new()
-//!     .add_plugins((DefaultPlugins, ConiferLodPlugin))
+//!     .add_plugins((DefaultPlugins, ConiferLodPlugin::default()))
 //!     .add_systems(Startup, setup)
 //!     .run();
 //! ```
@@ -46,11 +46,13 @@
 mod asset;
 mod debug;
 pub mod headless;
+mod preset;
 mod render;
 mod systems;
 
 pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, triangle_mesh, wood_mesh};
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
+pub use preset::{ConiferPresets, PresetCache, PresetLoadError, cache_file_name, load_preset};
 pub use render::gpu::{
     FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, OPACITY_OVERRIDE_SHIFT, PartKind,
 };
@@ -62,20 +64,59 @@ use bevy::camera::visibility::VisibilitySystems;
 use bevy::prelude::*;
 use bevy::transform::TransformSystems;
 
-/// Adds continuous conifer LOD: the `.conifer` asset loader, the systems
-/// of [`ConiferLodSet`] and the render path.
+/// Adds continuous conifer LOD: the `.conifer` asset loader, species
+/// from presets ([`ConiferPresets`]), the systems of [`ConiferLodSet`] and
+/// the render path.
+///
+/// What a game sets once goes in the plugin; what changes at run time is
+/// a resource ([`ConiferLodSettings`], which starts as
+/// [`ConiferLodPlugin::settings`]):
+///
+/// ```no_run
+/// use bevy::prelude::*;
+/// use bevy_conifer_lod::prelude::*;
+///
+/// App::new().add_plugins((
+///     DefaultPlugins,
+///     ConiferLodPlugin {
+///         settings: ConiferLodSettings { pixel_error: 1.5, ..default() },
+///         preset_cache: PresetCache::Directory("cache/trees".into()),
+///     },
+/// ));
+/// ```
 ///
 /// Needs Bevy's asset, mesh and (for drawing) render/PBR plugins; without a
 /// render app (e.g. `MinimalPlugins` in tests) it still loads records and
 /// computes every instance's [`ConiferLodState`].
-#[derive(Clone, Copy, Debug, Default)]
-pub struct ConiferLodPlugin;
+#[derive(Clone, Debug, Default)]
+pub struct ConiferLodPlugin {
+    /// The first value of the [`ConiferLodSettings`] resource (a resource
+    /// the app already has when the plugin is added is kept).
+    pub settings: ConiferLodSettings,
+    /// Where species baked from presets are cached.
+    pub preset_cache: PresetCache,
+}
+
+impl ConiferLodPlugin {
+    /// The plugin with these starting settings.
+    pub fn with_settings(self, settings: ConiferLodSettings) -> Self {
+        Self { settings, ..self }
+    }
+
+    /// The plugin with this preset cache.
+    pub fn with_preset_cache(self, preset_cache: PresetCache) -> Self {
+        Self { preset_cache, ..self }
+    }
+}
 
 impl Plugin for ConiferLodPlugin {
     fn build(&self, app: &mut App) {
+        if !app.world().contains_resource::<ConiferLodSettings>() {
+            app.insert_resource(self.settings);
+        }
         app.init_asset::<ConiferSpecies>()
             .init_asset_loader::<ConiferRecordLoader>()
-            .init_resource::<ConiferLodSettings>()
+            .insert_resource(preset::PresetStore::new(&self.preset_cache))
             .init_resource::<ConiferLodCpuTime>()
             .init_resource::<CompactInstances>()
             // Inspectors and Bevy's remote protocol see and edit these.
@@ -98,6 +139,7 @@ impl Plugin for ConiferLodPlugin {
                 PostUpdate,
                 ConiferLodSet::Instances.after(VisibilitySystems::VisibilityPropagate),
             )
+            .add_systems(PreUpdate, asset::explain_failed_loads)
             .add_systems(
                 PostUpdate,
                 (
