@@ -55,3 +55,9 @@ pub mod prelude {
         LineOpacity, PresetCache, conifer_lod_keys, spawn_forest,
     };
 }
+
+/// The README's Rust blocks, compiled (and the `no_run` one type-checked)
+/// as doc tests: the snippet a new user copies cannot rot.
+#[cfg(all(doctest, feature = "plugin"))]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -8,7 +8,7 @@
 //! * [`record`]: the LOD record (merge forest, error ranges) and the cut.
 //! * [`prototype`]: a tree as shared prototypes placed many times (record format 3).
 //! * [`cut_count`]: the cut's primitive counts at any error without a traversal.
-//! * [`file`]: the binary record file.
+//! * [`file`](mod@file): the binary record file.
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
 

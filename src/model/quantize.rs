@@ -42,7 +42,7 @@ const F32_GRID_ULPS: f32 = 2.384_185_8e-7;
 pub const MAX_GRID_COORDINATE: f32 = 65_000.0;
 
 /// Grid origins are multiples of this (2⁻⁸ m ≈ 3.9 mm), so a record
-/// stores them as small integers ([`PositionGrid::origin_codes`]).
+/// stores them as small integers ([`PositionGrid::to_codes`]).
 pub const GRID_ORIGIN_UNIT: f32 = 0.003_906_25;
 
 /// A grid of 65,536 positions an axis: `origin + code · step`, with `step`
