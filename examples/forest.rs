@@ -59,7 +59,7 @@ struct Args {
     /// Where headless mode writes its picture.
     #[arg(long, default_value = "target/forest.png")]
     screenshot: PathBuf,
-    /// Picture size in headless mode, WIDTHxHEIGHT.
+    /// Picture size in headless mode, window size otherwise, WIDTHxHEIGHT.
     #[arg(long, default_value = "960x540")]
     size: String,
     /// Minimum spacing between trees, metres (fewer trees when larger).
@@ -84,6 +84,9 @@ struct Args {
     /// species) instead of growing the presets.
     #[arg(long)]
     records: bool,
+    /// Needles per preset tree (default: each species' own count).
+    #[arg(long)]
+    needles: Option<usize>,
     /// Camera: `overview` (above the valley), `ground` (eye level in the
     /// trees) or `x,y,z:x,y,z` (eye and target).
     #[arg(long, default_value = "overview")]
@@ -93,26 +96,34 @@ struct Args {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
     let (eye, target) = camera_view(&args.view)?;
-    if !args.headless {
-        App::new()
-            .add_plugins((
-                DefaultPlugins,
-                ConiferLodPlugin::default(),
-                ConiferLodDebugPlugin::default(),
-            ))
-            .insert_resource(args)
-            .insert_resource(CameraStart { eye, target })
-            .add_systems(Startup, setup)
-            .add_systems(Update, (fly_camera, conifer_lod_keys))
-            .run();
-        return Ok(());
-    }
     let (width, height) = args
         .size
         .split_once('x')
         .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
         .filter(|&(w, h)| w > 0 && h > 0)
         .ok_or_else(|| format!("--size {}: expected WIDTHxHEIGHT", args.size))?;
+    if !args.headless {
+        let window = Window {
+            title: "conifer forest".into(),
+            resolution: (width, height).into(),
+            ..default()
+        };
+        App::new()
+            .add_plugins((
+                DefaultPlugins.set(WindowPlugin {
+                    primary_window: Some(window),
+                    ..default()
+                }),
+                ConiferLodPlugin::default(),
+                ConiferLodDebugPlugin::default(),
+            ))
+            .insert_resource(args)
+            .insert_resource(CameraStart { eye, target })
+            .add_systems(Startup, setup)
+            .add_systems(Update, (fly_camera, conifer_lod_keys, quit_on_escape, announce_ready))
+            .run();
+        return Ok(());
+    }
     let frames = args.frames;
     let screenshot = args.screenshot.clone();
     let assets = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
@@ -331,7 +342,11 @@ fn setup(
             .iter()
             .flat_map(|&(species, _, weight)| (0..SEEDS_PER_SPECIES).map(move |seed| (species, seed, weight)))
             .map(|(species, seed, weight)| {
-                let handle = presets.load(Preset::new(species).with_seed(seed));
+                let preset = Preset::new(species).with_seed(seed);
+                let handle = presets.load(match args.needles {
+                    Some(needles) => preset.with_needles(needles),
+                    None => preset,
+                });
                 (handle, weight / SEEDS_PER_SPECIES as f32)
             })
             .unzip()
@@ -396,6 +411,28 @@ fn setup(
     camera.insert(IsDefaultUiCamera);
     if let Some(target) = target {
         camera.insert(RenderTarget::from(target.0.clone()));
+    }
+}
+
+/// `Esc` ends the app, as closing the window does.
+fn quit_on_escape(keys: Res<ButtonInput<KeyCode>>, mut exit: MessageWriter<AppExit>) {
+    if keys.just_pressed(KeyCode::Escape) {
+        exit.write(AppExit::Success);
+    }
+}
+
+/// Logs once that every species has arrived (the window test waits for
+/// this line before it sends keys).
+fn announce_ready(
+    server: Res<AssetServer>,
+    species: Option<Res<SpeciesHandles>>,
+    mut announced: Local<bool>,
+    trees: Query<(), With<ConiferFoliage>>,
+) {
+    let Some(species) = species else { return };
+    if !*announced && species.0.iter().all(|handle| server.is_loaded(handle)) {
+        *announced = true;
+        info!("forest ready: {} trees of {} species", trees.iter().len(), species.0.len());
     }
 }
 

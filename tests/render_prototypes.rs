@@ -330,3 +330,47 @@ fn placed_prototypes_cast_the_flattened_tree_shadow() {
     assert!((da - db).abs() <= 0.05 * db, "placed {da}, flat {db}");
     assert!(difference < 1.0);
 }
+
+#[test]
+fn with_lod_off_every_tree_of_a_forest_is_drawn() {
+    let mut scene = Scene::new();
+    scene.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
+    scene.look_from(30.0, 45.0);
+    let shot = |scene: &mut Scene, species: &Handle<ConiferSpecies>, name: &str| {
+        let trees: Vec<Entity> = (0..5)
+            .map(|k| {
+                let x = (k as f32 - 2.0) * 6.0;
+                scene
+                    .renderer
+                    .world_mut()
+                    .spawn((ConiferFoliage(species.clone()), Transform::from_xyz(x, 0.0, 0.0)))
+                    .id()
+            })
+            .collect();
+        for _ in 0..3 {
+            scene.renderer.update().unwrap();
+        }
+        let image = scene.renderer.capture(&scene.target, 20).unwrap();
+        image.save(scene.out.join(format!("prototypes_{name}.png"))).unwrap();
+        for tree in trees {
+            scene.renderer.world_mut().despawn(tree);
+        }
+        image
+    };
+    let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
+    let a = shot(&mut scene, &placed, "lod_off_forest_placed");
+    let b = shot(&mut scene, &flat, "lod_off_forest_flat");
+    // Each tree's column of the picture.
+    for k in 0..5u32 {
+        let columns = |image: &image::RgbaImage| {
+            let mut part = image::RgbaImage::new(SIZE / 5, SIZE);
+            for y in 0..SIZE {
+                for x in 0..SIZE / 5 {
+                    part.put_pixel(x, y, *image.get_pixel(k * SIZE / 5 + x, y));
+                }
+            }
+            part
+        };
+        assert_alike(&format!("LOD off, tree {k}"), &columns(&a), &columns(&b));
+    }
+}

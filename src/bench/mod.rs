@@ -12,6 +12,7 @@
 //!   meshoptimizer LODs under `VisibilityRange`.
 
 pub mod forest;
+pub mod presets;
 pub mod runtime;
 
 use crate::generate::{GenerateOptions, Species, generate};
@@ -69,8 +70,10 @@ pub struct BenchOptions {
     /// Needles of the procedural prototype trees whose GPU bytes are
     /// measured (one per species).
     pub prototype_needles: usize,
+    /// Needles of each preset baked while frames are timed (`presets`).
+    pub preset_needles: usize,
     /// Parts to run (`bake`, `records`, `prototypes`, `cuts`, `runtime`,
-    /// `forest`); empty runs them all.
+    /// `presets`, `forest`); empty runs them all.
     pub only: Vec<String>,
 }
 
@@ -95,6 +98,7 @@ impl BenchOptions {
             forest_size: (640, 360),
             forest_frames: 5,
             prototype_needles: 1_000_000,
+            preset_needles: 1_000_000,
             out_dir,
             only: Vec::new(),
         }
@@ -112,6 +116,7 @@ impl BenchOptions {
             forest_size: (256, 144),
             forest_frames: 1,
             prototype_needles: 50_000,
+            preset_needles: 20_000,
             ..Self::full(conifer, records_dir, out_dir)
         }
     }
@@ -272,6 +277,8 @@ pub struct BenchReport {
     pub cut_us: Option<CutFigures>,
     /// The plugin's CPU time per frame, no rendering.
     pub runtime: Vec<RuntimeFigures>,
+    /// Presets baking while the app runs, and read back from the cache.
+    pub presets: Option<presets::PresetFigures>,
     /// The rendered forest.
     pub render_ratio: Option<RenderRatio>,
     /// The GPU machine's figures, or why there are none.
@@ -628,6 +635,11 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
         runtime.push(runtime::runtime(&runtime_records, instances, options.runtime_frames));
     }
 
+    let presets = options.runs("presets").then(|| {
+        progress(&format!("six presets of {} needles baking in a running app", options.preset_needles));
+        presets::preset_figures(options.preset_needles, 1_000, &options.out_dir.join("preset-cache"))
+    });
+
     let render_ratio = if options.runs("forest") {
         Some(forest_figures(options, &mut files, progress)?)
     } else {
@@ -647,6 +659,7 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
         prototype_trees,
         cut_us,
         runtime,
+        presets,
         render_ratio,
         gpu: "no GPU machine was lent to this session (the device tool's status: not drawn); no absolute GPU figures"
             .into(),

@@ -17,7 +17,7 @@ pub struct BenchArgs {
     /// Directory for plots and forest pictures.
     #[arg(long, default_value = "target/bench")]
     pub out: PathBuf,
-    /// Run only these parts (bake, records, prototypes, cuts, runtime, forest).
+    /// Run only these parts (bake, records, prototypes, cuts, runtime, presets, forest).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
     /// Print one JSON object on stdout (otherwise a summary).
@@ -27,7 +27,7 @@ pub struct BenchArgs {
 
 pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let conifer = std::env::current_exe().context("cannot find the conifer executable for the bake runs")?;
-    const PARTS: [&str; 6] = ["bake", "records", "prototypes", "cuts", "runtime", "forest"];
+    const PARTS: [&str; 7] = ["bake", "records", "prototypes", "cuts", "runtime", "presets", "forest"];
     if let Some(bad) = args.only.iter().find(|p| !PARTS.contains(&p.as_str())) {
         anyhow::bail!("--only {bad:?}: the parts are {}", PARTS.join(", "));
     }
@@ -78,6 +78,22 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         println!(
             "{:>7} trees: systems {:.3} ms ({:.0} ns/tree), whole {:.3} ms ({:.0} ns/tree)",
             r.instances, r.systems_ms_per_frame, r.systems_ns_per_instance, r.cpu_ms_per_frame, r.ns_per_instance
+        );
+    }
+    if let Some(p) = &report.presets {
+        println!(
+            "{} presets ({} needles) baking under {} trees: longest frame {:.2} ms (median {:.2}) over {} frames, \
+             idle longest {:.2} ms (median {:.2}); baked in {:.1} s, read from the cache in {:.0} ms",
+            p.presets.len(),
+            p.needles,
+            p.trees,
+            p.baking_frame_ms_max,
+            p.baking_frame_ms_median,
+            p.baking_frames,
+            p.idle_frame_ms_max,
+            p.idle_frame_ms_median,
+            p.bake_seconds,
+            p.cached_load_ms
         );
     }
     if let Some(c) = &report.cut_us {

@@ -1,0 +1,147 @@
+//! Species from presets in a running app: how long the longest frame gets
+//! while several presets bake in the background, against the same app with
+//! nothing baking, and how fast the next start reads them from the cache.
+
+use crate::generate::{Preset, Species};
+use crate::plugin::PresetCache;
+use crate::prelude::*;
+use bevy::asset::AssetPlugin;
+use bevy::ecs::system::RunSystemOnce;
+use bevy::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// What loading presets costs the frame.
+#[derive(Clone, Debug, Serialize)]
+pub struct PresetFigures {
+    /// The presets loaded at once (their text form).
+    pub presets: Vec<String>,
+    /// Trees standing in the app (they start drawing as their species
+    /// arrives).
+    pub trees: usize,
+    /// Frames run while the presets baked (from the load call until every
+    /// species had arrived).
+    pub baking_frames: usize,
+    /// Longest of those frames, ms: what a bake costs the main thread.
+    pub baking_frame_ms_max: f64,
+    /// Median of those frames, ms.
+    pub baking_frame_ms_median: f64,
+    /// Longest of as many frames of the same app once everything has
+    /// loaded, ms: the frame's own noise.
+    pub idle_frame_ms_max: f64,
+    /// Median of those idle frames, ms.
+    pub idle_frame_ms_median: f64,
+    /// Wall time from the load call until every species had arrived, s.
+    pub bake_seconds: f64,
+    /// The same presets in a new app reading the cache the first wrote:
+    /// from the load call until every species had arrived, ms.
+    pub cached_load_ms: f64,
+    /// Needles of the presets' trees, summed.
+    pub needles: usize,
+}
+
+/// The six presets timed: the four species and two more seeds, each
+/// aiming at `needles` needles.
+pub fn timed_presets(needles: usize) -> Vec<Preset> {
+    let mut presets: Vec<Preset> = Species::ALL.iter().map(|&s| Preset::new(s).with_needles(needles)).collect();
+    presets.push(Preset::new(Species::ScotsPine).with_seed(1).with_needles(needles));
+    presets.push(Preset::new(Species::NorwaySpruce).with_seed(1).with_needles(needles));
+    presets
+}
+
+fn app(cache: &Path) -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, AssetPlugin::default(), TransformPlugin))
+        .add_plugins(ConiferLodPlugin {
+            preset_cache: PresetCache::Directory(cache.to_path_buf()),
+            ..default()
+        });
+    app.world_mut().spawn((Camera3d::default(), Transform::from_xyz(0.0, 10.0, 200.0)));
+    app
+}
+
+/// Loads `presets` in `app` and spawns `trees` trees of them on a grid;
+/// runs frames until all have arrived and returns each frame's ms.
+fn load_all(app: &mut App, presets: &[Preset], trees: usize) -> (Vec<f64>, Vec<Handle<ConiferSpecies>>) {
+    let presets = presets.to_vec();
+    let handles = app
+        .world_mut()
+        .run_system_once(move |mut loader: ConiferPresets| {
+            presets.iter().map(|&p| loader.load(p)).collect::<Vec<_>>()
+        })
+        .expect("a system with no conflicting access");
+    for i in 0..trees {
+        let position = Vec3::new((i % 32) as f32 * 8.0, 0.0, (i / 32) as f32 * 8.0);
+        app.world_mut().spawn((
+            ConiferFoliage(handles[i % handles.len()].clone()),
+            Transform::from_translation(position),
+        ));
+    }
+    let mut frames = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(600);
+    loop {
+        let start = Instant::now();
+        app.update();
+        frames.push(start.elapsed().as_secs_f64() * 1e3);
+        let server = app.world().resource::<AssetServer>();
+        if handles.iter().all(|h| server.is_loaded(h) || server.load_state(h).is_failed()) || Instant::now() > deadline {
+            break;
+        }
+    }
+    (frames, handles)
+}
+
+fn max_and_median(frames: &[f64]) -> (f64, f64) {
+    let mut sorted = frames.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    (sorted.last().copied().unwrap_or(0.0), sorted.get(sorted.len() / 2).copied().unwrap_or(0.0))
+}
+
+/// Bakes [`timed_presets`] of `needles` needles in an app with `trees`
+/// trees, cache in `cache` (emptied first), and reads them back in a second
+/// app.
+pub fn preset_figures(needles: usize, trees: usize, cache: &Path) -> PresetFigures {
+    let _ = std::fs::remove_dir_all(cache);
+    let presets = timed_presets(needles);
+
+    let mut first = app(cache);
+    first.update();
+    let start = Instant::now();
+    let (baking, handles) = load_all(&mut first, &presets, trees);
+    let bake_seconds = start.elapsed().as_secs_f64();
+    let species = first.world().resource::<Assets<ConiferSpecies>>();
+    let needles_loaded = handles
+        .iter()
+        .filter_map(|h| species.get(h))
+        .map(|s| s.record.needles.len())
+        .sum();
+    let idle: Vec<f64> = (0..baking.len().max(10))
+        .map(|_| {
+            let start = Instant::now();
+            first.update();
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+
+    let mut second = app(cache);
+    second.update();
+    let start = Instant::now();
+    load_all(&mut second, &presets, trees);
+    let cached_load_ms = start.elapsed().as_secs_f64() * 1e3;
+
+    let (baking_frame_ms_max, baking_frame_ms_median) = max_and_median(&baking);
+    let (idle_frame_ms_max, idle_frame_ms_median) = max_and_median(&idle);
+    PresetFigures {
+        presets: presets.iter().map(ToString::to_string).collect(),
+        trees,
+        baking_frames: baking.len(),
+        baking_frame_ms_max,
+        baking_frame_ms_median,
+        idle_frame_ms_max,
+        idle_frame_ms_median,
+        bake_seconds,
+        cached_load_ms,
+        needles: needles_loaded,
+    }
+}
