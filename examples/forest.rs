@@ -432,7 +432,11 @@ fn announce_ready(
     let Some(species) = species else { return };
     if !*announced && species.0.iter().all(|handle| server.is_loaded(handle)) {
         *announced = true;
-        info!("forest ready: {} trees of {} species", trees.iter().len(), species.0.len());
+        info!(
+            "forest ready: {} trees of {} species",
+            trees.iter().len(),
+            species.0.len()
+        );
     }
 }
 

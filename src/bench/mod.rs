@@ -70,8 +70,9 @@ pub struct BenchOptions {
     /// Needles of the procedural prototype trees whose GPU bytes are
     /// measured (one per species).
     pub prototype_needles: usize,
-    /// Needles of each preset baked while frames are timed (`presets`).
-    pub preset_needles: usize,
+    /// Needles of each preset baked while frames are timed (`presets`);
+    /// `None`: each species' own count, what the examples load.
+    pub preset_needles: Option<usize>,
     /// Parts to run (`bake`, `records`, `prototypes`, `cuts`, `runtime`,
     /// `presets`, `forest`); empty runs them all.
     pub only: Vec<String>,
@@ -98,7 +99,7 @@ impl BenchOptions {
             forest_size: (640, 360),
             forest_frames: 5,
             prototype_needles: 1_000_000,
-            preset_needles: 1_000_000,
+            preset_needles: None,
             out_dir,
             only: Vec::new(),
         }
@@ -116,7 +117,7 @@ impl BenchOptions {
             forest_size: (256, 144),
             forest_frames: 1,
             prototype_needles: 50_000,
-            preset_needles: 20_000,
+            preset_needles: Some(20_000),
             ..Self::full(conifer, records_dir, out_dir)
         }
     }
@@ -636,7 +637,10 @@ pub fn run(options: &BenchOptions, progress: &mut dyn FnMut(&str)) -> Result<Ben
     }
 
     let presets = options.runs("presets").then(|| {
-        progress(&format!("six presets of {} needles baking in a running app", options.preset_needles));
+        progress(&format!(
+            "six presets ({:?} needles) baking in a running app",
+            options.preset_needles
+        ));
         presets::preset_figures(options.preset_needles, 1_000, &options.out_dir.join("preset-cache"))
     });
 

@@ -20,6 +20,10 @@ pub struct BenchArgs {
     /// Run only these parts (bake, records, prototypes, cuts, runtime, presets, forest).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
+    /// Needles of each preset of the `presets` part (default: each
+    /// species' own count).
+    #[arg(long)]
+    pub preset_needles: Option<usize>,
     /// Print one JSON object on stdout (otherwise a summary).
     #[arg(long)]
     pub json: bool,
@@ -37,6 +41,9 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         BenchOptions::full(conifer, args.records.clone(), args.out.clone())
     };
     options.only = args.only.clone();
+    if args.preset_needles.is_some() {
+        options.preset_needles = args.preset_needles;
+    }
     let report = run(&options, &mut |line| eprintln!("bench: {line}")).context("benchmark failed")?;
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -82,15 +89,17 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     }
     if let Some(p) = &report.presets {
         println!(
-            "{} presets ({} needles) baking under {} trees: longest frame {:.2} ms (median {:.2}) over {} frames, \
-             idle longest {:.2} ms (median {:.2}); baked in {:.1} s, read from the cache in {:.0} ms",
+            "{} presets ({} needles) baking under {} trees: longest frame {:.2} ms (p99 {:.2}, median {:.2}) over {} frames, \
+             idle longest {:.2} ms (p99 {:.2}, median {:.2}); baked in {:.1} s, read from the cache in {:.0} ms",
             p.presets.len(),
             p.needles,
             p.trees,
             p.baking_frame_ms_max,
+            p.baking_frame_ms_p99,
             p.baking_frame_ms_median,
             p.baking_frames,
             p.idle_frame_ms_max,
+            p.idle_frame_ms_p99,
             p.idle_frame_ms_median,
             p.bake_seconds,
             p.cached_load_ms

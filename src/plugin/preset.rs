@@ -211,7 +211,9 @@ pub fn cache_file_name(preset: &Preset) -> String {
 }
 
 /// The rayon pool preset bakes run on: one thread fewer than the machine
-/// has (at least one), so a bake never takes every core from the frame;
+/// has (at least one), at the lowest scheduling priority where the OS
+/// sets it per thread (Linux), so a bake never takes a core from the
+/// frame's threads;
 /// `None` where no thread could be started (the bake then runs on the
 /// calling task).
 fn bake_pool() -> Option<&'static rayon::ThreadPool> {
@@ -221,8 +223,26 @@ fn bake_pool() -> Option<&'static rayon::ThreadPool> {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .thread_name(|i| format!("conifer-bake-{i}"))
+            .start_handler(|_| lower_this_thread_priority())
             .build()
             .ok()
     })
     .as_ref()
 }
+
+/// Gives the calling thread the lowest scheduling priority (nice 19): it
+/// then runs on what the frame's threads leave.
+#[cfg(any(target_os = "linux", target_os = "android"))]
+fn lower_this_thread_priority() {
+    // SAFETY: `setpriority` takes no pointers; on Linux `PRIO_PROCESS`
+    // with `who = 0` changes the calling thread only (threads are tasks).
+    // A failure leaves the priority as it was, which is harmless.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, 19);
+    }
+}
+
+/// Elsewhere the priority is per process, and lowering it would slow the
+/// game: the bake pool's size alone leaves the frame a core.
+#[cfg(not(any(target_os = "linux", target_os = "android")))]
+fn lower_this_thread_priority() {}
