@@ -32,6 +32,7 @@ fn every_method_renders_and_is_measured() {
             supersampling: 4,
             sun: Default::default(),
             line_lighting: Default::default(),
+            ours_line_opacity: Default::default(),
         },
         dolly_steps: 4,
         timed_frames: 1,

@@ -16,7 +16,7 @@ use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
 use bevy_conifer_lod::plugin::CompactGpuMemory;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
-use common::{BACKGROUND, background_camera, covered_count, covered_grey, look_at_crown, mean_difference};
+use common::{BACKGROUND, background_camera, covered_count, covered_grey, grey, look_at_crown, mean_difference};
 use std::path::PathBuf;
 
 const SIZE: u32 = 192;
@@ -127,6 +127,7 @@ fn the_plugin_covers_what_the_needles_cover() {
         supersampling: 4,
         sun: Default::default(),
         line_lighting: Default::default(),
+        ours_line_opacity: Default::default(),
     };
     let mut scene = EvalScene::new(record, &[Method::Ours], view).unwrap();
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
@@ -315,6 +316,41 @@ fn lines_are_lit_as_the_cylinders_they_stand_for() {
         "from behind, both are in their own shade"
     );
     assert!(cylinder[2] < cylinder[1] && cylinder[1] < cylinder[0]);
+}
+
+/// `LineOpacity::Coverage` against the summed-area rule, both drawn by the
+/// shader: merged lines cover `1 − exp(−Σa/A)` of their footprint
+/// (`model::metric::merged_line_coverage`), never more than `Σa/A` and,
+/// where `Σa/A ≤ 1`, at least `1 − 1/e` of it.
+#[test]
+fn merged_lines_cover_at_most_their_summed_area_under_the_coverage_rule() {
+    let mut scene = Scene::new();
+    // 60 m through a telephoto: merged lines carry most of the crown.
+    scene.look_from(60.0, 12.0);
+    let empty = scene.shot("opacity_empty");
+    scene.spawn_tree(Transform::IDENTITY);
+    let darkness = |scene: &mut Scene, rule: LineOpacity, name: &str| -> f32 {
+        scene
+            .renderer
+            .world_mut()
+            .resource_mut::<ConiferLodSettings>()
+            .line_opacity = rule;
+        let picture = scene.shot(name);
+        picture
+            .pixels()
+            .zip(empty.pixels())
+            .map(|(p, e)| (grey(e) - grey(p)).abs())
+            .sum()
+    };
+    let area = darkness(&mut scene, LineOpacity::AreaPreserving, "opacity_area");
+    let coverage = darkness(&mut scene, LineOpacity::Coverage, "opacity_coverage");
+    println!("summed grey change from the empty picture: area rule {area:.0}, coverage rule {coverage:.0}");
+    assert!(area > 500.0, "the tree is drawn");
+    assert!(coverage < area, "coverage {coverage} under the summed area {area}");
+    assert!(
+        coverage > (1.0 - (-1.0f32).exp()) * area,
+        "coverage {coverage} at least 1 − 1/e of the summed area {area}"
+    );
 }
 
 #[test]

@@ -3,7 +3,7 @@
 use crate::eval::scene::{EvalSun, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::read_record;
-use crate::plugin::LineLighting;
+use crate::plugin::{LineLighting, LineOpacity};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 
@@ -63,6 +63,11 @@ pub struct EvalArgs {
     /// `facing-strip` (a strip turned toward the viewer).
     #[arg(long, default_value = "cylinder")]
     pub line_lighting: String,
+    /// The merged-line opacity `ours` draws with: `area` (the needles'
+    /// summed area over the line's pixel area) or `coverage`
+    /// (`1 − exp(−Σa/A)`).
+    #[arg(long, default_value = "area")]
+    pub ours_opacity: String,
 }
 
 /// The paper's Table 1 distances (metres).
@@ -102,6 +107,11 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         "facing-strip" => LineLighting::FacingStrip,
         other => bail!("--line-lighting {other:?}: cylinder or facing-strip"),
     };
+    let ours_line_opacity = match args.ours_opacity.as_str() {
+        "area" => LineOpacity::AreaPreserving,
+        "coverage" => LineOpacity::Coverage,
+        other => bail!("--ours-opacity {other:?}: area or coverage"),
+    };
     let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
     let options = EvalOptions {
         methods,
@@ -115,6 +125,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
             supersampling,
             sun,
             line_lighting,
+            ours_line_opacity,
         },
         dolly_steps: args.dolly_steps.unwrap_or(if args.quick { 16 } else { 150 }),
         timed_frames: args.frames.unwrap_or(if args.quick { 2 } else { 5 }),

@@ -143,6 +143,9 @@ pub struct EvalReport {
     pub sun: String,
     /// How the plugin's methods lit their lines (`Cylinder`, `FacingStrip`).
     pub line_lighting: String,
+    /// The merged-line opacity `ours` drew with (`AreaPreserving`,
+    /// `Coverage`).
+    pub ours_line_opacity: String,
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -443,6 +446,7 @@ pub fn evaluate(
         transition: options.view.transition,
         sun: options.view.sun.name().into(),
         line_lighting: format!("{:?}", options.view.line_lighting),
+        ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         needles,
         dolly_distances: dolly,
         bevy_lod_levels: scene.lod_levels().to_vec(),

@@ -82,12 +82,12 @@ impl Method {
         1 + self as usize
     }
 
-    /// The merged-line opacity of the plugin's methods (`None`: the method
-    /// does not draw through the plugin's defaults or the paper's).
-    pub fn line_opacity(self) -> Option<LineOpacity> {
+    /// The merged-line opacity of the plugin's methods, `ours` drawing with
+    /// `ours` (`None`: the method does not draw through the plugin).
+    pub fn line_opacity(self, ours: LineOpacity) -> Option<LineOpacity> {
         match self {
             Method::Paper => Some(LineOpacity::Paper),
-            Method::Ours => Some(LineOpacity::AreaPreserving),
+            Method::Ours => Some(ours),
             _ => None,
         }
     }
@@ -137,6 +137,8 @@ pub struct EvalView {
     pub sun: EvalSun,
     /// How the plugin's methods light their lines.
     pub line_lighting: LineLighting,
+    /// The merged-line opacity `ours` draws with.
+    pub ours_line_opacity: LineOpacity,
 }
 
 /// Where the sun of `conifer eval`'s scene stands (the camera looks at the
@@ -314,7 +316,10 @@ impl EvalScene {
         // The plugin's methods.
         let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species.clone());
         for method in [Method::Paper, Method::Ours] {
-            if let Some(opacity) = method.line_opacity().filter(|_| methods.contains(&method)) {
+            if let Some(opacity) = method
+                .line_opacity(view.ours_line_opacity)
+                .filter(|_| methods.contains(&method))
+            {
                 world.spawn((
                     ConiferFoliage(species_handle.clone()),
                     ConiferLodOverride {

@@ -125,7 +125,7 @@ impl ShadowScene {
         for (k, method) in SHADOW_METHODS.into_iter().filter(|m| methods.contains(m)).enumerate() {
             let (tree_layer, ground_layer) = (2 * k + 1, 2 * k + 2);
             let world = renderer.world_mut();
-            let trees = match method.line_opacity() {
+            let trees = match method.line_opacity(view.ours_line_opacity) {
                 Some(opacity) => vec![
                     world
                         .spawn((

@@ -165,6 +165,21 @@ pub fn needle_form(rho: f32, max_sides: u8) -> NeedleForm {
     }
 }
 
+/// Coverage of a merged line whose needles' summed side area, per unit of
+/// its length, is `summed_width`, drawn one pixel (`pixel_width`) wide,
+/// when the needles lie at random within that footprint: `1 − exp(−w/p)`
+/// (the Poisson / Beer–Lambert coverage; `LineOpacity::Coverage`). It
+/// matches the area rule `min(w/p, 1)` for sparse bundles and stays below
+/// it where needles overlap. Defined results: 0 for NaN, zero or negative
+/// widths, 1 for an infinite ratio.
+pub fn merged_line_coverage(summed_width: f32, pixel_width: f32) -> f32 {
+    let density = summed_width / pixel_width;
+    if density.is_nan() || density <= 0.0 {
+        return 0.0;
+    }
+    1.0 - (-density).exp()
+}
+
 /// Opacity of an original line at relative error `rho` (paper, §3.2 and §6):
 /// `T(ρ) = 2/ρ` for `ρ ≥ 2` (the needle's width over the line's width),
 /// times the transition coefficient δ in `(0, 1]` that makes lines more
@@ -244,6 +259,23 @@ mod tests {
         assert_eq!(needle_form(1.999, 8), NeedleForm::Prism { sides: 3 });
         assert_eq!(needle_form(2.0, 8), NeedleForm::Line);
         assert_eq!(needle_form(f32::INFINITY, 8), NeedleForm::Line);
+    }
+
+    #[test]
+    fn merged_line_coverage_stays_under_the_summed_area() {
+        for density in [1e-4f32, 0.01, 0.1, 0.5, 1.0, 2.0, 10.0] {
+            let coverage = merged_line_coverage(density * 0.02, 0.02);
+            assert!(coverage <= density.min(1.0) + 1e-6, "{density}: {coverage}");
+            assert!(coverage > 0.0 && coverage < 1.0 + 1e-6);
+        }
+        // Sparse bundles: the summed area; two needles each covering a
+        // quarter of the footprint at random: between 1 − 0.75² and 0.5.
+        assert!((merged_line_coverage(1e-3, 1.0) - 1e-3).abs() < 1e-6);
+        let pair = merged_line_coverage(0.5, 1.0);
+        assert!((0.39..0.4375).contains(&pair), "{pair}");
+        assert_eq!(merged_line_coverage(f32::NAN, 1.0), 0.0);
+        assert_eq!(merged_line_coverage(1.0, 0.0), 1.0);
+        assert_eq!(merged_line_coverage(-1.0, 1.0), 0.0);
     }
 
     #[test]

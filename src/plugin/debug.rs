@@ -425,7 +425,8 @@ pub fn conifer_lod_keys(
     if keys.just_pressed(KeyCode::KeyP) {
         settings.line_opacity = match settings.line_opacity {
             LineOpacity::Paper => LineOpacity::AreaPreserving,
-            LineOpacity::AreaPreserving => LineOpacity::Paper,
+            LineOpacity::AreaPreserving => LineOpacity::Coverage,
+            LineOpacity::Coverage => LineOpacity::Paper,
         };
     }
     if keys.just_pressed(KeyCode::F3) || keys.just_pressed(KeyCode::KeyO) {

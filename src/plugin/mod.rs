@@ -175,6 +175,12 @@ pub enum LineOpacity {
     /// 1): the tree keeps its projected density as lines merge.
     #[default]
     AreaPreserving,
+    /// A merged line's needles overlap at random within its pixel
+    /// footprint: coverage `1 − exp(−Σa/A)` of their summed side area `Σa`
+    /// over the line's pixel area `A` (original lines, one needle each,
+    /// keep `a/A`). Lower than [`LineOpacity::AreaPreserving`] where a
+    /// bundle is dense, where summed areas overshoot.
+    Coverage,
 }
 
 /// How lines are lit.

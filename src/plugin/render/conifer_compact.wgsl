@@ -270,6 +270,16 @@ fn line_alpha(lod: InstanceLod, spatial_error: f32, width: f32, paper_width: f32
     return min(width * lod.pixel_error / e, 1.0);
 }
 
+// A merged line: as `line_alpha`, except under the coverage rule (2),
+// where its needles overlap at random in its footprint: `1 − exp(−Σa/A)`
+// (`model::metric::merged_line_coverage`).
+fn merged_line_alpha(lod: InstanceLod, spatial_error: f32, width: f32, paper_width: f32) -> f32 {
+    if ((lod.code >> LOD_OPACITY_SHIFT) & 3u) == 2u {
+        return 1.0 - exp(-width * lod.pixel_error / max(spatial_error, 1e-12));
+    }
+    return line_alpha(lod, spatial_error, width, paper_width);
+}
+
 // A line's colour; in shadow passes its index and tree (for the hashed
 // alpha test) and its opacity.
 fn line_color(color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
@@ -368,7 +378,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let width = log_decode((a >> 24u) | ((b >> 24u) << 8u));
-    let alpha = line_alpha(lod, spatial_error, width, log_decode(own));
+    let alpha = merged_line_alpha(lod, spatial_error, width, log_decode(own));
     let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
     let start = end_position(grid, a);

@@ -189,6 +189,7 @@ fn gpu_instance(
         None => 0,
         Some(LineOpacity::Paper) => 1,
         Some(LineOpacity::AreaPreserving) => 2,
+        Some(LineOpacity::Coverage) => 3,
     };
     let layer_mask = view_layers(layers);
     // A NaN or negative override would make every error NaN: such a tree
@@ -396,6 +397,7 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         opacity_rule: match settings.line_opacity {
             LineOpacity::Paper => 0,
             LineOpacity::AreaPreserving => 1,
+            LineOpacity::Coverage => 2,
         },
         wood_line_fade: WOOD_LINE_FADE,
         roughness: material.roughness,
