@@ -9,8 +9,8 @@
 //! Keys: `WASD` move, `Q`/`E` down/up, `Shift` faster, right mouse button +
 //! drag to look; `[`/`]` pixel error ε ÷/× 1.25; `,`/`.` transition δ −/+
 //! 0.1; `F3` (or `O`) the LOD debug overlay; `L` LOD on/off (off: every
-//! needle a full prism, to feel the difference); `P` the paper's line
-//! opacity vs ours.
+//! needle a full prism, to feel the difference); `P` the line opacity
+//! rule (ours → coverage → the paper's); `Esc` quits.
 //!
 //! The trees are grown from the presets at startup, three seeds per
 //! species, with no asset files (baked in the background and cached, see

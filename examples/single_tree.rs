@@ -10,7 +10,7 @@
 //! Keys: `W`/`S` (or the mouse wheel) closer/farther, `A`/`D` orbit, `R`/`F`
 //! up/down along the trunk; and the keys of `conifer_lod_keys`: `[`/`]`
 //! pixel error ε ÷/× 1.25, `,`/`.` δ, `F3` (or `O`) the overlay (colours by
-//! representation, distance rings, stats), `L` LOD on/off, `P` paper opacity. The tree is baked at startup from a procedural preset (about a
+//! representation, distance rings, stats), `L` LOD on/off, `P` the opacity rule. The tree is baked at startup from a procedural preset (about a
 //! second), so any preset and needle count can be tried.
 
 use bevy::input::mouse::AccumulatedMouseScroll;

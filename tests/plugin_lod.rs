@@ -602,6 +602,12 @@ fn lod_keys_change_the_settings_and_the_overlay() {
     assert!((app.world().resource::<ConiferLodSettings>().transition - 0.9).abs() < 1e-6);
     press(&mut app, KeyCode::KeyL);
     assert!(!app.world().resource::<ConiferLodSettings>().enabled);
+    // P cycles the opacity rules: ours (area), coverage, the paper's.
+    press(&mut app, KeyCode::KeyP);
+    assert_eq!(
+        app.world().resource::<ConiferLodSettings>().line_opacity,
+        LineOpacity::Coverage
+    );
     press(&mut app, KeyCode::KeyP);
     assert_eq!(
         app.world().resource::<ConiferLodSettings>().line_opacity,

@@ -400,7 +400,7 @@ fn update_panel(
 /// Keyboard control of the LOD, for examples and tools; add it to `Update`
 /// yourself (`app.add_systems(Update, conifer_lod_keys)`): `[`/`]` pixel
 /// error ε ÷/× 1.25 (0.05–64), `,`/`.` transition δ −/+ 0.1 (0.1–1), `L`
-/// LOD on/off, `P` paper vs area-preserving line opacity, `F3` or `O` the
+/// LOD on/off, `P` the line opacity rule (area-preserving → coverage → paper), `F3` or `O` the
 /// debug overlay.
 pub fn conifer_lod_keys(
     keys: Res<ButtonInput<KeyCode>>,
