@@ -107,14 +107,7 @@ fn camera(distance: f32) -> impl Bundle {
 /// the camera distance is exact).
 fn spawn_tree(app: &mut App, name: &str, crown: Vec3) -> (Entity, Handle<ConiferSpecies>) {
     let handle: Handle<ConiferSpecies> = app.world().resource::<AssetServer>().load(name.to_string());
-    for _ in 0..200 {
-        app.update();
-        match app.world().resource::<AssetServer>().load_state(&handle) {
-            LoadState::Loaded => break,
-            LoadState::Failed(error) => panic!("{error}"),
-            _ => std::thread::sleep(std::time::Duration::from_millis(5)),
-        }
-    }
+    wait_for(app, &handle).unwrap();
     let tree = app
         .world_mut()
         .spawn((ConiferFoliage(handle.clone()), Transform::from_translation(-crown)))
@@ -470,16 +463,7 @@ fn a_corrupted_record_fails_to_load_with_its_reason() {
     std::fs::write(dir.path().join("broken.conifer"), &bytes).unwrap();
     let mut app = app(dir.path());
     let handle: Handle<ConiferSpecies> = app.world().resource::<AssetServer>().load("broken.conifer");
-    let mut failure = None;
-    for _ in 0..200 {
-        app.update();
-        if let LoadState::Failed(error) = app.world().resource::<AssetServer>().load_state(&handle) {
-            failure = Some(error.to_string());
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let failure = failure.expect("load fails");
+    let failure = wait_for(&mut app, &handle).expect_err("load fails");
     assert!(failure.contains("checksum"), "{failure}");
 }
 
