@@ -64,6 +64,15 @@ fn wait_for(app: &mut App, handle: &Handle<ConiferSpecies>) -> Result<(), String
     panic!("{handle:?} neither loaded nor failed");
 }
 
+/// The loaded species of `handle`.
+fn loaded_species(app: &App, handle: &Handle<ConiferSpecies>) -> ConiferSpecies {
+    app.world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(handle)
+        .expect("the species has loaded")
+        .clone()
+}
+
 /// Loads `preset` through [`ConiferPresets`] in `app`.
 fn load_preset(app: &mut App, preset: &str) -> Handle<ConiferSpecies> {
     let preset = preset.to_owned();
@@ -137,12 +146,7 @@ fn error_matches_the_formula_and_representation_follows_distance() {
     let cam = app.world_mut().spawn(camera(5.0)).id();
     let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
 
-    let species = app
-        .world()
-        .resource::<Assets<ConiferSpecies>>()
-        .get(&handle)
-        .unwrap()
-        .clone();
+    let species = loaded_species(&app, &handle);
     assert!(
         app.world().get::<Children>(tree).is_none(),
         "nothing is spawned for a tree"
@@ -496,12 +500,7 @@ fn debug_overlay_switches_colours_and_counts_the_cut() {
         "overlay turns debug colours on"
     );
     let stats = *app.world().resource::<ConiferLodStats>();
-    let species = app
-        .world()
-        .resource::<Assets<ConiferSpecies>>()
-        .get(&handle)
-        .unwrap()
-        .clone();
+    let species = loaded_species(&app, &handle);
     let mut expected = (0, 0, 0, 0);
     for entity in [tree, far] {
         let cut = species.record.cut(state(&app, entity).min_spatial_error);
@@ -913,12 +912,7 @@ fn presets_load_without_files_and_come_back_from_the_cache() {
     );
     wait_for(&mut run, &handle).unwrap();
     let baked = preset.bake().unwrap().flatten().unwrap();
-    let species = run
-        .world()
-        .resource::<Assets<ConiferSpecies>>()
-        .get(&handle)
-        .unwrap()
-        .clone();
+    let species = loaded_species(&run, &handle);
     assert_eq!(species.record.needles, baked.needles, "the preset's own tree");
     let tree = run
         .world_mut()
@@ -941,7 +935,7 @@ fn presets_load_without_files_and_come_back_from_the_cache() {
     let mut run = app(dir.path());
     let handle = load_preset(&mut run, &preset.to_string());
     wait_for(&mut run, &handle).unwrap();
-    let species = run.world().resource::<Assets<ConiferSpecies>>().get(&handle).unwrap();
+    let species = loaded_species(&run, &handle);
     assert_eq!(
         species.record.needles,
         other.flatten().unwrap().needles,
@@ -953,7 +947,7 @@ fn presets_load_without_files_and_come_back_from_the_cache() {
     let mut run = app(dir.path());
     let handle = load_preset(&mut run, &preset.to_string());
     wait_for(&mut run, &handle).unwrap();
-    let species = run.world().resource::<Assets<ConiferSpecies>>().get(&handle).unwrap();
+    let species = loaded_species(&run, &handle);
     assert_eq!(species.record.needles, baked.needles);
     let on_disk = bevy_conifer_lod::model::read_prototype_record(&cached).unwrap();
     assert_eq!(
