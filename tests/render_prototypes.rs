@@ -81,18 +81,27 @@ impl Scene {
 
     /// A picture of one tree of `species` at the origin.
     fn shot(&mut self, species: &Handle<ConiferSpecies>, name: &str) -> image::RgbaImage {
-        let tree = self
-            .renderer
-            .world_mut()
-            .spawn((ConiferFoliage(species.clone()), Transform::IDENTITY))
-            .id();
+        self.shot_of(species, &[Transform::IDENTITY], name)
+    }
+
+    /// A picture of trees of `species` standing at `transforms`.
+    fn shot_of(&mut self, species: &Handle<ConiferSpecies>, transforms: &[Transform], name: &str) -> image::RgbaImage {
+        let trees: Vec<Entity> = transforms
+            .iter()
+            .map(|&transform| {
+                let world = self.renderer.world_mut();
+                world.spawn((ConiferFoliage(species.clone()), transform)).id()
+            })
+            .collect();
         // Buffers fill and pipelines compile over a few frames.
         for _ in 0..3 {
             self.renderer.update().unwrap();
         }
         let image = self.renderer.capture(&self.target, 20).unwrap();
         image.save(self.out.join(format!("prototypes_{name}.png"))).unwrap();
-        self.renderer.world_mut().despawn(tree);
+        for tree in trees {
+            self.renderer.world_mut().despawn(tree);
+        }
         image
     }
 
@@ -336,41 +345,16 @@ fn with_lod_off_every_tree_of_a_forest_is_drawn() {
     let mut scene = Scene::new();
     scene.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
     scene.look_from(30.0, 45.0);
-    let shot = |scene: &mut Scene, species: &Handle<ConiferSpecies>, name: &str| {
-        let trees: Vec<Entity> = (0..5)
-            .map(|k| {
-                let x = (k as f32 - 2.0) * 6.0;
-                scene
-                    .renderer
-                    .world_mut()
-                    .spawn((ConiferFoliage(species.clone()), Transform::from_xyz(x, 0.0, 0.0)))
-                    .id()
-            })
-            .collect();
-        for _ in 0..3 {
-            scene.renderer.update().unwrap();
-        }
-        let image = scene.renderer.capture(&scene.target, 20).unwrap();
-        image.save(scene.out.join(format!("prototypes_{name}.png"))).unwrap();
-        for tree in trees {
-            scene.renderer.world_mut().despawn(tree);
-        }
-        image
-    };
+    let row: Vec<Transform> = (0..5)
+        .map(|k| Transform::from_xyz((k as f32 - 2.0) * 6.0, 0.0, 0.0))
+        .collect();
     let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
-    let a = shot(&mut scene, &placed, "lod_off_forest_placed");
-    let b = shot(&mut scene, &flat, "lod_off_forest_flat");
+    let a = scene.shot_of(&placed, &row, "lod_off_forest_placed");
+    let b = scene.shot_of(&flat, &row, "lod_off_forest_flat");
     // Each tree's column of the picture.
     for k in 0..5u32 {
-        let columns = |image: &image::RgbaImage| {
-            let mut part = image::RgbaImage::new(SIZE / 5, SIZE);
-            for y in 0..SIZE {
-                for x in 0..SIZE / 5 {
-                    part.put_pixel(x, y, *image.get_pixel(k * SIZE / 5 + x, y));
-                }
-            }
-            part
-        };
-        assert_alike(&format!("LOD off, tree {k}"), &columns(&a), &columns(&b));
+        let column =
+            |image: &image::RgbaImage| image::imageops::crop_imm(image, k * SIZE / 5, 0, SIZE / 5, SIZE).to_image();
+        assert_alike(&format!("LOD off, tree {k}"), &column(&a), &column(&b));
     }
 }

@@ -85,12 +85,12 @@ impl Preset {
         })
     }
 
-    /// A file name that names this preset uniquely (`norway-spruce-s3.conifer`,
-    /// `norway-spruce-s3-n20000.conifer`).
-    pub fn file_name(&self) -> String {
+    /// A file stem that names this preset uniquely (`norway-spruce-s3`,
+    /// `norway-spruce-s3-n20000`).
+    pub fn file_stem(&self) -> String {
         match self.target_needles {
-            Some(needles) => format!("{}-s{}-n{needles}.conifer", self.species.name(), self.seed),
-            None => format!("{}-s{}.conifer", self.species.name(), self.seed),
+            Some(needles) => format!("{}-s{}-n{needles}", self.species.name(), self.seed),
+            None => format!("{}-s{}", self.species.name(), self.seed),
         }
     }
 }
@@ -200,7 +200,7 @@ mod tests {
             (&record.prototypes, &record.placements, &record.tree_merged),
             "a preset is deterministic"
         );
-        assert_eq!(preset.file_name(), "scots-pine-s2-n3000.conifer");
+        assert_eq!(preset.file_stem(), "scots-pine-s2-n3000");
         assert_eq!(preset.fingerprint(), preset.with_seed(9).fingerprint());
         assert_ne!(
             preset.fingerprint(),

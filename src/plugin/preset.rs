@@ -202,12 +202,10 @@ pub fn load_preset(preset: Preset, cache: Option<&Path>) -> Result<ConiferSpecie
     species(&record)
 }
 
-/// The cache file of `preset`: its own file name with the generator's
+/// The cache file of `preset`: its file stem with the generator's
 /// fingerprint, so a changed generator or format bakes anew.
 pub fn cache_file_name(preset: &Preset) -> String {
-    let name = preset.file_name();
-    let stem = name.strip_suffix(".conifer").unwrap_or(&name);
-    format!("{stem}-{:016x}.conifer", preset.fingerprint())
+    format!("{}-{:016x}.conifer", preset.file_stem(), preset.fingerprint())
 }
 
 /// The rayon pool preset bakes run on: one thread fewer than the machine

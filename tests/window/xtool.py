@@ -1,16 +1,14 @@
 #!/usr/bin/env python3
 """X helpers of the window test, with the standard library only: reads
 `xwd -root` dumps (32-bit ZPixmap, what Xvfb's 24-bit screens give), writes
-them as PNG, measures and compares regions of them, and asks a window to
+them as PNG, compares regions of them, and asks a window to
 close as a window manager's close button does (WM_DELETE_WINDOW).
 
   xtool.py png DUMP.xwd OUT.png
-  xtool.py stats DUMP.xwd X Y W H          # JSON: mean RGB, colour-class shares
   xtool.py differ A.xwd B.xwd X Y W H      # share of pixels that differ in a region
   xtool.py close WINDOW_ID                 # WM_DELETE_WINDOW to the window
 """
 import ctypes
-import json
 import struct
 import sys
 import zlib
@@ -50,19 +48,6 @@ def write_png(path, width, height, rows):
     png = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0))
     png += chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b"")
     open(path, "wb").write(png)
-
-
-def stats(rows, x, y, w, h):
-    """Mean colour and the share of pixels by the debug overlay's colour
-    classes (prisms blue, original lines green, merged lines yellow to red)
-    in a region."""
-    pixels = [p for row in rows[y:y + h] for p in row[x:x + w]]
-    n = max(len(pixels), 1)
-    mean = [sum(p[i] for p in pixels) / n for i in range(3)]
-    blue = sum(1 for r, g, b in pixels if b > r + 40 and b > g + 10) / n
-    red_yellow = sum(1 for r, g, b in pixels if r > b + 60 and r + 10 >= g) / n
-    dark = sum(1 for r, g, b in pixels if r + g + b < 150) / n
-    return {"mean": mean, "blue": blue, "red_yellow": red_yellow, "dark": dark, "pixels": len(pixels)}
 
 
 def differ(rows_a, rows_b, x, y, w, h):
@@ -114,9 +99,6 @@ if __name__ == "__main__":
     command = sys.argv[1] if len(sys.argv) > 1 else ""
     if command == "png":
         write_png(sys.argv[3], *read_xwd(sys.argv[2]))
-    elif command == "stats":
-        _, _, rows = read_xwd(sys.argv[2])
-        print(json.dumps(stats(rows, *(int(v) for v in sys.argv[3:7]))))
     elif command == "differ":
         _, _, rows_a = read_xwd(sys.argv[2])
         _, _, rows_b = read_xwd(sys.argv[3])
