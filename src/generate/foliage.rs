@@ -15,19 +15,37 @@ use crate::model::{Needle, Placement};
 /// Radius of a young shoot: needles attach on its surface.
 const SHOOT_RADIUS: f32 = 0.0015;
 
-/// Covers `sites` with about `target` needles.
+/// How many needles to place, and how much wider than the species' they are.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct NeedleBudget {
+    /// Needles to place.
+    pub target: usize,
+    /// The species' natural count on this tree: the spiral floor is taken
+    /// at its density.
+    pub natural: usize,
+    /// Radius factor (≥ 1) that keeps the summed needle area of the
+    /// natural count.
+    pub widening: f32,
+    /// Length factor (≥ 1), for scale leaves, which grow in both directions
+    /// to keep their shape.
+    pub lengthening: f32,
+}
+
+/// Covers `sites` with about `budget.target` needles.
 pub(crate) fn grow_needles(
     sites: &[FoliageSite],
     params: &FoliageParams,
-    target: usize,
+    budget: NeedleBudget,
     rng: &mut TreeRng,
 ) -> Vec<Needle> {
-    let units = units_per_site(sites, params, target);
+    let units = units_per_site(sites, params, budget);
     let total_units: usize = units.iter().map(|&u| u as usize).sum();
     let mut placer = Placer {
         params,
         rng,
         up: UP,
+        widening: budget.widening,
+        lengthening: budget.lengthening,
         needles: Vec::with_capacity(total_units * needles_per_unit(params) as usize),
         next_group: 0,
         spray: None,
@@ -62,10 +80,10 @@ type ShootKey = (u32, u32, u32);
 pub(crate) fn grow_shoot_prototypes(
     sites: &[FoliageSite],
     params: &FoliageParams,
-    target: usize,
+    budget: NeedleBudget,
     rng: &mut TreeRng,
 ) -> (Vec<Vec<Needle>>, Vec<Placement>) {
-    let units = units_per_site(sites, params, target);
+    let units = units_per_site(sites, params, budget);
     let largest = units.iter().copied().max().unwrap_or(0);
     let mut ladder = vec![1u32];
     while *ladder.last().expect("not empty") < largest {
@@ -114,6 +132,8 @@ pub(crate) fn grow_shoot_prototypes(
             params,
             rng: &mut *rng,
             up: Vec3::Z,
+            widening: budget.widening,
+            lengthening: budget.lengthening,
             needles: Vec::new(),
             next_group: 0,
             spray: None,
@@ -145,21 +165,21 @@ pub(crate) fn grow_shoot_prototypes(
 fn needles_per_unit(params: &FoliageParams) -> u32 {
     match params.phyllotaxy {
         Phyllotaxy::Fascicle { needles, .. } => needles.max(1),
-        Phyllotaxy::Spiral | Phyllotaxy::Scales => 1,
+        Phyllotaxy::Spiral | Phyllotaxy::Scales | Phyllotaxy::TwoRanked { .. } => 1,
     }
 }
 
 /// Units (fascicles or needles) per site, proportional to the site's
 /// weight, rounded with error diffusion, with the minimum shoot group size
 /// for spirals; the density is adjusted until the total meets `target`.
-fn units_per_site(sites: &[FoliageSite], params: &FoliageParams, target: usize) -> Vec<u32> {
+fn units_per_site(sites: &[FoliageSite], params: &FoliageParams, budget: NeedleBudget) -> Vec<u32> {
     let per_unit = needles_per_unit(params) as f32;
-    let target_units = (target as f32 / per_unit).round();
+    let target_units = (budget.target as f32 / per_unit).round();
     let total_weight: f32 = sites.iter().map(|s| s.weight).sum();
     if target_units < 1.0 || total_weight <= 0.0 {
         return vec![0; sites.len()];
     }
-    let default_density = params.default_needles as f32 / per_unit / total_weight;
+    let default_density = budget.natural.max(1) as f32 / per_unit / total_weight;
     let mut density = target_units / total_weight;
     let mut units = Vec::new();
     for _ in 0..12 {
@@ -184,7 +204,7 @@ fn minimum_units(params: &FoliageParams, relative_density: f32) -> u32 {
             let scale = (relative_density / 0.85).min(1.0);
             (params.group_size.0 as f32 * scale).round() as u32
         }
-        Phyllotaxy::Fascicle { .. } | Phyllotaxy::Scales => 0,
+        Phyllotaxy::Fascicle { .. } | Phyllotaxy::Scales | Phyllotaxy::TwoRanked { .. } => 0,
     }
 }
 
@@ -209,6 +229,10 @@ struct Placer<'a> {
     /// The world's up in the frame needles are grown in (droop, needles
     /// turning away from beneath the shoot).
     up: Vec3,
+    /// Radius factor of every needle ([`NeedleBudget::widening`]).
+    widening: f32,
+    /// Length factor of every needle ([`NeedleBudget::lengthening`]).
+    lengthening: f32,
     needles: Vec<Needle>,
     next_group: u32,
     /// Spray key and size of the scale-leaf group being filled.
@@ -222,6 +246,7 @@ impl Placer<'_> {
             Phyllotaxy::Fascicle { needles, spread, twist } => self.fascicles(site, count, needles, spread, twist),
             Phyllotaxy::Spiral => self.spiral(site, count),
             Phyllotaxy::Scales => self.scales(site, count),
+            Phyllotaxy::TwoRanked { lift } => self.two_ranked(site, count, lift),
         }
     }
 
@@ -241,10 +266,11 @@ impl Placer<'_> {
     /// Adds a needle; its length is kept within the species' range.
     fn push(&mut self, base: Vec3, dir: Vec3, length: f32, normal: Vec3, group: u32) {
         let (shortest, longest) = self.params.length;
-        let radius = self.rng.range(self.params.radius);
+        let radius = self.rng.range(self.params.radius) * self.widening;
+        let length = length.clamp(shortest, longest) * self.lengthening;
         self.needles.push(Needle {
             base,
-            tip: base + dir * length.clamp(shortest, longest),
+            tip: base + dir * length,
             radius,
             normal,
             group,
@@ -305,6 +331,39 @@ impl Placer<'_> {
                 dir,
                 length,
                 normal,
+                first_group + index / run_length,
+            );
+        }
+    }
+
+    /// Fir: needles in two flat rows either side of the shoot, alternating
+    /// left and right, raised `lift` above the shoot's plane; the ones from
+    /// beneath the shoot twist round to the rows, so none hangs below it.
+    /// Flat faces up. The shoot is one group, split like a spiral's.
+    fn two_ranked(&mut self, site: &FoliageSite, count: u32, lift: f32) {
+        let axis = site.axis();
+        let up = perpendicular_toward(axis, site.up);
+        let side = axis.cross(up).normalize_or(axis.any_orthonormal_vector());
+        let max_group = self.params.group_size.1.max(1) as u32;
+        let runs = count.div_ceil(max_group).max(1);
+        let run_length = count.div_ceil(runs).max(1);
+        let first_group = self.next_group;
+        self.next_group += runs;
+        for index in 0..count {
+            let (t, pos) = self.position(site, index, count);
+            let row = if index % 2 == 0 { side } else { -side };
+            let raise = lift * self.rng.jitter(1.0, 0.4) + 0.15 * self.rng.signed();
+            let radial = (row * raise.cos() + up * raise.sin()).normalize();
+            let divergence = self.rng.range(self.params.divergence);
+            let dir = (axis * divergence.cos() + radial * divergence.sin()).normalize();
+            let dir = bend(dir, -self.up, self.params.droop * self.rng.unit());
+            // Shorter at both ends of the shoot.
+            let length = self.length(site) * (0.75 + 0.25 * (std::f32::consts::PI * t).sin());
+            self.push(
+                pos + radial * SHOOT_RADIUS,
+                dir,
+                length,
+                perpendicular_toward(dir, up),
                 first_group + index / run_length,
             );
         }

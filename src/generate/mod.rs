@@ -13,14 +13,16 @@
 //! Trees stand at the origin, +Y up, in metres.
 //!
 //! ```
-//! use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+//! use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
 //!
-//! let tree = generate(Species::NorwaySpruce, &GenerateOptions { seed: 7, target_needles: Some(10_000) });
+//! let options = GenerateOptions { seed: 7, target_needles: Some(10_000), age: Age::Young };
+//! let tree = generate(Species::NorwaySpruce, &options);
 //! assert!(tree.needles.iter().all(|n| n.is_valid()));
 //! ```
 
 mod foliage;
 mod geometry;
+mod mature;
 mod params;
 mod preset;
 mod random;
@@ -32,7 +34,8 @@ use std::str::FromStr;
 
 use serde::{Deserialize, Serialize};
 
-use self::params::SpeciesParams;
+use self::foliage::NeedleBudget;
+use self::params::{NeedleCount, SpeciesParams};
 pub use self::preset::{Preset, PresetParseError};
 use self::random::{Stream, TreeRng};
 use crate::model::{PrototypeInput, TreeInput};
@@ -57,15 +60,61 @@ pub enum Species {
     /// fern-like sprays of scale leaves (2.5–4 mm). Even so its ~75,000
     /// scales cover a fifth of its silhouette or less: the crown is lacy.
     LawsonCypress,
+    /// *Pseudotsuga menziesii*: low branches drooping, middle ones level,
+    /// top ones rising; single needles (1.5–3 cm) spirally round the shoot,
+    /// parted to the sides.
+    DouglasFir,
+    /// *Abies alba*: a cone flattening into a "stork's nest" top when old,
+    /// flat needles (1.5–3 cm) in two rows, pale grey bark.
+    SilverFir,
+}
+
+/// How old a preset tree is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Age {
+    /// A 6–10-year-old sapling, 2–5 m, tens of thousands of needles (the
+    /// presets of the first releases).
+    Young,
+    /// A mature tree at its species' real size and crown density (15–50 m),
+    /// a million or more needles.
+    #[default]
+    Mature,
+}
+
+impl Age {
+    /// Both ages.
+    pub const ALL: [Age; 2] = [Age::Young, Age::Mature];
+
+    /// The age's name on the command line and in preset strings.
+    pub fn name(self) -> &'static str {
+        match self {
+            Age::Young => "young",
+            Age::Mature => "mature",
+        }
+    }
+
+    /// The age called `name` (case is not significant).
+    pub fn from_name(name: &str) -> Option<Age> {
+        Age::ALL.into_iter().find(|a| a.name().eq_ignore_ascii_case(name.trim()))
+    }
+}
+
+impl fmt::Display for Age {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
 impl Species {
     /// Every preset.
-    pub const ALL: [Species; 4] = [
+    pub const ALL: [Species; 6] = [
         Species::ScotsPine,
         Species::NorwaySpruce,
         Species::EasternWhitePine,
         Species::LawsonCypress,
+        Species::DouglasFir,
+        Species::SilverFir,
     ];
 
     /// The preset's name on the command line and in file names.
@@ -75,6 +124,8 @@ impl Species {
             Species::NorwaySpruce => "norway-spruce",
             Species::EasternWhitePine => "eastern-white-pine",
             Species::LawsonCypress => "lawson-cypress",
+            Species::DouglasFir => "douglas-fir",
+            Species::SilverFir => "silver-fir",
         }
     }
 
@@ -95,22 +146,52 @@ impl Species {
         Species::ALL.into_iter().find(|s| s.name() == wanted)
     }
 
-    /// One line about the preset: botanical name, age, height, phyllotaxy.
-    pub fn description(self) -> &'static str {
-        match self {
-            Species::ScotsPine => "Pinus sylvestris, ~10 years, 3.3-4.3 m, 2-needle fascicles",
-            Species::NorwaySpruce => "Picea abies, ~8 years, ~3 m, single needles round each shoot",
-            Species::EasternWhitePine => "Pinus strobus, ~10 years, 3.9-4.8 m, 5-needle fascicles",
-            Species::LawsonCypress => "Chamaecyparis lawsoniana, young (~6 years, ~2.2 m), scale-leaf sprays",
+    /// One line about the preset at `age`: botanical name, age, height, phyllotaxy.
+    pub fn description(self, age: Age) -> &'static str {
+        match (self, age) {
+            (Species::ScotsPine, Age::Young) => "Pinus sylvestris, ~10 years, 3.3-4.3 m, 2-needle fascicles",
+            (Species::ScotsPine, Age::Mature) => {
+                "Pinus sylvestris, ~70 years, 18-25 m, bare bole, umbrella top, 2-needle fascicles"
+            }
+            (Species::NorwaySpruce, Age::Young) => "Picea abies, ~8 years, ~3 m, single needles round each shoot",
+            (Species::NorwaySpruce, Age::Mature) => {
+                "Picea abies, ~80 years, 25-35 m, deep cone, hanging branchlets, single needles"
+            }
+            (Species::EasternWhitePine, Age::Young) => "Pinus strobus, ~10 years, 3.9-4.8 m, 5-needle fascicles",
+            (Species::EasternWhitePine, Age::Mature) => {
+                "Pinus strobus, ~60 years, 25-30 m, level tiers, drooping 5-needle tufts"
+            }
+            (Species::LawsonCypress, Age::Young) => {
+                "Chamaecyparis lawsoniana, young (~6 years, ~2.2 m), scale-leaf sprays"
+            }
+            (Species::LawsonCypress, Age::Mature) => {
+                "Chamaecyparis lawsoniana, ~50 years, 15-25 m, narrow column, drooping sprays"
+            }
+            (Species::DouglasFir, Age::Young) => "Pseudotsuga menziesii, ~10 years, ~4 m, single needles",
+            (Species::DouglasFir, Age::Mature) => {
+                "Pseudotsuga menziesii, ~90 years, 35-50 m, drooping low branches, single needles"
+            }
+            (Species::SilverFir, Age::Young) => "Abies alba, ~12 years, ~3 m, two-rowed flat needles",
+            (Species::SilverFir, Age::Mature) => {
+                "Abies alba, ~100 years, 30-40 m, stork's nest top, two-rowed flat needles"
+            }
         }
     }
 
-    fn params(self) -> SpeciesParams {
-        match self {
-            Species::ScotsPine => params::scots_pine(),
-            Species::NorwaySpruce => params::norway_spruce(),
-            Species::EasternWhitePine => params::eastern_white_pine(),
-            Species::LawsonCypress => params::lawson_cypress(),
+    fn params(self, age: Age) -> SpeciesParams {
+        match (self, age) {
+            (Species::ScotsPine, Age::Young) => params::scots_pine(),
+            (Species::NorwaySpruce, Age::Young) => params::norway_spruce(),
+            (Species::EasternWhitePine, Age::Young) => params::eastern_white_pine(),
+            (Species::LawsonCypress, Age::Young) => params::lawson_cypress(),
+            (Species::DouglasFir, Age::Young) => mature::young_douglas_fir(),
+            (Species::SilverFir, Age::Young) => mature::young_silver_fir(),
+            (Species::ScotsPine, Age::Mature) => mature::scots_pine(),
+            (Species::NorwaySpruce, Age::Mature) => mature::norway_spruce(),
+            (Species::EasternWhitePine, Age::Mature) => mature::eastern_white_pine(),
+            (Species::LawsonCypress, Age::Mature) => mature::lawson_cypress(),
+            (Species::DouglasFir, Age::Mature) => mature::douglas_fir(),
+            (Species::SilverFir, Age::Mature) => mature::silver_fir(),
         }
     }
 }
@@ -158,25 +239,30 @@ pub struct GenerateOptions {
     /// Needle count to aim for (the result lands within a fraction of a per
     /// cent for counts from a few thousand up): the needle density on the
     /// shoots is scaled, the tree's shape and size kept. `None`: the
-    /// species' natural count (tens of thousands, ±8 % by seed).
+    /// species' own count (young trees: tens of thousands, ±8 % by seed;
+    /// mature trees: what their shoots carry, at most a record's worth).
+    ///
+    /// A mature tree given fewer needles than it naturally carries widens
+    /// them, keeping their summed area, so its crown stays as dense; up to
+    /// needles as wide as the shortest is long, past which it thins.
     pub target_needles: Option<usize>,
+    /// How old the tree is.
+    pub age: Age,
 }
 
 /// Grows one tree of `species`.
 pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
-    let params = species.params();
+    let params = species.params(options.age);
     let skeleton = skeleton::grow_skeleton(&params, &mut TreeRng::new(options.seed, Stream::Skeleton));
-    let target = options
-        .target_needles
-        .unwrap_or_else(|| default_needle_count(&params, options.seed));
+    let budget = needle_budget(&params, &skeleton.sites, options);
     let needles = foliage::grow_needles(
         &skeleton.sites,
         &params.foliage,
-        target,
+        budget,
         &mut TreeRng::new(options.seed, Stream::Foliage),
     );
     TreeInput {
-        name: format!("{}-s{}", species.name(), options.seed),
+        name: format!("{}-{}-s{}", species.name(), options.age, options.seed),
         needles,
         wood: skeleton.wood,
         wood_mesh: Default::default(),
@@ -190,19 +276,17 @@ pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
 /// (by needle count, vigour and variant) placed, rotated and scaled onto the
 /// shoot, so the record and the GPU hold them once.
 pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> PrototypeInput {
-    let params = species.params();
+    let params = species.params(options.age);
     let skeleton = skeleton::grow_skeleton(&params, &mut TreeRng::new(options.seed, Stream::Skeleton));
-    let target = options
-        .target_needles
-        .unwrap_or_else(|| default_needle_count(&params, options.seed));
+    let budget = needle_budget(&params, &skeleton.sites, options);
     let (prototypes, placements) = foliage::grow_shoot_prototypes(
         &skeleton.sites,
         &params.foliage,
-        target,
+        budget,
         &mut TreeRng::new(options.seed, Stream::Foliage),
     );
     PrototypeInput {
-        name: format!("{}-s{}", species.name(), options.seed),
+        name: format!("{}-{}-s{}", species.name(), options.age, options.seed),
         prototypes,
         placements,
         wood: skeleton.wood,
@@ -211,10 +295,39 @@ pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> Proto
     }
 }
 
-/// The species' needle count with the tree's vigour (±8 %, by seed).
-fn default_needle_count(params: &SpeciesParams, seed: u64) -> usize {
-    let vigor = TreeRng::new(seed, Stream::Tree).jitter(1.0, 0.08);
-    (params.foliage.default_needles as f32 * vigor).round() as usize
+/// How many needles the tree gets, and how much they widen: the species'
+/// count with the tree's vigour (±8 %, by seed), or the options' count.
+fn needle_budget(params: &SpeciesParams, sites: &[skeleton::FoliageSite], options: &GenerateOptions) -> NeedleBudget {
+    let vigor = TreeRng::new(options.seed, Stream::Tree).jitter(1.0, 0.08);
+    let foliage = &params.foliage;
+    let (natural, most) = match foliage.count {
+        NeedleCount::Total(count) => ((count as f32 * vigor).round() as usize, usize::MAX),
+        NeedleCount::PerMetre { per_metre, most } => {
+            let shoot_metres: f32 = sites.iter().map(|s| s.weight).sum();
+            ((per_metre * shoot_metres * vigor).round() as usize, most)
+        }
+    };
+    let target = options.target_needles.unwrap_or(natural.min(most));
+    let keep_area = natural as f32 / target.max(1) as f32;
+    let (widening, lengthening) = match (foliage.count, foliage.phyllotaxy) {
+        (NeedleCount::Total(_), _) => (1.0, 1.0),
+        // Scale leaves grow both ways, keeping their shape, up to 6×.
+        (NeedleCount::PerMetre { .. }, params::Phyllotaxy::Scales) => {
+            let both = keep_area.sqrt().clamp(1.0, 6.0);
+            (both, both)
+        }
+        // Needles widen, up to as wide as the shortest is long.
+        (NeedleCount::PerMetre { .. }, _) => {
+            let widest = 0.5 * foliage.length.0 / foliage.radius.1;
+            (keep_area.clamp(1.0, widest.max(1.0)), 1.0)
+        }
+    };
+    NeedleBudget {
+        target,
+        natural,
+        widening,
+        lengthening,
+    }
 }
 
 #[cfg(test)]

@@ -35,6 +35,9 @@ pub(crate) struct TrunkParams {
     pub nod_length: f32,
     /// Trunk pieces per annual unit; branching nodes sit at each piece's top.
     pub nodes_per_year: u32,
+    /// Extra radius at the ground as a fraction of `base_radius` (root
+    /// flare), fading within the lowest 3 % of the height.
+    pub flare: f32,
 }
 
 /// The envelope the branches fill.
@@ -49,6 +52,10 @@ pub(crate) struct CrownParams {
     pub shape: CrownShape,
     /// Random spread of each branch's reach (fraction).
     pub irregularity: f32,
+    /// Below the crown base, the top `dead_zone` fraction of the bare trunk
+    /// keeps dead branches (bare wood, a fraction of a live branch's reach);
+    /// lower down only stubs (`BranchParams::stubs`) or nothing.
+    pub dead_zone: f32,
 }
 
 /// Crown silhouettes.
@@ -60,6 +67,12 @@ pub(crate) enum CrownShape {
     Rounded,
     /// A narrow column with a short tapering top (cypress).
     Columnar,
+    /// Old pines: narrow low down, widest at 70 % of the crown, a flat dome
+    /// on top (the upper branches level out under the leader's height).
+    Umbrella,
+    /// Old firs: a cone cut off flat, its upper branches still long and
+    /// turned up to one height (the "stork's nest").
+    StorksNest,
 }
 
 impl CrownShape {
@@ -71,6 +84,12 @@ impl CrownShape {
             CrownShape::Conical { exponent } => (1.0 - c).powf(exponent),
             CrownShape::Rounded => (1.0 - c).powf(0.4) * (0.6 + 0.4 * (c / 0.35).min(1.0)),
             CrownShape::Columnar => (1.0 - c).powf(0.45) * (0.75 + 0.25 * (1.0 - c)),
+            CrownShape::Umbrella => {
+                let rise = (c / 0.7).min(1.0);
+                let fall = ((c - 0.7) / 0.3).max(0.0);
+                (0.45 + 0.55 * (rise * std::f32::consts::FRAC_PI_2).sin()) * (1.0 - 0.55 * fall * fall)
+            }
+            CrownShape::StorksNest => (1.0 - 0.75 * c).powf(0.9),
         }
     }
 }
@@ -109,8 +128,31 @@ pub(crate) struct BranchParams {
     /// Probability that a lateral lies in the branch's horizontal plane
     /// (left/right) rather than at a random azimuth.
     pub planarity: f32,
-    /// Extra downward bending per metre of order ≥ 3 axes (hanging branchlets).
+    /// Extra downward bending per metre of axes of order `hanging_from_order`
+    /// and higher (hanging branchlets).
     pub hanging: f32,
+    /// Lowest order that hangs (3 in young spruce; 2 gives an old spruce's
+    /// curtains of branchlets).
+    pub hanging_from_order: u32,
+    /// Nodes of an axis older than this many years carry no laterals: they
+    /// were shed in the shaded interior, so foliage sits at the branch ends.
+    pub shed_years: u32,
+    /// Chance that a branch of a whorl is missing; half as many again are
+    /// broken off at a random age.
+    pub loss: f32,
+    /// Random sideways turn per metre of a branch (crooked old pine limbs).
+    pub crookedness: f32,
+    /// Laterals whose yearly shoot would be shorter than this (metres) do
+    /// not grow.
+    pub min_shoot: f32,
+    /// Most growth units a first-order branch is grown as: an older branch
+    /// grew most of its length while young and lit, so it is grown as this
+    /// many longer units (its shaded old wood carries nothing).
+    pub branch_units: u32,
+    /// Consecutive pieces of an axis merged into one foliage site and one
+    /// wood segment (1: every piece its own), so a big tree's shoots and
+    /// wood stay within a record's budget.
+    pub merge_pieces: u32,
     /// Radius of a shoot tip (pipe model: a branch's cross-section is the
     /// sum of its tips').
     pub tip_radius: f32,
@@ -151,6 +193,21 @@ pub(crate) enum Phyllotaxy {
     Spiral,
     /// Cypresses: scale leaves lying flat in the spray plane, one spray a group.
     Scales,
+    /// Firs: needles in two flat rows either side of the shoot, raised by
+    /// `lift` radians above the shoot's plane (a shallow V).
+    TwoRanked { lift: f32 },
+}
+
+/// How many needles a tree of the species carries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum NeedleCount {
+    /// This many at default options (young presets), the density on the
+    /// shoots following from it.
+    Total(usize),
+    /// Needles per metre of young shoot at full survival: the count follows
+    /// from the tree. A record carries at most `most` needles; above it the
+    /// needles widen, keeping their summed area (and the crown's density).
+    PerMetre { per_metre: f32, most: usize },
 }
 
 /// Needle shape, density and grouping.
@@ -158,7 +215,7 @@ pub(crate) enum Phyllotaxy {
 pub(crate) struct FoliageParams {
     pub phyllotaxy: Phyllotaxy,
     /// Needle count at default options (before a ±8 % per-seed vigour factor).
-    pub default_needles: usize,
+    pub count: NeedleCount,
     /// Shoots (or sprays) younger than this carry needles.
     pub retention_years: u32,
     /// Needle density on a shoot one year older, relative (needle fall).
@@ -176,12 +233,12 @@ pub(crate) struct FoliageParams {
     pub group_size: (usize, usize),
 }
 
-const fn deg(degrees: f32) -> f32 {
+pub(crate) const fn deg(degrees: f32) -> f32 {
     degrees * (std::f32::consts::PI / 180.0)
 }
 
 /// Linear colour from 8-bit sRGB.
-fn srgb(r: u8, g: u8, b: u8) -> [f32; 4] {
+pub(crate) fn srgb(r: u8, g: u8, b: u8) -> [f32; 4] {
     let lin = |c: u8| {
         let c = f32::from(c) / 255.0;
         if c <= 0.04045 {
@@ -207,12 +264,14 @@ pub(crate) fn scots_pine() -> SpeciesParams {
             nod: 0.0,
             nod_length: 0.0,
             nodes_per_year: 2,
+            flare: 0.0,
         },
         crown: CrownParams {
             base_fraction: (0.22, 0.32),
             radius: 1.4,
             shape: CrownShape::Rounded,
             irregularity: 0.45,
+            dead_zone: 0.0,
         },
         branching: BranchParams {
             whorl_size: (4, 6),
@@ -231,6 +290,13 @@ pub(crate) fn scots_pine() -> SpeciesParams {
             lateral_length: 0.7,
             planarity: 0.45,
             hanging: 0.0,
+            hanging_from_order: 3,
+            shed_years: u32::MAX,
+            loss: 0.0,
+            crookedness: 0.0,
+            min_shoot: 0.0,
+            branch_units: u32::MAX,
+            merge_pieces: 1,
             tip_radius: 0.002,
             stubs: true,
         },
@@ -241,7 +307,7 @@ pub(crate) fn scots_pine() -> SpeciesParams {
                 spread: deg(9.0),
                 twist: deg(60.0),
             },
-            default_needles: 56_000,
+            count: NeedleCount::Total(56_000),
             retention_years: 3,
             survival_per_year: 0.8,
             length: (0.03, 0.07),
@@ -273,12 +339,14 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             nod: 0.0,
             nod_length: 0.0,
             nodes_per_year: 3,
+            flare: 0.0,
         },
         crown: CrownParams {
             base_fraction: (0.0, 0.04),
             radius: 0.75,
             shape: CrownShape::Conical { exponent: 0.8 },
             irregularity: 0.15,
+            dead_zone: 0.0,
         },
         branching: BranchParams {
             whorl_size: (4, 6),
@@ -297,13 +365,20 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             lateral_length: 0.5,
             planarity: 0.9,
             hanging: 2.5,
+            hanging_from_order: 3,
+            shed_years: u32::MAX,
+            loss: 0.0,
+            crookedness: 0.0,
+            min_shoot: 0.0,
+            branch_units: u32::MAX,
+            merge_pieces: 1,
             tip_radius: 0.001,
             stubs: false,
         },
         spray: None,
         foliage: FoliageParams {
             phyllotaxy: Phyllotaxy::Spiral,
-            default_needles: 70_000,
+            count: NeedleCount::Total(70_000),
             retention_years: 5,
             survival_per_year: 0.75,
             length: (0.013, 0.025),
@@ -336,12 +411,14 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
             nod: 0.0,
             nod_length: 0.0,
             nodes_per_year: 2,
+            flare: 0.0,
         },
         crown: CrownParams {
             base_fraction: (0.1, 0.18),
             radius: 1.5,
             shape: CrownShape::Conical { exponent: 0.9 },
             irregularity: 0.2,
+            dead_zone: 0.0,
         },
         branching: BranchParams {
             whorl_size: (4, 6),
@@ -360,6 +437,13 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
             lateral_length: 0.65,
             planarity: 0.9,
             hanging: 0.0,
+            hanging_from_order: 3,
+            shed_years: u32::MAX,
+            loss: 0.0,
+            crookedness: 0.0,
+            min_shoot: 0.0,
+            branch_units: u32::MAX,
+            merge_pieces: 1,
             tip_radius: 0.002,
             stubs: false,
         },
@@ -370,7 +454,7 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
                 spread: deg(8.0),
                 twist: deg(30.0),
             },
-            default_needles: 62_000,
+            count: NeedleCount::Total(62_000),
             retention_years: 2,
             survival_per_year: 0.7,
             length: (0.06, 0.13),
@@ -406,12 +490,14 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             nod: deg(75.0),
             nod_length: 0.3,
             nodes_per_year: 10,
+            flare: 0.0,
         },
         crown: CrownParams {
             base_fraction: (0.0, 0.03),
             radius: 0.42,
             shape: CrownShape::Columnar,
             irregularity: 0.2,
+            dead_zone: 0.0,
         },
         branching: BranchParams {
             whorl_size: (1, 2),
@@ -430,6 +516,13 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             lateral_length: 0.5,
             planarity: 1.0,
             hanging: 0.0,
+            hanging_from_order: 3,
+            shed_years: u32::MAX,
+            loss: 0.0,
+            crookedness: 0.0,
+            min_shoot: 0.0,
+            branch_units: u32::MAX,
+            merge_pieces: 1,
             tip_radius: 0.0006,
             stubs: false,
         },
@@ -445,7 +538,7 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
         }),
         foliage: FoliageParams {
             phyllotaxy: Phyllotaxy::Scales,
-            default_needles: 74_000,
+            count: NeedleCount::Total(74_000),
             retention_years: 2,
             survival_per_year: 0.8,
             length: (0.0025, 0.004),

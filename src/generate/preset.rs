@@ -4,14 +4,15 @@
 use std::fmt;
 use std::str::FromStr;
 
-use super::{GenerateOptions, Species, UnknownSpecies, generate_prototypes};
+use super::{Age, GenerateOptions, Species, UnknownSpecies, generate_prototypes};
 use crate::model::{BakeError, BakeOptions, PrototypeRecord, bake_prototypes};
 
-/// A preset tree: one of the [`Species`] grown from a seed, optionally
-/// with a needle count, as shared shoot prototypes baked with
-/// [`BakeOptions::default`] (what `conifer bake --preset` writes).
+/// A preset tree: one of the [`Species`] at an [`Age`] (mature unless
+/// asked), grown from a seed, optionally with a needle count, as shared
+/// shoot prototypes baked with [`BakeOptions::default`] (what `conifer bake
+/// --preset` writes).
 ///
-/// Its text form is `species[?seed=S][&needles=N]`, e.g.
+/// Its text form is `species[?seed=S][&needles=N][&age=young]`, e.g.
 /// `norway-spruce?seed=3`; [`Preset`]'s `Display` writes it back.
 ///
 /// ```
@@ -29,15 +30,32 @@ pub struct Preset {
     pub seed: u64,
     /// Needle count to aim for; `None` is the species' own.
     pub target_needles: Option<usize>,
+    /// How old the tree is.
+    pub age: Age,
 }
 
 impl Preset {
-    /// The species' tree of seed 0 with its own needle count.
+    /// The species' mature tree of seed 0 with its own needle count.
     pub fn new(species: Species) -> Self {
         Self {
             species,
             seed: 0,
             target_needles: None,
+            age: Age::Mature,
+        }
+    }
+
+    /// The same preset at another age.
+    pub fn with_age(self, age: Age) -> Self {
+        Self { age, ..self }
+    }
+
+    /// What [`generate_prototypes`](super::generate_prototypes) grows it from.
+    pub fn options(&self) -> GenerateOptions {
+        GenerateOptions {
+            seed: self.seed,
+            target_needles: self.target_needles,
+            age: self.age,
         }
     }
 
@@ -54,16 +72,10 @@ impl Preset {
         }
     }
 
-    /// Grows and bakes the tree (tens of milliseconds for the presets'
-    /// own counts; level-1 merges run on the current rayon pool).
+    /// Grows and bakes the tree (tens of milliseconds for young trees,
+    /// seconds for mature ones; merges run on the current rayon pool).
     pub fn bake(&self) -> Result<PrototypeRecord, BakeError> {
-        let input = generate_prototypes(
-            self.species,
-            &GenerateOptions {
-                seed: self.seed,
-                target_needles: self.target_needles,
-            },
-        );
+        let input = generate_prototypes(self.species, &self.options());
         bake_prototypes(&input, &BakeOptions::default(), &())
     }
 
@@ -74,7 +86,7 @@ impl Preset {
     pub fn fingerprint(&self) -> u64 {
         let inputs = format!(
             "{:?}|{:?}|{}|{}",
-            self.species.params(),
+            self.species.params(self.age),
             BakeOptions::default(),
             crate::model::file::FORMAT_VERSION,
             env!("CARGO_PKG_VERSION")
@@ -86,11 +98,15 @@ impl Preset {
     }
 
     /// A file stem that names this preset uniquely (`norway-spruce-s3`,
-    /// `norway-spruce-s3-n20000`).
+    /// `norway-spruce-young-s3-n20000`).
     pub fn file_stem(&self) -> String {
+        let age = match self.age {
+            Age::Mature => String::new(),
+            age => format!("-{age}"),
+        };
         match self.target_needles {
-            Some(needles) => format!("{}-s{}-n{needles}", self.species.name(), self.seed),
-            None => format!("{}-s{}", self.species.name(), self.seed),
+            Some(needles) => format!("{}{age}-s{}-n{needles}", self.species.name(), self.seed),
+            None => format!("{}{age}-s{}", self.species.name(), self.seed),
         }
     }
 }
@@ -111,6 +127,10 @@ impl fmt::Display for Preset {
         }
         if let Some(needles) = self.target_needles {
             write!(f, "{separator}needles={needles}")?;
+            separator = '&';
+        }
+        if self.age != Age::Mature {
+            write!(f, "{separator}age={}", self.age)?;
         }
         Ok(())
     }
@@ -124,10 +144,10 @@ pub enum PresetParseError {
         "{0}; a tree of your own loads from a `.conifer` record baked by `conifer bake` (a glTF file or a preset with other options)"
     )]
     UnknownSpecies(#[from] UnknownSpecies),
-    /// An option that is not `seed` or `needles`, or a value that is not a
-    /// whole number.
+    /// An option that is not `seed`, `needles` or `age`, a seed or count
+    /// that is not a whole number, a count of 0 or an unknown age.
     #[error(
-        "bad preset option `{option}` in `{text}` (expected `seed=S` and `needles=N`, whole numbers, joined by `&`)"
+        "bad preset option `{option}` in `{text}` (expected `seed=S` and `needles=N`, whole numbers with N > 0, and `age=young` or `age=mature`, joined by `&`)"
     )]
     BadOption {
         /// The whole text.
@@ -151,7 +171,11 @@ impl FromStr for Preset {
             let (key, value) = option.split_once('=').ok_or_else(bad)?;
             match key.trim() {
                 "seed" => preset.seed = value.trim().parse().map_err(|_| bad())?,
-                "needles" => preset.target_needles = Some(value.trim().parse().map_err(|_| bad())?),
+                "needles" => match value.trim().parse() {
+                    Ok(0) | Err(_) => return Err(bad()),
+                    Ok(needles) => preset.target_needles = Some(needles),
+                },
+                "age" => preset.age = Age::from_name(value).ok_or_else(bad)?,
                 _ => return Err(bad()),
             }
         }
@@ -178,6 +202,9 @@ mod tests {
             "scots-pine?colour=red",
             "scots-pine?seed",
             "scots-pine?needles=-3",
+            "scots-pine?needles=0",
+            "scots-pine?age=0",
+            "scots-pine?age=old",
         ] {
             assert!(
                 matches!(bad.parse::<Preset>(), Err(PresetParseError::BadOption { .. })),
@@ -188,7 +215,10 @@ mod tests {
 
     #[test]
     fn a_preset_bakes_the_tree_conifer_bake_writes() {
-        let preset = Preset::new(Species::ScotsPine).with_seed(2).with_needles(3_000);
+        let preset = Preset::new(Species::ScotsPine)
+            .with_seed(2)
+            .with_needles(3_000)
+            .with_age(Age::Young);
         let record = preset.bake().unwrap();
         let flat = record.flatten().unwrap();
         let needles = flat.needles.len();
@@ -200,19 +230,26 @@ mod tests {
             (&record.prototypes, &record.placements, &record.tree_merged),
             "a preset is deterministic"
         );
-        assert_eq!(preset.file_stem(), "scots-pine-s2-n3000");
+        assert_eq!(preset.file_stem(), "scots-pine-young-s2-n3000");
+        assert_eq!(preset.to_string(), "scots-pine?seed=2&needles=3000&age=young");
         assert_eq!(preset.fingerprint(), preset.with_seed(9).fingerprint());
         assert_ne!(
             preset.fingerprint(),
             Preset::new(Species::NorwaySpruce).fingerprint(),
             "species' parameters differ"
         );
+        assert_ne!(
+            preset.fingerprint(),
+            preset.with_age(Age::Mature).fingerprint(),
+            "ages' parameters differ"
+        );
     }
 
     proptest! {
         #[test]
-        fn text_form_round_trips(species in 0..Species::ALL.len(), seed in any::<u64>(), needles in proptest::option::of(1usize..10_000_000)) {
-            let preset = Preset { species: Species::ALL[species], seed, target_needles: needles };
+        fn text_form_round_trips(species in 0..Species::ALL.len(), seed in any::<u64>(), needles in proptest::option::of(1usize..10_000_000), young in any::<bool>()) {
+            let age = if young { Age::Young } else { Age::Mature };
+            let preset = Preset { species: Species::ALL[species], seed, target_needles: needles, age };
             prop_assert_eq!(preset.to_string().parse::<Preset>(), Ok(preset));
         }
     }

@@ -88,6 +88,16 @@ struct Axis {
     vigor: f32,
     /// The pipe model's radius is capped here (a branch thinner than its parent).
     max_radius: f32,
+    /// A dead branch below the crown: bare wood, no laterals.
+    dead: bool,
+}
+
+/// The site a run of consecutive pieces of one axis is merged into
+/// (`BranchParams::merge_pieces`).
+#[derive(Clone, Copy, Debug, Default)]
+struct SiteRun {
+    site: Option<usize>,
+    pieces: u32,
 }
 
 /// A grown piece of an axis, waiting for its radius.
@@ -142,9 +152,11 @@ impl Grower<'_> {
     }
 
     fn trunk_radius(&self, path: f32) -> f32 {
+        let trunk = &self.params.trunk;
         let tip = self.params.branching.tip_radius * 1.5;
         let rest = (1.0 - path / self.height).clamp(0.0, 1.0);
-        tip + (self.params.trunk.base_radius - tip) * rest.powf(0.9)
+        let flare = trunk.flare * (-path / (0.03 * self.height).max(1e-3)).exp();
+        tip + (trunk.base_radius - tip) * rest.powf(0.9) + trunk.base_radius * flare
     }
 
     /// The trunk's direction at `path` metres up: vertical plus a slowly
@@ -183,7 +195,7 @@ impl Grower<'_> {
                     end_radius: self.trunk_radius(path + piece),
                 });
                 let is_tip = year as u32 + 1 == trunk.age_years && node == nodes;
-                self.add_foliage(pos, end, years_old, 1.2, is_tip);
+                self.add_foliage(&mut SiteRun::default(), pos, end, years_old, 1.2, is_tip);
                 if years_old >= 1 {
                     let is_whorl = node == nodes;
                     self.grow_whorl(end, years_old, is_whorl, self.trunk_radius(path + piece));
@@ -206,9 +218,24 @@ impl Grower<'_> {
         let count = self.rng.count(size);
         self.whorl_count += 1;
         let first_azimuth = self.whorl_count as f32 * GOLDEN_ANGLE;
+        let loss = self.params.branching.loss;
         for index in 0..count {
             let spread = TAU / count as f32;
             let azimuth = first_azimuth + index as f32 * spread + 0.35 * spread * self.rng.signed();
+            // (No draws without loss: young presets keep their trees.)
+            if loss > 0.0 && self.rng.chance(loss) {
+                // Missing: lost long ago, a stub where the wood healed over.
+                if self.params.branching.stubs {
+                    self.grow_stub(node, azimuth, trunk_radius);
+                }
+                continue;
+            }
+            // Broken: the branch stopped growing at a random age.
+            let age = if loss > 0.0 && self.rng.chance(0.5 * loss) {
+                1 + self.rng.count((0, age.saturating_sub(1)))
+            } else {
+                age
+            };
             self.grow_branch(node, azimuth, age, vigor, trunk_radius);
         }
     }
@@ -216,19 +243,23 @@ impl Grower<'_> {
     /// One first-order branch, sized so its reach follows the crown shape.
     fn grow_branch(&mut self, node: Vec3, azimuth: f32, age: u32, vigor: f32, trunk_radius: f32) {
         let params = self.params;
-        if node.y < self.crown_base {
+        let crown = &params.crown;
+        let dead = node.y < self.crown_base;
+        if dead && node.y < self.crown_base * (1.0 - crown.dead_zone) {
             if params.branching.stubs {
                 self.grow_stub(node, azimuth, trunk_radius);
             }
             return;
         }
         let crown_height = (self.height - self.crown_base).max(1e-3);
-        let c = (node.y - self.crown_base) / crown_height;
-        let crown = &params.crown;
+        let c = ((node.y - self.crown_base) / crown_height).max(0.0);
+        // A dead branch keeps part of the reach it had when it died.
+        let vigor = if dead { 0.4 * vigor } else { vigor };
         let reach = crown.radius * crown.shape.reach_fraction(c) * self.rng.jitter(1.0, crown.irregularity) * vigor;
         let branching = &params.branching;
         let angle =
             branching.angle_bottom + (branching.angle_top - branching.angle_bottom) * c + 0.12 * self.rng.signed();
+        let age = age.min(branching.branch_units.max(1));
         let segment_length = (reach / (age as f32 * angle.sin().max(0.4))).clamp(0.02, branching.max_annual_growth);
         self.grow_axis(Axis {
             origin: node,
@@ -237,7 +268,8 @@ impl Grower<'_> {
             order: 1,
             segment_length,
             vigor: 0.8 + 0.2 * vigor,
-            max_radius: 0.6 * trunk_radius,
+            max_radius: if dead { 0.3 } else { 0.6 } * trunk_radius,
+            dead,
         });
     }
 
@@ -263,18 +295,26 @@ impl Grower<'_> {
         let mut pieces = Vec::with_capacity((axis.age * nodes) as usize);
         let (mut pos, mut dir) = (axis.origin, axis.direction);
         let mut node_index = self.rng.count((0, 1));
+        let mut run = SiteRun::default();
         for year in 0..axis.age {
             let years_old = axis.age - 1 - year;
             let youth = 1.0 - years_old as f32 / axis.age as f32;
             let piece_length = self.rng.jitter(axis.segment_length, 0.2) / nodes as f32;
             for node in 1..=nodes {
                 dir = bend_vertically(dir, self.bending(axis.order, youth) * piece_length);
+                if branching.crookedness > 0.0 {
+                    let turn = horizontal(self.rng.unit() * TAU) * (branching.crookedness * piece_length);
+                    dir = (dir + turn).normalize_or(dir);
+                }
                 dir = keep_above_ground(pos, dir, piece_length);
                 dir = keep_below_leader(pos, dir, piece_length, self.height);
                 let end = pos + dir * piece_length;
                 let is_tip = year + 1 == axis.age && node == nodes;
-                self.add_foliage(pos, end, years_old, axis.vigor, is_tip);
-                let children_measure = if years_old >= 1 && axis.order < branching.max_order {
+                if !axis.dead {
+                    self.add_foliage(&mut run, pos, end, years_old, axis.vigor, is_tip);
+                }
+                let bears_laterals = years_old >= 1 && years_old < branching.shed_years && !axis.dead;
+                let children_measure = if bears_laterals && axis.order < branching.max_order {
                     node_index += 1;
                     self.grow_laterals(end, dir, years_old, &axis, node_index)
                 } else {
@@ -295,7 +335,11 @@ impl Grower<'_> {
     /// high-order branchlets hang.
     fn bending(&self, order: u32, youth: f32) -> f32 {
         let branching = &self.params.branching;
-        let hanging = if order >= 3 { branching.hanging } else { 0.0 };
+        let hanging = if order >= branching.hanging_from_order {
+            branching.hanging
+        } else {
+            0.0
+        };
         branching.upturn * youth * youth - branching.sag * (1.0 - youth) - hanging
     }
 
@@ -319,6 +363,10 @@ impl Grower<'_> {
             };
             let angle = self.rng.jitter(branching.lateral_angle, 0.2);
             let length_ratio = self.rng.jitter(branching.lateral_length, 0.2);
+            if parent.segment_length * length_ratio < branching.min_shoot {
+                // Too weak to grow: shaded buds stay dormant.
+                continue;
+            }
             measure += self.grow_axis(Axis {
                 origin: node,
                 direction: cone_direction(parent_dir, side, angle, azimuth),
@@ -327,6 +375,7 @@ impl Grower<'_> {
                 segment_length: parent.segment_length * length_ratio,
                 vigor: parent.vigor * 0.85,
                 max_radius: parent.max_radius * 0.7,
+                dead: false,
             });
         }
         measure
@@ -340,15 +389,27 @@ impl Grower<'_> {
         let max = max_radius.powf(PIPE_EXPONENT);
         let radius = |measure: f32| measure.min(max).powf(PIPE_EXPONENT.recip());
         let mut measure = tip;
+        let mut segments = Vec::with_capacity(pieces.len());
         for piece in pieces.iter().rev() {
             measure += piece.children_measure;
             let end_radius = radius(measure);
             measure += 0.15 * tip;
-            self.wood.push(WoodSegment {
+            segments.push(WoodSegment {
                 start: piece.start,
                 end: piece.end,
                 start_radius: radius(measure),
                 end_radius,
+            });
+        }
+        // Runs of `merge_pieces` pieces (from the tip) become one segment.
+        let merge = self.params.branching.merge_pieces.max(1) as usize;
+        for run in segments.chunks(merge) {
+            let (tip_most, base_most) = (run[0], run[run.len() - 1]);
+            self.wood.push(WoodSegment {
+                start: base_most.start,
+                end: tip_most.end,
+                start_radius: base_most.start_radius,
+                end_radius: tip_most.end_radius,
             });
         }
         measure.min(max)
@@ -356,7 +417,7 @@ impl Grower<'_> {
 
     /// Records the needle-bearing part of a young piece: the piece itself
     /// (needle shoots) or the sprays along it (scale-leaf species).
-    fn add_foliage(&mut self, start: Vec3, end: Vec3, years_old: u32, vigor: f32, is_tip: bool) {
+    fn add_foliage(&mut self, run: &mut SiteRun, start: Vec3, end: Vec3, years_old: u32, vigor: f32, is_tip: bool) {
         let foliage = &self.params.foliage;
         if years_old >= foliage.retention_years {
             return;
@@ -365,16 +426,32 @@ impl Grower<'_> {
         match &self.params.spray {
             Some(spray) => self.add_sprays(spray, start, end, weight_scale, vigor, is_tip),
             None => {
+                let weight = start.distance(end) * weight_scale;
+                let merge = self.params.branching.merge_pieces.max(1);
+                if let Some(index) = run.site.filter(|_| run.pieces < merge) {
+                    let site = &mut self.sites[index];
+                    if site.end.distance_squared(start) < 1e-12 {
+                        site.end = end;
+                        site.weight += weight;
+                        site.up = perpendicular_toward((end - site.start).normalize_or(UP), UP);
+                        run.pieces += 1;
+                        return;
+                    }
+                }
                 let dir = (end - start).normalize_or(UP);
                 self.sites.push(FoliageSite {
                     start,
                     end,
                     up: perpendicular_toward(dir, UP),
-                    weight: start.distance(end) * weight_scale,
+                    weight,
                     group_key: self.next_group_key,
                     vigor,
                 });
                 self.next_group_key += 1;
+                *run = SiteRun {
+                    site: Some(self.sites.len() - 1),
+                    pieces: 1,
+                };
             }
         }
     }

@@ -11,11 +11,13 @@
 //! * [`file`](mod@file): the binary record file.
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
+//! * [`look`]: how the whole tree looks from afar (its crown's see-through).
 
 pub mod bake;
 pub mod compact;
 pub mod cut_count;
 pub mod file;
+pub mod look;
 pub mod merge;
 pub mod metric;
 pub mod needle;

@@ -1,0 +1,432 @@
+//! How a whole tree looks from afar, free of Bevy: how much of its crown
+//! one can see through.
+//!
+//! ## Crown see-through
+//!
+//! [`crown_see_through`] is `1 −` the mean coverage over the crown's
+//! *outline*, defined on a coverage picture (alpha of the tree rendered
+//! alone) and the crown's box in it (the screen box of the needles, so the
+//! bare trunk below the crown is left out):
+//!
+//! 1. The *silhouette*: the box's pixels with coverage of at least 5 %
+//!    ([`SILHOUETTE_COVERAGE`]).
+//! 2. Closed at 1/16 of the crown's height ([`OUTLINE_CELLS`]): dilated,
+//!    then eroded, by a square of `c = max(1, round(h / 16))` pixels, `h`
+//!    the box's height. Gaps narrower than `c` (between shoots, branches,
+//!    tiers) are filled; the outline's edge stays on the silhouette's.
+//! 3. Filled across: in each row, every pixel from the leftmost to the
+//!    rightmost of the closed silhouette.
+//! 4. The see-through is `1 −` the mean coverage of the outline's pixels.
+//!
+//! `conifer eval` applies it to the supersampled reference; [`side_coverage`]
+//! renders the picture on the CPU instead (orthographic, every needle and
+//! wood segment rasterized at a fraction of its width), which the generator
+//! is tuned and tested with.
+
+use super::needle::{Needle, WoodSegment};
+use glam::{Vec2, Vec3};
+
+/// The outline's resolution: gaps narrower than the crown's height over
+/// this are closed.
+pub const OUTLINE_CELLS: u32 = 16;
+
+/// Coverage from which a pixel is part of the crown's silhouette.
+pub const SILHOUETTE_COVERAGE: f32 = 0.5;
+
+/// A picture of coverage in `[0, 1]`, row-major, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoverageGrid {
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// `width × height` coverages.
+    pub coverage: Vec<f32>,
+}
+
+impl CoverageGrid {
+    /// A grid of `width × height` zeros.
+    pub fn new(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            coverage: vec![0.0; width as usize * height as usize],
+        }
+    }
+
+    /// Coverage at column `x`, row `y` (0 outside).
+    pub fn at(&self, x: u32, y: u32) -> f32 {
+        if x < self.width && y < self.height {
+            self.coverage[(y * self.width + x) as usize]
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The crown's box in a picture: columns `x0..x1`, rows `y0..y1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CrownBox {
+    /// First column.
+    pub x0: u32,
+    /// First row (the crown's top).
+    pub y0: u32,
+    /// One past the last column.
+    pub x1: u32,
+    /// One past the last row (the crown's base).
+    pub y1: u32,
+}
+
+/// What [`crown_see_through`] measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeeThrough {
+    /// `1 −` mean coverage over the outline, in `[0, 1]`.
+    pub see_through: f64,
+    /// Pixels in the outline.
+    pub outline_pixels: u64,
+    /// Side of the closing square, pixels.
+    pub closing: u32,
+}
+
+/// The crown's see-through (module docs): `None` when the box is empty or
+/// holds no silhouette pixel.
+pub fn crown_see_through(grid: &CoverageGrid, crown: CrownBox) -> Option<SeeThrough> {
+    let (x0, x1) = (crown.x0.min(grid.width), crown.x1.min(grid.width));
+    let (y0, y1) = (crown.y0.min(grid.height), crown.y1.min(grid.height));
+    if x1 <= x0 || y1 <= y0 {
+        return None;
+    }
+    let closing = ((y1 - y0) as f32 / OUTLINE_CELLS as f32).round().max(1.0) as usize;
+    // The box with a margin of `closing` on every side, so the dilation
+    // has room; outside it nothing is silhouette.
+    let margin = closing;
+    let (width, height) = ((x1 - x0) as usize + 2 * margin, (y1 - y0) as usize + 2 * margin);
+    let mut mask = vec![false; width * height];
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let index = (y - y0) as usize * width + (x - x0) as usize + margin * width + margin;
+            mask[index] = grid.at(x, y) >= SILHOUETTE_COVERAGE;
+        }
+    }
+    if !mask.iter().any(|&m| m) {
+        return None;
+    }
+    let dilated = square_filter(&mask, width, height, closing, true);
+    let closed = square_filter(&dilated, width, height, closing, false);
+    let (mut covered, mut pixels) = (0.0f64, 0u64);
+    for row in 0..height {
+        let line = &closed[row * width..(row + 1) * width];
+        let (Some(first), Some(last)) = (line.iter().position(|&m| m), line.iter().rposition(|&m| m)) else {
+            continue;
+        };
+        for column in first..=last {
+            let (x, y) = (column as i64 - margin as i64, row as i64 - margin as i64);
+            if x >= 0 && y >= 0 {
+                covered += f64::from(grid.at(x0 + x as u32, y0 + y as u32).clamp(0.0, 1.0));
+            }
+            pixels += 1;
+        }
+    }
+    Some(SeeThrough {
+        see_through: (1.0 - covered / pixels as f64).clamp(0.0, 1.0),
+        outline_pixels: pixels,
+        closing: closing as u32,
+    })
+}
+
+/// `mask` dilated (`grow`) or eroded by a `side × side` square: a pixel is
+/// set when any (dilation) or every (erosion) pixel of the square around it
+/// is; outside the mask counts as unset. Separable: rows, then columns.
+fn square_filter(mask: &[bool], width: usize, height: usize, side: usize, grow: bool) -> Vec<bool> {
+    let (before, after) = ((side - 1) / 2, side / 2);
+    let pass = |input: &[bool], length: usize, lines: usize, at: &dyn Fn(usize, usize) -> usize| {
+        let mut output = vec![false; input.len()];
+        for line in 0..lines {
+            for i in 0..length {
+                let lo = i.checked_sub(before);
+                let hi = i + after;
+                let window_inside = lo.is_some() && hi < length;
+                let (lo, hi) = (lo.unwrap_or(0), hi.min(length - 1));
+                let mut window = (lo..=hi).map(|j| input[at(line, j)]);
+                output[at(line, i)] = if grow {
+                    window.any(|m| m)
+                } else {
+                    window_inside && window.all(|m| m)
+                };
+            }
+        }
+        output
+    };
+    let rows = pass(mask, width, height, &|row, x| row * width + x);
+    pass(&rows, height, width, &|column, y| y * width + column)
+}
+
+/// A side view for [`side_coverage`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SideView {
+    /// Azimuth of the viewing direction about +Y, radians (0 looks along −Z).
+    pub azimuth: f32,
+    /// Side of a picture pixel, metres (at 100 m with a 45° field of view
+    /// over 256 rows: 0.32 m).
+    pub pixel: f32,
+    /// Samples per pixel along each axis; `0` picks enough for the
+    /// thinnest needle to be about one sample wide (at most 256).
+    pub samples: u32,
+}
+
+impl SideView {
+    /// The view `conifer eval` takes at `distance` metres with a vertical
+    /// field of view `fov_y` (radians) over `rows` rows, from the front.
+    pub fn like_eval(distance: f32, fov_y: f32, rows: u32) -> Self {
+        Self {
+            azimuth: 0.0,
+            pixel: 2.0 * distance * (0.5 * fov_y).tan() / rows.max(1) as f32,
+            samples: 0,
+        }
+    }
+}
+
+/// A picture made by [`side_coverage`], with the crown's box in it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SidePicture {
+    /// Coverage of each pixel.
+    pub grid: CoverageGrid,
+    /// The needles' box.
+    pub crown: CrownBox,
+    /// Samples per pixel along each axis that were taken.
+    pub samples: u32,
+}
+
+/// Largest side of the sample grid: pictures above it take fewer samples.
+const MAX_SAMPLE_SIDE: u64 = 40_000;
+
+/// The tree's coverage seen from the side, orthographic, on the CPU: every
+/// needle a strip `2r` wide and every wood segment a trapezoid, rasterized
+/// on a grid of `samples × samples` binary samples a pixel (a sample is
+/// covered when its centre is within the piece's half width of its axis),
+/// box-filtered to pixels. `None` without valid needles or with a pixel
+/// size that is not positive and finite.
+pub fn side_coverage(needles: &[Needle], wood: &[WoodSegment], view: SideView) -> Option<SidePicture> {
+    if !(view.pixel.is_finite() && view.pixel > 0.0) {
+        return None;
+    }
+    let right = Vec3::new(view.azimuth.cos(), 0.0, view.azimuth.sin());
+    let project = |p: Vec3| Vec2::new(p.dot(right), p.y);
+    let valid: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
+    let thinnest = valid.iter().map(|n| n.radius).fold(f32::INFINITY, f32::min);
+    if valid.is_empty() {
+        return None;
+    }
+    let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+    for n in &valid {
+        for p in [project(n.base), project(n.tip)] {
+            lo = lo.min(p - n.radius);
+            hi = hi.max(p + n.radius);
+        }
+    }
+    let crown_lo = lo;
+    let crown_hi = hi;
+    for w in wood.iter().filter(|w| w.is_valid()) {
+        let r = w.start_radius.max(w.end_radius);
+        for p in [project(w.start), project(w.end)] {
+            lo = lo.min(p - r);
+            hi = hi.max(p + r);
+        }
+    }
+    let width = ((hi.x - lo.x) / view.pixel).ceil().max(1.0) as u32;
+    let height = ((hi.y - lo.y) / view.pixel).ceil().max(1.0) as u32;
+    let wanted = if view.samples == 0 {
+        (view.pixel / (2.0 * thinnest)).ceil().clamp(1.0, 256.0) as u32
+    } else {
+        view.samples
+    };
+    let longest = u64::from(width.max(height));
+    let samples = wanted.min((MAX_SAMPLE_SIDE / longest).max(1) as u32);
+    let (sw, sh) = (width * samples, height * samples);
+    let step = view.pixel / samples as f32;
+    // Sample (i, j) has its centre at lo + ((i + ½), (top − j − ½))·step.
+    let top = lo.y + height as f32 * view.pixel;
+    let mut bits = vec![0u64; (sw as usize * sh as usize).div_ceil(64)];
+    let mut stamp = |a: Vec2, b: Vec2, ra: f32, rb: f32| {
+        let r = ra.max(rb);
+        let (min, max) = (a.min(b) - r, a.max(b) + r);
+        let last_i = i64::from(sw) - 1;
+        let last_j = i64::from(sh) - 1;
+        let i0 = (((min.x - lo.x) / step - 0.5).ceil() as i64).max(0);
+        let i1 = (((max.x - lo.x) / step - 0.5).floor() as i64).min(last_i);
+        let j0 = (((top - max.y) / step - 0.5).ceil() as i64).max(0);
+        let j1 = (((top - min.y) / step - 0.5).floor() as i64).min(last_j);
+        let axis = b - a;
+        let length_sq = axis.length_squared();
+        for j in j0..=j1 {
+            let y = top - (j as f32 + 0.5) * step;
+            for i in i0..=i1 {
+                let p = Vec2::new(lo.x + (i as f32 + 0.5) * step, y);
+                let t = if length_sq > 0.0 {
+                    ((p - a).dot(axis) / length_sq).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let half_width = ra + (rb - ra) * t;
+                if p.distance_squared(a + axis * t) <= half_width * half_width {
+                    let index = j as usize * sw as usize + i as usize;
+                    bits[index / 64] |= 1 << (index % 64);
+                }
+            }
+        }
+    };
+    for n in &valid {
+        stamp(project(n.base), project(n.tip), n.radius, n.radius);
+    }
+    for w in wood.iter().filter(|w| w.is_valid()) {
+        stamp(project(w.start), project(w.end), w.start_radius, w.end_radius);
+    }
+    let mut grid = CoverageGrid::new(width, height);
+    let per_pixel = (samples * samples) as f32;
+    for j in 0..sh {
+        for i in 0..sw {
+            let index = j as usize * sw as usize + i as usize;
+            if bits[index / 64] & (1 << (index % 64)) != 0 {
+                grid.coverage[((j / samples) * width + i / samples) as usize] += 1.0 / per_pixel;
+            }
+        }
+    }
+    let column = |x: f32| ((x - lo.x) / view.pixel).clamp(0.0, width as f32);
+    let row = |y: f32| ((top - y) / view.pixel).clamp(0.0, height as f32);
+    let crown = CrownBox {
+        x0: column(crown_lo.x).floor() as u32,
+        x1: column(crown_hi.x).ceil() as u32,
+        y0: row(crown_hi.y).floor() as u32,
+        y1: row(crown_lo.y).ceil() as u32,
+    };
+    Some(SidePicture { grid, crown, samples })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn needle(base: Vec3, tip: Vec3, radius: f32) -> Needle {
+        Needle {
+            base,
+            tip,
+            radius,
+            normal: Vec3::Z,
+            group: 0,
+        }
+    }
+
+    fn crown(width: u32, height: u32) -> CrownBox {
+        CrownBox {
+            x0: 0,
+            y0: 0,
+            x1: width,
+            y1: height,
+        }
+    }
+
+    #[test]
+    fn a_solid_crown_is_not_see_through_and_an_empty_one_has_no_outline() {
+        // A solid triangle (a spruce's side view): its outline is exactly
+        // its silhouette, however coarse the closing.
+        let mut grid = CoverageGrid::new(64, 64);
+        for y in 0..64 {
+            let half = y / 2;
+            for x in 32 - half..=32 + half.min(31) {
+                grid.coverage[(y * 64 + x) as usize] = 1.0;
+            }
+        }
+        let solid = crown_see_through(&grid, crown(64, 64)).expect("a silhouette");
+        assert_eq!(solid.see_through, 0.0, "{solid:?}");
+        assert_eq!(solid.closing, 4);
+        assert_eq!(crown_see_through(&CoverageGrid::new(32, 32), crown(32, 32)), None);
+        assert_eq!(crown_see_through(&grid, CrownBox { x1: 0, ..crown(64, 64) }), None);
+    }
+
+    #[test]
+    fn gaps_narrower_than_the_closing_count_and_the_outside_does_not() {
+        // A 32-row crown (closing 2 px) of 16 columns: every third row is
+        // empty (gaps of 1 px are closed), and the columns outside are
+        // empty (not in the outline).
+        let mut grid = CoverageGrid::new(40, 32);
+        for y in 0..32 {
+            for x in 12..28 {
+                if y % 3 != 1 {
+                    grid.coverage[(y * 40 + x) as usize] = 0.8;
+                }
+            }
+        }
+        let measured = crown_see_through(&grid, crown(40, 32)).expect("a silhouette");
+        let empty_rows = (0..32).filter(|y| y % 3 == 1).count() as f64;
+        let expected = 1.0 - 0.8 * (32.0 - empty_rows) / 32.0;
+        assert!((measured.see_through - expected).abs() < 1e-9, "{measured:?} vs {expected}");
+        assert_eq!(measured.outline_pixels, 32 * 16);
+    }
+
+    #[test]
+    fn faint_pixels_do_not_widen_the_outline_and_wide_gaps_stay_open_at_the_edge() {
+        let mut grid = CoverageGrid::new(40, 32);
+        for y in 0..32 {
+            for x in 10..30 {
+                grid.coverage[(y * 40 + x) as usize] = 0.5;
+            }
+            grid.coverage[(y * 40) as usize] = 0.04;
+        }
+        // A notch 6 px deep into the right edge over 8 rows: wider than
+        // the closing (2 px), so it is not outline.
+        for y in 10..18 {
+            for x in 24..30 {
+                grid.coverage[(y * 40 + x) as usize] = 0.0;
+            }
+        }
+        let measured = crown_see_through(&grid, crown(40, 32)).expect("a silhouette");
+        assert!((measured.see_through - 0.5).abs() < 1e-6, "{measured:?}");
+        assert_eq!(measured.outline_pixels, 32 * 20 - 8 * 6);
+    }
+
+    #[test]
+    fn a_side_view_covers_a_needle_by_its_area() {
+        // One needle 1 m long and 2 cm wide, crossing 0.1 m pixels: its
+        // summed coverage is its area over the pixel area.
+        let n = needle(Vec3::new(0.013, 0.0, 0.0), Vec3::new(0.013, 1.0, 0.0), 0.01);
+        let view = SideView {
+            azimuth: 0.0,
+            pixel: 0.1,
+            samples: 40,
+        };
+        let picture = side_coverage(&[n], &[], view).expect("a needle");
+        let summed: f32 = picture.grid.coverage.iter().sum();
+        let expected = 1.0 * 0.02 / (0.1 * 0.1);
+        assert!((summed - expected).abs() < 0.06 * expected, "{summed} vs {expected}");
+        assert_eq!(picture.crown.y1 - picture.crown.y0, picture.grid.height);
+    }
+
+    #[test]
+    fn needles_behind_each_other_do_not_add_coverage_and_wood_is_left_out_of_the_crown_box() {
+        let front = needle(Vec3::ZERO, Vec3::Y, 0.05);
+        let behind = needle(Vec3::new(0.0, 0.0, -3.0), Vec3::new(0.0, 1.0, -3.0), 0.05);
+        let view = SideView {
+            azimuth: 0.0,
+            pixel: 0.1,
+            samples: 20,
+        };
+        let one = side_coverage(&[front], &[], view).expect("a needle");
+        let two = side_coverage(&[front, behind], &[], view).expect("needles");
+        assert_eq!(one.grid, two.grid);
+        let trunk = WoodSegment {
+            start: Vec3::new(0.0, -2.0, 0.0),
+            end: Vec3::ZERO,
+            start_radius: 0.2,
+            end_radius: 0.1,
+        };
+        let with_trunk = side_coverage(&[front], &[trunk], view).expect("a needle");
+        assert!(with_trunk.grid.height > one.grid.height);
+        // The crown box leaves the trunk out (it may straddle one more row:
+        // the grid's origin moved with the trunk).
+        let crown_rows = with_trunk.crown.y1 - with_trunk.crown.y0;
+        assert!(crown_rows.abs_diff(one.grid.height) <= 1, "{crown_rows} rows");
+        assert!(with_trunk.grid.height >= crown_rows + 20);
+        assert!(side_coverage(&[], &[trunk], view).is_none());
+        assert!(side_coverage(&[front], &[], SideView { pixel: f32::NAN, ..view }).is_none());
+    }
+}
