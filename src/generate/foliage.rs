@@ -9,7 +9,7 @@ use glam::{Mat3, Quat, Vec3};
 use super::geometry::{GOLDEN_ANGLE, UP, bend, cone_direction, perpendicular_toward, rotate_around};
 use super::params::{FoliageParams, Phyllotaxy};
 use super::random::TreeRng;
-use super::skeleton::FoliageSite;
+use super::skeleton::{FoliageSite, Skeleton};
 use crate::model::{Needle, Placement};
 
 /// Radius of a young shoot: needles attach on its surface.
@@ -78,12 +78,26 @@ type ShootKey = (u32, u32, u32);
 /// shoot's upper side, which is the world's up for the level shoots that
 /// carry most foliage.
 pub(crate) fn grow_shoot_prototypes(
-    sites: &[FoliageSite],
+    skeleton: &Skeleton,
     params: &FoliageParams,
     budget: NeedleBudget,
     rng: &mut TreeRng,
 ) -> (Vec<Vec<Needle>>, Vec<Placement>) {
-    let units = units_per_site(sites, params, budget);
+    let sites = &skeleton.sites;
+    // The budget is shared between the shoots and the twigs by weight.
+    let site_weight: f32 = sites.iter().map(|s| s.weight).sum();
+    let twig_weight: f32 = skeleton
+        .twig_placements
+        .iter()
+        .map(|p| skeleton.twigs[p.twig as usize].weight())
+        .sum();
+    let share = site_weight / (site_weight + twig_weight).max(f32::MIN_POSITIVE);
+    let site_budget = NeedleBudget {
+        target: (budget.target as f32 * share).round() as usize,
+        natural: (budget.natural as f32 * share).round() as usize,
+        ..budget
+    };
+    let units = units_per_site(sites, params, site_budget);
     let largest = units.iter().copied().max().unwrap_or(0);
     let mut ladder = vec![1u32];
     while *ladder.last().expect("not empty") < largest {
@@ -142,7 +156,7 @@ pub(crate) fn grow_shoot_prototypes(
         prototype_of.insert(*key, (prototypes.len() as u32, length));
         prototypes.push(placer.needles);
     }
-    let placements = keyed
+    let mut placements: Vec<Placement> = keyed
         .iter()
         .map(|&(index, key)| {
             let site = &sites[index];
@@ -158,7 +172,79 @@ pub(crate) fn grow_shoot_prototypes(
             }
         })
         .collect();
+    grow_twig_prototypes(skeleton, params, budget, twig_weight, rng, &mut prototypes, &mut placements);
     (prototypes, placements)
+}
+
+/// Covers each used twig of `skeleton` with needles at one density (the
+/// budget's twig share, calibrated like [`units_per_site`]) as one
+/// prototype, and places it wherever the twig stands.
+fn grow_twig_prototypes(
+    skeleton: &Skeleton,
+    params: &FoliageParams,
+    budget: NeedleBudget,
+    twig_weight: f32,
+    rng: &mut TreeRng,
+    prototypes: &mut Vec<Vec<Needle>>,
+    placements: &mut Vec<Placement>,
+) {
+    if skeleton.twig_placements.is_empty() || twig_weight <= 0.0 {
+        return;
+    }
+    let site_weight: f32 = skeleton.sites.iter().map(|s| s.weight).sum();
+    let share = twig_weight / (site_weight + twig_weight);
+    let per_unit = needles_per_unit(params) as f32;
+    let target_units = budget.target as f32 * share / per_unit;
+    let default_density = budget.natural.max(1) as f32 * share / per_unit / twig_weight;
+    let mut uses = vec![0u32; skeleton.twigs.len()];
+    for placement in &skeleton.twig_placements {
+        uses[placement.twig as usize] += 1;
+    }
+    let mut density = target_units / twig_weight;
+    let mut units: Vec<Vec<u32>> = Vec::new();
+    for _ in 0..12 {
+        let floor = minimum_units(params, density / default_density);
+        units = skeleton.twigs.iter().map(|t| diffuse(&t.sites, density, floor)).collect();
+        let total: f32 = units
+            .iter()
+            .zip(&uses)
+            .map(|(u, &n)| u.iter().sum::<u32>() as f32 * n as f32)
+            .sum::<f32>()
+            .max(1.0);
+        if (total - target_units).abs() <= 0.002 * target_units {
+            break;
+        }
+        density *= target_units / total;
+    }
+    let mut prototype_of = vec![None; skeleton.twigs.len()];
+    for (index, twig) in skeleton.twigs.iter().enumerate() {
+        if uses[index] == 0 || units[index].iter().all(|&u| u == 0) {
+            continue;
+        }
+        let mut placer = Placer {
+            params,
+            rng: &mut *rng,
+            up: UP,
+            widening: budget.widening,
+            lengthening: budget.lengthening,
+            needles: Vec::new(),
+            next_group: 0,
+            spray: None,
+        };
+        for (site, &count) in twig.sites.iter().zip(&units[index]) {
+            placer.grow(site, count);
+        }
+        prototype_of[index] = Some(prototypes.len() as u32);
+        prototypes.push(placer.needles);
+    }
+    placements.extend(skeleton.twig_placements.iter().filter_map(|p| {
+        Some(Placement {
+            prototype: prototype_of[p.twig as usize]?,
+            rotation: p.rotation,
+            translation: p.translation,
+            scale: p.scale.max(1e-3),
+        })
+    }));
 }
 
 /// Needles per placed unit: a fascicle's needles, or 1.

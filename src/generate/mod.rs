@@ -253,8 +253,12 @@ pub struct GenerateOptions {
 /// Grows one tree of `species`.
 pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
     let params = species.params(options.age);
+    if params.branching.twig_order > 0 {
+        // Its twigs are prototypes however it is grown: flattened.
+        return generate_prototypes(species, options).to_tree();
+    }
     let skeleton = skeleton::grow_skeleton(&params, &mut TreeRng::new(options.seed, Stream::Skeleton));
-    let budget = needle_budget(&params, &skeleton.sites, options);
+    let budget = needle_budget(&params, &skeleton, options);
     let needles = foliage::grow_needles(
         &skeleton.sites,
         &params.foliage,
@@ -278,9 +282,9 @@ pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
 pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> PrototypeInput {
     let params = species.params(options.age);
     let skeleton = skeleton::grow_skeleton(&params, &mut TreeRng::new(options.seed, Stream::Skeleton));
-    let budget = needle_budget(&params, &skeleton.sites, options);
+    let budget = needle_budget(&params, &skeleton, options);
     let (prototypes, placements) = foliage::grow_shoot_prototypes(
-        &skeleton.sites,
+        &skeleton,
         &params.foliage,
         budget,
         &mut TreeRng::new(options.seed, Stream::Foliage),
@@ -297,13 +301,18 @@ pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> Proto
 
 /// How many needles the tree gets, and how much they widen: the species'
 /// count with the tree's vigour (±8 %, by seed), or the options' count.
-fn needle_budget(params: &SpeciesParams, sites: &[skeleton::FoliageSite], options: &GenerateOptions) -> NeedleBudget {
+fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options: &GenerateOptions) -> NeedleBudget {
     let vigor = TreeRng::new(options.seed, Stream::Tree).jitter(1.0, 0.08);
     let foliage = &params.foliage;
     let (natural, most) = match foliage.count {
         NeedleCount::Total(count) => ((count as f32 * vigor).round() as usize, usize::MAX),
         NeedleCount::PerMetre { per_metre, most } => {
-            let shoot_metres: f32 = sites.iter().map(|s| s.weight).sum();
+            let twig_metres: f32 = skeleton
+                .twig_placements
+                .iter()
+                .map(|p| skeleton.twigs[p.twig as usize].weight() * p.scale)
+                .sum();
+            let shoot_metres = skeleton.sites.iter().map(|s| s.weight).sum::<f32>() + twig_metres;
             ((per_metre * shoot_metres * vigor).round() as usize, most)
         }
     };

@@ -153,6 +153,10 @@ pub(crate) struct BranchParams {
     /// wood segment (1: every piece its own), so a big tree's shoots and
     /// wood stay within a record's budget.
     pub merge_pieces: u32,
+    /// Laterals of this order, with all they carry, are twigs grown once
+    /// per age, shoot length class and variant and placed many times
+    /// (shared prototypes); 0: none.
+    pub twig_order: u32,
     /// Radius of a shoot tip (pipe model: a branch's cross-section is the
     /// sum of its tips').
     pub tip_radius: f32,
@@ -297,6 +301,7 @@ pub(crate) fn scots_pine() -> SpeciesParams {
             min_shoot: 0.0,
             branch_units: u32::MAX,
             merge_pieces: 1,
+            twig_order: 0,
             tip_radius: 0.002,
             stubs: true,
         },
@@ -372,6 +377,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             min_shoot: 0.0,
             branch_units: u32::MAX,
             merge_pieces: 1,
+            twig_order: 0,
             tip_radius: 0.001,
             stubs: false,
         },
@@ -444,6 +450,7 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
             min_shoot: 0.0,
             branch_units: u32::MAX,
             merge_pieces: 1,
+            twig_order: 0,
             tip_radius: 0.002,
             stubs: false,
         },
@@ -523,6 +530,7 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             min_shoot: 0.0,
             branch_units: u32::MAX,
             merge_pieces: 1,
+            twig_order: 0,
             tip_radius: 0.0006,
             stubs: false,
         },

@@ -6,7 +6,9 @@
 
 use std::f32::consts::{PI, TAU};
 
-use glam::Vec3;
+use std::collections::HashMap;
+
+use glam::{Mat3, Quat, Vec3};
 
 use super::geometry::{
     GOLDEN_ANGLE, UP, bend_vertically, cone_direction, from_vertical, horizontal, perpendicular_toward,
@@ -73,7 +75,45 @@ fn keep_below_leader(pos: Vec3, dir: Vec3, length: f32, height: f32) -> Vec3 {
 pub(crate) struct Skeleton {
     pub wood: Vec<WoodSegment>,
     pub sites: Vec<FoliageSite>,
+    /// Twigs grown once in their own frame (`BranchParams::twig_order`).
+    pub twigs: Vec<Twig>,
+    /// Where each twig stands in the tree.
+    pub twig_placements: Vec<TwigPlacement>,
 }
+
+/// A lateral system grown once in its own frame and placed many times: its
+/// base at the origin, its first shoot along +X, the world's up +Y.
+#[derive(Clone, Debug)]
+pub(crate) struct Twig {
+    /// Its foliage sites, in its frame.
+    pub sites: Vec<FoliageSite>,
+}
+
+impl Twig {
+    /// Summed site weight (needle capacity at unit density).
+    pub(crate) fn weight(&self) -> f32 {
+        self.sites.iter().map(|s| s.weight).sum()
+    }
+}
+
+/// One twig in the tree: `p ↦ rotation · (scale · p) + translation`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct TwigPlacement {
+    pub twig: u32,
+    pub rotation: Quat,
+    pub translation: Vec3,
+    pub scale: f32,
+}
+
+/// Ratio between neighbouring yearly shoot lengths of the twig library: a
+/// twig is placed scaled by at most ±15 % of its prototype's.
+const TWIG_LENGTH_STEP: f32 = 1.35;
+
+/// Twig variants grown per age and length class.
+const TWIG_VARIANTS: u32 = 3;
+
+/// A twig class: age, shoot length class and variant.
+type TwigKey = (u32, i32, u32);
 
 /// One branch (or lateral) to grow.
 #[derive(Clone, Copy, Debug)]
@@ -121,11 +161,17 @@ pub(crate) fn grow_skeleton(params: &SpeciesParams, rng: &mut TreeRng) -> Skelet
         crown_base,
         next_group_key: 0,
         whorl_count: 0,
+        in_tree: true,
+        twigs: Vec::new(),
+        twig_classes: HashMap::new(),
+        twig_placements: Vec::new(),
     };
     grower.grow_trunk();
     Skeleton {
         wood: grower.wood,
         sites: grower.sites,
+        twigs: grower.twigs,
+        twig_placements: grower.twig_placements,
     }
 }
 
@@ -138,6 +184,13 @@ struct Grower<'a> {
     crown_base: f32,
     next_group_key: u32,
     whorl_count: u32,
+    /// Growing in the tree (kept above the ground and under the leader), not
+    /// a twig in its own frame.
+    in_tree: bool,
+    twigs: Vec<Twig>,
+    /// Each twig class's index, base cross-section measure and yearly shoot length.
+    twig_classes: HashMap<TwigKey, (u32, f32, f32)>,
+    twig_placements: Vec<TwigPlacement>,
 }
 
 impl Grower<'_> {
@@ -306,8 +359,10 @@ impl Grower<'_> {
                     let turn = horizontal(self.rng.unit() * TAU) * (branching.crookedness * piece_length);
                     dir = (dir + turn).normalize_or(dir);
                 }
-                dir = keep_above_ground(pos, dir, piece_length);
-                dir = keep_below_leader(pos, dir, piece_length, self.height);
+                if self.in_tree {
+                    dir = keep_above_ground(pos, dir, piece_length);
+                    dir = keep_below_leader(pos, dir, piece_length, self.height);
+                }
                 let end = pos + dir * piece_length;
                 let is_tip = year + 1 == axis.age && node == nodes;
                 if !axis.dead {
@@ -367,7 +422,7 @@ impl Grower<'_> {
                 // Too weak to grow: shaded buds stay dormant.
                 continue;
             }
-            measure += self.grow_axis(Axis {
+            let lateral = Axis {
                 origin: node,
                 direction: cone_direction(parent_dir, side, angle, azimuth),
                 age,
@@ -376,9 +431,60 @@ impl Grower<'_> {
                 vigor: parent.vigor * 0.85,
                 max_radius: parent.max_radius * 0.7,
                 dead: false,
-            });
+            };
+            measure += if self.in_tree && lateral.order == branching.twig_order {
+                self.place_twig(lateral)
+            } else {
+                self.grow_axis(lateral)
+            };
         }
         measure
+    }
+
+    /// Places a twig of `axis`'s class, growing the class in its own frame
+    /// the first time. Returns the placed twig's base cross-section measure.
+    fn place_twig(&mut self, axis: Axis) -> f32 {
+        let length_class = (axis.segment_length.max(1e-4).ln() / TWIG_LENGTH_STEP.ln()).round() as i32;
+        let variant = self.rng.count((0, TWIG_VARIANTS - 1));
+        let key = (axis.age, length_class, variant);
+        let (twig, measure, length) = match self.twig_classes.get(&key) {
+            Some(&class) => class,
+            None => {
+                let length = TWIG_LENGTH_STEP.powi(length_class);
+                let (sites, measure) = self.grow_in_own_frame(Axis {
+                    origin: Vec3::ZERO,
+                    direction: Vec3::X,
+                    segment_length: length,
+                    ..axis
+                });
+                let class = (self.twigs.len() as u32, measure, length);
+                self.twigs.push(Twig { sites });
+                self.twig_classes.insert(key, class);
+                class
+            }
+        };
+        let scale = axis.segment_length / length;
+        let up = perpendicular_toward(axis.direction, UP);
+        let frame = Mat3::from_cols(axis.direction, up, axis.direction.cross(up));
+        self.twig_placements.push(TwigPlacement {
+            twig,
+            rotation: Quat::from_mat3(&frame).normalize(),
+            translation: axis.origin,
+            scale,
+        });
+        measure * scale.powf(PIPE_EXPONENT)
+    }
+
+    /// Grows `axis` (at the origin) outside the tree: its foliage sites,
+    /// and its base cross-section measure; its wood is left out (a twig's is
+    /// millimetres thick, hidden by its needles).
+    fn grow_in_own_frame(&mut self, axis: Axis) -> (Vec<FoliageSite>, f32) {
+        let (wood, sites) = (std::mem::take(&mut self.wood), std::mem::take(&mut self.sites));
+        self.in_tree = false;
+        let measure = self.grow_axis(axis);
+        self.in_tree = true;
+        self.wood = wood;
+        (std::mem::replace(&mut self.sites, sites), measure)
     }
 
     /// Wood of an axis from the pipe model: walking from the tip down, the
