@@ -243,8 +243,10 @@ pub struct GenerateOptions {
     /// mature trees: what their shoots carry, at most a record's worth).
     ///
     /// A mature tree given fewer needles than it naturally carries widens
-    /// them, keeping their summed area, so its crown stays as dense; up to
-    /// needles as wide as the shortest is long, past which it thins.
+    /// them, keeping their summed area, so its crown stays as dense: up to
+    /// 6× and as wide as the shortest is long, then both ways, up to twice
+    /// as long (needle elements standing for several needles); past that it
+    /// thins.
     pub target_needles: Option<usize>,
     /// How old the tree is.
     pub age: Age,
@@ -299,6 +301,9 @@ pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> Proto
     }
 }
 
+/// Most a mature tree's needles widen before they also lengthen.
+const MAX_WIDENING: f32 = 6.0;
+
 /// How many needles the tree gets, and how much they widen: the species'
 /// count with the tree's vigour (±8 %, by seed), or the options' count.
 fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options: &GenerateOptions) -> NeedleBudget {
@@ -320,15 +325,20 @@ fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options:
     let keep_area = natural as f32 / target.max(1) as f32;
     let (widening, lengthening) = match (foliage.count, foliage.phyllotaxy) {
         (NeedleCount::Total(_), _) => (1.0, 1.0),
-        // Scale leaves grow both ways, keeping their shape, up to 6×.
+        // Scale leaves grow both ways, keeping their shape, up to 10×
+        // (scale elements standing for a piece of spray).
         (NeedleCount::PerMetre { .. }, params::Phyllotaxy::Scales) => {
-            let both = keep_area.sqrt().clamp(1.0, 6.0);
+            let both = keep_area.sqrt().clamp(1.0, 10.0);
             (both, both)
         }
-        // Needles widen, up to as wide as the shortest is long.
+        // Needles widen up to 6× (a needle element standing for a row of
+        // needles) and no wider than the shortest is long; past that they
+        // grow both ways, up to twice as long.
         (NeedleCount::PerMetre { .. }, _) => {
-            let widest = 0.5 * foliage.length.0 / foliage.radius.1;
-            (keep_area.clamp(1.0, widest.max(1.0)), 1.0)
+            let widest = (0.5 * foliage.length.0 / foliage.radius.1).clamp(1.0, MAX_WIDENING);
+            let widening = keep_area.clamp(1.0, widest);
+            let both = (keep_area / widening).sqrt().clamp(1.0, 2.0);
+            (widening * both, both)
         }
     };
     NeedleBudget {
