@@ -17,6 +17,7 @@ fn tree(needles: usize) -> bevy_conifer_lod::model::TreeInput {
         &GenerateOptions {
             seed: 0,
             target_needles: Some(needles),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     )
 }

@@ -29,6 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &GenerateOptions {
                 seed: 3,
                 target_needles: Some(30_000),
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         ),
     };

@@ -144,6 +144,7 @@ fn main() {
             &GenerateOptions {
                 seed: 1,
                 target_needles: None,
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         let glb = encode_tree_glb(&truth_tree, &TreeGlbOptions { groups: false });

@@ -32,6 +32,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &GenerateOptions {
                 seed,
                 target_needles: None,
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         let generation = started.elapsed();
@@ -90,6 +91,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &GenerateOptions {
                 seed,
                 target_needles: Some(1_000_000),
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         println!(

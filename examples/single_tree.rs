@@ -82,6 +82,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &GenerateOptions {
                 seed: 0,
                 target_needles: args.needles,
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         ),
         &BakeOptions::default(),

@@ -15,6 +15,7 @@ fn every_method_renders_and_is_measured() {
         &GenerateOptions {
             seed: 4,
             target_needles: Some(6000),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     );
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();

@@ -19,6 +19,7 @@ fn preset(species: Species, needles: usize) -> bevy_conifer_lod::model::TreeInpu
         &GenerateOptions {
             seed: 2,
             target_needles: Some(needles),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     )
 }

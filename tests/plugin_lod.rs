@@ -87,6 +87,7 @@ fn write_tree(dir: &std::path::Path, name: &str) -> Vec3 {
         &GenerateOptions {
             seed: 1,
             target_needles: Some(4000),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     );
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
@@ -358,6 +359,7 @@ fn no_asset_churn_and_nothing_left_behind() {
             &GenerateOptions {
                 seed: 5,
                 target_needles: Some(3000),
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         let record = bake(&tree, &BakeOptions::default(), &()).unwrap();

@@ -28,6 +28,7 @@ fn pine() -> bevy_conifer_lod::model::LodRecord {
         &GenerateOptions {
             seed: 2,
             target_needles: Some(12_000),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     );
     bake(&tree, &BakeOptions::default(), &()).unwrap()
@@ -435,6 +436,7 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
         &GenerateOptions {
             seed: 9,
             target_needles: Some(6_000),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     );
     let record = bake(&other, &BakeOptions::default(), &()).unwrap();

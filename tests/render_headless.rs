@@ -26,6 +26,7 @@ fn scene(dir: &std::path::Path) -> (HeadlessRenderer, Vec3) {
         &GenerateOptions {
             seed: 2,
             target_needles: Some(20000),
+            age: bevy_conifer_lod::generate::Age::Young,
         },
     );
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();

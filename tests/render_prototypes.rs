@@ -42,6 +42,7 @@ impl Scene {
             &GenerateOptions {
                 seed: 3,
                 target_needles: Some(15_000),
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         let record: PrototypeRecord = bake_prototypes(&input, &BakeOptions::default(), &())
@@ -215,6 +216,7 @@ fn gpu_draws_equal_the_cpu_reference() {
             &GenerateOptions {
                 seed: 3,
                 target_needles: Some(15_000),
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         bake_prototypes(&input, &BakeOptions::default(), &())

@@ -72,6 +72,7 @@ impl ShadowScene {
             &GenerateOptions {
                 seed: 4,
                 target_needles: Some(20_000),
+                age: bevy_conifer_lod::generate::Age::Young,
             },
         );
         let record = bake(&tree, &BakeOptions::default(), &()).unwrap();

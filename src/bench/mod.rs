@@ -35,6 +35,7 @@ pub fn species_records(needles: usize) -> Vec<LodRecord> {
                 &GenerateOptions {
                     seed: 0,
                     target_needles: Some(needles),
+                    age: crate::generate::Age::Young,
                 },
             );
             bake(&tree, &BakeOptions::default(), &()).expect("procedural trees bake")
@@ -462,6 +463,7 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
         &GenerateOptions {
             seed: 0,
             target_needles: Some(needles),
+            age: crate::generate::Age::Mature,
         },
     );
     let failed = |e: String| BenchError::Record(species.name().into(), e);
@@ -555,6 +557,7 @@ fn cut_figures(needles: usize) -> CutFigures {
         &GenerateOptions {
             seed: 0,
             target_needles: Some(needles),
+            age: crate::generate::Age::Young,
         },
     );
     let record = bake(&tree, &BakeOptions::default(), &()).expect("the preset bakes");

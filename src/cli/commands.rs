@@ -99,9 +99,13 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
                 ),
                 _ => bail!("--needles with --preset takes one needle count"),
             };
+            if target_needles == Some(0) {
+                bail!("--needles with --preset takes a needle count above 0");
+            }
             let options = GenerateOptions {
                 seed: args.seed,
                 target_needles,
+                age: args.age,
             };
             let mut input = if args.flat {
                 PrototypeInput::from_tree(&generate(species, &options))

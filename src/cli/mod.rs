@@ -57,14 +57,24 @@ pub enum Command {
 }
 
 /// Arguments of `conifer bake`.
+/// `--age`: a name of [`crate::generate::Age`].
+fn parse_age(text: &str) -> Result<crate::generate::Age, String> {
+    crate::generate::Age::from_name(text).ok_or_else(|| format!("unknown age `{text}` (expected `young` or `mature`)"))
+}
+
 #[derive(Debug, clap::Args)]
 pub struct BakeArgs {
     /// Input glTF/GLB file (alternative to --preset).
     #[arg(conflicts_with = "preset", required_unless_present = "preset")]
     pub input: Option<PathBuf>,
-    /// Procedural species preset: scots-pine, norway-spruce, eastern-white-pine, lawson-cypress.
+    /// Procedural species preset: scots-pine, norway-spruce, eastern-white-pine,
+    /// lawson-cypress, douglas-fir, silver-fir.
     #[arg(long)]
     pub preset: Option<String>,
+    /// With --preset: how old the tree is: `mature` (15–50 m, a million needles or more) or
+    /// `young` (2–5 m saplings, tens of thousands).
+    #[arg(long, requires = "preset", default_value = "mature", value_parser = parse_age)]
+    pub age: crate::generate::Age,
     /// Seed of the procedural tree.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,

@@ -103,6 +103,7 @@ mod tests {
             &GenerateOptions {
                 seed: 1,
                 target_needles: Some(5000),
+                age: crate::generate::Age::Young,
             },
         );
         let record = bake(&tree, &BakeOptions::default(), &()).unwrap();

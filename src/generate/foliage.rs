@@ -201,21 +201,26 @@ fn grow_twig_prototypes(
         uses[placement.twig as usize] += 1;
     }
     let mut density = target_units / twig_weight;
-    let mut units: Vec<Vec<u32>> = Vec::new();
+    let mut best: (f32, Vec<Vec<u32>>) = (f32::INFINITY, Vec::new());
     for _ in 0..12 {
         let floor = minimum_units(params, density / default_density);
-        units = skeleton.twigs.iter().map(|t| diffuse(&t.sites, density, floor)).collect();
+        let units: Vec<Vec<u32>> = skeleton.twigs.iter().map(|t| diffuse(&t.sites, density, floor)).collect();
         let total: f32 = units
             .iter()
             .zip(&uses)
             .map(|(u, &n)| u.iter().sum::<u32>() as f32 * n as f32)
             .sum::<f32>()
             .max(1.0);
-        if (total - target_units).abs() <= 0.002 * target_units {
+        let miss = (total - target_units).abs();
+        if miss < best.0 {
+            best = (miss, units);
+        }
+        if miss <= 0.002 * target_units {
             break;
         }
         density *= target_units / total;
     }
+    let units = best.1;
     let mut prototype_of = vec![None; skeleton.twigs.len()];
     for (index, twig) in skeleton.twigs.iter().enumerate() {
         if uses[index] == 0 || units[index].iter().all(|&u| u == 0) {
@@ -267,30 +272,37 @@ fn units_per_site(sites: &[FoliageSite], params: &FoliageParams, budget: NeedleB
     }
     let default_density = budget.natural.max(1) as f32 / per_unit / total_weight;
     let mut density = target_units / total_weight;
-    let mut units = Vec::new();
+    // The closest of the tries: the floor can make the total jump over the
+    // target back and forth.
+    let mut best: (f32, Vec<u32>) = (f32::INFINITY, Vec::new());
     for _ in 0..12 {
         let floor = minimum_units(params, density / default_density);
-        units = diffuse(sites, density, floor);
+        let units = diffuse(sites, density, floor);
         let total = units.iter().map(|&u| u as f32).sum::<f32>().max(1.0);
-        if (total - target_units).abs() <= 0.002 * target_units {
+        let miss = (total - target_units).abs();
+        if miss < best.0 {
+            best = (miss, units);
+        }
+        if miss <= 0.002 * target_units {
             break;
         }
         density *= target_units / total;
     }
-    units
+    best.1
 }
 
-/// The fewest needles a spiral shoot gets at `relative_density` (1 = the
-/// species' default density); other phyllotaxies have no floor.
+/// The fewest needles a spiral or two-rowed shoot gets at
+/// `relative_density` (1 = the species' default density); other
+/// phyllotaxies have no floor.
 fn minimum_units(params: &FoliageParams, relative_density: f32) -> u32 {
     match params.phyllotaxy {
-        Phyllotaxy::Spiral => {
+        Phyllotaxy::Spiral | Phyllotaxy::TwoRanked { .. } => {
             // Full floor from 85 % of the default density: the default
             // count's per-seed vigour (±8 %) keeps it.
             let scale = (relative_density / 0.85).min(1.0);
             (params.group_size.0 as f32 * scale).round() as u32
         }
-        Phyllotaxy::Fascicle { .. } | Phyllotaxy::Scales | Phyllotaxy::TwoRanked { .. } => 0,
+        Phyllotaxy::Fascicle { .. } | Phyllotaxy::Scales => 0,
     }
 }
 

@@ -412,11 +412,11 @@ pub(crate) fn silver_fir() -> SpeciesParams {
     }
 }
 
-/// Douglas fir, ~10 years, about 4 m: a young cone to the ground.
+/// Douglas fir, ~9 years, about 3.7 m: a young cone to the ground.
 pub(crate) fn young_douglas_fir() -> SpeciesParams {
     let mut params = super::params::norway_spruce();
-    params.trunk.age_years = 10;
-    params.trunk.height = (3.5, 4.5);
+    params.trunk.age_years = 9;
+    params.trunk.height = (3.2, 4.2);
     params.trunk.base_radius = 0.06;
     params.crown.radius = 1.2;
     params.crown.shape = CrownShape::Conical { exponent: 0.75 };
@@ -427,17 +427,17 @@ pub(crate) fn young_douglas_fir() -> SpeciesParams {
     params.foliage.length = (0.015, 0.03);
     params.foliage.radius = (0.0006, 0.0008);
     params.foliage.divergence = (deg(50.0), deg(80.0));
-    params.foliage.count = NeedleCount::Total(60_000);
+    params.foliage.count = NeedleCount::Total(70_000);
     params.material = douglas_fir().material;
     params
 }
 
-/// Silver fir, ~12 years, about 3 m: a young cone of level branches with
+/// Silver fir, ~9 years, about 2.8 m: a young cone of level branches with
 /// two-rowed flat needles.
 pub(crate) fn young_silver_fir() -> SpeciesParams {
     let mut params = super::params::norway_spruce();
-    params.trunk.age_years = 12;
-    params.trunk.height = (2.6, 3.4);
+    params.trunk.age_years = 9;
+    params.trunk.height = (2.4, 3.2);
     params.trunk.base_radius = 0.05;
     params.crown.radius = 1.0;
     params.branching.angle_bottom = deg(88.0);
@@ -448,7 +448,7 @@ pub(crate) fn young_silver_fir() -> SpeciesParams {
     params.foliage.length = (0.015, 0.03);
     params.foliage.radius = (0.0009, 0.0012);
     params.foliage.divergence = (deg(65.0), deg(85.0));
-    params.foliage.count = NeedleCount::Total(40_000);
+    params.foliage.count = NeedleCount::Total(60_000);
     params.material = silver_fir().material;
     params
 }

@@ -167,11 +167,11 @@ impl Species {
             (Species::LawsonCypress, Age::Mature) => {
                 "Chamaecyparis lawsoniana, ~50 years, 15-25 m, narrow column, drooping sprays"
             }
-            (Species::DouglasFir, Age::Young) => "Pseudotsuga menziesii, ~10 years, ~4 m, single needles",
+            (Species::DouglasFir, Age::Young) => "Pseudotsuga menziesii, ~9 years, ~3.7 m, single needles",
             (Species::DouglasFir, Age::Mature) => {
                 "Pseudotsuga menziesii, ~90 years, 35-50 m, drooping low branches, single needles"
             }
-            (Species::SilverFir, Age::Young) => "Abies alba, ~12 years, ~3 m, two-rowed flat needles",
+            (Species::SilverFir, Age::Young) => "Abies alba, ~9 years, ~2.8 m, two-rowed flat needles",
             (Species::SilverFir, Age::Mature) => {
                 "Abies alba, ~100 years, 30-40 m, stork's nest top, two-rowed flat needles"
             }

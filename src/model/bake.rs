@@ -332,6 +332,7 @@ mod tests {
             &GenerateOptions {
                 seed: 3,
                 target_needles: Some(4000),
+                age: crate::generate::Age::Young,
             },
         );
         let timer = StageTimer::new(&());

@@ -968,6 +968,7 @@ mod tests {
         let options = GenerateOptions {
             seed,
             target_needles: Some(needles),
+            age: crate::generate::Age::Young,
         };
         bake(&generate(Species::ScotsPine, &options), &BakeOptions::default(), &()).expect("bake")
     }
@@ -1223,6 +1224,7 @@ mod tests {
         let options = GenerateOptions {
             seed: 4,
             target_needles: Some(needles),
+            age: crate::generate::Age::Young,
         };
         let input = crate::generate::generate_prototypes(species, &options);
         let record = crate::model::bake_prototypes(&input, &BakeOptions::default(), &())

@@ -131,6 +131,7 @@ mod tests {
                 &GenerateOptions {
                     seed: 2,
                     target_needles: Some(5000),
+                    age: crate::generate::Age::Young,
                 },
             );
             let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
