@@ -175,6 +175,17 @@ pub fn print_table(report: &EvalReport) {
         }
     }
     println!();
+    println!("| reference | distance (m) | mean coverage | crown see-through |");
+    println!("|---|---:|---:|---:|");
+    for d in &report.reference.distances {
+        println!(
+            "| reference | {:.2} | {:.4} | {} |",
+            d.distance,
+            d.mean_coverage,
+            d.crown_see_through.map_or("–".to_string(), |s| format!("{s:.3}"))
+        );
+    }
+    println!();
     println!("| method | popping max | popping p99 |");
     println!("|---|---:|---:|");
     for (name, method) in &report.methods {

@@ -56,12 +56,12 @@ pub enum Command {
     Bench(bench::BenchArgs),
 }
 
-/// Arguments of `conifer bake`.
 /// `--age`: a name of [`crate::generate::Age`].
 fn parse_age(text: &str) -> Result<crate::generate::Age, String> {
     crate::generate::Age::from_name(text).ok_or_else(|| format!("unknown age `{text}` (expected `young` or `mature`)"))
 }
 
+/// Arguments of `conifer bake`.
 #[derive(Debug, clap::Args)]
 pub struct BakeArgs {
     /// Input glTF/GLB file (alternative to --preset).

@@ -206,6 +206,24 @@ pub fn crown_color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRe
     })
 }
 
+/// The crown's see-through on `image` (its alpha as coverage) within
+/// `crown`, the needles' screen box: [`crate::model::look::crown_see_through`].
+/// `None` for a blank crown.
+pub fn crown_see_through(image: &RgbaImage, crown: &PixelRect) -> Option<f64> {
+    let grid = crate::model::look::CoverageGrid {
+        width: image.width(),
+        height: image.height(),
+        coverage: image.pixels().map(|p| f32::from(p.0[3]) / 255.0).collect(),
+    };
+    let crown = crate::model::look::CrownBox {
+        x0: crown.x0,
+        y0: crown.y0,
+        x1: crown.x1,
+        y1: crown.y1,
+    };
+    crate::model::look::crown_see_through(&grid, crown).map(|s| s.see_through)
+}
+
 /// Mean coverage (alpha / 255) over `rect`: 0 for a blank render.
 pub fn mean_coverage(image: &RgbaImage, rect: &PixelRect) -> f64 {
     if rect.area() == 0 || rect.x1 > image.width() || rect.y1 > image.height() {

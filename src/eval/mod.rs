@@ -100,6 +100,10 @@ pub struct ReferenceDistance {
     pub frame_ms: f64,
     /// Mean coverage over the tree's box.
     pub mean_coverage: f64,
+    /// How much of the crown one sees through: `1 −` the mean coverage over
+    /// the crown's outline (README, "Crown see-through";
+    /// [`crate::model::look`]). `None` when the crown is blank.
+    pub crown_see_through: Option<f64>,
     /// The tree's screen box on the methods' pictures.
     pub screen_box: PixelRect,
     /// The exact shadow's screen box on the shadow pictures (camera this
@@ -327,6 +331,7 @@ pub fn evaluate(
             triangles: scene.counts(Method::Raw, distance).triangles,
             frame_ms: scene.frame_ms(None, options.timed_frames.min(2))?,
             mean_coverage: measure::mean_coverage(&frame.reference, &rect),
+            crown_see_through: measure::crown_see_through(&frame.reference, &scene.crown_rect(distance)),
             screen_box: rect,
             shadow_box: PixelRect::full(0, 0),
         });

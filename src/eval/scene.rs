@@ -626,6 +626,25 @@ impl EvalScene {
         )
     }
 
+    /// The screen box of the needles alone at `distance` (the crown, without
+    /// the bare trunk below it): where [`crate::model::look::crown_see_through`]
+    /// looks.
+    pub fn crown_rect(&self, distance: f32) -> super::measure::PixelRect {
+        let Some((lo, hi)) = crate::model::needle::bounds(self.record.needles.iter().flat_map(|n| [n.base, n.tip]))
+        else {
+            return self.screen_rect(distance);
+        };
+        super::measure::screen_rect(
+            lo,
+            hi,
+            self.eye(distance),
+            self.record.crown_center(),
+            self.view.fov_deg.to_radians(),
+            self.view.width,
+            self.view.height,
+        )
+    }
+
     /// Every camera: the methods' and the reference's.
     fn cameras(&self) -> Vec<Entity> {
         self.views
