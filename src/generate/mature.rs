@@ -324,7 +324,7 @@ pub(crate) fn douglas_fir() -> SpeciesParams {
             planarity: 0.85,
             hanging: 1.0,
             hanging_from_order: 3,
-            shed_years: 20,
+            shed_years: 17,
             loss: 0.15,
             crookedness: 0.08,
             min_shoot: 0.04,

@@ -110,7 +110,7 @@ pub(crate) struct TwigPlacement {
 const TWIG_LENGTH_STEP: f32 = 1.35;
 
 /// Twig variants grown per age and length class.
-const TWIG_VARIANTS: u32 = 3;
+const TWIG_VARIANTS: u32 = 2;
 
 /// A twig class: age, shoot length class and variant.
 type TwigKey = (u32, i32, u32);
