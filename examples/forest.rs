@@ -342,7 +342,11 @@ fn setup(
             .iter()
             .flat_map(|&(species, _, weight)| (0..SEEDS_PER_SPECIES).map(move |seed| (species, seed, weight)))
             .map(|(species, seed, weight)| {
-                let preset = Preset::new(species).with_seed(seed);
+                // Young trees: a mature tree's cut at forest distances is
+                // still hundreds of thousands of lines (README, "The
+                // presets"), too many for thousands of trees on a software
+                // renderer.
+                let preset = Preset::new(species).with_seed(seed).with_age(Age::Young);
                 let handle = presets.load(match args.needles {
                     Some(needles) => preset.with_needles(needles),
                     None => preset,

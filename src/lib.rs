@@ -48,7 +48,7 @@ pub mod plugin;
 /// The types a Bevy user needs: `use bevy_conifer_lod::prelude::*;`.
 #[cfg(feature = "plugin")]
 pub mod prelude {
-    pub use crate::generate::{Preset, Species};
+    pub use crate::generate::{Age, Preset, Species};
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
         ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, LineLighting,

@@ -1010,7 +1010,7 @@ fn bad_trees_fail_with_what_to_do_and_are_not_drawn() {
     );
     let error = wait_for(&mut app, &needles).unwrap_err();
     assert!(
-        error.contains("scots-pine?needles=0") && error.contains("no needles"),
+        error.contains("scots-pine?needles=0") && error.contains("N > 0"),
         "{error}"
     );
 

@@ -172,7 +172,15 @@ pub(crate) fn grow_shoot_prototypes(
             }
         })
         .collect();
-    grow_twig_prototypes(skeleton, params, budget, twig_weight, rng, &mut prototypes, &mut placements);
+    grow_twig_prototypes(
+        skeleton,
+        params,
+        budget,
+        twig_weight,
+        rng,
+        &mut prototypes,
+        &mut placements,
+    );
     (prototypes, placements)
 }
 
@@ -204,7 +212,11 @@ fn grow_twig_prototypes(
     let mut best: (f32, Vec<Vec<u32>>) = (f32::INFINITY, Vec::new());
     for _ in 0..12 {
         let floor = minimum_units(params, density / default_density);
-        let units: Vec<Vec<u32>> = skeleton.twigs.iter().map(|t| diffuse(&t.sites, density, floor)).collect();
+        let units: Vec<Vec<u32>> = skeleton
+            .twigs
+            .iter()
+            .map(|t| diffuse(&t.sites, density, floor))
+            .collect();
         let total: f32 = units
             .iter()
             .zip(&uses)

@@ -458,7 +458,13 @@ struct FoliageFor;
 
 impl FoliageFor {
     /// Pine fascicles of `needles` needles, `per_metre` needles a metre of shoot.
-    fn pine(needles: u32, length: (f32, f32), radius: (f32, f32), retention_years: u32, per_metre: f32) -> FoliageParams {
+    fn pine(
+        needles: u32,
+        length: (f32, f32),
+        radius: (f32, f32),
+        retention_years: u32,
+        per_metre: f32,
+    ) -> FoliageParams {
         FoliageParams {
             phyllotaxy: Phyllotaxy::Fascicle {
                 needles,

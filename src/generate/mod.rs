@@ -1,12 +1,14 @@
 //! Deterministic procedural conifers: the default input of the bake.
 //!
-//! One shared grower builds every species from its own parameter set: a
-//! trunk of annual growth units with whorls of branches, laterals at the
-//! branch nodes (radii from the pipe model), and needles on the young
-//! shoots in the species' phyllotaxy: 2-needle fascicles (Scots pine),
-//! 5-needle fascicles (eastern white pine), single needles spirally round
-//! each shoot (Norway spruce), or scale leaves lying flat in fern-like
-//! sprays (Lawson cypress). Everything is drawn from a PCG stream seeded by
+//! One shared grower builds every species from its own parameter set, at
+//! either [`Age`]: a trunk of annual growth units with whorls of branches,
+//! laterals at the branch nodes (radii from the pipe model; shed in the
+//! shaded interior of mature trees), and needles on the young shoots in the
+//! species' phyllotaxy: 2-needle fascicles (Scots pine), 5-needle fascicles
+//! (eastern white pine), single needles spirally round each shoot (Norway
+//! spruce, Douglas fir), two flat rows (silver fir), or scale leaves lying
+//! flat in fern-like sprays (Lawson cypress). Mature trees share their
+//! twigs: each class is grown once and placed many times. Everything is drawn from a PCG stream seeded by
 //! [`GenerateOptions::seed`], so a seed always gives the same tree, bit for
 //! bit.
 //!
@@ -40,32 +42,34 @@ pub use self::preset::{Preset, PresetParseError};
 use self::random::{Stream, TreeRng};
 use crate::model::{PrototypeInput, TreeInput};
 
-/// The conifer presets (after the paper's species).
+/// The conifer presets: the paper's four species and two firs. Each grows
+/// at either [`Age`]; [`Species::description`] gives its size at each.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Species {
-    /// *Pinus sylvestris*, ~10 years, 3.3–4.3 m: irregular rounded crown on
-    /// a trunk bare in its lower quarter, 2-needle fascicles (3–7 cm).
+    /// *Pinus sylvestris*: mature 18–25 m with a bare bole over half its
+    /// height and an umbrella crown; young (~10 years) 3.3–4.3 m.
+    /// 2-needle fascicles (3–7 cm).
     ScotsPine,
-    /// *Picea abies*, ~8 years, 2.7–3.3 m: cone to the ground, single
-    /// needles (1–2.5 cm) spirally round each shoot, hanging branchlets.
+    /// *Picea abies*: mature 25–35 m, a deep cone with hanging branchlets;
+    /// young (~8 years) 2.7–3.3 m. Single needles (1–2.5 cm) spirally round
+    /// each shoot.
     NorwaySpruce,
-    /// *Pinus strobus*, ~10 years, 3.9–4.8 m: open crown of level branch
-    /// layers, soft drooping 5-needle fascicles (6–13 cm) tufted at the
+    /// *Pinus strobus*: mature 25–30 m in level tiers; young (~10 years)
+    /// 3.9–4.8 m. Soft drooping 5-needle fascicles (6–13 cm) tufted at the
     /// shoot ends.
     EasternWhitePine,
-    /// *Chamaecyparis lawsoniana*, a young tree (~6 years, 2.0–2.4 m; the
-    /// paper's is 30 years and 8–10 m, which as scale leaves would take
-    /// millions of needles): narrow columnar cone, nodding leader, flat
-    /// fern-like sprays of scale leaves (2.5–4 mm). Even so its ~75,000
-    /// scales cover a fifth of its silhouette or less: the crown is lacy.
+    /// *Chamaecyparis lawsoniana*: mature 15–25 m, a narrow column with a
+    /// nodding leader; young (~6 years) 2.0–2.4 m. Flat fern-like sprays of
+    /// scale leaves (2.5–4 mm).
     LawsonCypress,
-    /// *Pseudotsuga menziesii*: low branches drooping, middle ones level,
-    /// top ones rising; single needles (1.5–3 cm) spirally round the shoot,
-    /// parted to the sides.
+    /// *Pseudotsuga menziesii*: mature 35–50 m, low branches drooping, top
+    /// ones rising; young (~9 years) ~3.7 m. Single needles (1.5–3 cm)
+    /// parted to the sides of the shoot.
     DouglasFir,
-    /// *Abies alba*: a cone flattening into a "stork's nest" top when old,
-    /// flat needles (1.5–3 cm) in two rows, pale grey bark.
+    /// *Abies alba*: mature 30–40 m with a flattened "stork's nest" top;
+    /// young (~9 years) ~2.8 m. Flat needles (1.5–3 cm) in two rows, pale
+    /// grey bark.
     SilverFir,
 }
 
@@ -96,7 +100,9 @@ impl Age {
 
     /// The age called `name` (case is not significant).
     pub fn from_name(name: &str) -> Option<Age> {
-        Age::ALL.into_iter().find(|a| a.name().eq_ignore_ascii_case(name.trim()))
+        Age::ALL
+            .into_iter()
+            .find(|a| a.name().eq_ignore_ascii_case(name.trim()))
     }
 }
 

@@ -332,10 +332,7 @@ fn mature_trees_have_their_species_size_within_a_record_budget() {
         let input = mature(species, 1);
         let tree_height = input.wood.iter().map(|w| w.end.y).fold(0.0f32, f32::max);
         let (lo, hi) = mature_height(species);
-        assert!(
-            (lo..=hi * 1.01).contains(&tree_height),
-            "{species}: {tree_height} m"
-        );
+        assert!((lo..=hi * 1.01).contains(&tree_height), "{species}: {tree_height} m");
         let placed = input.placed_needle_count();
         assert!((1_000_000..=2_050_000).contains(&placed), "{species}: {placed} needles");
         let stored: usize = input.prototypes.iter().map(Vec::len).sum();
@@ -438,7 +435,10 @@ fn fewer_needles_widen_and_keep_the_crown_area() {
     }
     // Past the widening limit needles lengthen too, up to twice.
     let (budget, _) = area(Some(natural.natural / 12));
-    assert!(budget.lengthening > 1.0 && budget.widening <= 2.0 * MAX_WIDENING, "{budget:?}");
+    assert!(
+        budget.lengthening > 1.0 && budget.widening <= 2.0 * MAX_WIDENING,
+        "{budget:?}"
+    );
 }
 
 #[test]
@@ -487,9 +487,9 @@ fn young_presets_are_unchanged_by_the_mature_generator() {
             },
         );
         let text = format!("{:?}{:?}{:?}", tree.prototypes, tree.placements, tree.wood);
-        let fnv = text
-            .bytes()
-            .fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+        let fnv = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
         assert_eq!(fnv, hash, "{species}");
     }
 }

@@ -359,7 +359,10 @@ mod tests {
         let measured = crown_see_through(&grid, crown(40, 32)).expect("a silhouette");
         let empty_rows = (0..32).filter(|y| y % 3 == 1).count() as f64;
         let expected = 1.0 - 0.8 * (32.0 - empty_rows) / 32.0;
-        assert!((measured.see_through - expected).abs() < 1e-9, "{measured:?} vs {expected}");
+        assert!(
+            (measured.see_through - expected).abs() < 1e-9,
+            "{measured:?} vs {expected}"
+        );
         assert_eq!(measured.outline_pixels, 32 * 16);
     }
 
@@ -427,6 +430,16 @@ mod tests {
         assert!(crown_rows.abs_diff(one.grid.height) <= 1, "{crown_rows} rows");
         assert!(with_trunk.grid.height >= crown_rows + 20);
         assert!(side_coverage(&[], &[trunk], view).is_none());
-        assert!(side_coverage(&[front], &[], SideView { pixel: f32::NAN, ..view }).is_none());
+        assert!(
+            side_coverage(
+                &[front],
+                &[],
+                SideView {
+                    pixel: f32::NAN,
+                    ..view
+                }
+            )
+            .is_none()
+        );
     }
 }
