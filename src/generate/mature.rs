@@ -68,7 +68,7 @@ pub(crate) fn scots_pine() -> SpeciesParams {
             stubs: true,
         },
         spray: None,
-        foliage: FoliageFor::pine(2, (0.03, 0.06), (0.0007, 0.001), 3, 5_000.0),
+        foliage: FoliageFor::pine(2, (0.03, 0.06), (0.0007, 0.001), 3, 1_000.0),
         material: FoliageMaterial {
             needle_color: srgb(52, 84, 62),
             wood_color: srgb(140, 92, 62),
@@ -144,7 +144,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
 /// with gaps between them, an irregular top, drooping tufts of soft
 /// 5-needle fascicles at the shoot ends.
 pub(crate) fn eastern_white_pine() -> SpeciesParams {
-    let mut foliage = FoliageFor::pine(5, (0.06, 0.13), (0.0004, 0.0005), 2, 30_000.0);
+    let mut foliage = FoliageFor::pine(5, (0.06, 0.13), (0.0004, 0.0005), 2, 1_000.0);
     foliage.phyllotaxy = Phyllotaxy::Fascicle {
         needles: 5,
         spread: deg(8.0),

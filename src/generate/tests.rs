@@ -371,11 +371,11 @@ fn mature_crowns_are_dense_seen_from_100_m() {
     // unseen.
     let range = |species: Species| match species {
         Species::ScotsPine => (0.20, 0.35),
-        Species::NorwaySpruce => (0.05, 0.25),
+        Species::NorwaySpruce => (0.05, 0.20),
         Species::EasternWhitePine => (0.20, 0.40),
         Species::LawsonCypress => (0.05, 0.40),
         Species::DouglasFir => (0.10, 0.30),
-        Species::SilverFir => (0.05, 0.20),
+        Species::SilverFir => (0.05, 0.15),
     };
     for species in Species::ALL {
         let tree = mature(species, 0).to_tree();
