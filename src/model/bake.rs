@@ -1,6 +1,6 @@
 //! The bake: from a [`TreeInput`] to a [`LodRecord`] (paper, §4–5.1).
 
-use super::merge::{CostContext, GroupLine, MergeOptions, merge_group, merge_group_lines};
+use super::merge::{CostContext, GroupLine, MergeOptions, merge_group_lines, merge_nested_group};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
 use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord};
@@ -260,10 +260,13 @@ pub fn bake_prototypes(
     let prototypes: Vec<Prototype> = prototype_needles
         .into_par_iter()
         .zip(scale_sum.par_iter())
-        .map(|(needles, &(sum, count))| {
+        .zip(input.prototypes.par_iter())
+        .map(|((needles, &(sum, count)), original)| {
             let mean_scale = if count == 0 { 1.0 } else { (sum / count as f64) as f32 };
             let context = CostContext::new(options.merge.weights, diagonal / mean_scale, total);
-            let merged = merge_group(&needles, &context, &options.merge);
+            // A twig's shoots and fascicles are merged first, then across it.
+            let groups: Vec<u32> = original.iter().map(|n| n.group).collect();
+            let merged = merge_nested_group(&needles, &groups, &context, &options.merge);
             let so_far = done.fetch_add(merged.len(), Ordering::Relaxed) + merged.len();
             progress.progress(BakeStage::MergeGroups, so_far, group_total);
             Prototype { needles, merged }

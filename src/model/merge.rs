@@ -531,7 +531,7 @@ impl<'a> MergeSet<'a> {
 
     /// Merges the set down to one line; returns the merges and the root's
     /// local id. Calls `progress` after every merge with the count so far.
-    fn run(mut self, progress: impl Fn(usize)) -> (Vec<MergedLine>, u32) {
+    fn run(&mut self, progress: impl Fn(usize)) -> (Vec<MergedLine>, u32) {
         let inputs = self.lines.len();
         let mut merges = Vec::with_capacity(inputs.saturating_sub(1));
         if inputs <= 1 {
@@ -620,6 +620,96 @@ pub fn merge_group(needles: &[Needle], context: &CostContext, options: &MergeOpt
     MergeSet::new(context, search, lines).run(|_| {}).0
 }
 
+/// Level 1 for a prototype whose needles come in phyllotaxy sub-groups
+/// (the shoots and fascicles of a twig): each sub-group (needles with one
+/// `groups` value) is merged down to one line by [`merge_group`]'s search,
+/// then the sub-groups' lines across the prototype by the whole-tree search,
+/// as the paper's two levels do across a tree. Merging a twig's thousands of
+/// needles as one group would pair needles of different shoots early and
+/// leave large errors low in the forest.
+///
+/// The result is numbered as [`merge_group`]'s (needle ids, then merged
+/// lines in creation order, children before parents, the last the root).
+/// `groups` has one value per needle. With a single value, or no more
+/// needles than [`MergeOptions::exhaustive_group_limit`] (a shoot, which the
+/// paper merges as one group), it is [`merge_group`].
+pub fn merge_nested_group(
+    needles: &[Needle],
+    groups: &[u32],
+    context: &CostContext,
+    options: &MergeOptions,
+) -> Vec<MergedLine> {
+    assert_eq!(needles.len(), groups.len(), "one sub-group value per needle");
+    // Sub-groups in order of first appearance.
+    let mut order: Vec<u32> = Vec::new();
+    let mut members: std::collections::HashMap<u32, Vec<u32>> = std::collections::HashMap::new();
+    for (index, &group) in groups.iter().enumerate() {
+        members
+            .entry(group)
+            .or_insert_with(|| {
+                order.push(group);
+                Vec::new()
+            })
+            .push(index as u32);
+    }
+    if order.len() <= 1 || needles.len() <= options.exhaustive_group_limit {
+        return merge_group(needles, context, options);
+    }
+    let needle_count = needles.len() as u32;
+    let mut merged: Vec<MergedLine> = Vec::with_capacity(needles.len().saturating_sub(1));
+    // Each sub-group's root: its node id and its line.
+    let mut roots: Vec<(u32, Line)> = Vec::with_capacity(order.len());
+    for group in &order {
+        let ids = &members[group];
+        let lines: Vec<Line> = ids.iter().map(|&i| needle_line(i, &needles[i as usize])).collect();
+        let search = if lines.len() <= options.exhaustive_group_limit {
+            options.group_search
+        } else {
+            options.tree_search
+        };
+        let mut set = MergeSet::new(context, search, lines);
+        let (merges, root) = set.run(|_| {});
+        let root_line = set.lines[root as usize];
+        let first = needle_count + merged.len() as u32;
+        let node = |local: u32| {
+            if (local as usize) < ids.len() {
+                ids[local as usize]
+            } else {
+                first + (local - ids.len() as u32)
+            }
+        };
+        for m in &merges {
+            merged.push(MergedLine {
+                children: m.children.map(node),
+                ..*m
+            });
+        }
+        let root_node = if merges.is_empty() {
+            ids[0]
+        } else {
+            needle_count + merged.len() as u32 - 1
+        };
+        roots.push((root_node, root_line));
+    }
+    let lines: Vec<Line> = roots.iter().map(|&(_, line)| line).collect();
+    let count = lines.len() as u32;
+    let (across, _) = MergeSet::new(context, options.tree_search, lines).run(|_| {});
+    let first = needle_count + merged.len() as u32;
+    for m in across {
+        merged.push(MergedLine {
+            children: m.children.map(|c| {
+                if c < count {
+                    roots[c as usize].0
+                } else {
+                    first + (c - count)
+                }
+            }),
+            ..m
+        });
+    }
+    merged
+}
+
 /// A group's root line placed in the tree: the input of level 2.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GroupLine {
@@ -669,6 +759,81 @@ pub fn endpoint_position(needles: &[Needle], end: EndpointId) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nested_groups_are_merged_first_and_the_forest_stays_exact() {
+        // 40 shoots of 12 needles each, side by side along a twig: every
+        // shoot's needles meet below one node before any other shoot's.
+        let mut needles = Vec::new();
+        let mut groups = Vec::new();
+        for shoot in 0..40u32 {
+            let origin = Vec3::new(shoot as f32 * 0.05, 0.0, (shoot % 3) as f32 * 0.02);
+            for k in 0..12u32 {
+                let angle = k as f32 * 2.4;
+                let direction = Vec3::new(angle.cos() * 0.5, 1.0, angle.sin() * 0.5).normalize();
+                needles.push(Needle {
+                    base: origin + Vec3::Y * (k as f32 * 0.004),
+                    tip: origin + Vec3::Y * (k as f32 * 0.004) + direction * 0.02,
+                    radius: 0.0006,
+                    normal: direction.any_orthonormal_vector(),
+                    group: 0,
+                });
+                groups.push(shoot);
+            }
+        }
+        let context = CostContext::new(MergeWeights::default(), 2.0, needles.len());
+        let options = MergeOptions::default();
+        assert!(needles.len() > options.exhaustive_group_limit);
+        let merged = merge_nested_group(&needles, &groups, &context, &options);
+        let n = needles.len();
+        assert_eq!(merged.len(), n - 1, "a binary forest down to one root");
+        // Each node's needles, children before parents.
+        let mut leaves: Vec<Vec<u32>> = (0..n as u32).map(|i| vec![i]).collect();
+        let error = |id: u32, merged: &[MergedLine]| {
+            if (id as usize) < n {
+                crate::model::metric::line_error(needles[id as usize].radius)
+            } else {
+                merged[id as usize - n].error
+            }
+        };
+        for (k, m) in merged.iter().enumerate() {
+            let id = (n + k) as u32;
+            for child in m.children {
+                assert!(child < id, "children before parents");
+                assert!(m.error >= error(child, &merged), "parent error ≥ child error");
+            }
+            let mut union = leaves[m.children[0] as usize].clone();
+            union.extend(&leaves[m.children[1] as usize]);
+            leaves.push(union);
+        }
+        let mut all = leaves.last().unwrap().clone();
+        all.sort_unstable();
+        assert_eq!(
+            all,
+            (0..n as u32).collect::<Vec<_>>(),
+            "every needle once under the root"
+        );
+        for shoot in 0..40u32 {
+            let members: Vec<u32> = (0..n as u32).filter(|&i| groups[i as usize] == shoot).collect();
+            assert!(
+                leaves.iter().any(|l| {
+                    let mut l = l.clone();
+                    l.sort_unstable();
+                    l == members
+                }),
+                "shoot {shoot} is one subtree"
+            );
+        }
+        // Shoots are a few centimetres across: no node below a shoot's
+        // root spans two shoots, so their errors stay small.
+        let shoot_roots_max = leaves
+            .iter()
+            .zip((0..).map(|id| error(id, &merged)))
+            .filter(|(l, _)| l.iter().all(|&i| groups[i as usize] == groups[l[0] as usize]))
+            .map(|(_, e)| e)
+            .fold(0.0f32, f32::max);
+        assert!(shoot_roots_max < 0.06, "{shoot_roots_max}");
+    }
 
     #[test]
     fn segment_distance_cases() {

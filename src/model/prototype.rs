@@ -116,7 +116,8 @@ impl Placement {
 /// forest down to one line (see the module docs for its node ids).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Prototype {
-    /// The needles, prototype metres (their `group` is not used).
+    /// The needles, prototype metres (as the record stores them: their
+    /// `group` is 0).
     pub needles: Vec<Needle>,
     /// Level-1 merged lines in creation order (children before parents);
     /// `needles.len() − 1` of them, the last one the root.
@@ -186,7 +187,11 @@ impl Prototype {
 pub struct PrototypeInput {
     /// Human-readable name (species preset, or the source file).
     pub name: String,
-    /// Each prototype's needles in its own frame (their `group` is not used).
+    /// Each prototype's needles in its own frame. Their `group` marks the
+    /// phyllotaxy sub-groups (shoots, fascicles) of a prototype larger than
+    /// [`crate::model::MergeOptions::exhaustive_group_limit`], merged first
+    /// ([`crate::model::merge::merge_nested_group`]); the record does not
+    /// keep it.
     pub prototypes: Vec<Vec<Needle>>,
     /// Where the prototypes stand; placement `p` becomes group `p`.
     pub placements: Vec<Placement>,
