@@ -48,14 +48,12 @@ pub struct PresetFigures {
     pub needles: usize,
 }
 
-/// The six presets timed: the four species and two more seeds, each
-/// aiming at `needles` needles (`None`: the species' own count).
+/// The six presets timed: the six species (mature), each aiming at
+/// `needles` needles (`None`: the species' own count).
 pub fn timed_presets(needles: Option<usize>) -> Vec<Preset> {
-    let mut presets: Vec<Preset> = Species::ALL.iter().map(|&s| Preset::new(s)).collect();
-    presets.push(Preset::new(Species::ScotsPine).with_seed(1));
-    presets.push(Preset::new(Species::NorwaySpruce).with_seed(1));
-    presets
-        .into_iter()
+    Species::ALL
+        .iter()
+        .map(|&s| Preset::new(s))
         .map(|p| Preset {
             target_needles: needles,
             ..p
