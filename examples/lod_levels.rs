@@ -10,7 +10,7 @@
 //! cargo run --release --example lod_levels [species] [output.png]
 //! ```
 
-use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake};
 use bevy_conifer_lod::preview::{PreviewCamera, PreviewOptions, cut_primitives, render_preview};
 use std::path::PathBuf;
@@ -28,7 +28,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some(dir) = output.parent() {
         std::fs::create_dir_all(dir)?;
     }
-    let tree = generate(species, &GenerateOptions::default());
+    let young = GenerateOptions {
+        age: Age::Young,
+        ..GenerateOptions::default()
+    };
+    let tree = generate(species, &young);
     let record = bake(&tree, &BakeOptions::default(), &())?;
     let view = ViewParams {
         vertical_fov: 45f32.to_radians(),

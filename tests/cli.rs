@@ -30,12 +30,15 @@ fn assert_fails_naming(output: &Output, needle: &str) -> String {
     stderr
 }
 
+/// A young preset baked (the figures below were calibrated on them).
 fn baked(dir: &Path, preset: &str, needles: &str) -> PathBuf {
     let out = dir.join(format!("{preset}.conifer"));
     let output = conifer(&[
         "bake",
         "--preset",
         preset,
+        "--age",
+        "young",
         "--seed",
         "3",
         "--needles",
@@ -430,6 +433,8 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         "bake",
         "--preset",
         "eastern-white-pine",
+        "--age",
+        "young",
         "--needles",
         "20000",
         "--flat",
@@ -494,4 +499,30 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     std::fs::write(&junk, b"not a record at all").unwrap();
     assert_fails_naming(&conifer(&["upgrade", junk.to_str().unwrap()]), "junk.conifer");
     assert_eq!(std::fs::read(&junk).unwrap(), b"not a record at all");
+}
+
+#[test]
+fn mature_presets_are_the_default_and_bad_ages_and_counts_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("fir.conifer");
+    let path = out.to_str().unwrap();
+    let output = conifer(&["bake", "--preset", "silver-fir", "--needles", "60000", "-o", path]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let inspect = json(&conifer(&["inspect", path, "--json"]));
+    let needles = inspect["needles"].as_u64().unwrap();
+    assert!((57_000..=63_000).contains(&needles), "{needles}");
+    // A mature tree's needles are widened to keep its crown: far wider
+    // than a young fir's 0.9–1.2 mm.
+    let radius = inspect["radius"]["median"].as_f64().unwrap();
+    assert!(radius > 0.003, "median radius {radius}");
+    let cut = json(&conifer(&["cut", path, "--distance", "0.5", "--json"]));
+    assert_eq!(cut["needles_covered"].as_u64(), Some(needles));
+    for (args, named) in [
+        (vec!["--age", "old"], "old"),
+        (vec!["--needles", "0"], "needle count above 0"),
+    ] {
+        let mut all = vec!["bake", "--preset", "silver-fir", "-o", path];
+        all.extend(args);
+        assert_fails_naming(&conifer(&all), named);
+    }
 }

@@ -2,7 +2,7 @@
 //! the paper's four distances (45° vertical FOV, 1536 px, ε = 1). The paper's
 //! 10-year-old white pine used 23,310 / 14,391 / 6,212 / 2,022 lines there.
 
-use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
+use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, PixelError, ViewParams, bake};
 
 const DISTANCES: [f32; 4] = [12.22, 26.71, 56.15, 118.40];
@@ -10,7 +10,12 @@ const PAPER_LINES: [u64; 4] = [23_310, 14_391, 6_212, 2_022];
 
 #[test]
 fn lines_fall_with_distance_like_table_1() {
-    let tree = generate(Species::EasternWhitePine, &GenerateOptions::default());
+    // The young preset: the paper's tree is 10 years old.
+    let young = GenerateOptions {
+        age: Age::Young,
+        ..GenerateOptions::default()
+    };
+    let tree = generate(Species::EasternWhitePine, &young);
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
     let view = ViewParams {
         vertical_fov: 45f32.to_radians(),
