@@ -615,25 +615,21 @@ impl EvalScene {
     /// The tree's screen rectangle at `distance` on the methods' pictures.
     pub fn screen_rect(&self, distance: f32) -> super::measure::PixelRect {
         let (lo, hi) = self.record.bounds();
-        super::measure::screen_rect(
-            lo,
-            hi,
-            self.eye(distance),
-            self.record.crown_center(),
-            self.view.fov_deg.to_radians(),
-            self.view.width,
-            self.view.height,
-        )
+        self.box_rect(lo, hi, distance)
     }
 
     /// The screen box of the needles alone at `distance` (the crown, without
     /// the bare trunk below it): where [`crate::model::look::crown_see_through`]
     /// looks.
     pub fn crown_rect(&self, distance: f32) -> super::measure::PixelRect {
-        let Some((lo, hi)) = crate::model::needle::bounds(self.record.needles.iter().flat_map(|n| [n.base, n.tip]))
-        else {
-            return self.screen_rect(distance);
-        };
+        match crate::model::needle::bounds(self.record.needles.iter().flat_map(|n| [n.base, n.tip])) {
+            Some((lo, hi)) => self.box_rect(lo, hi, distance),
+            None => self.screen_rect(distance),
+        }
+    }
+
+    /// The screen rectangle of the box `[lo, hi]` seen from the eye at `distance`.
+    fn box_rect(&self, lo: Vec3, hi: Vec3, distance: f32) -> super::measure::PixelRect {
         super::measure::screen_rect(
             lo,
             hi,

@@ -208,10 +208,7 @@ fn grow_twig_prototypes(
     for placement in &skeleton.twig_placements {
         uses[placement.twig as usize] += 1;
     }
-    let mut density = target_units / twig_weight;
-    let mut best: (f32, Vec<Vec<u32>>) = (f32::INFINITY, Vec::new());
-    for _ in 0..12 {
-        let floor = minimum_units(params, density / default_density);
+    let units = calibrate(params, target_units, twig_weight, default_density, |density, floor| {
         let units: Vec<Vec<u32>> = skeleton
             .twigs
             .iter()
@@ -221,18 +218,9 @@ fn grow_twig_prototypes(
             .iter()
             .zip(&uses)
             .map(|(u, &n)| u.iter().sum::<u32>() as f32 * n as f32)
-            .sum::<f32>()
-            .max(1.0);
-        let miss = (total - target_units).abs();
-        if miss < best.0 {
-            best = (miss, units);
-        }
-        if miss <= 0.002 * target_units {
-            break;
-        }
-        density *= target_units / total;
-    }
-    let units = best.1;
+            .sum();
+        (units, total)
+    });
     let mut prototype_of = vec![None; skeleton.twigs.len()];
     for (index, twig) in skeleton.twigs.iter().enumerate() {
         if uses[index] == 0 || units[index].iter().all(|&u| u == 0) {
@@ -283,24 +271,41 @@ fn units_per_site(sites: &[FoliageSite], params: &FoliageParams, budget: NeedleB
         return vec![0; sites.len()];
     }
     let default_density = budget.natural.max(1) as f32 / per_unit / total_weight;
-    let mut density = target_units / total_weight;
-    // The closest of the tries: the floor can make the total jump over the
-    // target back and forth.
-    let mut best: (f32, Vec<u32>) = (f32::INFINITY, Vec::new());
+    calibrate(params, target_units, total_weight, default_density, |density, floor| {
+        let units = diffuse(sites, density, floor);
+        let total = units.iter().map(|&u| u as f32).sum();
+        (units, total)
+    })
+}
+
+/// The units of the density (per unit of site weight) that best meets
+/// `target_units`: `place(density, floor)` gives the units at a density
+/// with the phyllotaxy's floor and their total. Up to 12 tries, each
+/// scaling the density by the miss; the closest is kept (the floor can make
+/// the total jump over the target back and forth).
+fn calibrate<T>(
+    params: &FoliageParams,
+    target_units: f32,
+    weight: f32,
+    default_density: f32,
+    mut place: impl FnMut(f32, u32) -> (T, f32),
+) -> T {
+    let mut density = target_units / weight;
+    let mut best: Option<(f32, T)> = None;
     for _ in 0..12 {
         let floor = minimum_units(params, density / default_density);
-        let units = diffuse(sites, density, floor);
-        let total = units.iter().map(|&u| u as f32).sum::<f32>().max(1.0);
+        let (units, total) = place(density, floor);
+        let total = total.max(1.0);
         let miss = (total - target_units).abs();
-        if miss < best.0 {
-            best = (miss, units);
+        if best.as_ref().is_none_or(|(closest, _)| miss < *closest) {
+            best = Some((miss, units));
         }
         if miss <= 0.002 * target_units {
             break;
         }
         density *= target_units / total;
     }
-    best.1
+    best.expect("at least one try").1
 }
 
 /// The fewest needles a spiral or two-rowed shoot gets at
