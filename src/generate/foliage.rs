@@ -425,11 +425,7 @@ impl Placer<'_> {
     fn spiral(&mut self, site: &FoliageSite, count: u32) {
         let axis = site.axis();
         let phase = self.rng.unit() * TAU;
-        let max_group = self.params.group_size.1.max(1) as u32;
-        let runs = count.div_ceil(max_group).max(1);
-        let run_length = count.div_ceil(runs).max(1);
-        let first_group = self.next_group;
-        self.next_group += runs;
+        let (first_group, run_length) = self.shoot_runs(count);
         for index in 0..count {
             let (t, pos) = self.position(site, index, count);
             let mut radial = cone_direction(axis, site.up, FRAC_PI_2, phase + index as f32 * GOLDEN_ANGLE);
@@ -459,11 +455,7 @@ impl Placer<'_> {
         let axis = site.axis();
         let up = perpendicular_toward(axis, site.up);
         let side = axis.cross(up).normalize_or(axis.any_orthonormal_vector());
-        let max_group = self.params.group_size.1.max(1) as u32;
-        let runs = count.div_ceil(max_group).max(1);
-        let run_length = count.div_ceil(runs).max(1);
-        let first_group = self.next_group;
-        self.next_group += runs;
+        let (first_group, run_length) = self.shoot_runs(count);
         for index in 0..count {
             let (t, pos) = self.position(site, index, count);
             let row = if index % 2 == 0 { side } else { -side };
@@ -502,6 +494,17 @@ impl Placer<'_> {
             let group = self.spray_group(site.group_key);
             self.push(pos, dir, length, perpendicular_toward(dir, site.up), group);
         }
+    }
+
+    /// Groups for a shoot of `count` needles: one, or even runs when it
+    /// exceeds the maximum group size. Returns the first group and the run
+    /// length (needle `i` is in group `first + i / run_length`).
+    fn shoot_runs(&mut self, count: u32) -> (u32, u32) {
+        let max_group = self.params.group_size.1.max(1) as u32;
+        let runs = count.div_ceil(max_group).max(1);
+        let first_group = self.next_group;
+        self.next_group += runs;
+        (first_group, count.div_ceil(runs).max(1))
     }
 
     fn new_group(&mut self) -> u32 {
