@@ -40,16 +40,8 @@ pub(crate) fn grow_needles(
 ) -> Vec<Needle> {
     let units = units_per_site(sites, params, budget);
     let total_units: usize = units.iter().map(|&u| u as usize).sum();
-    let mut placer = Placer {
-        params,
-        rng,
-        up: UP,
-        widening: budget.widening,
-        lengthening: budget.lengthening,
-        needles: Vec::with_capacity(total_units * needles_per_unit(params) as usize),
-        next_group: 0,
-        spray: None,
-    };
+    let mut placer = Placer::new(params, rng, UP, budget);
+    placer.needles.reserve(total_units * needles_per_unit(params) as usize);
     for (site, &count) in sites.iter().zip(&units) {
         placer.grow(site, count);
     }
@@ -85,12 +77,7 @@ pub(crate) fn grow_shoot_prototypes(
 ) -> (Vec<Vec<Needle>>, Vec<Placement>) {
     let sites = &skeleton.sites;
     // The budget is shared between the shoots and the twigs by weight.
-    let site_weight: f32 = sites.iter().map(|s| s.weight).sum();
-    let twig_weight: f32 = skeleton
-        .twig_placements
-        .iter()
-        .map(|p| skeleton.twigs[p.twig as usize].weight())
-        .sum();
+    let (site_weight, twig_weight) = (skeleton.site_weight(), skeleton.placed_twig_weight());
     let share = site_weight / (site_weight + twig_weight).max(f32::MIN_POSITIVE);
     let site_budget = NeedleBudget {
         target: (budget.target as f32 * share).round() as usize,
@@ -142,16 +129,7 @@ pub(crate) fn grow_shoot_prototypes(
             group_key: 0,
             vigor: vigors[vigors.len() / 2],
         };
-        let mut placer = Placer {
-            params,
-            rng: &mut *rng,
-            up: Vec3::Z,
-            widening: budget.widening,
-            lengthening: budget.lengthening,
-            needles: Vec::new(),
-            next_group: 0,
-            spray: None,
-        };
+        let mut placer = Placer::new(params, &mut *rng, Vec3::Z, budget);
         placer.grow(&canonical, key.0);
         prototype_of.insert(*key, (prototypes.len() as u32, length));
         prototypes.push(placer.needles);
@@ -172,35 +150,35 @@ pub(crate) fn grow_shoot_prototypes(
             }
         })
         .collect();
-    grow_twig_prototypes(
-        skeleton,
-        params,
-        budget,
-        twig_weight,
-        rng,
-        &mut prototypes,
-        &mut placements,
-    );
+    if twig_weight > 0.0 {
+        let twig_share = twig_weight / (site_weight + twig_weight);
+        grow_twig_prototypes(
+            skeleton,
+            params,
+            budget,
+            twig_share,
+            rng,
+            &mut prototypes,
+            &mut placements,
+        );
+    }
     (prototypes, placements)
 }
 
 /// Covers each used twig of `skeleton` with needles at one density (the
-/// budget's twig share, calibrated like [`units_per_site`]) as one
-/// prototype, and places it wherever the twig stands.
+/// budget's `share`, calibrated like [`units_per_site`]) as one prototype,
+/// and places it wherever the twig stands. The placed twigs must weigh
+/// more than nothing.
 fn grow_twig_prototypes(
     skeleton: &Skeleton,
     params: &FoliageParams,
     budget: NeedleBudget,
-    twig_weight: f32,
+    share: f32,
     rng: &mut TreeRng,
     prototypes: &mut Vec<Vec<Needle>>,
     placements: &mut Vec<Placement>,
 ) {
-    if skeleton.twig_placements.is_empty() || twig_weight <= 0.0 {
-        return;
-    }
-    let site_weight: f32 = skeleton.sites.iter().map(|s| s.weight).sum();
-    let share = twig_weight / (site_weight + twig_weight);
+    let twig_weight = skeleton.placed_twig_weight();
     let per_unit = needles_per_unit(params) as f32;
     let target_units = budget.target as f32 * share / per_unit;
     let default_density = budget.natural.max(1) as f32 * share / per_unit / twig_weight;
@@ -226,16 +204,7 @@ fn grow_twig_prototypes(
         if uses[index] == 0 || units[index].iter().all(|&u| u == 0) {
             continue;
         }
-        let mut placer = Placer {
-            params,
-            rng: &mut *rng,
-            up: UP,
-            widening: budget.widening,
-            lengthening: budget.lengthening,
-            needles: Vec::new(),
-            next_group: 0,
-            spray: None,
-        };
+        let mut placer = Placer::new(params, &mut *rng, UP, budget);
         for (site, &count) in twig.sites.iter().zip(&units[index]) {
             placer.grow(site, count);
         }
@@ -354,7 +323,22 @@ struct Placer<'a> {
     spray: Option<(u32, usize)>,
 }
 
-impl Placer<'_> {
+impl<'a> Placer<'a> {
+    /// A placer of needles sized by `budget`, growing in a frame whose
+    /// world up is `up`.
+    fn new(params: &'a FoliageParams, rng: &'a mut TreeRng, up: Vec3, budget: NeedleBudget) -> Self {
+        Self {
+            params,
+            rng,
+            up,
+            widening: budget.widening,
+            lengthening: budget.lengthening,
+            needles: Vec::new(),
+            next_group: 0,
+            spray: None,
+        }
+    }
+
     /// `count` units of the species' phyllotaxy on `site`.
     fn grow(&mut self, site: &FoliageSite, count: u32) {
         match self.params.phyllotaxy {

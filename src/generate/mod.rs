@@ -323,7 +323,7 @@ fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options:
                 .iter()
                 .map(|p| skeleton.twigs[p.twig as usize].weight() * p.scale)
                 .sum();
-            let shoot_metres = skeleton.sites.iter().map(|s| s.weight).sum::<f32>() + twig_metres;
+            let shoot_metres = skeleton.site_weight() + twig_metres;
             ((per_metre * shoot_metres * vigor).round() as usize, most)
         }
     };

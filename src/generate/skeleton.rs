@@ -81,6 +81,23 @@ pub(crate) struct Skeleton {
     pub twig_placements: Vec<TwigPlacement>,
 }
 
+impl Skeleton {
+    /// Summed weight of the foliage sites (needle capacity at unit density).
+    pub(crate) fn site_weight(&self) -> f32 {
+        self.sites.iter().map(|s| s.weight).sum()
+    }
+
+    /// Summed weight of the twigs as placed, each counted once per
+    /// placement at its prototype's size (a placement carries its
+    /// prototype's needles whatever its scale).
+    pub(crate) fn placed_twig_weight(&self) -> f32 {
+        self.twig_placements
+            .iter()
+            .map(|p| self.twigs[p.twig as usize].weight())
+            .sum()
+    }
+}
+
 /// A lateral system grown once in its own frame and placed many times: its
 /// base at the origin, its first shoot along +X, the world's up +Y.
 #[derive(Clone, Debug)]

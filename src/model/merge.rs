@@ -96,6 +96,18 @@ pub struct MergeOptions {
     pub tree_search: PartnerSearch,
 }
 
+impl MergeOptions {
+    /// The partner search for a group of `lines` lines: exhaustive up to
+    /// [`MergeOptions::exhaustive_group_limit`], the whole-tree search above.
+    pub fn search_for_group(&self, lines: usize) -> PartnerSearch {
+        if lines <= self.exhaustive_group_limit {
+            self.group_search
+        } else {
+            self.tree_search
+        }
+    }
+}
+
 impl Default for MergeOptions {
     fn default() -> Self {
         Self {
@@ -612,11 +624,7 @@ fn needle_line(needle_id: u32, needle: &Needle) -> Line {
 /// [`MergeOptions::exhaustive_group_limit`] use the whole-tree search.
 pub fn merge_group(needles: &[Needle], context: &CostContext, options: &MergeOptions) -> Vec<MergedLine> {
     let lines: Vec<Line> = (0..needles.len()).map(|i| needle_line(i as u32, &needles[i])).collect();
-    let search = if lines.len() <= options.exhaustive_group_limit {
-        options.group_search
-    } else {
-        options.tree_search
-    };
+    let search = options.search_for_group(lines.len());
     MergeSet::new(context, search, lines).run(|_| {}).0
 }
 
@@ -640,6 +648,9 @@ pub fn merge_nested_group(
     options: &MergeOptions,
 ) -> Vec<MergedLine> {
     assert_eq!(needles.len(), groups.len(), "one sub-group value per needle");
+    if needles.len() <= options.exhaustive_group_limit {
+        return merge_group(needles, context, options);
+    }
     // Sub-groups in order of first appearance.
     let mut order: Vec<u32> = Vec::new();
     let mut members: std::collections::HashMap<u32, Vec<u32>> = std::collections::HashMap::new();
@@ -652,7 +663,7 @@ pub fn merge_nested_group(
             })
             .push(index as u32);
     }
-    if order.len() <= 1 || needles.len() <= options.exhaustive_group_limit {
+    if order.len() <= 1 {
         return merge_group(needles, context, options);
     }
     let needle_count = needles.len() as u32;
@@ -662,12 +673,7 @@ pub fn merge_nested_group(
     for group in &order {
         let ids = &members[group];
         let lines: Vec<Line> = ids.iter().map(|&i| needle_line(i, &needles[i as usize])).collect();
-        let search = if lines.len() <= options.exhaustive_group_limit {
-            options.group_search
-        } else {
-            options.tree_search
-        };
-        let mut set = MergeSet::new(context, search, lines);
+        let mut set = MergeSet::new(context, options.search_for_group(lines.len()), lines);
         let (merges, root) = set.run(|_| {});
         let root_line = set.lines[root as usize];
         let first = needle_count + merged.len() as u32;
