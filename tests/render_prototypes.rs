@@ -280,7 +280,7 @@ fn gpu_draws_equal_the_cpu_reference() {
                 flat_record.cut(e)
             } else {
                 compact
-                    .placed_drawn(&prototype_record, code, e, shader_threshold_code)
+                    .placed_drawn(&prototype_record, code, e, shader_threshold_code, None)
                     .0
             };
             let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()) as f64;

@@ -480,7 +480,7 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
     let (gpu_bytes, view_bytes) = compact_memory(tree, &distances, |view| {
         let [code, e_bits, ..] = view.lods[0];
         let (code, e) = ((code & 0xffff) as u16, f32::from_bits(e_bits));
-        let (cut, _) = compact.placed_drawn(&record, code, e, crate::model::compact::shader_threshold_code);
+        let (cut, _) = compact.placed_drawn(&record, code, e, crate::model::compact::shader_threshold_code, None);
         let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()).max(1);
         processed_over_cut.push(view.processed_primitives(record.max_sides) as f64 / in_cut as f64);
     })?;

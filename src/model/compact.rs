@@ -47,6 +47,7 @@ use super::prism::{TriangleMesh, WOOD_LINE_FADE};
 use super::prototype::{Placement, PrototypeRecord};
 use super::quantize::{LOG_CODE_MAX, LOG_CODE_MIN, PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
 use super::record::{Cut, LodRecord, NO_PARENT};
+use super::view::{Sphere, ViewPoint};
 use super::{file, metric};
 use glam::Vec3;
 
@@ -119,7 +120,20 @@ pub struct CompactSpecies {
     /// their root line descending: the placements a view expands are a
     /// prefix.
     pub placements: Vec<CompactPlacement>,
+    /// Bounding spheres of the level-2 merged lines (tree metres, see
+    /// [`super::view`]): first those of the tree's drawable lines in their
+    /// order in `merged_lines`, then the others'. Empty for a flat species.
+    pub tree_spheres: Vec<Sphere>,
+    /// For each of the tree's drawable lines, the index in `tree_spheres`
+    /// of its parent's sphere ([`NO_SPHERE`] for a root).
+    pub tree_line_parents: Vec<u32>,
+    /// A sphere holding every node's sphere and the wood (tree metres); a
+    /// view's tree-wide threshold code comes from its nearest point.
+    pub tree_sphere: Sphere,
 }
+
+/// A root's parent sphere index: no parent.
+pub const NO_SPHERE: u32 = u32::MAX;
 
 /// One shared prototype of a placed species: its sections of the compact
 /// arrays, on its own grid, and how its placements' threshold codes are
@@ -128,6 +142,8 @@ pub struct CompactSpecies {
 pub struct CompactPrototype {
     /// The grid of its needles' ends (prototype metres).
     pub grid: PositionGrid,
+    /// Its bounding sphere (prototype metres): placed, a placement's.
+    pub sphere: Sphere,
     /// First entry and length of its needles (sorted by line-error code
     /// descending within the section).
     pub needles: [u32; 2],
@@ -155,6 +171,9 @@ pub struct CompactPlacement {
     /// ([`ROOT_PARENT_CODE`] without one): a view expands the placement iff
     /// its threshold code is below it.
     pub parent_code: u16,
+    /// Index in [`CompactSpecies::tree_spheres`] of that parent's sphere
+    /// ([`NO_SPHERE`] for a root).
+    pub parent_sphere: u32,
     /// The record's placement index.
     pub source: u32,
 }
@@ -511,6 +530,9 @@ impl CompactSpecies {
             tree_counts: [n as u32, original_len, merged_len],
             prototypes: Vec::new(),
             placements: Vec::new(),
+            tree_spheres: Vec::new(),
+            tree_line_parents: Vec::new(),
+            tree_sphere: Sphere::default(),
         })
     }
 
@@ -733,6 +755,9 @@ impl CompactSpecies {
             tree_counts: [0; 3],
             prototypes: Vec::new(),
             placements: Vec::new(),
+            tree_spheres: Vec::new(),
+            tree_line_parents: Vec::new(),
+            tree_sphere: record.tree_sphere(),
         };
         for (slot, &i) in order.iter().enumerate() {
             let (parent, own, width, node) = lines[i];
@@ -748,6 +773,28 @@ impl CompactSpecies {
         }
         species.merged_code_range = merged_code_range;
         species.tree_counts = [species.needles.len() as u32, 0, species.merged_lines.len() as u32];
+        // Spheres: the drawable lines' in slot order, then the others'.
+        let p_node = record.placements.len() as u32;
+        let mut sphere_of = vec![NO_SPHERE; record.tree_merged.len()];
+        for &i in &order {
+            let k = (lines[i].3 - level2_first) as usize;
+            sphere_of[k] = species.tree_spheres.len() as u32;
+            species.tree_spheres.push(record.node_sphere(p_node + k as u32));
+        }
+        for k in 0..record.tree_merged.len() {
+            if sphere_of[k] == NO_SPHERE {
+                sphere_of[k] = species.tree_spheres.len() as u32;
+                species.tree_spheres.push(record.node_sphere(p_node + k as u32));
+            }
+        }
+        let parent_sphere = |node: u32| match record.tree_parent(node) {
+            NO_PARENT => NO_SPHERE,
+            parent => sphere_of[(parent - p_node) as usize],
+        };
+        species.tree_line_parents = order
+            .iter()
+            .map(|&i| parent_sphere(p_node + lines[i].3 - level2_first))
+            .collect();
         // The prototypes' sections, each built as a one-prototype record.
         for prototype in &record.prototypes {
             let alone = PrototypeRecord::from_parts(
@@ -774,6 +821,7 @@ impl CompactSpecies {
             let band_edges = section.band_edges();
             species.prototypes.push(CompactPrototype {
                 grid: section.grid,
+                sphere: record.prototype_sphere(species.prototypes.len()),
                 needles: first(species.needles.len(), section.needles.len()),
                 original_lines: first(species.original_lines.len(), section.original_lines.len()),
                 merged_lines: first(species.merged_lines.len(), section.merged_lines.len()),
@@ -799,6 +847,7 @@ impl CompactSpecies {
                 prototype: placement.prototype,
                 transform: *placement,
                 parent_code: parent_code(flat, root)?,
+                parent_sphere: parent_sphere(p as u32),
                 source: p as u32,
             });
         }
@@ -866,18 +915,64 @@ impl CompactSpecies {
         k * PLACED_BANDS as usize + self.placement_band(k, code) as usize
     }
 
+    /// Spatial error (tree metres) of what `sphere` bounds, seen from
+    /// `view`: its nearest point's, or the tree sphere's for a camera
+    /// beyond [`super::view::VIEW_RANGE`] (as `conifer_cull.wgsl` computes it).
+    pub fn sphere_error(&self, view: &ViewPoint, sphere: &Sphere) -> f32 {
+        if view.beyond_range(&self.tree_sphere) {
+            view.spatial_error(&self.tree_sphere)
+        } else {
+            view.spatial_error(sphere)
+        }
+    }
+
+    /// Spatial error (tree metres) a view gives placement entry `j`: the
+    /// tree's `e`, or from `seen`, its own sphere's.
+    pub fn placement_error(&self, j: usize, e: f32, seen: Option<&ViewPoint>) -> f32 {
+        let placement = &self.placements[j];
+        match seen {
+            None => e,
+            Some(view) => {
+                let sphere = self.prototypes[placement.prototype as usize]
+                    .sphere
+                    .placed(&placement.transform);
+                self.sphere_error(view, &sphere)
+            }
+        }
+    }
+
+    /// `true` when a view seen from `seen` leaves placement entry `j`
+    /// unexpanded although the tree's code (a lower bound of every node's)
+    /// reaches it: its parent's sphere is far enough for the parent line.
+    pub fn parent_accepted(&self, j: usize, seen: Option<&ViewPoint>, threshold: fn(f32) -> u16) -> bool {
+        let placement = &self.placements[j];
+        match seen {
+            Some(view) if placement.parent_sphere != NO_SPHERE => {
+                let sphere = self.tree_spheres[placement.parent_sphere as usize];
+                threshold(self.sphere_error(view, &sphere)) >= placement.parent_code
+            }
+            _ => false,
+        }
+    }
+
     /// What the compute passes find for one tree at spatial error `e`
     /// (tree metres) and threshold code `code`: each expanded placement's
     /// own threshold code (`threshold(e / scale)`), and the per-draw counts
-    /// and longest prefixes.
-    pub fn placed_view(&self, code: u16, e: f32, threshold: fn(f32) -> u16) -> PlacedView {
+    /// and longest prefixes. Seen from `seen` (view-dependent detail), `e`
+    /// and `code` are the tree sphere's; a placement whose parent is
+    /// accepted at its own sphere's error is dropped, and each kept one
+    /// takes its own sphere's error.
+    pub fn placed_view(&self, code: u16, e: f32, threshold: fn(f32) -> u16, seen: Option<&ViewPoint>) -> PlacedView {
         let mut view = PlacedView {
             expanded: Vec::new(),
             draws: vec![PlacedDraw::default(); self.prototypes.len() * PLACED_BANDS as usize],
         };
         for j in 0..self.expanded_placements(code) {
+            if self.parent_accepted(j as usize, seen, threshold) {
+                continue;
+            }
             let placement = &self.placements[j as usize];
-            let c = threshold(e / placement.transform.scale);
+            let c = threshold(self.placement_error(j as usize, e, seen) / placement.transform.scale);
             let k = placement.prototype as usize;
             let draw = self.placed_draw_index(k, c);
             view.draws[draw].add(self.prototype_prefixes(k, c));
@@ -890,18 +985,41 @@ impl CompactSpecies {
     /// `code` and spatial error `e`: the tree's level-2 lines and, for each
     /// expanded placement, its draw's prefixes filtered by the placement's
     /// own threshold code, as a [`Cut`] in `record.flatten()`'s ids; and
-    /// how many primitives the draws processed.
-    pub fn placed_drawn(&self, record: &PrototypeRecord, code: u16, e: f32, threshold: fn(f32) -> u16) -> (Cut, u64) {
+    /// how many primitives the draws processed. Seen from `seen`, each
+    /// level-2 line is kept by its own and its parent's sphere's codes
+    /// (see [`CompactSpecies::placed_view`] for the placements).
+    pub fn placed_drawn(
+        &self,
+        record: &PrototypeRecord,
+        code: u16,
+        e: f32,
+        threshold: fn(f32) -> u16,
+        seen: Option<&ViewPoint>,
+    ) -> (Cut, u64) {
         let mut cut = self.drawn(code, e);
         let tree = self.prefixes(code, e);
+        if let Some(view) = seen {
+            cut.merged_lines.clear();
+            for m in 0..tree.merged_lines as usize {
+                let (own, parent) = self.merged_codes(m);
+                let own_code = threshold(self.sphere_error(view, &self.tree_spheres[m]));
+                let parent_code = match self.tree_line_parents[m] {
+                    NO_SPHERE => 0,
+                    k => threshold(self.sphere_error(view, &self.tree_spheres[k as usize])),
+                };
+                if own <= own_code && parent_code < parent {
+                    cut.merged_lines.push(self.merged_source[m]);
+                }
+            }
+        }
         let mut processed = u64::from(tree.merged_lines);
-        let view = self.placed_view(code, e, threshold);
+        let view = self.placed_view(code, e, threshold, seen);
         for &(j, c, draw) in &view.expanded {
             let placement = &self.placements[j as usize];
             let prototype = &self.prototypes[placement.prototype as usize];
             let draw = view.draws[draw].longest;
             let name = |local: u32| record.flat_local(placement.source as usize, local);
-            let placed_e = e / placement.transform.scale;
+            let placed_e = self.placement_error(j as usize, e, seen) / placement.transform.scale;
             let first_needle = prototype.needles[0];
             for i in 0..draw.prisms {
                 let needle = first_needle + i;

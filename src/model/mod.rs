@@ -12,6 +12,7 @@
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
+//! * [`view`]: view-dependent detail inside a tree (bounding spheres, errors per placement).
 
 pub mod bake;
 pub mod compact;
@@ -26,6 +27,7 @@ pub mod prototype;
 pub mod quantize;
 pub mod record;
 pub mod shading;
+pub mod view;
 
 pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_prototypes};
 pub use cut_count::{CutCounter, CutCounts};
@@ -38,3 +40,4 @@ pub use metric::{PixelError, ViewParams, spatial_error};
 pub use needle::*;
 pub use prototype::{Placement, Prototype, PrototypeInput, PrototypeRecord};
 pub use record::{Cut, CutStats, LodRecord, Representation};
+pub use view::{Sphere, ViewPoint};

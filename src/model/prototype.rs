@@ -39,6 +39,7 @@ use super::metric::{NeedleForm, line_error, needle_form, relative_error};
 use super::needle::{FoliageMaterial, Needle, TreeInput, WoodSegment};
 use super::prism::TriangleMesh;
 use super::record::{BakeInfo, Cut, LodRecord, NO_PARENT, RecordInvalid, check_appearance, check_forest};
+use super::view::{SPHERE_MARGIN, Sphere, ViewPoint};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
@@ -286,6 +287,13 @@ pub struct PrototypeRecord {
     merged_offset: Vec<u64>,
     /// Parent of each level-2 node (placements, then `tree_merged`).
     tree_parent: Vec<u32>,
+    /// Bounding sphere of each prototype, prototype metres.
+    prototype_spheres: Vec<Sphere>,
+    /// Bounding sphere of each level-2 node, tree metres: a placement's
+    /// prototype sphere placed, a merged line's holding its children's.
+    node_spheres: Vec<Sphere>,
+    /// A sphere holding every node's sphere and the wood.
+    tree_sphere: Sphere,
 }
 
 impl PrototypeRecord {
@@ -364,13 +372,96 @@ impl PrototypeRecord {
             needle_offset,
             merged_offset,
             tree_parent: Vec::new(),
+            prototype_spheres: Vec::new(),
+            node_spheres: Vec::new(),
+            tree_sphere: Sphere::default(),
         };
         let tree_parent = check_forest(record.placements.len(), &tree_merged, 2 * needles, |p| {
             record.placed_root_error(p)
         })?;
         record.tree_merged = tree_merged;
         record.tree_parent = tree_parent;
+        record.bound_nodes()?;
         Ok(record)
+    }
+
+    /// Derives the bounding spheres (see [`super::view`]): each prototype's
+    /// around its needles' ends and widest radius, each placement's that
+    /// sphere placed, each level-2 merged line's the smallest holding its
+    /// two children's grown by [`SPHERE_MARGIN`] of the tree's size, and
+    /// the tree's holding the roots' and the wood's, grown the same.
+    fn bound_nodes(&mut self) -> Result<(), RecordInvalid> {
+        self.prototype_spheres = self
+            .prototypes
+            .iter()
+            .map(|prototype| {
+                let widest = prototype.needles.iter().map(|n| n.radius).fold(0.0, f32::max);
+                Sphere::around_points(prototype.needles.iter().flat_map(|n| [n.base, n.tip]), widest)
+            })
+            .collect::<Option<_>>()
+            .ok_or(RecordInvalid::NoNeedles)?;
+        let mut spheres: Vec<Sphere> = self
+            .placements
+            .iter()
+            .map(|pl| self.prototype_spheres[pl.prototype as usize].placed(pl))
+            .collect();
+        let wood: Vec<Sphere> = self
+            .wood
+            .iter()
+            .map(|w| Sphere {
+                center: 0.5 * (w.start + w.end),
+                radius: 0.5 * w.start.distance(w.end) + w.start_radius.max(w.end_radius),
+            })
+            .chain(Sphere::around_points(self.wood_mesh.positions.iter().copied(), 0.0))
+            .collect();
+        let extent = Sphere::around_points(
+            spheres
+                .iter()
+                .chain(&wood)
+                .flat_map(|s| [s.center - Vec3::splat(s.radius), s.center + Vec3::splat(s.radius)]),
+            0.0,
+        )
+        .map_or(0.0, |s| s.radius);
+        let margin = (extent * SPHERE_MARGIN).max(f32::MIN_POSITIVE);
+        for line in &self.tree_merged {
+            let [a, b] = line.children.map(|c| spheres[c as usize]);
+            spheres.push(a.enclosing(&b).grown(margin));
+        }
+        let mut roots = (0..spheres.len())
+            .filter(|&k| self.tree_parent[k] == NO_PARENT)
+            .map(|k| spheres[k])
+            .chain(wood);
+        let first = roots.next().ok_or(RecordInvalid::NoNeedles)?;
+        self.tree_sphere = roots.fold(first, |all, s| all.enclosing(&s)).grown(margin);
+        self.node_spheres = spheres;
+        Ok(())
+    }
+
+    /// Bounding sphere of prototype `k`, prototype metres.
+    pub fn prototype_sphere(&self, prototype: usize) -> Sphere {
+        self.prototype_spheres[prototype]
+    }
+
+    /// Bounding sphere of level-2 node `node` (placements, then merged
+    /// lines), tree metres; each holds its children's.
+    pub fn node_sphere(&self, node: u32) -> Sphere {
+        self.node_spheres[node as usize]
+    }
+
+    /// A sphere holding every node's sphere and the wood, tree metres.
+    pub fn tree_sphere(&self) -> Sphere {
+        self.tree_sphere
+    }
+
+    /// The spatial error `view` gives level-2 node `node`: its own
+    /// sphere's, or the tree sphere's for a camera beyond
+    /// [`super::view::VIEW_RANGE`].
+    pub fn node_error_seen_from(&self, view: &ViewPoint, node: u32) -> f32 {
+        if view.beyond_range(&self.tree_sphere) {
+            view.spatial_error(&self.tree_sphere)
+        } else {
+            view.spatial_error(&self.node_spheres[node as usize])
+        }
     }
 
     /// Needles once placed (the flattened tree's needle count).
@@ -480,6 +571,34 @@ impl PrototypeRecord {
             .filter(|&k| self.tree_parent[k as usize] == NO_PARENT)
             .collect();
         while let Some(node) = stack.pop() {
+            if node < p_count {
+                self.push_placement(&mut cut, node as usize, e);
+                continue;
+            }
+            let line = &self.tree_merged[(node - p_count) as usize];
+            if line.error <= e {
+                cut.merged_lines.push(self.flat_tree_node(node));
+            } else {
+                stack.extend(line.children);
+            }
+        }
+        cut
+    }
+
+    /// The cut seen from `view` (see [`super::view`]): walked down the
+    /// level-2 forest, each merged line and placement at the spatial error
+    /// of the nearest point of its own sphere, every node of a placement at
+    /// the placement's. An exact partition of the needles wherever the
+    /// camera is, inside a sphere included; named as [`PrototypeRecord::flatten`]
+    /// numbers its nodes.
+    pub fn cut_seen_from(&self, view: &ViewPoint) -> Cut {
+        let mut cut = Cut::default();
+        let p_count = self.placements.len() as u32;
+        let mut stack: Vec<u32> = (0..self.tree_parent.len() as u32)
+            .filter(|&k| self.tree_parent[k as usize] == NO_PARENT)
+            .collect();
+        while let Some(node) = stack.pop() {
+            let e = self.node_error_seen_from(view, node).min(f32::MAX);
             if node < p_count {
                 self.push_placement(&mut cut, node as usize, e);
                 continue;
