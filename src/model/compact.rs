@@ -121,11 +121,11 @@ pub struct CompactSpecies {
     /// prefix.
     pub placements: Vec<CompactPlacement>,
     /// Bounding spheres of the level-2 merged lines (tree metres, see
-    /// [`super::view`]): first those of the tree's drawable lines in their
-    /// order in `merged_lines`, then the others'. Empty for a flat species.
+    /// [`super::view`]), in their order in `merged_lines`. Empty for a
+    /// flat species.
     pub tree_spheres: Vec<Sphere>,
-    /// For each of the tree's drawable lines, the index in `tree_spheres`
-    /// of its parent's sphere ([`NO_SPHERE`] for a root).
+    /// For each of the tree's lines, the index in `tree_spheres` of its
+    /// parent's sphere ([`NO_SPHERE`] for a root).
     pub tree_line_parents: Vec<u32>,
     /// A sphere holding every node's sphere and the wood (tree metres); a
     /// view's tree-wide threshold code comes from its nearest point.
@@ -713,7 +713,7 @@ impl CompactSpecies {
             return Self::build(flat);
         }
         let level2_first = (flat.node_count() - record.tree_merged.len()) as u32;
-        // The tree's section: a pseudo-needle per drawable level-2 line,
+        // The tree's section: a pseudo-needle per level-2 line,
         // holding its ends, with line-error code 0 (never a prism or an
         // original line).
         let mut ends = Vec::new();
@@ -723,9 +723,9 @@ impl CompactSpecies {
             let node = level2_first + k;
             let (own, parent) = merged_line_codes(flat, node)?;
             merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
-            if parent <= own {
-                continue;
-            }
+            // Every level-2 line is kept, even one whose error code equals
+            // its parent's: seen from a camera, the two take different
+            // spheres' codes and it can be in the cut.
             let width = merged_line_width(flat, node)?;
             let [(a, _), (b, _)] = flat.node_ends(node);
             ends.push([a, b]);
@@ -773,19 +773,13 @@ impl CompactSpecies {
         }
         species.merged_code_range = merged_code_range;
         species.tree_counts = [species.needles.len() as u32, 0, species.merged_lines.len() as u32];
-        // Spheres: the drawable lines' in slot order, then the others'.
+        // Spheres, in the lines' order.
         let p_node = record.placements.len() as u32;
         let mut sphere_of = vec![NO_SPHERE; record.tree_merged.len()];
         for &i in &order {
             let k = (lines[i].3 - level2_first) as usize;
             sphere_of[k] = species.tree_spheres.len() as u32;
             species.tree_spheres.push(record.node_sphere(p_node + k as u32));
-        }
-        for k in 0..record.tree_merged.len() {
-            if sphere_of[k] == NO_SPHERE {
-                sphere_of[k] = species.tree_spheres.len() as u32;
-                species.tree_spheres.push(record.node_sphere(p_node + k as u32));
-            }
         }
         let parent_sphere = |node: u32| match record.tree_parent(node) {
             NO_PARENT => NO_SPHERE,
