@@ -1390,7 +1390,7 @@ mod tests {
             while e < top * 3.0 {
                 for threshold in [threshold_code as fn(f32) -> u16, shader_threshold_code] {
                     let code = threshold(e);
-                    let (drawn, processed) = compact.placed_drawn(&record, code, e, threshold);
+                    let (drawn, processed) = compact.placed_drawn(&record, code, e, threshold, None);
                     let coverage = flat.coverage(&drawn);
                     assert!(
                         coverage.iter().all(|&c| c == 1),
