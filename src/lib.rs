@@ -51,7 +51,7 @@ pub mod prelude {
     pub use crate::generate::{Age, Preset, Species};
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
-        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, LineLighting,
+        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, ErrorScope, LineLighting,
         LineOpacity, PresetCache, conifer_lod_keys, spawn_forest,
     };
 }

@@ -4,14 +4,14 @@
 //! convert losslessly both ways, and the file round-trips. Seen from any
 //! camera, view-dependent cuts stay exact partitions.
 
-use bevy_conifer_lod::model::compact::{CompactSpecies, shader_threshold_code, threshold_code};
 use bevy_conifer_lod::model::Cut;
+use bevy_conifer_lod::model::compact::{CompactSpecies, shader_threshold_code, threshold_code};
 use bevy_conifer_lod::model::record::CutStrategy;
+use bevy_conifer_lod::model::record::NO_PARENT;
 use bevy_conifer_lod::model::{
     BakeOptions, LodRecord, Needle, Placement, PrototypeInput, PrototypeRecord, TreeInput, ViewPoint, bake,
     bake_prototypes, decode_prototype_record, decode_record, encode_prototype_record, encode_record,
 };
-use bevy_conifer_lod::model::record::NO_PARENT;
 use glam::{Quat, Vec3};
 use proptest::prelude::*;
 
@@ -462,10 +462,16 @@ fn a_camera_in_a_tall_crown_sees_prisms_beside_it_and_lines_across_it() {
         n.base.distance(camera).min(n.tip.distance(camera))
     };
     let near_sides = |cut: &Cut| {
-        let sides: Vec<f64> = cut.prisms.iter().filter(|p| distance(p.0) < 0.5).map(|p| f64::from(p.1)).collect();
+        let sides: Vec<f64> = cut
+            .prisms
+            .iter()
+            .filter(|p| distance(p.0) < 0.5)
+            .map(|p| f64::from(p.1))
+            .collect();
         (sides.len(), sides.iter().sum::<f64>() / sides.len().max(1) as f64)
     };
-    let far_lines = |cut: &Cut| cut.original_lines.iter().filter(|&&i| distance(i) > 25.0).count() + cut.merged_lines.len();
+    let far_lines =
+        |cut: &Cut| cut.original_lines.iter().filter(|&&i| distance(i) > 25.0).count() + cut.merged_lines.len();
     let primitives = |s: &bevy_conifer_lod::model::CutStats| s.triangles + s.lines_original + s.lines_merged;
     let (seen_stats, tree_stats) = (flat.cut_stats(&seen), flat.cut_stats(&per_tree));
     println!(
@@ -489,7 +495,11 @@ fn a_camera_in_a_tall_crown_sees_prisms_beside_it_and_lines_across_it() {
     );
     let ((near, seen_sides), (_, tree_sides)) = (near_sides(&seen), near_sides(&per_tree));
     assert!(near > 0);
-    assert_eq!(seen_sides, f64::from(flat.max_sides), "every needle beside the camera is a full prism");
+    assert_eq!(
+        seen_sides,
+        f64::from(flat.max_sides),
+        "every needle beside the camera is a full prism"
+    );
     assert!(tree_sides < seen_sides);
     assert!(
         far_lines(&seen) > 10 * far_lines(&per_tree).max(100),

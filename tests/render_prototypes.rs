@@ -11,7 +11,7 @@ mod common;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
 use bevy_conifer_lod::model::compact::{CompactSpecies, PLACED_BANDS, PlacedDraw, shader_threshold_code};
-use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
+use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, ViewPoint, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback};
 use bevy_conifer_lod::prelude::*;
@@ -126,6 +126,12 @@ fn assert_alike(what: &str, placed: &image::RgbaImage, flat: &image::RgbaImage) 
 #[test]
 fn placed_prototypes_draw_what_the_flattened_tree_draws() {
     let mut scene = Scene::new();
+    // One error per tree, as a flat species has: the same cut both ways.
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .error_scope = ErrorScope::Tree;
     let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
     // Prisms close up, original lines, level-1 and level-2 merged lines.
     for (distance, fov, what) in [
@@ -148,6 +154,47 @@ fn placed_prototypes_draw_what_the_flattened_tree_draws() {
 }
 
 #[test]
+fn inside_the_crown_errors_per_placement_keep_the_full_detail_picture() {
+    // The camera 1.5 m from the crown's centre, inside the tree's sphere:
+    // with one error for the tree (from that centre) the needles beside
+    // the camera get the far side's error; with each placement's own, the
+    // picture stays nearer the full-detail one (LOD off).
+    let mut scene = Scene::new();
+    let placed = scene.placed.clone();
+    let shot = |scene: &mut Scene, scope: ErrorScope, enabled: bool, name: &str| {
+        let mut settings = scene.renderer.world_mut().resource_mut::<ConiferLodSettings>();
+        settings.error_scope = scope;
+        settings.enabled = enabled;
+        scene.shot(&placed, name)
+    };
+    for (distance, fov) in [(1.5f32, 30.0f32), (0.6, 60.0)] {
+        scene.look_from(distance, fov);
+        let full = shot(
+            &mut scene,
+            ErrorScope::Placement,
+            false,
+            &format!("inside_{distance}m_full"),
+        );
+        let tree = shot(&mut scene, ErrorScope::Tree, true, &format!("inside_{distance}m_tree"));
+        let own = shot(
+            &mut scene,
+            ErrorScope::Placement,
+            true,
+            &format!("inside_{distance}m_placement"),
+        );
+        let (d_tree, d_own) = (mean_difference(&tree, &full), mean_difference(&own, &full));
+        println!(
+            "{distance} m from the crown centre: mean grey |Δ| to full detail: one error per tree {d_tree:.2}, \
+             per placement {d_own:.2}; covered pixels full {}, tree {}, placement {}",
+            covered_count(&full),
+            covered_count(&tree),
+            covered_count(&own)
+        );
+        assert!(d_own < d_tree, "{distance} m: per placement {d_own}, per tree {d_tree}");
+    }
+}
+
+#[test]
 fn placed_species_hold_each_prototype_once() {
     let mut scene = Scene::new();
     scene.look_from(6.0, 45.0);
@@ -158,10 +205,11 @@ fn placed_species_hold_each_prototype_once() {
     let flat_bytes = scene.memory().species_bytes[&flat.id()];
     println!("species buffers: placed {placed_bytes} B, flat {flat_bytes} B");
     // A sapling's shoots are small (7 needles a placement here): its
-    // placements and level-2 lines weigh most; a mature tree's shoots hold
-    // hundreds (`conifer bench`: `prototype_gpu_bytes`).
+    // placements and level-2 lines (with their bounding spheres, 20 bytes
+    // a line) weigh most; a mature tree's shoots hold hundreds (`conifer
+    // bench`: `prototype_gpu_bytes`).
     assert!(
-        placed_bytes * 3 < flat_bytes,
+        placed_bytes * 5 < flat_bytes * 2,
         "placed {placed_bytes} B is not a fraction of flat {flat_bytes} B"
     );
 }
@@ -225,6 +273,7 @@ fn gpu_draws_equal_the_cpu_reference() {
             .unwrap()
     };
     let flat_record = prototype_record.flatten().unwrap();
+    let mut view_dependent = 0;
     for distance in [1.5f32, 6.0, 25.0, 80.0] {
         scene.look_from(distance, 45.0);
         for (handle, compact) in [(&placed, &placed_compact), (&flat, &flat_compact)] {
@@ -235,12 +284,32 @@ fn gpu_draws_equal_the_cpu_reference() {
                 .iter()
                 .find(|v| v.species == handle.id() && v.perspective)
                 .expect("the camera's results were read back");
-            let [code_word, e_bits, ..] = view.lods[0];
+            let [code_word, e_bits, _, _, view_point @ ..] = view.lods[0];
             let (code, e) = ((code_word & 0xffff) as u16, f32::from_bits(e_bits));
             assert!(
                 code.abs_diff(shader_threshold_code(e)) <= 1,
                 "tree code {code} at e = {e}"
             );
+            // View-dependent detail (the default scope) on the placed tree:
+            // the camera in the tree's frame (the tree stands at the
+            // origin) and the tree's error from its sphere's nearest point.
+            let [x, y, z, slope] = view_point.map(f32::from_bits);
+            let seen = (slope > 0.0).then(|| ViewPoint::new(Vec3::new(x, y, z), slope));
+            if let Some(seen) = &seen {
+                let camera = scene
+                    .renderer
+                    .world()
+                    .get::<Transform>(scene.camera)
+                    .unwrap()
+                    .translation;
+                assert!(
+                    seen.camera.distance(camera) < 1e-3,
+                    "view point {seen:?}, camera {camera}"
+                );
+                let cpu = compact.sphere_error(seen, &compact.tree_sphere);
+                assert!((e - cpu).abs() <= 1e-5 * cpu.max(1e-3), "tree error {e}, CPU {cpu}");
+                view_dependent += 1;
+            }
             // Per-tree draws: the GPU's binary searches are the CPU's.
             let trees = view.lods.len();
             for (kind, [vertices, first]) in reference_tree_draws(compact, code, e).into_iter().enumerate() {
@@ -256,12 +325,15 @@ fn gpu_draws_equal_the_cpu_reference() {
                 let j = (word & 0x7fff) as usize;
                 let c = (word >> 16) as u16;
                 let placement = &compact.placements[j];
-                let cpu = shader_threshold_code(e / placement.transform.scale);
+                assert!(!compact.parent_accepted(j, seen.as_ref(), shader_threshold_code));
+                let cpu =
+                    shader_threshold_code(compact.placement_error(j, e, seen.as_ref()) / placement.transform.scale);
                 assert!(c.abs_diff(cpu) <= 1, "entry code {c}, CPU {cpu}");
                 let k = placement.prototype as usize;
                 expected[compact.placed_draw_index(k, c)].add(compact.prototype_prefixes(k, c));
             }
-            assert_eq!(view.entries.len(), compact.expanded_placements(code) as usize);
+            let cpu_view = compact.placed_view(code, e, shader_threshold_code, seen.as_ref());
+            assert_eq!(view.entries.len(), cpu_view.expanded.len());
             let draws = expected.len();
             let prism_vertices = 12 * u32::from(compact.max_sides.max(3)) - 12;
             for (d, reference) in expected.iter().enumerate() {
@@ -280,7 +352,7 @@ fn gpu_draws_equal_the_cpu_reference() {
                 flat_record.cut(e)
             } else {
                 compact
-                    .placed_drawn(&prototype_record, code, e, shader_threshold_code, None)
+                    .placed_drawn(&prototype_record, code, e, shader_threshold_code, seen.as_ref())
                     .0
             };
             let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()) as f64;
@@ -297,6 +369,10 @@ fn gpu_draws_equal_the_cpu_reference() {
             assert!(ratio <= 2.0, "{distance} m: {ratio}");
         }
     }
+    assert_eq!(
+        view_dependent, 4,
+        "the placed tree is seen from a view point at every distance"
+    );
 }
 
 #[test]

@@ -125,7 +125,9 @@ pub struct CompactSpecies {
     /// flat species.
     pub tree_spheres: Vec<Sphere>,
     /// For each of the tree's lines, the index in `tree_spheres` of its
-    /// parent's sphere ([`NO_SPHERE`] for a root).
+    /// parent's sphere, or its nearest drawable ancestor's when the parent
+    /// has its parent's error code and is left out ([`NO_SPHERE`] for a
+    /// root).
     pub tree_line_parents: Vec<u32>,
     /// A sphere holding every node's sphere and the wood (tree metres); a
     /// view's tree-wide threshold code comes from its nearest point.
@@ -171,8 +173,8 @@ pub struct CompactPlacement {
     /// ([`ROOT_PARENT_CODE`] without one): a view expands the placement iff
     /// its threshold code is below it.
     pub parent_code: u16,
-    /// Index in [`CompactSpecies::tree_spheres`] of that parent's sphere
-    /// ([`NO_SPHERE`] for a root).
+    /// Index in [`CompactSpecies::tree_spheres`] of that parent's sphere,
+    /// or its nearest drawable ancestor's ([`NO_SPHERE`] for a root).
     pub parent_sphere: u32,
     /// The record's placement index.
     pub source: u32,
@@ -713,7 +715,7 @@ impl CompactSpecies {
             return Self::build(flat);
         }
         let level2_first = (flat.node_count() - record.tree_merged.len()) as u32;
-        // The tree's section: a pseudo-needle per level-2 line,
+        // The tree's section: a pseudo-needle per drawable level-2 line,
         // holding its ends, with line-error code 0 (never a prism or an
         // original line).
         let mut ends = Vec::new();
@@ -723,9 +725,12 @@ impl CompactSpecies {
             let node = level2_first + k;
             let (own, parent) = merged_line_codes(flat, node)?;
             merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
-            // Every level-2 line is kept, even one whose error code equals
-            // its parent's: seen from a camera, the two take different
-            // spheres' codes and it can be in the cut.
+            // A line whose error code equals its parent's is never in a cut
+            // at one code; seen from a camera, its children test its
+            // nearest drawable ancestor's sphere instead (below).
+            if parent <= own {
+                continue;
+            }
             let width = merged_line_width(flat, node)?;
             let [(a, _), (b, _)] = flat.node_ends(node);
             ends.push([a, b]);
@@ -773,7 +778,12 @@ impl CompactSpecies {
         }
         species.merged_code_range = merged_code_range;
         species.tree_counts = [species.needles.len() as u32, 0, species.merged_lines.len() as u32];
-        // Spheres, in the lines' order.
+        // Spheres, in the lines' order. A node's parent sphere is its
+        // nearest drawable ancestor's: a line whose code equals its
+        // parent's is left out of the arrays, and as the codes along such a
+        // chain are equal, testing the drawable ancestor's sphere with the
+        // node's parent code is testing that ancestor, whose sphere holds
+        // the node's: the hierarchy without those lines is still monotone.
         let p_node = record.placements.len() as u32;
         let mut sphere_of = vec![NO_SPHERE; record.tree_merged.len()];
         for &i in &order {
@@ -781,9 +791,15 @@ impl CompactSpecies {
             sphere_of[k] = species.tree_spheres.len() as u32;
             species.tree_spheres.push(record.node_sphere(p_node + k as u32));
         }
-        let parent_sphere = |node: u32| match record.tree_parent(node) {
-            NO_PARENT => NO_SPHERE,
-            parent => sphere_of[(parent - p_node) as usize],
+        let parent_sphere = |node: u32| {
+            let mut ancestor = record.tree_parent(node);
+            while ancestor != NO_PARENT && sphere_of[(ancestor - p_node) as usize] == NO_SPHERE {
+                ancestor = record.tree_parent(ancestor);
+            }
+            match ancestor {
+                NO_PARENT => NO_SPHERE,
+                ancestor => sphere_of[(ancestor - p_node) as usize],
+            }
         };
         species.tree_line_parents = order
             .iter()

@@ -588,9 +588,11 @@ impl PrototypeRecord {
     /// The cut seen from `view` (see [`super::view`]): walked down the
     /// level-2 forest, each merged line and placement at the spatial error
     /// of the nearest point of its own sphere, every node of a placement at
-    /// the placement's. An exact partition of the needles wherever the
-    /// camera is, inside a sphere included; named as [`PrototypeRecord::flatten`]
-    /// numbers its nodes.
+    /// the placement's. A level-2 line whose error equals its parent's is
+    /// never in the cut (as at one error, where its interval is empty).
+    /// An exact partition of the needles wherever the camera is, inside a
+    /// sphere included; named as [`PrototypeRecord::flatten`] numbers its
+    /// nodes.
     pub fn cut_seen_from(&self, view: &ViewPoint) -> Cut {
         let mut cut = Cut::default();
         let p_count = self.placements.len() as u32;
@@ -604,7 +606,12 @@ impl PrototypeRecord {
                 continue;
             }
             let line = &self.tree_merged[(node - p_count) as usize];
-            if line.error <= e {
+            // A line with its parent's error has an empty interval at one
+            // error; seen from a camera it is skipped too (the compact
+            // layout leaves it out), so the walk goes through it.
+            let parent = self.tree_parent[node as usize];
+            let empty = parent != NO_PARENT && self.tree_merged[(parent - p_count) as usize].error <= line.error;
+            if line.error <= e && !empty {
                 cut.merged_lines.push(self.flat_tree_node(node));
             } else {
                 stack.extend(line.children);

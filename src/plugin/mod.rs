@@ -183,6 +183,22 @@ pub enum LineOpacity {
     Coverage,
 }
 
+/// Where a tree's spatial error is measured from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
+pub enum ErrorScope {
+    /// The paper: one error for the whole tree, from the camera's distance
+    /// to the crown's centre.
+    Tree,
+    /// Each placement and level-2 line of a tree of shared prototypes from
+    /// the nearest point of its own bounding sphere
+    /// ([`crate::model::view`]): a camera inside a tall crown sees prisms
+    /// beside it and merged lines across it, and the cut stays an exact
+    /// partition. A flat species (no shared prototypes) and orthographic
+    /// views (directional shadow maps) keep one error per tree.
+    #[default]
+    Placement,
+}
+
 /// How lines are lit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 pub enum LineLighting {
@@ -225,6 +241,9 @@ pub struct ConiferLodSettings {
     /// coarser cut (its level-2 lines). Default 131,072 (about 100 mature
     /// trees within full detail of one view).
     pub max_expanded_placements: u32,
+    /// Where a tree's spatial error is measured from: one error per tree
+    /// (the paper's) or each placement's own (default).
+    pub error_scope: ErrorScope,
 }
 
 impl Default for ConiferLodSettings {
@@ -237,15 +256,18 @@ impl Default for ConiferLodSettings {
             enabled: true,
             debug_colors: false,
             max_expanded_placements: 1 << 17,
+            error_scope: ErrorScope::default(),
         }
     }
 }
 
 impl ConiferLodSettings {
-    /// The paper's configuration: `T = 2/ρ` opacity, everything else as given.
+    /// The paper's configuration: `T = 2/ρ` opacity and one error per
+    /// tree, everything else as given.
     pub fn paper() -> Self {
         Self {
             line_opacity: LineOpacity::Paper,
+            error_scope: ErrorScope::Tree,
             ..Self::default()
         }
     }

@@ -67,9 +67,13 @@ struct SpeciesParams {
     prototype_count: u32,
     // needles of the tree's section and the prototypes'
     total_needle_count: u32,
-    padding_a: u32,
+    // 1: each placement and level-2 line takes its own sphere's error
+    // (`ErrorScope::Placement`); 0: one error per tree
+    error_scope: u32,
     padding_b: u32,
     padding_c: u32,
+    // a sphere holding every node's sphere and the wood (tree-local xyz, w radius)
+    tree_sphere: vec4<f32>,
 }
 
 struct CullView {
@@ -103,6 +107,9 @@ struct InstanceLod {
     spatial_error: f32,
     pixel_error: f32,
     transition: f32,
+    // the camera in the tree's frame (xyz) and the spatial error per metre
+    // of distance (w); w = 0: every node takes `spatial_error`
+    view: vec4<f32>,
 }
 
 // A shared prototype of a placed species (`gpu::GpuPrototype`).
@@ -119,6 +126,8 @@ struct Prototype {
     padding_b: u32,
     // lower edges of bands 1…, two 16-bit codes a word
     band_edges: array<vec4<u32>, 2>,
+    // bounding sphere, prototype metres (xyz centre, w radius)
+    sphere: vec4<f32>,
 }
 
 // Where a prototype stands in the tree (`gpu::GpuPlacement`).
@@ -129,9 +138,15 @@ struct Placement {
     prototype: u32,
     // error code of its root line's level-2 parent
     parent_code: u32,
-    padding_a: u32,
+    // that parent's index in the tree's spheres (NO_SPHERE for a root)
+    parent_sphere: u32,
     padding_b: u32,
 }
+
+// `model::compact::NO_SPHERE`.
+const NO_SPHERE: u32 = 0xffffffffu;
+// `model::view::VIEW_RANGE`.
+const VIEW_RANGE: f32 = 256.0;
 
 // `model::compact::PLACED_BANDS`; the placed parts, each a block of
 // `prototype_count · PLACED_BANDS` draws.
@@ -210,6 +225,38 @@ fn instance_scale(instance: Instance) -> f32 {
     let y = vec3<f32>(instance.row_x.y, instance.row_y.y, instance.row_z.y);
     let z = vec3<f32>(instance.row_x.z, instance.row_y.z, instance.row_z.z);
     return (length(x) + length(y) + length(z)) / 3.0;
+}
+
+// The largest code whose value is at most `e` (`model::compact::shader_threshold_code`).
+fn threshold_code(e: f32) -> u32 {
+    if !(e >= 1e-9) {
+        return 0u;
+    }
+    let steps = floor((log(e) - LOG_LN_MIN) / LOG_LN_STEP) + 1.0;
+    return u32(clamp(steps, 0.0, f32(MAX_THRESHOLD_CODE)));
+}
+
+// Distance from `point` to the nearest point of `sphere` (xyz, w radius),
+// 0 inside (`model::view::Sphere::distance_from`).
+fn sphere_distance(sphere: vec4<f32>, point: vec3<f32>) -> f32 {
+    return max(length(point - sphere.xyz) - sphere.w, 0.0);
+}
+
+// Spatial error (tree metres) a view gives what `sphere` bounds: its own
+// nearest point's, or the tree's error when the view has no view point
+// (`model::compact::CompactSpecies::sphere_error`).
+fn sphere_error(lod: InstanceLod, sphere: vec4<f32>) -> f32 {
+    if lod.view.w > 0.0 {
+        return lod.view.w * sphere_distance(sphere, lod.view.xyz);
+    }
+    return lod.spatial_error;
+}
+
+// Spatial error (tree metres) of a placement of a prototype with bounding
+// sphere `prototype_sphere` (`model::compact::CompactSpecies::placement_error`).
+fn placement_error(lod: InstanceLod, placement: Placement, prototype_sphere: vec4<f32>) -> f32 {
+    let center = (placement_matrix(placement) * vec4<f32>(prototype_sphere.xyz, 1.0)).xyz;
+    return sphere_error(lod, vec4<f32>(center, prototype_sphere.w * placement.translation_scale.w));
 }
 
 // A logarithmic code's value (`model::compact::shader_log_decode`).

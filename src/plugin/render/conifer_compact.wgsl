@@ -37,8 +37,9 @@
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
-    ENTRY_PLACEMENT_MASK, ENTRY_FROM_NEEDLES,
+    ENTRY_PLACEMENT_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
     instance_world_from_local, log_decode, placement_matrix,
+    threshold_code, sphere_error, placement_error,
 }
 
 @group(2) @binding(0) var<uniform> species: SpeciesParams;
@@ -52,6 +53,8 @@
 @group(2) @binding(8) var<storage, read> placements: array<Placement>;
 @group(2) @binding(9) var<storage, read> prototypes: array<Prototype>;
 @group(2) @binding(10) var<storage, read> placed_entries: array<vec2<u32>>;
+@group(2) @binding(11) var<storage, read> tree_spheres: array<vec4<f32>>;
+@group(2) @binding(12) var<storage, read> tree_line_parents: array<u32>;
 
 const PI: f32 = 3.14159265358979;
 const TAU: f32 = 6.28318530717959;
@@ -290,6 +293,17 @@ fn line_color(color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
 #endif
 }
 
+// Spatial error of a wood segment (`start`, `end`: centre and radius of
+// each end): the tree's, or seen from a view point, its own sphere's (the
+// one `model::view` bounds it by).
+fn wood_segment_error(lod: InstanceLod, start: vec4<f32>, end: vec4<f32>, tree_error: f32) -> f32 {
+    if lod.view.w > 0.0 {
+        let sphere = vec4<f32>(0.5 * (start.xyz + end.xyz), 0.5 * distance(start.xyz, end.xyz) + max(start.w, end.w));
+        return sphere_error(lod, sphere);
+    }
+    return tree_error;
+}
+
 // Draws of the tree's own parts have one instance, the tree; placed draws
 // one instance per expanded placement, whose entry names its tree,
 // placement and threshold code. Either way the vertex works in the frame
@@ -303,7 +317,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let lod = instance_lods[tree];
     let code = entry.y >> 16u;
     let original_from_needles = (entry.y & ENTRY_FROM_NEEDLES) != 0u;
-    let spatial_error = lod.spatial_error / placement.translation_scale.w;
+    let spatial_error = placement_error(lod, placement, prototypes[placement.prototype].sphere)
+        / placement.translation_scale.w;
     let world_from_local = instance_world_from_local(instances[tree]) * placement_matrix(placement);
     let grid = prototypes[placement.prototype].grid;
     // Shadow hash: the same per placement every frame.
@@ -337,7 +352,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let s = vertex_index / species.prism_vertices;
     let start = wood_segments[2u * s];
     let end = wood_segments[2u * s + 1u];
-    let sides = prism_sides(max(start.w, end.w), spatial_error);
+    let wood_error = wood_segment_error(lod, start, end, spatial_error);
+    if lod.view.w > 0.0 && !(wood_error < 2.0 * max(start.w, end.w)) {
+        return culled();
+    }
+    let sides = prism_sides(max(start.w, end.w), wood_error);
     let corner = prism_corner(vertex_index % species.prism_vertices);
     let toward = toward_view_local(world_from_local, 0.5 * (start.xyz + end.xyz));
     let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner, toward);
@@ -374,11 +393,28 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let b = merged_lines[3u * line + 1u];
     let codes = merged_lines[3u * line + 2u];
     let own = codes & 0xffffu;
-    if !(own <= code && code < (codes >> 16u)) {
+    // Seen from a view point, a tree's level-2 line takes its own sphere's
+    // code and its parent's sphere's (CPU reference:
+    // `model::compact::CompactSpecies::placed_drawn`).
+    var line_code = code;
+    var parent_view_code = code;
+    var line_error = spatial_error;
+#ifndef CONIFER_PLACED
+    if lod.view.w > 0.0 && species.placement_count > 0u {
+        line_error = sphere_error(lod, tree_spheres[line]);
+        line_code = threshold_code(line_error);
+        let parent = tree_line_parents[line];
+        parent_view_code = 0u;
+        if parent != NO_SPHERE {
+            parent_view_code = threshold_code(sphere_error(lod, tree_spheres[parent]));
+        }
+    }
+#endif
+    if !(own <= line_code && parent_view_code < (codes >> 16u)) {
         return culled();
     }
     let width = log_decode((a >> 24u) | ((b >> 24u) << 8u));
-    let alpha = merged_line_alpha(lod, spatial_error, width, log_decode(own));
+    let alpha = merged_line_alpha(lod, line_error, width, log_decode(own));
     let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
     let start = end_position(grid, a);
@@ -392,7 +428,12 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = wood_segments[2u * s];
     let end = wood_segments[2u * s + 1u];
     let width = start.w + end.w;
-    let alpha = line_alpha(lod, spatial_error, width, width);
+    let wood_error = wood_segment_error(lod, start, end, spatial_error);
+    let line_from = 2.0 * max(start.w, end.w);
+    if lod.view.w > 0.0 && (wood_error < line_from || !(wood_error < species.wood_line_fade * line_from)) {
+        return culled();
+    }
+    let alpha = line_alpha(lod, wood_error, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
     return finish(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
 #endif

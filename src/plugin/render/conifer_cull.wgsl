@@ -20,6 +20,7 @@
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale,
+    threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
 }
 
 @group(0) @binding(0) var<uniform> cull_view: CullView;
@@ -38,17 +39,11 @@
 @group(1) @binding(3) var<storage, read_write> entries: array<vec2<u32>>;
 @group(1) @binding(4) var<storage, read_write> sorted_entries: array<vec2<u32>>;
 @group(1) @binding(5) var<storage, read_write> placed_args: array<DrawArgs>;
+@group(1) @binding(6) var<storage, read> tree_spheres: array<vec4<f32>>;
 // Only `prepare_dispatch` binds it: the other passes read it as their
 // indirect dispatch.
 @group(2) @binding(0) var<storage, read_write> dispatch: array<u32>;
 
-fn threshold_code(e: f32) -> u32 {
-    if !(e >= 1e-9) {
-        return 0u;
-    }
-    let steps = floor((log(e) - LOG_LN_MIN) / LOG_LN_STEP) + 1.0;
-    return u32(clamp(steps, 0.0, f32(MAX_THRESHOLD_CODE)));
-}
 
 // Needles of `[first, first + count)` whose line-error code is above
 // `code` (they are prisms), counted from `first`.
@@ -152,6 +147,14 @@ fn hide(instance: u32) {
     }
     instance_lods[instance].code = 0u;
     instance_lods[instance].spatial_error = 0.0;
+    instance_lods[instance].view = vec4<f32>(0.0);
+}
+
+// `world` in the frame of a tree whose `world_from_local` is a rotation, a
+// uniform `scale` and a translation.
+fn tree_local_point(world_from_local: mat4x4<f32>, scale: f32, world: vec3<f32>) -> vec3<f32> {
+    let basis = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
+    return (transpose(basis) * (world - world_from_local[3].xyz)) / max(scale * scale, 1e-12);
 }
 
 @compute @workgroup_size(64)
@@ -197,9 +200,29 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     if species.lod_enabled == 0u {
         e = 0.0;
     }
+    // View-dependent detail (`model::view`): the tree's error from the
+    // nearest point of its sphere (a lower bound of every node's), each
+    // node's from its own sphere, unless the camera is beyond range.
+    var view_point = vec4<f32>(0.0);
+    if species.error_scope != 0u && species.placement_count > 0u && species.lod_enabled != 0u
+        && cull_view.perspective != 0u {
+        let camera = tree_local_point(world_from_local, scale, cull_view.world_position.xyz);
+        let slope = max(pixel_error, 0.0) * cull_view.error_slope;
+        let d = sphere_distance(species.tree_sphere, camera);
+        e = slope * d;
+        if d <= VIEW_RANGE * species.tree_sphere.w {
+            view_point = vec4<f32>(camera, slope);
+        }
+    }
     var code = threshold_code(e);
     if species.placement_count > 0u {
-        code = expand_placements(i, code);
+        let expanded = expand_placements(i, code);
+        // A tree whose placements did not fit draws its coarser cut at
+        // one error.
+        if expanded != code {
+            view_point = vec4<f32>(0.0);
+        }
+        code = expanded;
     }
     let prisms = prism_prefix(code);
     let by_parent = original_prefix(code);
@@ -222,12 +245,19 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     instance_lods[i].spatial_error = e;
     instance_lods[i].pixel_error = max(pixel_error, 1e-6);
     instance_lods[i].transition = clamp(transition, 0.0, 1.0);
+    instance_lods[i].view = view_point;
     write_args(KIND_PRISMS, i, prisms * species.prism_vertices, 0u);
     write_args(KIND_ORIGINAL_LINES, i, 2u * original, original_first);
     write_args(KIND_MERGED_LINES, i, 2u * merged, 0u);
     write_args(KIND_WOOD_PRISMS, i, wood_prisms * species.prism_vertices, 0u);
-    // Wood lines: the segments after the prisms, up to the fade.
-    write_args(KIND_WOOD_LINES, i, 2u * (wood_lines - min(wood_prisms, wood_lines)), 2u * min(wood_prisms, wood_lines));
+    // Wood lines: the segments after the prisms, up to the fade; seen from
+    // a view point, every segment up to the fade (each decides by its own
+    // sphere's error).
+    var wood_lines_first = min(wood_prisms, wood_lines);
+    if view_point.w > 0.0 {
+        wood_lines_first = 0u;
+    }
+    write_args(KIND_WOOD_LINES, i, 2u * (wood_lines - wood_lines_first), 2u * wood_lines_first);
     write_args(KIND_WOOD_MESH, i, species.wood_index_count, 0u);
 }
 
@@ -283,8 +313,11 @@ fn written_entry(i: u32) -> vec2<u32> {
     return entries[i];
 }
 
-// Per entry: its placement's threshold code (the tree's error over the
-// placement's scale), its draw's count and longest prefixes.
+// Per entry: its placement's threshold code (the tree's error, or its own
+// sphere's seen from the tree's view point, over the placement's scale),
+// its draw's count and longest prefixes. Seen from a view point, an entry
+// whose parent line is in reach of its own sphere's error is dropped.
+// CPU reference: `model::compact::CompactSpecies::placed_view`.
 @compute @workgroup_size(64)
 fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -293,9 +326,17 @@ fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let placement = placements[entry.y];
-    let e = instance_lods[entry.x].spatial_error / placement.translation_scale.w;
-    let code = threshold_code(e);
+    let lod = instance_lods[entry.x];
+    if lod.view.w > 0.0 && placement.parent_sphere != NO_SPHERE {
+        let parent = threshold_code(sphere_error(lod, tree_spheres[placement.parent_sphere]));
+        if parent >= placement.parent_code {
+            entries[i] = vec2<u32>(ENTRY_INVALID, ENTRY_INVALID);
+            return;
+        }
+    }
     let prototype = prototypes[placement.prototype];
+    let e = placement_error(lod, placement, prototype.sphere) / placement.translation_scale.w;
+    let code = threshold_code(e);
     let draw = entry_draw(placement, code);
     let prisms = prism_prefix_in(prototype.needle_first, prototype.needle_count, code);
     atomicAdd(&counters[counter_index(ARRAY_COUNT, draw)], 1u);

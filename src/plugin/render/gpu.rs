@@ -131,7 +131,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 176 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 192 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -187,8 +187,12 @@ pub struct SpeciesParams {
     pub prototype_count: u32,
     /// Needles of the tree's own section and the prototypes'.
     pub total_needle_count: u32,
+    /// 1: view-dependent detail ([`crate::plugin::ErrorScope::Placement`]).
+    pub error_scope: u32,
     /// Padding to 16 bytes.
-    pub padding: [u32; 3],
+    pub padding: [u32; 2],
+    /// A sphere holding every node's sphere and the wood (tree-local centre, radius).
+    pub tree_sphere: [f32; 4],
 }
 
 /// A view as the compute pass sees it (`CullView` in WGSL), 128 bytes.
@@ -209,8 +213,10 @@ pub struct CullView {
     pub entry_capacity: u32,
 }
 
-/// What the compute pass writes per tree and view (`InstanceLod`), 16 bytes.
-pub const INSTANCE_LOD_BYTES: u64 = 16;
+/// What the compute pass writes per tree and view (`InstanceLod`), 32
+/// bytes: code, spatial error, pixel error, transition, and the view point
+/// (the camera in the tree's frame and the error per metre of distance).
+pub const INSTANCE_LOD_BYTES: u64 = 32;
 /// One indirect draw (`DrawArgs`), 16 bytes.
 pub const DRAW_ARGS_BYTES: u64 = 16;
 
@@ -221,7 +227,7 @@ pub fn prism_vertices(max_sides: u8) -> u32 {
     6 * m + 6 * (m - 2)
 }
 
-/// A prototype of a placed species (`Prototype` in WGSL), 80 bytes.
+/// A prototype of a placed species (`Prototype` in WGSL), 96 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct GpuPrototype {
@@ -234,6 +240,8 @@ pub struct GpuPrototype {
     pub padding: [u32; 2],
     /// Band edges, two 16-bit codes a word (the last half-word unused).
     pub band_edges: [u32; PLACED_BANDS as usize / 2],
+    /// Bounding sphere, prototype metres (centre, radius).
+    pub sphere: [f32; 4],
 }
 
 impl GpuPrototype {
@@ -253,6 +261,7 @@ impl GpuPrototype {
             sections: [n0, n1, o0, o1, m0, m1],
             padding: [0; 2],
             band_edges,
+            sphere: prototype.sphere.to_array(),
         }
     }
 }
@@ -269,8 +278,11 @@ pub struct GpuPlacement {
     pub prototype: u32,
     /// Parent error code of its root line.
     pub parent_code: u32,
+    /// Index of that parent's sphere in the tree's spheres
+    /// ([`crate::model::compact::NO_SPHERE`] for a root).
+    pub parent_sphere: u32,
     /// Padding.
-    pub padding: [u32; 2],
+    pub padding: u32,
 }
 
 impl GpuPlacement {
@@ -282,7 +294,8 @@ impl GpuPlacement {
             translation_scale: t.translation.extend(t.scale).to_array(),
             prototype: placement.prototype,
             parent_code: u32::from(placement.parent_code),
-            padding: [0; 2],
+            parent_sphere: placement.parent_sphere,
+            padding: 0,
         }
     }
 }

@@ -33,7 +33,9 @@ use self::gpu::{
     PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
     prism_vertices,
 };
-use super::{ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineLighting, LineOpacity};
+use super::{
+    ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ErrorScope, LineLighting, LineOpacity,
+};
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
 use crate::model::prism::WOOD_LINE_FADE;
@@ -295,11 +297,13 @@ struct SpeciesBuffers {
     wood_mesh: Buffer,
     placements: Buffer,
     prototypes: Buffer,
+    tree_spheres: Buffer,
+    tree_line_parents: Buffer,
 }
 
 impl SpeciesBuffers {
     /// The species' shared arrays (not its trees).
-    fn arrays(&self) -> [&Buffer; 7] {
+    fn arrays(&self) -> [&Buffer; 9] {
         [
             &self.needles,
             &self.original_lines,
@@ -308,6 +312,8 @@ impl SpeciesBuffers {
             &self.wood_mesh,
             &self.placements,
             &self.prototypes,
+            &self.tree_spheres,
+            &self.tree_line_parents,
         ]
     }
 
@@ -405,7 +411,12 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         placement_count: compact.placements.len() as u32,
         prototype_count: compact.prototypes.len() as u32,
         total_needle_count: compact.needles.len() as u32,
-        padding: [0; 3],
+        error_scope: match settings.error_scope {
+            ErrorScope::Tree => 0,
+            ErrorScope::Placement => 1,
+        },
+        padding: [0; 2],
+        tree_sphere: compact.tree_sphere.to_array(),
     }
 }
 
@@ -556,6 +567,16 @@ fn prepare_species(
                     &device,
                     "conifer prototypes",
                     bytemuck::cast_slice(&c.prototypes.iter().map(GpuPrototype::new).collect::<Vec<_>>()),
+                ),
+                tree_spheres: storage_buffer(
+                    &device,
+                    "conifer tree spheres",
+                    bytemuck::cast_slice(&c.tree_spheres.iter().map(|s| s.to_array()).collect::<Vec<_>>()),
+                ),
+                tree_line_parents: storage_buffer(
+                    &device,
+                    "conifer tree line parents",
+                    bytemuck::cast_slice(&c.tree_line_parents),
                 ),
             });
             species.instances_dirty = true;
@@ -766,6 +787,8 @@ fn init_compact_pipeline(
                 read(),
                 read(),
                 read(),
+                read(),
+                read(),
             ),
         ),
     );
@@ -797,6 +820,7 @@ fn init_compact_pipeline(
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
+                read(),
             ),
         ),
     );
@@ -1095,6 +1119,7 @@ fn prepare_views(
                         placed.entries.as_entire_binding(),
                         placed.sorted.as_entire_binding(),
                         placed.args.as_entire_binding(),
+                        gpu.tree_spheres.as_entire_binding(),
                     )),
                 );
                 let dispatch_group = device.create_bind_group(
@@ -1117,6 +1142,8 @@ fn prepare_views(
                         gpu.placements.as_entire_binding(),
                         gpu.prototypes.as_entire_binding(),
                         placed.sorted.as_entire_binding(),
+                        gpu.tree_spheres.as_entire_binding(),
+                        gpu.tree_line_parents.as_entire_binding(),
                     )),
                 );
                 ViewBindGroups {

@@ -28,8 +28,10 @@ pub struct ViewReadback {
     /// lights; directional cascades are not).
     pub perspective: bool,
     /// Per tree (instance slot): threshold code and flags, spatial error,
-    /// pixel error and transition as bits (`InstanceLod`).
-    pub lods: Vec<[u32; 4]>,
+    /// pixel error and transition, then the view point (the camera in the
+    /// tree's frame and the error per metre of distance, 0 without one) as
+    /// bits (`InstanceLod`).
+    pub lods: Vec<[u32; 8]>,
     /// Per-tree indirect draws, one block of `trees` per tree part
     /// (`PartKind::index`): vertex count, instance count, first vertex,
     /// first instance.
@@ -169,11 +171,23 @@ pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingRead
         let (lods, tree, placed, counters, sorted) = (part(0), part(1), part(2), part(3), part(4));
         let trees = s.trees;
         let quads = |w: &[u32], n: usize| w.chunks_exact(4).take(n).map(|c| [c[0], c[1], c[2], c[3]]).collect();
-        let entry_count = counters.get(1).copied().unwrap_or(0) as usize;
+        // Entries kept (an entry whose parent line a view point reaches is
+        // dropped): the draws' counts.
+        let first_count = super::gpu::PLACED_COUNTER_HEADER as usize;
+        let entry_count: usize = counters
+            .iter()
+            .skip(first_count)
+            .take(s.draws)
+            .map(|&c| c as usize)
+            .sum();
         done.push(ViewReadback {
             species: s.species,
             perspective: s.perspective,
-            lods: quads(&lods, trees),
+            lods: lods
+                .chunks_exact(8)
+                .take(trees)
+                .map(|c| std::array::from_fn(|k| c[k]))
+                .collect(),
             tree_draws: quads(&tree, trees * super::TREE_PART_KINDS),
             placed_draws: quads(&placed, s.draws * super::PLACED_PART_KINDS),
             entries: sorted
