@@ -203,14 +203,15 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     );
     // The buffers hold the arrays (each at least 128 bytes; a flat species'
     // placement and prototype tables are empty).
-    assert!(species_bytes >= compact.bytes().total() && species_bytes <= compact.bytes().total() + 7 * 128);
+    assert!(species_bytes >= compact.bytes().total() && species_bytes <= compact.bytes().total() + 9 * 128);
     assert!(per_needle <= 36.0, "{per_needle} B/needle");
-    // 3,000 trees: a 4,096-slot instance buffer (64 B each) and per view
-    // 4,096 LOD slots (16 B) and 6 × 4,096 indirect draws (16 B), and five
-    // 16-byte stand-ins for the placement buffers a flat species leaves empty.
+    // 3,000 trees: a 4,096-slot instance buffer (64 B each) and the
+    // species' 192-byte parameters, and per view 4,096 LOD slots (32 B)
+    // and 6 × 4,096 indirect draws (16 B), and five 16-byte stand-ins for
+    // the placement buffers a flat species leaves empty.
     let placed_stand_ins = 5 * 16;
-    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 176);
-    assert_eq!(memory.view_bytes, 128 + 4096 * 16 + 6 * 4096 * 16 + placed_stand_ins);
+    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 192);
+    assert_eq!(memory.view_bytes, 128 + 4096 * 32 + 6 * 4096 * 16 + placed_stand_ins);
     let buffers = memory.buffers;
     // Frames with nothing replaced make no bind groups.
     let made = memory.bind_group_sets_made;
@@ -226,8 +227,8 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     }
     scene.shot("forest_thinned");
     let memory = scene.memory();
-    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 176);
-    assert_eq!(memory.view_bytes, 128 + 128 * 16 + 6 * 128 * 16 + placed_stand_ins);
+    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 192);
+    assert_eq!(memory.view_bytes, 128 + 128 * 32 + 6 * 128 * 16 + placed_stand_ins);
     assert_eq!(memory.buffers, buffers);
     // All go: nothing is left.
     for &tree in &trees[..100] {

@@ -40,9 +40,7 @@ fn lines_fall_with_distance_like_table_1() {
         assert_eq!(stats.needles_covered, record.needle_count() as u64);
         // Like the paper's tree, no polygons at any of these distances.
         assert_eq!(stats.prisms, 0, "at {distance} m");
-        // Never more lines farther away; equal where no merge error lies
-        // between the two spatial errors (the preset's fascicles fan out, so
-        // their first merges cost more than 14 mm).
+        // Never more lines farther away.
         assert!(stats.line_segments <= previous, "lines must not grow with distance");
         previous = stats.line_segments;
         counts.push(stats.line_segments);
@@ -52,4 +50,17 @@ fn lines_fall_with_distance_like_table_1() {
         "far view must use under half the near view's lines: {counts:?}"
     );
     assert!(counts[3] < counts[2] && counts[2] < counts[1], "{counts:?}");
+    // Sheathed fascicles (needles nearly parallel) merge whole at the two
+    // near views: within 1.5× of the paper's counts there. Farther, merges
+    // across fascicles, which fan out from the shoot, cost more than the
+    // view's error (2.1× and 5.4× the paper's; README, "Table 1").
+    for k in 0..2 {
+        assert!(
+            counts[k] as f64 <= 1.5 * PAPER_LINES[k] as f64,
+            "{} m: {} lines, paper {}",
+            DISTANCES[k],
+            counts[k],
+            PAPER_LINES[k]
+        );
+    }
 }

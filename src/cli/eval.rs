@@ -1,8 +1,9 @@
 //! `conifer eval`: every method against the supersampled reference, headless.
 
+use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
 use crate::eval::scene::{EvalSun, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
-use crate::model::read_record;
+use crate::model::{read_prototype_record, read_record};
 use crate::plugin::{LineLighting, LineOpacity};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
@@ -68,6 +69,13 @@ pub struct EvalArgs {
     /// (`1 − exp(−Σa/A)`).
     #[arg(long, default_value = "area")]
     pub ours_opacity: String,
+    /// Instead of the distances: the camera in the crown, 2 m from the
+    /// trunk at 40 % of the tree's height, the tree drawn as its shared
+    /// prototypes with one error for the tree and with each placement's
+    /// own, against the reference (`--methods`, `--distances` and the
+    /// dolly do not apply).
+    #[arg(long)]
+    pub inside: bool,
 }
 
 /// The paper's Table 1 distances (metres).
@@ -112,21 +120,38 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         "coverage" => LineOpacity::Coverage,
         other => bail!("--ours-opacity {other:?}: area or coverage"),
     };
+    let view = EvalView {
+        width,
+        height,
+        fov_deg: args.fov_deg,
+        pixel_error: args.pixel_error,
+        transition: args.transition,
+        supersampling,
+        sun,
+        line_lighting,
+        ours_line_opacity,
+    };
+    if args.inside {
+        let record = read_prototype_record(&args.file)
+            .with_context(|| format!("{}: cannot load record", args.file.display()))?;
+        let options = InsideOptions {
+            out_dir: args.out.clone(),
+            ..InsideOptions::new(view)
+        };
+        let report = evaluate_inside(&record, &options, &mut |line| eprintln!("eval: {line}"))
+            .with_context(|| format!("{}: evaluation failed", args.file.display()))?;
+        if args.json {
+            println!("{}", serde_json::to_string(&serde_json::json!({ "inside": report }))?);
+        } else {
+            print_inside(&report);
+        }
+        return Ok(());
+    }
     let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
     let options = EvalOptions {
         methods,
         distances,
-        view: EvalView {
-            width,
-            height,
-            fov_deg: args.fov_deg,
-            pixel_error: args.pixel_error,
-            transition: args.transition,
-            supersampling,
-            sun,
-            line_lighting,
-            ours_line_opacity,
-        },
+        view,
         dolly_steps: args.dolly_steps.unwrap_or(if args.quick { 16 } else { 150 }),
         timed_frames: args.frames.unwrap_or(if args.quick { 2 } else { 5 }),
         out_dir: args.out.clone(),
@@ -190,5 +215,31 @@ pub fn print_table(report: &EvalReport) {
     println!("|---|---:|---:|");
     for (name, method) in &report.methods {
         println!("| {name} | {:.2} | {:.2} |", method.popping_max, method.popping_p99);
+    }
+}
+
+fn print_inside(report: &InsideReport) {
+    let [x, y, z] = report.camera;
+    println!(
+        "{:.1} m tree, {} needles; camera at ({x:.1}, {y:.1}, {z:.1}) m, {}x{} at {}°; {} needles within 1 m",
+        report.tree_height, report.needles, report.width, report.height, report.fov_deg, report.near_needles
+    );
+    println!(
+        "{:<10} {:>9} {:>8} {:>8} {:>10} {:>10} {:>10} {:>12} {:>12}",
+        "errors", "coverage", "colour", "FLIP", "prisms", "lines", "merged", "primitives", "coarse near"
+    );
+    for m in &report.methods {
+        println!(
+            "{:<10} {:>9.4} {:>8.2} {:>8.4} {:>10} {:>10} {:>10} {:>12} {:>12}",
+            format!("per {}", m.error_scope),
+            m.coverage_error,
+            m.color_error,
+            m.perceptual,
+            m.prisms,
+            m.original_lines,
+            m.merged_lines,
+            m.primitives,
+            m.coarse_near_needles
+        );
     }
 }

@@ -11,6 +11,7 @@
 //! `conifer eval --json` prints.
 
 pub mod decimate;
+pub mod inside;
 pub mod measure;
 pub mod plot;
 pub mod scene;

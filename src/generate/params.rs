@@ -456,9 +456,11 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
         },
         spray: None,
         foliage: FoliageParams {
+            // Sheathed: the five needles leave the sheath together and lie
+            // nearly parallel for most of their length.
             phyllotaxy: Phyllotaxy::Fascicle {
                 needles: 5,
-                spread: deg(8.0),
+                spread: deg(1.0),
                 twist: deg(30.0),
             },
             count: NeedleCount::Total(62_000),

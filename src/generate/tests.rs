@@ -471,11 +471,13 @@ fn fir_needles_lie_in_two_rows_and_spruce_needles_all_round() {
 fn young_presets_are_unchanged_by_the_mature_generator() {
     // The young trees of the first releases, bit for bit (FNV-1a of their
     // prototypes, placements and wood, seed 3): the mature generator's
-    // options must not draw from their random streams.
+    // options must not draw from their random streams. The white pine's
+    // fascicles are sheathed since (1° spread, was 8°): the same draws,
+    // other directions.
     let expected = [
         (Species::ScotsPine, 0xe15c_3a61_62b6_c911u64),
         (Species::NorwaySpruce, 0xedfb_91dc_d385_618e),
-        (Species::EasternWhitePine, 0xfe52_9f1d_cfd9_5979),
+        (Species::EasternWhitePine, 0x21b6_c1cd_f5bb_fab9),
         (Species::LawsonCypress, 0x3dc0_8e8a_2ace_aef0),
     ];
     for (species, hash) in expected {

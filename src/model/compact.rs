@@ -203,14 +203,17 @@ pub struct CompactBytes {
     pub merged_lines: u64,
     /// Wood segments, wood mesh vertices and indices.
     pub wood: u64,
-    /// Prototype table and placements (48 bytes each).
+    /// Prototype table (96 bytes each) and placements (48 bytes each).
     pub placements: u64,
+    /// The level-2 lines' bounding spheres (16 bytes each) and their
+    /// parents' sphere indices (4 bytes each), for view-dependent detail.
+    pub spheres: u64,
 }
 
 impl CompactBytes {
     /// All of it.
     pub fn total(&self) -> u64 {
-        self.needles + self.original_lines + self.merged_lines + self.wood + self.placements
+        self.needles + self.original_lines + self.merged_lines + self.wood + self.placements + self.spheres
     }
 }
 
@@ -547,7 +550,8 @@ impl CompactSpecies {
             wood: 32 * self.wood_segments.len() as u64
                 + 12 * self.wood_vertices.len() as u64
                 + 4 * self.wood_indices.len() as u64,
-            placements: 48 * (self.prototypes.len() + self.placements.len()) as u64,
+            placements: 96 * self.prototypes.len() as u64 + 48 * self.placements.len() as u64,
+            spheres: 16 * self.tree_spheres.len() as u64 + 4 * self.tree_line_parents.len() as u64,
         }
     }
 
