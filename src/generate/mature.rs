@@ -96,7 +96,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
         },
         crown: CrownParams {
             base_fraction: (0.12, 0.28),
-            radius: 3.8,
+            radius: 4.3,
             shape: CrownShape::Conical { exponent: 0.85 },
             irregularity: 0.2,
             dead_zone: 0.5,
@@ -119,7 +119,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             planarity: 0.8,
             hanging: 3.0,
             hanging_from_order: 2,
-            shed_years: 20,
+            shed_years: 30,
             loss: 0.05,
             crookedness: 0.05,
             min_shoot: 0.04,
@@ -145,6 +145,9 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
 /// 5-needle fascicles at the shoot ends.
 pub(crate) fn eastern_white_pine() -> SpeciesParams {
     let mut foliage = FoliageFor::pine(5, (0.06, 0.13), (0.0004, 0.0005), 2, 1_000.0);
+    // 8° rather than the young preset's sheathed 1°: a mature element
+    // stands for several needles (widened), so its five spread like the
+    // tuft they stand for (1° put the crown's see-through at 0.38).
     foliage.phyllotaxy = Phyllotaxy::Fascicle {
         needles: 5,
         spread: deg(8.0),
@@ -254,7 +257,7 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             planarity: 1.0,
             hanging: 0.8,
             hanging_from_order: 3,
-            shed_years: 12,
+            shed_years: 25,
             loss: 0.05,
             crookedness: 0.05,
             min_shoot: 0.03,
@@ -266,7 +269,7 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
         },
         spray: Some(SprayParams {
             spacing: 0.06,
-            length: (0.2, 0.4),
+            length: (0.35, 0.7),
             angle: deg(50.0),
             pinna_spacing: 0.01,
             pinna_angle: deg(45.0),
@@ -324,7 +327,7 @@ pub(crate) fn douglas_fir() -> SpeciesParams {
             planarity: 0.85,
             hanging: 1.0,
             hanging_from_order: 3,
-            shed_years: 17,
+            shed_years: 25,
             loss: 0.15,
             crookedness: 0.08,
             min_shoot: 0.04,

@@ -331,19 +331,19 @@ fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options:
     let keep_area = natural as f32 / target.max(1) as f32;
     let (widening, lengthening) = match (foliage.count, foliage.phyllotaxy) {
         (NeedleCount::Total(_), _) => (1.0, 1.0),
-        // Scale leaves grow both ways, keeping their shape, up to 10×
+        // Scale leaves grow both ways, keeping their shape, up to 15×
         // (scale elements standing for a piece of spray).
         (NeedleCount::PerMetre { .. }, params::Phyllotaxy::Scales) => {
-            let both = keep_area.sqrt().clamp(1.0, 10.0);
+            let both = keep_area.sqrt().clamp(1.0, 15.0);
             (both, both)
         }
         // Needles widen up to 6× (a needle element standing for a row of
         // needles) and no wider than the shortest is long; past that they
-        // grow both ways, up to twice as long.
+        // grow both ways, up to 3.5× as long.
         (NeedleCount::PerMetre { .. }, _) => {
             let widest = (0.5 * foliage.length.0 / foliage.radius.1).clamp(1.0, MAX_WIDENING);
             let widening = keep_area.clamp(1.0, widest);
-            let both = (keep_area / widening).sqrt().clamp(1.0, 2.0);
+            let both = (keep_area / widening).sqrt().clamp(1.0, 3.5);
             (widening * both, both)
         }
     };
