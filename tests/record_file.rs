@@ -273,3 +273,40 @@ fn format_2_files_load_converted() {
     assert!(matches!(error, RecordError::UnsupportedVersion { found: 1, .. }));
     assert!(error.to_string().contains("re-bake"), "{error}");
 }
+
+#[test]
+fn shipped_mature_records_are_the_presets_current_bakes() {
+    // `assets/trees/mature/`: the six mature presets (seed 0) as `conifer
+    // bake --preset P` writes them; each must be what the generator and
+    // the bake make today (re-bake them after changing either).
+    use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
+    use bevy_conifer_lod::model::{bake_prototypes, read_prototype_record};
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees/mature");
+    let mut total = 0u64;
+    for species in Species::ALL {
+        let path = dir.join(format!("{}.conifer", species.name()));
+        total += std::fs::metadata(&path).unwrap().len();
+        let shipped = read_prototype_record(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        assert!(
+            (1_800_000..=2_000_800).contains(&shipped.needle_count()),
+            "{species}: {} needles",
+            shipped.needle_count()
+        );
+        let flat = shipped.flatten().unwrap();
+        let (lo, hi) = flat.bounds();
+        assert!((15.0..=50.0).contains(&(hi.y - lo.y)), "{species}: {} m", hi.y - lo.y);
+        let input = generate_prototypes(species, &GenerateOptions::default());
+        let baked = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+        assert!(
+            baked.prototypes == shipped.prototypes
+                && baked.placements == shipped.placements
+                && baked.tree_merged == shipped.tree_merged
+                && baked.wood == shipped.wood,
+            "{species}: the shipped record is not the preset's current bake; re-bake it \
+             (conifer bake --preset {} -o {})",
+            species.name(),
+            path.display()
+        );
+    }
+    assert!(total <= 30 << 20, "{total} bytes shipped");
+}

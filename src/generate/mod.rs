@@ -317,7 +317,7 @@ fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options:
     let foliage = &params.foliage;
     let (natural, most) = match foliage.count {
         NeedleCount::Total(count) => ((count as f32 * vigor).round() as usize, usize::MAX),
-        NeedleCount::PerMetre { per_metre, most } => {
+        NeedleCount::PerMetre { per_metre, most, .. } => {
             let twig_metres: f32 = skeleton
                 .twig_placements
                 .iter()
@@ -331,19 +331,19 @@ fn needle_budget(params: &SpeciesParams, skeleton: &skeleton::Skeleton, options:
     let keep_area = natural as f32 / target.max(1) as f32;
     let (widening, lengthening) = match (foliage.count, foliage.phyllotaxy) {
         (NeedleCount::Total(_), _) => (1.0, 1.0),
-        // Scale leaves grow both ways, keeping their shape, up to 15×
-        // (scale elements standing for a piece of spray).
-        (NeedleCount::PerMetre { .. }, params::Phyllotaxy::Scales) => {
-            let both = keep_area.sqrt().clamp(1.0, 15.0);
+        // Scale leaves grow both ways, keeping their shape, up to `growth`
+        // times (scale elements standing for a piece of spray).
+        (NeedleCount::PerMetre { growth, .. }, params::Phyllotaxy::Scales) => {
+            let both = keep_area.sqrt().clamp(1.0, growth.max(1.0));
             (both, both)
         }
         // Needles widen up to 6× (a needle element standing for a row of
         // needles) and no wider than the shortest is long; past that they
-        // grow both ways, up to 3.5× as long.
-        (NeedleCount::PerMetre { .. }, _) => {
+        // grow both ways, up to `growth` times as long.
+        (NeedleCount::PerMetre { growth, .. }, _) => {
             let widest = (0.5 * foliage.length.0 / foliage.radius.1).clamp(1.0, MAX_WIDENING);
             let widening = keep_area.clamp(1.0, widest);
-            let both = (keep_area / widening).sqrt().clamp(1.0, 3.5);
+            let both = (keep_area / widening).sqrt().clamp(1.0, growth.max(1.0));
             (widening * both, both)
         }
     };

@@ -210,8 +210,10 @@ pub(crate) enum NeedleCount {
     Total(usize),
     /// Needles per metre of young shoot at full survival: the count follows
     /// from the tree. A record carries at most `most` needles; above it the
-    /// needles widen, keeping their summed area (and the crown's density).
-    PerMetre { per_metre: f32, most: usize },
+    /// needles widen, keeping their summed area (and the crown's density),
+    /// then grow both ways up to `growth` times as long (scale leaves: both
+    /// ways from the start, up to `growth` times).
+    PerMetre { per_metre: f32, most: usize, growth: f32 },
 }
 
 /// Needle shape, density and grouping.

@@ -398,6 +398,7 @@ fn fewer_needles_widen_and_keep_the_crown_area() {
     use super::params::NeedleCount;
     let mut params = mature::norway_spruce();
     params.foliage.count = NeedleCount::PerMetre {
+        growth: 2.0,
         per_metre: 1_500.0,
         most: usize::MAX,
     };
@@ -432,7 +433,7 @@ fn fewer_needles_widen_and_keep_the_crown_area() {
         let ratio = widened / natural_area;
         assert!((ratio - 1.0).abs() < 0.05, "1/{divisor} of the needles: area × {ratio}");
     }
-    // Past the widening limit needles lengthen too, up to 3.5×.
+    // Past the widening limit needles lengthen too, up to `growth`.
     let (budget, _) = area(Some(natural.natural / 12));
     assert!(
         budget.lengthening > 1.0 && budget.widening <= 2.0 * MAX_WIDENING,
