@@ -321,8 +321,8 @@ fn gpu_draws_equal_the_cpu_reference() {
             // holds the longest prefix they need.
             let mut expected = vec![PlacedDraw::default(); compact.prototypes.len() * PLACED_BANDS as usize];
             for &[tree, word] in &view.entries {
-                assert_eq!(tree, 0);
-                let j = (word & 0x7fff) as usize;
+                assert_eq!(tree & 0x7fff_ffff, 0);
+                let j = (word & 0xffff) as usize;
                 let c = (word >> 16) as u16;
                 let placement = &compact.placements[j];
                 assert!(!compact.parent_accepted(j, seen.as_ref(), shader_threshold_code));

@@ -478,9 +478,19 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
     let distances = vec![5.0f32, 20.0, 80.0];
     let mut processed_over_cut = Vec::new();
     let (gpu_bytes, view_bytes) = compact_memory(tree, &distances, |view| {
-        let [code, e_bits, ..] = view.lods[0];
+        let [code, e_bits, _, _, view_point @ ..] = view.lods[0];
         let (code, e) = ((code & 0xffff) as u16, f32::from_bits(e_bits));
-        let (cut, _) = compact.placed_drawn(&record, code, e, crate::model::compact::shader_threshold_code, None);
+        // The view point the cull pass wrote (view-dependent detail, the
+        // default scope), if any.
+        let [x, y, z, slope] = view_point.map(f32::from_bits);
+        let seen = (slope > 0.0).then(|| crate::model::ViewPoint::new(glam::Vec3::new(x, y, z), slope));
+        let (cut, _) = compact.placed_drawn(
+            &record,
+            code,
+            e,
+            crate::model::compact::shader_threshold_code,
+            seen.as_ref(),
+        );
         let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()).max(1);
         processed_over_cut.push(view.processed_primitives(record.max_sides) as f64 / in_cut as f64);
     })?;

@@ -24,6 +24,10 @@ pub struct BenchArgs {
     /// species' own count).
     #[arg(long)]
     pub preset_needles: Option<usize>,
+    /// Needles of each mature preset of the `prototypes` part (default
+    /// 1,000,000; 2,000,000 is what the shipped mature records hold).
+    #[arg(long)]
+    pub prototype_needles: Option<usize>,
     /// Print one JSON object on stdout (otherwise a summary).
     #[arg(long)]
     pub json: bool,
@@ -43,6 +47,12 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     options.only = args.only.clone();
     if args.preset_needles.is_some() {
         options.preset_needles = args.preset_needles;
+    }
+    if let Some(needles) = args.prototype_needles {
+        if needles == 0 {
+            anyhow::bail!("--prototype-needles 0: a tree needs needles");
+        }
+        options.prototype_needles = needles;
     }
     let report = run(&options, &mut |line| eprintln!("bench: {line}")).context("benchmark failed")?;
     if args.json {

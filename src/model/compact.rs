@@ -189,8 +189,8 @@ pub const PLACED_BANDS: u32 = 16;
 pub const MAX_PLACED_PROTOTYPES: usize = 1024;
 
 /// Most placements a placed species holds: a per-view entry packs the
-/// placement index in 15 bits.
-pub const MAX_PLACEMENTS: usize = 1 << 15;
+/// placement index in 16 bits.
+pub const MAX_PLACEMENTS: usize = 1 << 16;
 
 /// Bytes of each compact array.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]

@@ -110,7 +110,13 @@ impl Default for ConiferLodDebug {
 /// What the plugin drew last frame (kept while the overlay is enabled, or
 /// always with [`ConiferLodDebug::always_collect_stats`]).
 /// Counts are of the cut at each visible tree's finest view, computed
-/// exactly by [`CutCounter`] (no traversal).
+/// exactly by [`CutCounter`] (no traversal), at the tree's one error (the
+/// paper's, from its distance to the crown's centre). Under
+/// [`crate::plugin::ErrorScope::Placement`] a tree of shared prototypes
+/// draws each placement at its own error: for a tree the camera is near or
+/// inside, these counts are then an estimate (the drawn cut has more
+/// prisms beside the camera and fewer lines across the crown; `conifer
+/// eval --inside` counts both).
 #[derive(Resource, Clone, Copy, Debug, Default, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, Clone)]
 pub struct ConiferLodStats {

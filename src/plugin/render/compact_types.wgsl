@@ -155,9 +155,10 @@ const PLACED_KINDS: u32 = 3u;
 const PLACED_PRISMS: u32 = 0u;
 const PLACED_ORIGINAL_LINES: u32 = 1u;
 const PLACED_MERGED_LINES: u32 = 2u;
-// An expanded placement's entry: (tree, placement | ENTRY_FROM_NEEDLES | code << 16).
-const ENTRY_PLACEMENT_MASK: u32 = 0x7fffu;
-const ENTRY_FROM_NEEDLES: u32 = 0x8000u;
+// An expanded placement's entry: (tree | ENTRY_FROM_NEEDLES, placement | code << 16).
+const ENTRY_PLACEMENT_MASK: u32 = 0xffffu;
+const ENTRY_TREE_MASK: u32 = 0x7fffffffu;
+const ENTRY_FROM_NEEDLES: u32 = 0x80000000u;
 const ENTRY_INVALID: u32 = 0xffffffffu;
 // The view's placement counters: a header, then per-draw arrays.
 const COUNTER_TOTAL: u32 = 0u;

@@ -37,7 +37,7 @@
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
-    ENTRY_PLACEMENT_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
+    ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error,
 }
@@ -312,11 +312,11 @@ fn wood_segment_error(lod: InstanceLod, start: vec4<f32>, end: vec4<f32>, tree_e
 fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) instance_index: u32) -> VertexOutput {
 #ifdef CONIFER_PLACED
     let entry = placed_entries[instance_index];
-    let tree = entry.x;
+    let tree = entry.x & ENTRY_TREE_MASK;
     let placement = placements[entry.y & ENTRY_PLACEMENT_MASK];
     let lod = instance_lods[tree];
     let code = entry.y >> 16u;
-    let original_from_needles = (entry.y & ENTRY_FROM_NEEDLES) != 0u;
+    let original_from_needles = (entry.x & ENTRY_FROM_NEEDLES) != 0u;
     let spatial_error = placement_error(lod, placement, prototypes[placement.prototype].sphere)
         / placement.translation_scale.w;
     let world_from_local = instance_world_from_local(instances[tree]) * placement_matrix(placement);

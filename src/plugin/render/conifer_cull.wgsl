@@ -405,5 +405,5 @@ fn scatter_placements(@builtin(global_invocation_id) id: vec3<u32>) {
     let slot = atomicLoad(&counters[counter_index(ARRAY_OFFSET, draw)])
         + atomicAdd(&counters[counter_index(ARRAY_CURSOR, draw)], 1u);
     let flags = atomicLoad(&counters[counter_index(ARRAY_FLAGS, draw)]);
-    sorted_entries[slot] = vec2<u32>(entry.x, entry.y | flags);
+    sorted_entries[slot] = vec2<u32>(entry.x | flags, entry.y);
 }

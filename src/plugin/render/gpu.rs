@@ -301,8 +301,8 @@ impl GpuPlacement {
 }
 
 /// One expanded placement of one view (`vec2<u32>` in WGSL), 8 bytes: its
-/// tree, then the placement index (15 bits), the original-lines-from-needles
-/// flag and its threshold code (16 bits).
+/// tree (31 bits) and the original-lines-from-needles flag (bit 31), then
+/// the placement index (16 bits) and its threshold code (16 bits).
 pub const PLACED_ENTRY_BYTES: u64 = 8;
 
 /// Words of a view's placement counters before the per-draw arrays.

@@ -39,8 +39,9 @@ pub struct ViewReadback {
     /// Placed indirect draws, one block of `prototypes × PLACED_BANDS` per
     /// placed part.
     pub placed_draws: Vec<[u32; 4]>,
-    /// The expanded placements in draw order: tree, then placement (15
-    /// bits), the original-lines-from-needles flag and the threshold code.
+    /// The expanded placements in draw order: tree (31 bits) and the
+    /// original-lines-from-needles flag (bit 31), then placement (16 bits)
+    /// and the threshold code.
     pub entries: Vec<[u32; 2]>,
 }
 
