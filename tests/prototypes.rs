@@ -474,24 +474,23 @@ fn a_camera_in_a_tall_crown_sees_prisms_beside_it_and_lines_across_it() {
         |cut: &Cut| cut.original_lines.iter().filter(|&&i| distance(i) > 25.0).count() + cut.merged_lines.len();
     let primitives = |s: &bevy_conifer_lod::model::CutStats| s.triangles + s.lines_original + s.lines_merged;
     let (seen_stats, tree_stats) = (flat.cut_stats(&seen), flat.cut_stats(&per_tree));
+    let describe = |cut: &Cut, stats: &bevy_conifer_lod::model::CutStats| {
+        format!(
+            "{} prisms, {} original and {} merged lines, {} primitives; near: {:?} (needles, mean sides); \
+             far lines {}",
+            cut.prisms.len(),
+            cut.original_lines.len(),
+            cut.merged_lines.len(),
+            primitives(stats),
+            near_sides(cut),
+            far_lines(cut)
+        )
+    };
     println!(
         "{height:.1} m fir, camera 2 m from the trunk at 40 % of its height, 1080 px at 45°:\n  \
-         seen from the camera: {} prisms, {} original and {} merged lines, {} primitives; \
-         near: {:?} (needles, mean sides); far lines {}\n  \
-         one error for the tree: {} prisms, {} original and {} merged lines, {} primitives; \
-         near: {:?}; far lines {}",
-        seen.prisms.len(),
-        seen.original_lines.len(),
-        seen.merged_lines.len(),
-        primitives(&seen_stats),
-        near_sides(&seen),
-        far_lines(&seen),
-        per_tree.prisms.len(),
-        per_tree.original_lines.len(),
-        per_tree.merged_lines.len(),
-        primitives(&tree_stats),
-        near_sides(&per_tree),
-        far_lines(&per_tree),
+         seen from the camera: {}\n  one error for the tree: {}",
+        describe(&seen, &seen_stats),
+        describe(&per_tree, &tree_stats)
     );
     let ((near, seen_sides), (_, tree_sides)) = (near_sides(&seen), near_sides(&per_tree));
     assert!(near > 0);

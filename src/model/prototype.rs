@@ -565,24 +565,7 @@ impl PrototypeRecord {
         } else {
             0.0
         };
-        let mut cut = Cut::default();
-        let p_count = self.placements.len() as u32;
-        let mut stack: Vec<u32> = (0..self.tree_parent.len() as u32)
-            .filter(|&k| self.tree_parent[k as usize] == NO_PARENT)
-            .collect();
-        while let Some(node) = stack.pop() {
-            if node < p_count {
-                self.push_placement(&mut cut, node as usize, e);
-                continue;
-            }
-            let line = &self.tree_merged[(node - p_count) as usize];
-            if line.error <= e {
-                cut.merged_lines.push(self.flat_tree_node(node));
-            } else {
-                stack.extend(line.children);
-            }
-        }
-        cut
+        self.cut_at(|_| e)
     }
 
     /// The cut seen from `view` (see [`super::view`]): walked down the
@@ -594,21 +577,27 @@ impl PrototypeRecord {
     /// sphere included; named as [`PrototypeRecord::flatten`] numbers its
     /// nodes.
     pub fn cut_seen_from(&self, view: &ViewPoint) -> Cut {
+        self.cut_at(|node| self.node_error_seen_from(view, node).min(f32::MAX))
+    }
+
+    /// The walk both cuts make: level-2 node `node` (and, for a placement,
+    /// every node inside it) at spatial error `error_at(node)`. A line with
+    /// its parent's error is walked through: at one error it cannot be in
+    /// the cut anyway, and seen from a camera the compact layout leaves it
+    /// out.
+    fn cut_at(&self, error_at: impl Fn(u32) -> f32) -> Cut {
         let mut cut = Cut::default();
         let p_count = self.placements.len() as u32;
         let mut stack: Vec<u32> = (0..self.tree_parent.len() as u32)
             .filter(|&k| self.tree_parent[k as usize] == NO_PARENT)
             .collect();
         while let Some(node) = stack.pop() {
-            let e = self.node_error_seen_from(view, node).min(f32::MAX);
+            let e = error_at(node);
             if node < p_count {
                 self.push_placement(&mut cut, node as usize, e);
                 continue;
             }
             let line = &self.tree_merged[(node - p_count) as usize];
-            // A line with its parent's error has an empty interval at one
-            // error; seen from a camera it is skipped too (the compact
-            // layout leaves it out), so the walk goes through it.
             let parent = self.tree_parent[node as usize];
             let empty = parent != NO_PARENT && self.tree_merged[(parent - p_count) as usize].error <= line.error;
             if line.error <= e && !empty {
