@@ -154,6 +154,18 @@ proptest! {
         let flat = record.flatten().unwrap();
         let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
         let level2 = (record.placements.len() + record.tree_merged.len()) as u32;
+        // Each sphere holds its children's (with room to spare for
+        // rounding), and the tree's holds them all.
+        let holds = |outer: bevy_conifer_lod::model::Sphere, inner: bevy_conifer_lod::model::Sphere| {
+            outer.center.distance(inner.center) + inner.radius < outer.radius
+        };
+        for node in 0..level2 {
+            let parent = record.tree_parent(node);
+            if parent != NO_PARENT {
+                prop_assert!(holds(record.node_sphere(parent), record.node_sphere(node)), "node {}", node);
+            }
+            prop_assert!(holds(record.tree_sphere(), record.node_sphere(node)), "node {}", node);
+        }
         let mut points: Vec<Vec3> = cameras.into_iter().map(Vec3::from).collect();
         points.push(record.node_sphere(inside as u32 % level2).center);
         points.push(record.tree_sphere().center);
@@ -187,8 +199,12 @@ proptest! {
                         cut.original_lines.iter().chain(&cut.merged_lines).copied().chain(cut.prisms.iter().map(|p| p.0 | 1 << 31)).collect()
                     };
                     let (a, b) = (lines(&drawn), lines(&cut));
+                    // Codes round errors (a placed error is compared as
+                    // `code(error) ≤ threshold(e / scale)`, a prism by its
+                    // line code): at a boundary a line and its two
+                    // children swap, or a prism and its line.
                     let differing = a.symmetric_difference(&b).count();
-                    prop_assert!(differing <= 2 + a.len() / 100, "camera {camera}: {differing} of {} nodes differ", a.len());
+                    prop_assert!(differing <= 3 + a.len() / 30, "camera {camera}: {differing} of {} nodes differ", a.len());
                 }
             }
         }
