@@ -95,3 +95,53 @@ fn every_method_renders_and_is_measured() {
     }
     assert_eq!(image::open(out.join("ref_20m.png")).unwrap().width(), 96);
 }
+
+#[test]
+fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
+    // `conifer eval --inside` on a small tree of shared prototypes: the
+    // camera 2 m from the trunk at 40 % of the height, both error scopes
+    // against the supersampled reference.
+    use bevy_conifer_lod::eval::inside::{InsideOptions, evaluate_inside};
+    use bevy_conifer_lod::generate::{Age, generate_prototypes};
+    use bevy_conifer_lod::model::bake_prototypes;
+    let input = generate_prototypes(
+        Species::NorwaySpruce,
+        &GenerateOptions {
+            seed: 2,
+            target_needles: Some(20_000),
+            age: Age::Young,
+        },
+    );
+    let record = bake_prototypes(&input, &BakeOptions::default(), &())
+        .unwrap()
+        .quantized()
+        .unwrap();
+    let view = EvalView {
+        width: 96,
+        height: 96,
+        fov_deg: 60.0,
+        pixel_error: 1.0,
+        transition: 1.0,
+        supersampling: 4,
+        sun: Default::default(),
+        line_lighting: Default::default(),
+        ours_line_opacity: Default::default(),
+    };
+    let options = InsideOptions {
+        from_trunk: 0.6,
+        ..InsideOptions::new(view)
+    };
+    let report = evaluate_inside(&record, &options, &mut |_| {}).unwrap();
+    let [tree, placement] = [&report.methods[0], &report.methods[1]];
+    println!("{report:#?}");
+    assert_eq!((tree.error_scope, placement.error_scope), ("tree", "placement"));
+    assert!(report.near_needles > 0);
+    for m in [tree, placement] {
+        assert_eq!(m.primitives, m.triangles + m.lines);
+        assert!((0.0..=1.0).contains(&m.coverage_error));
+    }
+    // Beside the camera, each placement's own error keeps needles full
+    // prisms; one error for the tree thins them.
+    assert!(placement.coarse_near_needles < tree.coarse_near_needles);
+    assert!(placement.color_error < tree.color_error, "{placement:?} {tree:?}");
+}
