@@ -11,7 +11,7 @@ mod common;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
 use bevy_conifer_lod::model::compact::{CompactSpecies, PLACED_BANDS, PlacedDraw, shader_threshold_code};
-use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, ViewPoint, bake_prototypes};
+use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback};
 use bevy_conifer_lod::prelude::*;
@@ -284,8 +284,7 @@ fn gpu_draws_equal_the_cpu_reference() {
                 .iter()
                 .find(|v| v.species == handle.id() && v.perspective)
                 .expect("the camera's results were read back");
-            let [code_word, e_bits, _, _, view_point @ ..] = view.lods[0];
-            let (code, e) = ((code_word & 0xffff) as u16, f32::from_bits(e_bits));
+            let (code, e) = view.tree_lod(0);
             assert!(
                 code.abs_diff(shader_threshold_code(e)) <= 1,
                 "tree code {code} at e = {e}"
@@ -293,8 +292,7 @@ fn gpu_draws_equal_the_cpu_reference() {
             // View-dependent detail (the default scope) on the placed tree:
             // the camera in the tree's frame (the tree stands at the
             // origin) and the tree's error from its sphere's nearest point.
-            let [x, y, z, slope] = view_point.map(f32::from_bits);
-            let seen = (slope > 0.0).then(|| ViewPoint::new(Vec3::new(x, y, z), slope));
+            let seen = view.view_point(0);
             if let Some(seen) = &seen {
                 let camera = scene
                     .renderer

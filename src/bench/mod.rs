@@ -478,12 +478,10 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
     let distances = vec![5.0f32, 20.0, 80.0];
     let mut processed_over_cut = Vec::new();
     let (gpu_bytes, view_bytes) = compact_memory(tree, &distances, |view| {
-        let [code, e_bits, _, _, view_point @ ..] = view.lods[0];
-        let (code, e) = ((code & 0xffff) as u16, f32::from_bits(e_bits));
+        let (code, e) = view.tree_lod(0);
         // The view point the cull pass wrote (view-dependent detail, the
         // default scope), if any.
-        let [x, y, z, slope] = view_point.map(f32::from_bits);
-        let seen = (slope > 0.0).then(|| crate::model::ViewPoint::new(glam::Vec3::new(x, y, z), slope));
+        let seen = view.view_point(0);
         let (cut, _) = compact.placed_drawn(
             &record,
             code,

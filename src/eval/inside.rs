@@ -13,10 +13,8 @@
 //! `render_prototypes`).
 
 use super::measure::{self, PixelRect};
-use super::scene::{EvalError, EvalView, RawTree, raw_materials};
+use super::scene::{EvalError, EvalView, RawTree, raw_materials, wood_counts, wood_counts_by};
 use super::{EvaluateError, flip_error};
-use crate::model::metric::prism_sides;
-use crate::model::prism::{WOOD_LINE_FADE, prism_triangle_count, wood_segment_error};
 use crate::model::{Cut, LodRecord, PrototypeRecord, Sphere, ViewPoint};
 use crate::plugin::headless::HeadlessRenderer;
 use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, ErrorScope, triangle_mesh};
@@ -213,15 +211,17 @@ pub fn evaluate_inside(
             write(&reference, "ref_inside.png", &mut files)?;
         }
         write(&picture, &format!("ours-per-{name}_inside.png"), &mut files)?;
-        let cut = match scope {
-            ErrorScope::Tree => record.cut(slope * camera.distance(crown)),
-            ErrorScope::Placement => record.cut_seen_from(&seen_from),
+        let (cut, (wood_triangles, wood_lines)) = match scope {
+            ErrorScope::Tree => {
+                let e = slope * camera.distance(crown);
+                (record.cut(e), wood_counts(&flat, e))
+            }
+            ErrorScope::Placement => (
+                record.cut_seen_from(&seen_from),
+                wood_counts_seen_from(&flat, &seen_from),
+            ),
         };
         let stats = flat.cut_stats(&cut);
-        let (wood_triangles, wood_lines) = match scope {
-            ErrorScope::Tree => super::scene::wood_counts(&flat, slope * camera.distance(crown)),
-            ErrorScope::Placement => wood_counts_seen_from(&flat, &seen_from),
-        };
         let lines = stats.lines_original + stats.lines_merged + wood_lines;
         let triangles = stats.triangles + wood_triangles;
         methods.push(InsideMethod {
@@ -263,30 +263,10 @@ fn coarse_near(cut: &Cut, max_sides: u8, near: impl Fn(u32) -> bool) -> u64 {
 }
 
 /// Wood triangles and lines the plugin draws seen from `view`: each segment
-/// at its own sphere's error (as `conifer_compact.wgsl` does), a prism of
-/// `prism_sides(e / r_max)` sides while `e < 2·r_max`, then a line until
-/// `WOOD_LINE_FADE` times that. For a camera within range of the tree (the
-/// trees `conifer eval --inside` looks at).
+/// at its own sphere's error (as `conifer_compact.wgsl` does), for a camera
+/// within range of the tree (the trees `conifer eval --inside` looks at).
 pub fn wood_counts_seen_from(record: &LodRecord, view: &ViewPoint) -> (u64, u64) {
-    let (mut triangles, mut lines) = (0u64, 0u64);
-    for segment in &record.wood {
-        let error = wood_segment_error(segment);
-        if error.is_nan() || error <= 0.0 {
-            continue;
-        }
-        let radius = segment.start_radius.max(segment.end_radius);
-        let sphere = Sphere {
-            center: 0.5 * (segment.start + segment.end),
-            radius: 0.5 * segment.start.distance(segment.end) + radius,
-        };
-        let e = view.spatial_error(&sphere);
-        if e < error {
-            triangles += u64::from(prism_triangle_count(prism_sides(e / radius, record.max_sides)));
-        } else if e < error * WOOD_LINE_FADE {
-            lines += 1;
-        }
-    }
-    (triangles, lines)
+    wood_counts_by(record, |segment| view.spatial_error(&Sphere::around_wood(segment)))
 }
 
 #[cfg(test)]
@@ -309,7 +289,7 @@ mod tests {
         let camera = record.crown_center() + Vec3::Z * 1e4;
         let slope = 1e-6;
         let seen = wood_counts_seen_from(&record, &ViewPoint::new(camera, slope));
-        let one = super::super::scene::wood_counts(&record, slope * 1e4);
+        let one = wood_counts(&record, slope * 1e4);
         assert_eq!(seen, one);
         // Beside the trunk, the near segments are prisms of full sides.
         let near = ViewPoint::new(record.crown_center(), 1e-3);

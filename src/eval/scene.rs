@@ -981,8 +981,15 @@ fn never_empty(mesh: &mut TriangleMesh) {
 /// segment is a prism of `prism_sides(e / r_max)` sides while `e < 2·r_max`,
 /// then a line until `WOOD_LINE_FADE` times that.
 pub fn wood_counts(record: &LodRecord, e: f32) -> (u64, u64) {
+    wood_counts_by(record, |_| e)
+}
+
+/// [`wood_counts`] with each segment at its own spatial error
+/// `error_of(segment)` (view-dependent detail: `eval::inside`).
+pub fn wood_counts_by(record: &LodRecord, error_of: impl Fn(&crate::model::WoodSegment) -> f32) -> (u64, u64) {
     let (mut triangles, mut lines) = (0u64, 0u64);
     for segment in &record.wood {
+        let e = error_of(segment);
         let error = wood_segment_error(segment);
         if error.is_nan() || error <= 0.0 {
             continue;

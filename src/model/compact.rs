@@ -933,11 +933,7 @@ impl CompactSpecies {
     /// `view`: its nearest point's, or the tree sphere's for a camera
     /// beyond [`super::view::VIEW_RANGE`] (as `conifer_cull.wgsl` computes it).
     pub fn sphere_error(&self, view: &ViewPoint, sphere: &Sphere) -> f32 {
-        if view.beyond_range(&self.tree_sphere) {
-            view.spatial_error(&self.tree_sphere)
-        } else {
-            view.spatial_error(sphere)
-        }
+        view.node_error(&self.tree_sphere, sphere)
     }
 
     /// Spatial error (tree metres) a view gives placement entry `j`: the

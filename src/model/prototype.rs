@@ -408,10 +408,7 @@ impl PrototypeRecord {
         let wood: Vec<Sphere> = self
             .wood
             .iter()
-            .map(|w| Sphere {
-                center: 0.5 * (w.start + w.end),
-                radius: 0.5 * w.start.distance(w.end) + w.start_radius.max(w.end_radius),
-            })
+            .map(Sphere::around_wood)
             .chain(Sphere::around_points(self.wood_mesh.positions.iter().copied(), 0.0))
             .collect();
         let extent = Sphere::around_points(
@@ -457,11 +454,7 @@ impl PrototypeRecord {
     /// sphere's, or the tree sphere's for a camera beyond
     /// [`super::view::VIEW_RANGE`].
     pub fn node_error_seen_from(&self, view: &ViewPoint, node: u32) -> f32 {
-        if view.beyond_range(&self.tree_sphere) {
-            view.spatial_error(&self.tree_sphere)
-        } else {
-            view.spatial_error(&self.node_spheres[node as usize])
-        }
+        view.node_error(&self.tree_sphere, &self.node_spheres[node as usize])
     }
 
     /// Needles once placed (the flattened tree's needle count).

@@ -27,6 +27,7 @@
 //! spheres then differ by less than `1/VIEW_RANGE` in distance), so the
 //! test is exact at any distance.
 
+use super::needle::WoodSegment;
 use super::prototype::Placement;
 use glam::Vec3;
 
@@ -89,6 +90,16 @@ impl Sphere {
         Sphere { center, radius }
     }
 
+    /// A sphere holding a wood segment: round its midpoint, half its
+    /// length plus its wider radius (the shaders bound a segment the same
+    /// way).
+    pub fn around_wood(segment: &WoodSegment) -> Self {
+        Self {
+            center: 0.5 * (segment.start + segment.end),
+            radius: 0.5 * segment.start.distance(segment.end) + segment.start_radius.max(segment.end_radius),
+        }
+    }
+
     /// The sphere grown by `margin`.
     pub fn grown(&self, margin: f32) -> Sphere {
         Sphere {
@@ -148,6 +159,17 @@ impl ViewPoint {
     /// `k · d(camera, sphere)`.
     pub fn spatial_error(&self, sphere: &Sphere) -> f32 {
         self.error_per_metre * sphere.distance_from(self.camera)
+    }
+
+    /// Spatial error of a node bounded by `sphere` in a tree bounded by
+    /// `tree`: its own sphere's, or the tree's for a camera
+    /// [`beyond_range`](Self::beyond_range) (as `conifer_cull.wgsl` decides).
+    pub fn node_error(&self, tree: &Sphere, sphere: &Sphere) -> f32 {
+        if self.beyond_range(tree) {
+            self.spatial_error(tree)
+        } else {
+            self.spatial_error(sphere)
+        }
     }
 }
 

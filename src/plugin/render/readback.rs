@@ -46,6 +46,19 @@ pub struct ViewReadback {
 }
 
 impl ViewReadback {
+    /// Tree `tree`'s threshold code and spatial error (tree metres).
+    pub fn tree_lod(&self, tree: usize) -> (u16, f32) {
+        let [code, e, ..] = self.lods[tree];
+        ((code & 0xffff) as u16, f32::from_bits(e))
+    }
+
+    /// Tree `tree`'s view point (view-dependent detail: the camera in the
+    /// tree's frame and the error per metre), if the cull pass wrote one.
+    pub fn view_point(&self, tree: usize) -> Option<crate::model::ViewPoint> {
+        let [.., x, y, z, slope] = self.lods[tree].map(f32::from_bits);
+        (slope > 0.0).then(|| crate::model::ViewPoint::new(Vec3::new(x, y, z), slope))
+    }
+
     /// Prisms and needle lines the vertex shaders process for this view,
     /// counted from the indirect draws the compute passes wrote: the
     /// per-tree draws of prisms, original and merged lines, and every
