@@ -11,6 +11,7 @@
 //! * [`file`](mod@file): the binary record file.
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
+//! * [`impostor`]: the far representation (a crown impostor of a few views).
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
 //! * [`view`]: view-dependent detail inside a tree (bounding spheres, errors per placement).
 
@@ -18,6 +19,7 @@ pub mod bake;
 pub mod compact;
 pub mod cut_count;
 pub mod file;
+pub mod impostor;
 pub mod look;
 pub mod merge;
 pub mod metric;

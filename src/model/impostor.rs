@@ -1,0 +1,518 @@
+//! The far representation, free of Bevy: a crown impostor, the tree seen
+//! from a ring of directions around its vertical axis and stored as small
+//! coverage pictures.
+//!
+//! Merged lines hold their error bound at any distance, but a dense crown
+//! stacks them in depth: a 30 m spruce still needs ~380,000 lines at 1 km
+//! (`conifer cut --distance 1000`), where it is ~40 pixels tall. Past the
+//! distance where one of its texels is smaller than the pixel error, the
+//! plugin draws the tree as one camera-facing quad textured with the two
+//! views nearest the camera's azimuth instead, cross-faded with the lines
+//! over a band of distances ([`FADE_START`], [`FADE_END`]).
+//!
+//! ## What a texel holds
+//!
+//! Each view `k` looks at the tree horizontally from the azimuth
+//! `φ_k = 2πk / views` (the camera on `+z` for `k = 0`, its right `+x`),
+//! orthographic, over the tree's box: `columns × rows` texels of side
+//! [`CrownImpostor::texel`] metres. A texel stores four bytes:
+//!
+//! * **coverage**: the fraction of the texel the needles and wood hide;
+//! * **wood**: the fraction hidden by wood (drawn with the wood's colour);
+//! * **axis x, z**: the mean direction of what covers it (its `y` is
+//!   positive and follows from the unit length), lit as the cylinders the
+//!   lines stand for.
+//!
+//! ## Coverage-true baking
+//!
+//! Each view is rasterized at [`SUPERSAMPLING`]² cells a texel. A needle
+//! adds its projected area (`2r` times its projected length) to the
+//! optical depth `τ` of the cells along its axis; a cell's coverage is
+//! `1 − exp(−τ / cell area)` (needles scattered at random inside a cell
+//! overlap as a Poisson process), so needles in depth never cover more
+//! than the cell and a thin crown stays see-through. Wood segments are
+//! opaque and wide: each cell takes the fraction of its 4×4 samples inside
+//! the segment's trapezoid. A texel's coverage is its cells' mean, and the
+//! mip levels the plugin samples at a distance are means of texels, so the
+//! impostor's coverage at any size is the mean of the fine cells'.
+
+use super::needle::{Needle, WoodSegment};
+use glam::{Vec2, Vec3};
+
+/// Cells per texel along each axis when baking.
+pub const SUPERSAMPLING: u32 = 4;
+
+/// Spatial error, in texels, from which the plugin starts fading the
+/// lines into the impostor (a texel projects to `1 / FADE_START` of the
+/// pixel error).
+pub const FADE_START: f32 = 1.0;
+
+/// Spatial error, in texels, from which the plugin draws only the impostor.
+pub const FADE_END: f32 = 2.0;
+
+/// How a [`CrownImpostor`] is baked.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImpostorOptions {
+    /// Views around the vertical axis (at least 1).
+    pub views: u32,
+    /// Texels over the tree's height (at least 4).
+    pub rows: u32,
+}
+
+impl Default for ImpostorOptions {
+    /// Eight views, 192 texels tall: a 30 m spruce's texel is 16 cm, so the
+    /// impostor takes over where the tree is ~190 pixels tall at ε = 1.
+    fn default() -> Self {
+        Self { views: 8, rows: 192 }
+    }
+}
+
+/// A crown impostor (module docs): `views` pictures of `columns × rows`
+/// texels, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CrownImpostor {
+    /// Views around the vertical axis.
+    pub views: u32,
+    /// Texels across.
+    pub columns: u32,
+    /// Texels up.
+    pub rows: u32,
+    /// The vertical axis the views turn around (tree-local `x`, `z`).
+    pub axis: Vec2,
+    /// Half the pictures' width, metres: the farthest any needle or wood
+    /// reaches from the axis.
+    pub half_width: f32,
+    /// Tree-local height of the pictures' bottom edge.
+    pub bottom: f32,
+    /// Side of a texel, metres.
+    pub texel: f32,
+    /// `views × rows × columns` texels: coverage, wood, axis x, axis z.
+    pub texels: Vec<[u8; 4]>,
+}
+
+/// One texel decoded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImpostorTexel {
+    /// Fraction of the texel hidden, in `[0, 1]`.
+    pub coverage: f32,
+    /// Fraction hidden by wood, in `[0, coverage]`.
+    pub wood: f32,
+    /// Mean direction of what hides it (unit, `y ≥ 0`).
+    pub axis: Vec3,
+}
+
+/// Accumulates one view at the fine resolution.
+struct ViewCanvas {
+    right: Vec3,
+    /// Optical depth of the needles per cell (area over cell area).
+    depth: Vec<f32>,
+    /// Wood coverage per cell.
+    wood: Vec<f32>,
+    /// Area-weighted axis sum per texel.
+    axis: Vec<Vec3>,
+}
+
+impl CrownImpostor {
+    /// Bakes the impostor of `needles` and `wood` (tree-local metres; the
+    /// tree stands along `+y`). `None` when nothing is valid or the
+    /// options are out of range.
+    pub fn bake(needles: &[Needle], wood: &[WoodSegment], options: ImpostorOptions) -> Option<Self> {
+        if options.views == 0 || options.rows < 4 {
+            return None;
+        }
+        let needles: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
+        let wood: Vec<&WoodSegment> = wood.iter().filter(|w| w.is_valid()).collect();
+        if needles.is_empty() {
+            return None;
+        }
+        // The box: the vertical axis through the middle of the horizontal
+        // extent, wide enough for every view.
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let pieces = needles
+            .iter()
+            .flat_map(|n| [(n.base, n.radius), (n.tip, n.radius)])
+            .chain(wood.iter().flat_map(|w| [(w.start, w.start_radius), (w.end, w.end_radius)]));
+        for (p, r) in pieces.clone() {
+            lo = lo.min(p - r);
+            hi = hi.max(p + r);
+        }
+        let axis = Vec2::new(0.5 * (lo.x + hi.x), 0.5 * (lo.z + hi.z));
+        let half_width = pieces
+            .map(|(p, r)| Vec2::new(p.x, p.z).distance(axis) + r)
+            .fold(0.0f32, f32::max);
+        let height = hi.y - lo.y;
+        if !(height > 0.0 && height.is_finite() && half_width > 0.0 && half_width.is_finite()) {
+            return None;
+        }
+        let texel = height / options.rows as f32;
+        let columns = ((2.0 * half_width / texel).ceil() as u32).clamp(1, 4 * options.rows);
+        let mut impostor = Self {
+            views: options.views,
+            columns,
+            rows: options.rows,
+            axis,
+            half_width: 0.5 * columns as f32 * texel,
+            bottom: lo.y,
+            texel,
+            texels: Vec::new(),
+        };
+        let mut canvases: Vec<ViewCanvas> = (0..options.views)
+            .map(|k| ViewCanvas {
+                right: impostor.view_right(k),
+                depth: vec![0.0; impostor.cell_count()],
+                wood: vec![0.0; impostor.cell_count()],
+                axis: vec![Vec3::ZERO; (columns * options.rows) as usize],
+            })
+            .collect();
+        for needle in &needles {
+            for canvas in &mut canvases {
+                impostor.splat_needle(canvas, needle);
+            }
+        }
+        for segment in &wood {
+            for canvas in &mut canvases {
+                impostor.stamp_wood(canvas, segment);
+            }
+        }
+        impostor.texels = canvases.iter().flat_map(|c| impostor.resolve(c)).collect();
+        Some(impostor)
+    }
+
+    /// Tree-local height of the pictures' top edge.
+    pub fn top(&self) -> f32 {
+        self.bottom + self.rows as f32 * self.texel
+    }
+
+    /// Azimuth of view `k`, radians: the camera stands on
+    /// `(sin φ, 0, cos φ)` from the axis.
+    pub fn view_azimuth(&self, view: u32) -> f32 {
+        std::f32::consts::TAU * view as f32 / self.views.max(1) as f32
+    }
+
+    /// The picture's right of view `k` (tree-local, horizontal, unit).
+    pub fn view_right(&self, view: u32) -> Vec3 {
+        let phi = self.view_azimuth(view);
+        Vec3::new(phi.cos(), 0.0, -phi.sin())
+    }
+
+    /// Texel `(column, row)` of view `k`, decoded (`None` outside).
+    pub fn texel_at(&self, view: u32, column: u32, row: u32) -> Option<ImpostorTexel> {
+        if view >= self.views || column >= self.columns || row >= self.rows {
+            return None;
+        }
+        let [c, w, x, z] = self.texels[((view * self.rows + row) * self.columns + column) as usize];
+        let (x, z) = (f32::from(x) / 127.5 - 1.0, f32::from(z) / 127.5 - 1.0);
+        Some(ImpostorTexel {
+            coverage: f32::from(c) / 255.0,
+            wood: f32::from(w) / 255.0,
+            axis: Vec3::new(x, (1.0 - x * x - z * z).max(0.0).sqrt(), z).normalize_or(Vec3::Y),
+        })
+    }
+
+    /// The texel of view `k` a tree-local point projects to.
+    pub fn project(&self, view: u32, point: Vec3) -> (f32, f32) {
+        let along = (point - Vec3::new(self.axis.x, 0.0, self.axis.y)).dot(self.view_right(view));
+        let column = (along + self.half_width) / self.texel;
+        let row = (self.top() - point.y) / self.texel;
+        (column, row)
+    }
+
+    /// Coverage of view `k` as a picture (for measures and tests).
+    pub fn coverage_grid(&self, view: u32) -> super::look::CoverageGrid {
+        let mut grid = super::look::CoverageGrid::new(self.columns, self.rows);
+        for row in 0..self.rows {
+            for column in 0..self.columns {
+                grid.coverage[(row * self.columns + column) as usize] =
+                    self.texel_at(view, column, row).map_or(0.0, |t| t.coverage);
+            }
+        }
+        grid
+    }
+
+    /// The mip chain of view-major texels the plugin uploads: level 0 is
+    /// [`CrownImpostor::texels`], each next level halves both sides
+    /// (rounding down, at least 1) and averages the 2×2 (or fewer, at an
+    /// odd edge) texels below. Returns each level's `(columns, rows,
+    /// texels)`.
+    pub fn mip_chain(&self) -> Vec<(u32, u32, Vec<[u8; 4]>)> {
+        let mut levels = vec![(self.columns, self.rows, self.texels.clone())];
+        while let Some(&(w, h, ref below)) = levels.last() {
+            if w == 1 && h == 1 {
+                break;
+            }
+            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+            let mut next = Vec::with_capacity((self.views * nw * nh) as usize);
+            for view in 0..self.views {
+                for y in 0..nh {
+                    for x in 0..nw {
+                        let mut sum = [0u32; 4];
+                        let mut n = 0;
+                        for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                            let (sx, sy) = (2 * x + dx, 2 * y + dy);
+                            if sx < w && sy < h {
+                                let t = below[((view * h + sy) * w + sx) as usize];
+                                for (s, v) in sum.iter_mut().zip(t) {
+                                    *s += u32::from(v);
+                                }
+                                n += 1;
+                            }
+                        }
+                        next.push(sum.map(|s| ((s + n / 2) / n) as u8));
+                    }
+                }
+            }
+            levels.push((nw, nh, next));
+        }
+        levels
+    }
+
+    /// Bytes of the mip chain.
+    pub fn byte_size(&self) -> u64 {
+        self.mip_chain().iter().map(|(_, _, t)| 4 * t.len() as u64).sum()
+    }
+
+    fn cell_count(&self) -> usize {
+        (self.columns * self.rows * SUPERSAMPLING * SUPERSAMPLING) as usize
+    }
+
+    /// Fine cell coordinates of a tree-local point in a view.
+    fn cell_point(&self, canvas: &ViewCanvas, p: Vec3) -> Vec2 {
+        let along = (p - Vec3::new(self.axis.x, 0.0, self.axis.y)).dot(canvas.right);
+        let cell = self.texel / SUPERSAMPLING as f32;
+        Vec2::new((along + self.half_width) / cell, (self.top() - p.y) / cell)
+    }
+
+    fn splat_needle(&self, canvas: &mut ViewCanvas, needle: &Needle) {
+        let (a, b) = (self.cell_point(canvas, needle.base), self.cell_point(canvas, needle.tip));
+        let cell = self.texel / SUPERSAMPLING as f32;
+        let length = a.distance(b);
+        // Projected area over the cell area, spread over points half a cell
+        // apart along the axis.
+        let area = (length * 2.0 * needle.radius / cell).max(std::f32::consts::PI * (needle.radius / cell).powi(2));
+        let steps = (2.0 * length).ceil().max(1.0) as u32;
+        let share = area / steps as f32;
+        let mut direction = (needle.tip - needle.base).normalize_or(Vec3::Y);
+        if direction.y < 0.0 {
+            direction = -direction;
+        }
+        let (cw, ch) = (self.columns * SUPERSAMPLING, self.rows * SUPERSAMPLING);
+        for s in 0..steps {
+            let p = a.lerp(b, (s as f32 + 0.5) / steps as f32);
+            let (x, y) = (p.x.floor(), p.y.floor());
+            if x < 0.0 || y < 0.0 || x >= cw as f32 || y >= ch as f32 {
+                continue;
+            }
+            let (x, y) = (x as u32, y as u32);
+            canvas.depth[(y * cw + x) as usize] += share;
+            let texel = (y / SUPERSAMPLING) * self.columns + x / SUPERSAMPLING;
+            canvas.axis[texel as usize] += direction * share;
+        }
+    }
+
+    fn stamp_wood(&self, canvas: &mut ViewCanvas, segment: &WoodSegment) {
+        let cell = self.texel / SUPERSAMPLING as f32;
+        let (a, b) = (self.cell_point(canvas, segment.start), self.cell_point(canvas, segment.end));
+        let (ra, rb) = (segment.start_radius / cell, segment.end_radius / cell);
+        let r = ra.max(rb);
+        let (cw, ch) = (self.columns * SUPERSAMPLING, self.rows * SUPERSAMPLING);
+        let (min, max) = (a.min(b) - r, a.max(b) + r);
+        let x0 = min.x.floor().max(0.0) as u32;
+        let y0 = min.y.floor().max(0.0) as u32;
+        let x1 = (max.x.ceil().max(0.0) as u32).min(cw);
+        let y1 = (max.y.ceil().max(0.0) as u32).min(ch);
+        let axis = b - a;
+        let length_sq = axis.length_squared();
+        let mut direction = (segment.end - segment.start).normalize_or(Vec3::Y);
+        if direction.y < 0.0 {
+            direction = -direction;
+        }
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let mut inside = 0u32;
+                for sample in 0..16u32 {
+                    let p = Vec2::new(
+                        x as f32 + ((sample % 4) as f32 + 0.5) / 4.0,
+                        y as f32 + ((sample / 4) as f32 + 0.5) / 4.0,
+                    );
+                    let t = if length_sq > 0.0 {
+                        ((p - a).dot(axis) / length_sq).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    let half = ra + (rb - ra) * t;
+                    inside += u32::from(p.distance_squared(a + axis * t) <= half * half);
+                }
+                if inside > 0 {
+                    let covered = inside as f32 / 16.0;
+                    let index = (y * cw + x) as usize;
+                    canvas.wood[index] = 1.0 - (1.0 - canvas.wood[index]) * (1.0 - covered);
+                    let texel = (y / SUPERSAMPLING) * self.columns + x / SUPERSAMPLING;
+                    canvas.axis[texel as usize] += direction * covered;
+                }
+            }
+        }
+    }
+
+    /// The view's texels from its fine cells.
+    fn resolve(&self, canvas: &ViewCanvas) -> Vec<[u8; 4]> {
+        let cw = self.columns * SUPERSAMPLING;
+        let per_texel = (SUPERSAMPLING * SUPERSAMPLING) as f32;
+        let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
+        let signed = |v: f32| ((v.clamp(-1.0, 1.0) + 1.0) * 127.5).round() as u8;
+        let mut texels = Vec::with_capacity((self.columns * self.rows) as usize);
+        for row in 0..self.rows {
+            for column in 0..self.columns {
+                let (mut coverage, mut wood) = (0.0f32, 0.0f32);
+                for sy in 0..SUPERSAMPLING {
+                    for sx in 0..SUPERSAMPLING {
+                        let index = ((row * SUPERSAMPLING + sy) * cw + column * SUPERSAMPLING + sx) as usize;
+                        let needles = 1.0 - (-canvas.depth[index]).exp();
+                        let w = canvas.wood[index];
+                        // Wood is opaque; needles cover what is left.
+                        coverage += 1.0 - (1.0 - w) * (1.0 - needles);
+                        wood += w;
+                    }
+                }
+                let axis = canvas.axis[(row * self.columns + column) as usize].normalize_or(Vec3::Y);
+                texels.push([
+                    byte(coverage / per_texel),
+                    byte(wood / per_texel),
+                    signed(axis.x),
+                    signed(axis.z),
+                ]);
+            }
+        }
+        texels
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::look::{SideView, side_coverage};
+
+    fn needle(base: Vec3, tip: Vec3, radius: f32) -> Needle {
+        Needle {
+            base,
+            tip,
+            radius,
+            normal: Vec3::Z,
+            group: 0,
+        }
+    }
+
+    /// A cone of random needles, 10 m tall, 3 m across at the bottom.
+    fn cone(count: u32, radius: f32) -> Vec<Needle> {
+        let mut state = 0x9e37_79b9u32;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32
+        };
+        (0..count)
+            .map(|_| {
+                let y = 10.0 * (1.0 - next().sqrt());
+                let reach = 1.5 * (1.0 - y / 10.0) * next().sqrt();
+                let phi = std::f32::consts::TAU * next();
+                let base = Vec3::new(reach * phi.cos(), y, reach * phi.sin());
+                let d = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5).normalize_or(Vec3::Y);
+                needle(base, base + d * 0.05, radius)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn bad_input_gives_none() {
+        let n = needle(Vec3::ZERO, Vec3::Y, 0.01);
+        assert!(CrownImpostor::bake(&[], &[], ImpostorOptions::default()).is_none());
+        let nan = needle(Vec3::NAN, Vec3::Y, 0.01);
+        assert!(CrownImpostor::bake(&[nan], &[], ImpostorOptions::default()).is_none());
+        let no_views = ImpostorOptions { views: 0, rows: 64 };
+        assert!(CrownImpostor::bake(&[n], &[], no_views).is_none());
+        let flat = needle(Vec3::ZERO, Vec3::X, 0.0);
+        assert!(CrownImpostor::bake(&[flat], &[], ImpostorOptions::default()).is_none());
+    }
+
+    #[test]
+    fn a_sparse_crown_keeps_its_needles_area_and_a_dense_one_saturates() {
+        // Few thin needles: coverage adds up to their area (no overlap).
+        let sparse = cone(2_000, 0.0005);
+        let options = ImpostorOptions { views: 4, rows: 64 };
+        let impostor = CrownImpostor::bake(&sparse, &[], options).expect("needles");
+        let area: f32 = sparse.iter().map(|n| 2.0 * n.radius * (n.tip - n.base).length()).sum();
+        for view in 0..4 {
+            let summed: f32 = impostor.coverage_grid(view).coverage.iter().sum::<f32>() * impostor.texel.powi(2);
+            // Projected area: a random direction's length projects to π/4
+            // of it on average, and rounding to bytes.
+            assert!(
+                (summed / (area * std::f32::consts::FRAC_PI_4) - 1.0).abs() < 0.15,
+                "view {view}: {summed} vs {area}"
+            );
+        }
+        // Many thick needles: no texel covers more than all of itself.
+        let dense = cone(200_000, 0.01);
+        let impostor = CrownImpostor::bake(&dense, &[], options).expect("needles");
+        let grid = impostor.coverage_grid(0);
+        assert!(grid.coverage.iter().all(|&c| (0.0..=1.0).contains(&c)));
+        assert!(grid.coverage.iter().any(|&c| c > 0.99));
+    }
+
+    #[test]
+    fn coverage_is_near_the_exact_side_view() {
+        // The exact binary rasterization (`look::side_coverage`) at the
+        // impostor's texel against the impostor's view 0, texel by texel,
+        // on a tree of needles scattered at random (the Poisson model's
+        // own assumption) and with a trunk.
+        let needles = cone(60_000, 0.002);
+        let trunk = WoodSegment {
+            start: Vec3::new(0.0, -2.0, 0.0),
+            end: Vec3::new(0.0, 9.0, 0.0),
+            start_radius: 0.2,
+            end_radius: 0.03,
+        };
+        let options = ImpostorOptions { views: 8, rows: 48 };
+        let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
+        let exact = side_coverage(
+            &needles,
+            &[trunk],
+            SideView {
+                azimuth: 0.0,
+                pixel: impostor.texel,
+                samples: 64,
+            },
+        )
+        .expect("needles");
+        let grid = impostor.coverage_grid(0);
+        let mean = |values: &[f32]| values.iter().sum::<f32>() / values.len() as f32;
+        let ours = mean(&grid.coverage) * (grid.width * grid.height) as f32;
+        let reference = mean(&exact.grid.coverage) * (exact.grid.width * exact.grid.height) as f32;
+        assert!(
+            (ours / reference - 1.0).abs() < 0.05,
+            "summed coverage {ours} vs exact {reference}"
+        );
+        // The trunk below the crown is opaque wood in the impostor.
+        let (column, row) = impostor.project(0, Vec3::new(0.0, -1.0, 0.0));
+        let trunk_texel = impostor.texel_at(0, column as u32, row as u32).expect("inside");
+        assert!(trunk_texel.coverage > 0.95 && trunk_texel.wood > 0.95, "{trunk_texel:?}");
+        assert!(trunk_texel.axis.y > 0.99, "{trunk_texel:?}");
+    }
+
+    #[test]
+    fn mips_keep_the_mean_coverage() {
+        let impostor = CrownImpostor::bake(&cone(20_000, 0.003), &[], ImpostorOptions { views: 2, rows: 40 })
+            .expect("needles");
+        let chain = impostor.mip_chain();
+        assert_eq!(chain.last().map(|l| (l.0, l.1)), Some((1, 1)));
+        let mean = |(w, h, t): &(u32, u32, Vec<[u8; 4]>)| {
+            t[..(*w * *h) as usize].iter().map(|x| f64::from(x[0])).sum::<f64>() / f64::from(w * h)
+        };
+        // Levels whose sides halve exactly keep the mean (to rounding).
+        for pair in chain.windows(2).take_while(|p| p[0].0 % 2 == 0 && p[0].1 % 2 == 0) {
+            assert!((mean(&pair[0]) - mean(&pair[1])).abs() < 0.6, "{} vs {}", mean(&pair[0]), mean(&pair[1]));
+        }
+        let bytes: u64 = chain.iter().map(|l| 4 * l.2.len() as u64).sum();
+        assert_eq!(impostor.byte_size(), bytes);
+        assert!(bytes < 4 * impostor.texels.len() as u64 * 4 / 3 + 64);
+    }
+}
