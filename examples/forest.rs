@@ -1,5 +1,7 @@
-//! The main job: a few thousand conifers of four species scattered on a
-//! procedural, lit, fogged terrain, every one drawn with continuous LOD.
+//! The main job: a few thousand mature conifers of six species scattered
+//! on a procedural, lit, fogged terrain, every one drawn with continuous
+//! LOD (prisms near, lines, merged lines, then each tree's crown impostor
+//! far away).
 //!
 //! ```text
 //! cargo run --example forest                       # a window, fly through
@@ -12,10 +14,10 @@
 //! needle a full prism, to feel the difference); `P` the line opacity
 //! rule (ours → coverage → the paper's); `Esc` quits.
 //!
-//! The trees are grown from the presets at startup, three seeds per
-//! species, with no asset files (baked in the background and cached, see
-//! `ConiferPresets`; `--records` loads the shipped records under
-//! `assets/trees/` instead); the scatter is
+//! The trees are the shipped mature records under `assets/trees/mature/`
+//! (one tree per species, 1–2 M needles each); `--grow` grows them from
+//! the presets at startup instead, three seeds per species (baked in the
+//! background and cached, see `ConiferPresets`). The scatter is
 //! [`bevy_conifer_lod::scatter::Scatter`] (blue noise, clearings from a
 //! density noise, no trees on slopes over 32°).
 
@@ -31,12 +33,15 @@ use bevy_conifer_lod::scatter::{HeightMap, Scatter};
 use clap::Parser;
 use std::path::PathBuf;
 
-/// The four species, their shipped records, and their share of the forest.
-const SPECIES: [(Species, &str, f32); 4] = [
-    (Species::ScotsPine, "trees/scots-pine.conifer", 4.0),
-    (Species::NorwaySpruce, "trees/norway-spruce.conifer", 3.0),
-    (Species::EasternWhitePine, "trees/eastern-white-pine.conifer", 2.0),
-    (Species::LawsonCypress, "trees/lawson-cypress.conifer", 1.0),
+/// The six species, their shipped mature records, and their share of the
+/// forest.
+const SPECIES: [(Species, &str, f32); 6] = [
+    (Species::NorwaySpruce, "trees/mature/norway-spruce.conifer", 4.0),
+    (Species::ScotsPine, "trees/mature/scots-pine.conifer", 3.0),
+    (Species::SilverFir, "trees/mature/silver-fir.conifer", 2.0),
+    (Species::DouglasFir, "trees/mature/douglas-fir.conifer", 2.0),
+    (Species::EasternWhitePine, "trees/mature/eastern-white-pine.conifer", 1.0),
+    (Species::LawsonCypress, "trees/mature/lawson-cypress.conifer", 0.5),
 ];
 
 /// Trees of different seeds per species (a forest of one tree per species
@@ -62,7 +67,8 @@ struct Args {
     /// Picture size in headless mode, window size otherwise, WIDTHxHEIGHT.
     #[arg(long, default_value = "960x540")]
     size: String,
-    /// Minimum spacing between trees, metres (fewer trees when larger).
+    /// Minimum spacing between trees, metres (fewer trees when larger; a
+    /// mature stand is 4–8 m).
     #[arg(long, default_value_t = 6.0)]
     spacing: f32,
     /// Scatter seed.
@@ -80,15 +86,16 @@ struct Args {
     /// Start with LOD off (all prisms).
     #[arg(long)]
     lod_off: bool,
-    /// Load the shipped records under `assets/trees/` (one tree per
-    /// species) instead of growing the presets.
+    /// Grow the trees from the presets (three seeds per species) instead
+    /// of loading the shipped mature records.
     #[arg(long)]
-    records: bool,
-    /// Needles per preset tree (default: each species' own count).
+    grow: bool,
+    /// Needles per grown tree (default: each species' own count).
     #[arg(long)]
     needles: Option<usize>,
-    /// Camera: `overview` (above the valley), `ground` (eye level in the
-    /// trees) or `x,y,z:x,y,z` (eye and target).
+    /// Camera: `overview` (from a hillside above the valley), `ground`
+    /// (eye level between the trunks), `tree` (one tree close up) or
+    /// `x,y,z:x,y,z` (eye and target).
     #[arg(long, default_value = "overview")]
     view: String,
 }
@@ -200,7 +207,8 @@ fn camera_view(view: &str) -> Result<(Vec3, Vec3), String> {
             ground(-30.0, 260.0) + Vec3::Y * 30.0,
             ground(20.0, 60.0) + Vec3::Y * 4.0,
         )),
-        "ground" => Ok((ground(-6.0, 120.0) + Vec3::Y * 2.0, ground(10.0, 60.0) + Vec3::Y * 6.0)),
+        "ground" => Ok((ground(-6.0, 120.0) + Vec3::Y * 2.0, ground(10.0, 60.0) + Vec3::Y * 12.0)),
+        "tree" => Ok((ground(-18.0, 150.0) + Vec3::Y * 10.0, ground(-2.0, 128.0) + Vec3::Y * 12.0)),
         custom => {
             let parse = |s: &str| -> Option<Vec3> {
                 let v: Vec<f32> = s.split(',').map(|x| x.trim().parse().ok()).collect::<Option<_>>()?;
@@ -332,7 +340,7 @@ fn setup(
         })),
     ));
 
-    let (species, weights): (Vec<Handle<ConiferSpecies>>, Vec<f32>) = if args.records {
+    let (species, weights): (Vec<Handle<ConiferSpecies>>, Vec<f32>) = if !args.grow {
         SPECIES
             .iter()
             .map(|&(_, path, weight)| (asset_server.load(path), weight))
@@ -342,11 +350,7 @@ fn setup(
             .iter()
             .flat_map(|&(species, _, weight)| (0..SEEDS_PER_SPECIES).map(move |seed| (species, seed, weight)))
             .map(|(species, seed, weight)| {
-                // Young trees: a mature tree's cut at forest distances is
-                // still hundreds of thousands of lines (README, "The
-                // presets"), too many for thousands of trees on a software
-                // renderer.
-                let preset = Preset::new(species).with_seed(seed).with_age(Age::Young);
+                let preset = Preset::new(species).with_seed(seed).with_age(Age::Mature);
                 let handle = presets.load(match args.needles {
                     Some(needles) => preset.with_needles(needles),
                     None => preset,
@@ -363,8 +367,8 @@ fn setup(
     .density(tree_density)
     .height(map)
     .max_slope_deg(32.0)
-    // The presets are young trees (2–5 m); a forest's are taller.
-    .scale_range(2.2, 3.6)
+    // Mature trees at their own size, ±15 %.
+    .scale_range(0.85, 1.15)
     .species_weights(&weights)
     .seed(args.seed)
     .place();

@@ -232,6 +232,7 @@ fn overrides_visibility_and_render_layers_reach_the_gpu_instance() {
                 pixel_error: Some(0.5),
                 // A NaN override is ignored: the tree takes the global δ.
                 transition: Some(f32::NAN),
+                far_impostor: None,
             },
             RenderLayers::from_layers(&[0, 3]),
         ))

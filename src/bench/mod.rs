@@ -200,6 +200,9 @@ pub struct PrototypeTreeFigures {
     /// GPU buffer bytes of the species, summed from the `wgpu` buffers the
     /// render world created for it (`CompactGpuMemory::species_bytes`).
     pub gpu_bytes: u64,
+    /// Bytes of its crown impostor's texture, every mip level
+    /// (`CompactGpuMemory::impostor_bytes`).
+    pub impostor_bytes: u64,
     /// Per-view bytes of the one camera that drew it (culling, expanded
     /// placements, indirect draws).
     pub view_bytes: u64,
@@ -451,7 +454,7 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
 fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
     let species = crate::plugin::ConiferSpecies::from_record(record.clone())
         .map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
-    Ok(compact_memory(species, &[], |_| {})?.0)
+    Ok(compact_memory(species, &[], |_| {})?.species)
 }
 
 /// A 1,000,000-needle (by default) procedural tree of `species` as shoot
@@ -477,7 +480,7 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
     let compact = tree.compact.clone();
     let distances = vec![5.0f32, 20.0, 80.0];
     let mut processed_over_cut = Vec::new();
-    let (gpu_bytes, view_bytes) = compact_memory(tree, &distances, |view| {
+    let memory = compact_memory(tree, &distances, |view| {
         let (code, e) = view.tree_lod(0);
         // The view point the cull pass wrote (view-dependent detail, the
         // default scope), if any.
@@ -498,27 +501,41 @@ fn prototype_tree_figures(species: Species, needles: usize) -> Result<PrototypeT
         prototypes: record.prototypes.len(),
         placements: record.placements.len(),
         file_bytes,
-        gpu_bytes,
-        view_bytes,
+        gpu_bytes: memory.species,
+        impostor_bytes: memory.impostor,
+        view_bytes: memory.view,
         distances,
         processed_over_cut,
     })
 }
 
+/// Bytes the render path allocated for one species and one view.
+struct AllocatedBytes {
+    /// The species' buffers.
+    species: u64,
+    /// Its impostor texture.
+    impostor: u64,
+    /// The view's buffers.
+    view: u64,
+}
+
 /// One tree of `species` drawn headless at 20 m from its crown: the
-/// species' buffer bytes and the view's; then at each of `distances`, the camera's
-/// compute results read back and handed to `read`.
+/// species' buffer bytes, its impostor's and the view's; then at each of
+/// `distances`, the camera's compute results read back and handed to
+/// `read`. The line path is what is measured: the tree never turns into
+/// its impostor.
 fn compact_memory(
     species: crate::plugin::ConiferSpecies,
     distances: &[f32],
     mut read: impl FnMut(&crate::plugin::ViewReadback),
-) -> Result<(u64, u64), BenchError> {
+) -> Result<AllocatedBytes, BenchError> {
     use crate::plugin::headless::HeadlessRenderer;
     use crate::plugin::{CompactGpuMemory, CompactReadback, ConiferFoliage, ConiferSpecies};
     use bevy::prelude::*;
     let mut renderer = HeadlessRenderer::new(".");
     let target = renderer.render_target(64, 64);
     let world = renderer.world_mut();
+    world.resource_mut::<crate::plugin::ConiferLodSettings>().far_impostor = false;
     let crown = species.crown_center;
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
@@ -550,10 +567,11 @@ fn compact_memory(
             read(view);
         }
     }
-    Ok((
-        memory.species_bytes.get(&handle.id()).copied().unwrap_or(0),
-        memory.view_bytes,
-    ))
+    Ok(AllocatedBytes {
+        species: memory.species_bytes.get(&handle.id()).copied().unwrap_or(0),
+        impostor: memory.impostor_bytes.get(&handle.id()).copied().unwrap_or(0),
+        view: memory.view_bytes,
+    })
 }
 
 /// Distances of the cut benchmark, metres.

@@ -19,6 +19,7 @@
 //!   lines blended with their opacity as vertex alpha).
 
 use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
+use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
 use crate::model::prism::{
     TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, wood_segment_error,
@@ -293,6 +294,8 @@ pub struct EvalScene {
     raw_counts: DrawCounts,
     levels: Vec<LodLevelInfo>,
     sampling: Option<SamplingState>,
+    /// Texel side of the species' crown impostor (`ours` fades into it).
+    impostor_texel: Option<f32>,
 }
 
 /// Background of every picture (alpha 0: the alpha channel is coverage).
@@ -304,6 +307,7 @@ impl EvalScene {
     pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
         let (mut renderer, species) = renderer_with_species(record, &view)?;
         let record = species.record.clone();
+        let impostor_texel = species.impostor.as_ref().map(|i| i.texel);
         let mut methods: Vec<Method> = methods.to_vec();
         methods.sort();
         methods.dedup();
@@ -324,6 +328,8 @@ impl EvalScene {
                     ConiferFoliage(species_handle.clone()),
                     ConiferLodOverride {
                         line_opacity: Some(opacity),
+                        // The paper draws lines at every distance.
+                        far_impostor: Some(method == Method::Ours),
                         ..default()
                     },
                     Transform::IDENTITY,
@@ -475,6 +481,7 @@ impl EvalScene {
             raw_counts,
             levels,
             sampling,
+            impostor_texel,
         };
         scene.set_distance(10.0);
         // Let species, meshes and pipelines reach the GPU.
@@ -564,11 +571,26 @@ impl EvalScene {
         let (wood_triangles, wood_lines) = wood_counts(&self.record, e);
         match method {
             Method::Paper | Method::Ours => {
+                // `ours` fades into the crown impostor far away: its quad
+                // is two triangles, and once it is opaque nothing else is
+                // drawn (the cull pass's rule, `impostor_fade`).
+                let fade = match (method, self.impostor_texel) {
+                    (Method::Ours, Some(texel)) => impostor_fade(e, texel),
+                    _ => 0.0,
+                };
+                let impostor = if fade > 0.0 { 2 } else { 0 };
+                if fade >= 1.0 {
+                    return DrawCounts {
+                        triangles: impostor,
+                        lines: 0,
+                        needle_primitives: impostor,
+                    };
+                }
                 let cut = self.counter.count(e);
                 DrawCounts {
-                    triangles: cut.triangles + wood_triangles,
+                    triangles: cut.triangles + wood_triangles + impostor,
                     lines: cut.lines() + wood_lines,
-                    needle_primitives: cut.primitives(),
+                    needle_primitives: cut.primitives() + impostor,
                 }
             }
             Method::Raw => self.raw_counts,

@@ -50,6 +50,19 @@ pub const FADE_START: f32 = 1.0;
 /// Spatial error, in texels, from which the plugin draws only the impostor.
 pub const FADE_END: f32 = 2.0;
 
+/// How far a tree at spatial error `spatial_error` (tree metres) has
+/// faded into an impostor of texel side `texel`, in `[0, 1]`: 0 up to
+/// [`FADE_START`] texels, 1 from [`FADE_END`], linear between, in steps of
+/// 1/255 (the CPU reference of the plugin's cull pass, which stores it in
+/// 8 bits). 0 for a texel or error that is not positive and finite.
+pub fn impostor_fade(spatial_error: f32, texel: f32) -> f32 {
+    if !(texel > 0.0 && texel.is_finite() && spatial_error.is_finite()) {
+        return 0.0;
+    }
+    let t = ((spatial_error / texel - FADE_START) / (FADE_END - FADE_START)).clamp(0.0, 1.0);
+    (t * 255.0).round() / 255.0
+}
+
 /// How a [`CrownImpostor`] is baked.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ImpostorOptions {
@@ -496,6 +509,26 @@ mod tests {
         let trunk_texel = impostor.texel_at(0, column as u32, row as u32).expect("inside");
         assert!(trunk_texel.coverage > 0.95 && trunk_texel.wood > 0.95, "{trunk_texel:?}");
         assert!(trunk_texel.axis.y > 0.99, "{trunk_texel:?}");
+    }
+
+    #[test]
+    fn the_fade_rises_from_one_texel_to_two_in_8_bit_steps() {
+        let texel = 0.25;
+        assert_eq!(impostor_fade(0.0, texel), 0.0);
+        assert_eq!(impostor_fade(FADE_START * texel, texel), 0.0);
+        assert_eq!(impostor_fade(FADE_END * texel, texel), 1.0);
+        assert_eq!(impostor_fade(1e9, texel), 1.0);
+        assert!((impostor_fade(0.5 * (FADE_START + FADE_END) * texel, texel) - 0.5).abs() <= 1.0 / 255.0);
+        let mut last = 0.0;
+        for k in 0..1000 {
+            let fade = impostor_fade(k as f32 * 0.001, texel);
+            assert!(fade >= last && (fade * 255.0 - (fade * 255.0).round()).abs() < 1e-4);
+            last = fade;
+        }
+        for bad in [f32::NAN, 0.0, -1.0, f32::INFINITY] {
+            assert_eq!(impostor_fade(1.0, bad), 0.0);
+        }
+        assert_eq!(impostor_fade(f32::NAN, texel), 0.0);
     }
 
     #[test]

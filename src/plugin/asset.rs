@@ -1,6 +1,7 @@
 //! The species asset: a `.conifer` record and its compact GPU layout.
 
 use crate::model::compact::{CompactError, CompactSpecies};
+use crate::model::impostor::{CrownImpostor, ImpostorOptions};
 use crate::model::prism::{TriangleMesh, append_wood_segment, wood_segment_error};
 use crate::model::{LodRecord, PrototypeRecord, RecordError, WoodSegment, decode_prototype_record};
 use bevy::asset::io::{AssetReaderError, Reader};
@@ -31,6 +32,10 @@ pub struct ConiferSpecies {
     /// ([`crate::model::compact`]); a tree of shared prototypes keeps them
     /// shared.
     pub compact: Arc<CompactSpecies>,
+    /// The far representation ([`crate::model::impostor`]), baked from the
+    /// needles and wood when the record loads (`None` when they have no
+    /// extent).
+    pub impostor: Option<Arc<CrownImpostor>>,
 }
 
 /// Why a `.conifer` file did not load as a [`ConiferSpecies`].
@@ -126,6 +131,7 @@ impl ConiferSpecies {
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
             compact: Arc::new(compact),
+            impostor: CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new),
             record: Arc::new(record),
         })
     }

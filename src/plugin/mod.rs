@@ -54,7 +54,8 @@ pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, triangle_
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
 pub use preset::{ConiferPresets, PresetCache, PresetLoadError, cache_file_name, load_preset};
 pub use render::gpu::{
-    FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, OPACITY_OVERRIDE_SHIFT, PartKind,
+    FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE,
+    GpuInstance, OPACITY_OVERRIDE_SHIFT, PartKind,
 };
 pub use render::{CompactGpuMemory, CompactInstances, CompactReadback, ViewReadback};
 pub use systems::{ConiferLodCpuTime, view_error_slope};
@@ -244,6 +245,11 @@ pub struct ConiferLodSettings {
     /// Where a tree's spatial error is measured from: one error per tree
     /// (the paper's) or each placement's own (default).
     pub error_scope: ErrorScope,
+    /// Draw a far tree as its crown impostor
+    /// ([`crate::model::impostor`]): from where one of its texels is
+    /// smaller than the pixel error, the lines fade into one textured quad
+    /// per tree. Default on; [`ConiferLodSettings::paper`] turns it off.
+    pub far_impostor: bool,
 }
 
 impl Default for ConiferLodSettings {
@@ -257,17 +263,19 @@ impl Default for ConiferLodSettings {
             debug_colors: false,
             max_expanded_placements: 1 << 17,
             error_scope: ErrorScope::default(),
+            far_impostor: true,
         }
     }
 }
 
 impl ConiferLodSettings {
-    /// The paper's configuration: `T = 2/ρ` opacity and one error per
-    /// tree, everything else as given.
+    /// The paper's configuration: `T = 2/ρ` opacity, one error per tree
+    /// and lines at every distance, everything else as given.
     pub fn paper() -> Self {
         Self {
             line_opacity: LineOpacity::Paper,
             error_scope: ErrorScope::Tree,
+            far_impostor: false,
             ..Self::default()
         }
     }
@@ -294,6 +302,9 @@ pub struct ConiferLodOverride {
     /// Line opacity rule for this tree (`conifer eval` draws the paper's and
     /// ours side by side this way).
     pub line_opacity: Option<LineOpacity>,
+    /// Whether this tree turns into its crown impostor far away
+    /// ([`ConiferLodSettings::far_impostor`]).
+    pub far_impostor: Option<bool>,
 }
 
 /// What a tree's LOD is this frame, over every active camera (written by

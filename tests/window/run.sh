@@ -38,7 +38,7 @@ EPSILON_LINE="8 8 390 20" # its first line: "conifer LOD   pixel error 1.00 px"
 PRISMS_LINE="8 47 390 16" # its third line: "prisms 0   triangles 0"
 
 start() { # $1: log name
-    "$FOREST" --size 480x270 --spacing 30 --needles 4000 >"$OUT/$1.log" 2>&1 &
+    "$FOREST" --size 480x270 --spacing 30 --grow --needles 4000 >"$OUT/$1.log" 2>&1 &
     APP=$!
     for _ in $(seq 600); do
         grep -q "forest ready" "$OUT/$1.log" && break

@@ -11,13 +11,14 @@ const MAX_THRESHOLD_CODE: u32 = 65534u;
 
 // The parts of a species, each drawn by one multi-draw of its own
 // indirect arguments (one per instance).
-const KIND_COUNT: u32 = 6u;
+const KIND_COUNT: u32 = 7u;
 const KIND_PRISMS: u32 = 0u;
 const KIND_ORIGINAL_LINES: u32 = 1u;
 const KIND_MERGED_LINES: u32 = 2u;
 const KIND_WOOD_PRISMS: u32 = 3u;
 const KIND_WOOD_LINES: u32 = 4u;
 const KIND_WOOD_MESH: u32 = 5u;
+const KIND_IMPOSTOR: u32 = 6u;
 
 // Instance flags.
 const FLAG_VISIBLE: u32 = 1u;
@@ -26,11 +27,23 @@ const OPACITY_OVERRIDE_SHIFT: u32 = 1u;
 // The instance's pixel error and transition override the global settings.
 const FLAG_PIXEL_ERROR_OVERRIDE: u32 = 8u;
 const FLAG_TRANSITION_OVERRIDE: u32 = 16u;
+// The tree's own choice of the far impostor (`gpu::FLAG_IMPOSTOR_*`).
+const FLAG_IMPOSTOR_OVERRIDE: u32 = 32u;
+const FLAG_IMPOSTOR_ON: u32 = 64u;
 
 // InstanceLod.code: the threshold code (16 bits), then flags.
 const LOD_CODE_MASK: u32 = 0xffffu;
 const LOD_ORIGINAL_FROM_NEEDLES: u32 = 0x10000u;
 const LOD_OPACITY_SHIFT: u32 = 20u;
+// Bits 24–31: how far the tree has faded into its impostor, 0–255.
+const LOD_FADE_SHIFT: u32 = 24u;
+// `model::impostor::FADE_START`, `FADE_END`: spatial errors, in texels,
+// where the fade into the impostor starts and ends.
+const IMPOSTOR_FADE_START: f32 = 1.0;
+const IMPOSTOR_FADE_END: f32 = 2.0;
+// CullView.perspective: bit 0 a perspective view, bit 1 a camera.
+const VIEW_PERSPECTIVE: u32 = 1u;
+const VIEW_CAMERA: u32 = 2u;
 
 struct SpeciesParams {
     // tree-local crown centre (xyz) and the radius of a sphere round it
@@ -74,6 +87,12 @@ struct SpeciesParams {
     padding_c: u32,
     // a sphere holding every node's sphere and the wood (tree-local xyz, w radius)
     tree_sphere: vec4<f32>,
+    // the crown impostor (`model::impostor`): axis (tree-local x, z), half
+    // width, texel side (metres)
+    impostor_box: vec4<f32>,
+    // its bottom and top heights, its views, and 0 without an impostor, 1
+    // with one off by default, 2 with one on by default
+    impostor_span: vec4<f32>,
 }
 
 struct CullView {
@@ -82,6 +101,7 @@ struct CullView {
     world_position: vec4<f32>,
     // spatial error per metre of distance per unit pixel error: 2/(P₁₁·H)
     error_slope: f32,
+    // VIEW_PERSPECTIVE | VIEW_CAMERA
     perspective: u32,
     layers: u32,
     // expanded placements the view's entry buffers hold

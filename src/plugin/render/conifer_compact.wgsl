@@ -36,7 +36,7 @@
 #endif
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
-    LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
+    LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error,
@@ -55,6 +55,9 @@
 @group(2) @binding(10) var<storage, read> placed_entries: array<vec2<u32>>;
 @group(2) @binding(11) var<storage, read> tree_spheres: array<vec4<f32>>;
 @group(2) @binding(12) var<storage, read> tree_line_parents: array<u32>;
+// The crown impostor's views (`model::impostor`), one layer each.
+@group(2) @binding(13) var impostor_texture: texture_2d_array<f32>;
+@group(2) @binding(14) var impostor_sampler: sampler;
 
 const PI: f32 = 3.14159265358979;
 const TAU: f32 = 6.28318530717959;
@@ -68,6 +71,11 @@ struct VertexOutput {
     @location(2) @interpolate(flat) color: vec4<f32>,
 #else
     @location(2) color: vec4<f32>,
+#endif
+#ifdef CONIFER_IMPOSTOR
+    // Where on the impostor's pictures (u right, v down).
+    @location(3) uv: vec2<f32>,
+    @location(4) @interpolate(flat) tree: u32,
 #endif
 }
 
@@ -283,14 +291,27 @@ fn merged_line_alpha(lod: InstanceLod, spatial_error: f32, width: f32, paper_wid
     return line_alpha(lod, spatial_error, width, paper_width);
 }
 
-// A line's colour; in shadow passes its index and tree (for the hashed
-// alpha test) and its opacity.
-fn line_color(color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
+// How far a tree has faded into its impostor, in [0, 1].
+fn impostor_fade(lod: InstanceLod) -> f32 {
+    return f32(lod.code >> LOD_FADE_SHIFT) / 255.0;
+}
+
+// A line's colour, faded as its tree fades into its impostor; in shadow
+// passes its index and tree (for the hashed alpha test) and its opacity.
+fn line_color(lod: InstanceLod, color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
 #ifdef CONIFER_SHADOW
     return vec4<f32>(f32(line & 0xffffffu), f32(tree & 0xffffffu), 0.0, color.a);
 #else
-    return color;
+    return vec4<f32>(color.rgb, color.a * (1.0 - impostor_fade(lod)));
 #endif
+}
+
+// `world` in the frame of a tree whose `world_from_local` is a rotation, a
+// uniform scale and a translation.
+fn local_point(world_from_local: mat4x4<f32>, world: vec3<f32>) -> vec3<f32> {
+    let m = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
+    let scale_sq = max(dot(m[0], m[0]), 1e-12);
+    return (transpose(m) * (world - world_from_local[3].xyz)) / scale_sq;
 }
 
 // Spatial error of a wood segment (`start`, `end`: centre and radius of
@@ -384,7 +405,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return finish(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha), k, hash_tree));
+    return finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha), k, hash_tree));
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -420,7 +441,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = end_position(grid, a);
     let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return finish(position, end - start, world_from_local, line_color(base_color(1, amount, alpha), species.total_needle_count + line, hash_tree));
+    return finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha), species.total_needle_count + line, hash_tree));
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -435,7 +456,40 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let alpha = line_alpha(lod, wood_error, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
-    return finish(position, end.xyz - start.xyz, world_from_local, line_color(base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
+    return finish(position, end.xyz - start.xyz, world_from_local, line_color(lod, base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
+#endif
+
+#ifdef CONIFER_IMPOSTOR
+    // One quad standing on the impostor's axis, turned about it toward the
+    // camera; its pictures are the two views nearest the camera's azimuth,
+    // blended (`model::impostor`).
+    let fade = impostor_fade(lod);
+    if !(fade > 0.0) {
+        return culled();
+    }
+    let frame = species.impostor_box;
+    let span = species.impostor_span;
+    let camera = local_point(world_from_local, view.world_position);
+    var toward = vec2<f32>(camera.x - frame.x, camera.z - frame.y);
+    if dot(toward, toward) < 1e-12 {
+        toward = vec2<f32>(0.0, 1.0);
+    }
+    // The camera stands at azimuth φ: (sin φ, cos φ) in (x, z).
+    let phi = atan2(toward.x, toward.y);
+    let right = vec3<f32>(cos(phi), 0.0, -sin(phi));
+    // Two triangles: corners (0,0) (1,0) (1,1), (0,0) (1,1) (0,1).
+    let corner = vertex_index % 6u;
+    let u = select(0.0, 1.0, corner == 1u || corner == 2u || corner == 4u);
+    let v = select(0.0, 1.0, corner == 2u || corner == 4u || corner == 5u);
+    let position = vec3<f32>(frame.x, mix(span.x, span.y, v), frame.y) + right * ((2.0 * u - 1.0) * frame.z);
+    let views = max(span.z, 1.0);
+    let f = fract(phi / TAU + 1.0) * views;
+    let k0 = floor(f) % views;
+    let k1 = (k0 + 1.0) % views;
+    var out = finish(position, vec3<f32>(0.0, 1.0, 0.0), world_from_local, vec4<f32>(k0, k1, f - floor(f), fade));
+    out.uv = vec2<f32>(u, 1.0 - v);
+    out.tree = tree;
+    return out;
 #endif
 
 #ifdef CONIFER_WOOD_MESH
@@ -613,6 +667,28 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
     pbr_input.material.base_color = in.color;
+    var axis = in.world_normal;
+#ifdef CONIFER_IMPOSTOR
+    // The two views' texels: coverage, wood, the mean axis (x, z).
+    let first = textureSample(impostor_texture, impostor_sampler, in.uv, i32(round(in.color.x)));
+    let second = textureSample(impostor_texture, impostor_sampler, in.uv, i32(round(in.color.y)));
+    let texel = mix(first, second, in.color.z);
+    if !(texel.r > 1.0 / 512.0) {
+        discard;
+    }
+    let wood = clamp(texel.g / texel.r, 0.0, 1.0);
+    var albedo = mix(species.needle_color.rgb, species.wood_color.rgb, wood);
+    if species.debug_colors != 0u {
+        albedo = vec3<f32>(0.85, 0.2, 0.85);
+    }
+    pbr_input.material.base_color = vec4<f32>(albedo, texel.r * in.color.w);
+    let x = 2.0 * texel.b - 1.0;
+    let z = 2.0 * texel.a - 1.0;
+    let instance = instances[in.tree];
+    let world_from_local = instance_world_from_local(instance);
+    let local_axis = vec3<f32>(x, sqrt(max(1.0 - x * x - z * z, 0.0)), z);
+    axis = normalize((world_from_local * vec4<f32>(local_axis, 0.0)).xyz);
+#endif
     pbr_input.material.perceptual_roughness = species.roughness;
     pbr_input.material.reflectance = vec3<f32>(species.reflectance);
 #ifdef CONIFER_LINES
@@ -624,7 +700,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
 #endif
     pbr_input.frag_coord = in.position;
     pbr_input.world_position = in.world_position;
-    pbr_input.world_normal = normalize(in.world_normal);
+    pbr_input.world_normal = normalize(axis);
     pbr_input.is_orthographic = view.clip_from_view[3].w == 1.0;
     pbr_input.V = pbr_functions::calculate_view(in.world_position, pbr_input.is_orthographic);
     pbr_input.N = pbr_input.world_normal;
@@ -639,7 +715,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     pbr_input.N = pbr_input.world_normal;
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
 #else ifdef CONIFER_LINES
-    var color = cylinder_lighting(pbr_input, in.world_normal);
+    var color = cylinder_lighting(pbr_input, axis);
 #else
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
 #endif

@@ -17,7 +17,8 @@
     ENTRY_FROM_NEEDLES, ENTRY_INVALID, COUNTER_TOTAL, COUNTER_ENTRIES, COUNTER_HEADER,
     ARRAY_COUNT, ARRAY_CURSOR, ARRAY_PRISMS, ARRAY_AFTER_PRISMS, ARRAY_BY_PARENT, ARRAY_MERGED, ARRAY_OFFSET, ARRAY_FLAGS,
     placement_band,
-    KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH,
+    KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
+    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
@@ -193,7 +194,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         opacity_rule = rule_override - 1u;
     }
     var distance = 1.0;
-    if cull_view.perspective != 0u {
+    if (cull_view.perspective & VIEW_PERSPECTIVE) != 0u {
         distance = length(center - cull_view.world_position.xyz);
     }
     var e = max(pixel_error, 0.0) * distance * cull_view.error_slope / max(scale, 1e-6);
@@ -205,7 +206,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     // node's from its own sphere, unless the camera is beyond range.
     var view_point = vec4<f32>(0.0);
     if species.error_scope != 0u && species.placement_count > 0u && species.lod_enabled != 0u
-        && cull_view.perspective != 0u {
+        && (cull_view.perspective & VIEW_PERSPECTIVE) != 0u {
         let camera = tree_local_point(world_from_local, scale, cull_view.world_position.xyz);
         let slope = max(pixel_error, 0.0) * cull_view.error_slope;
         let d = sphere_distance(species.tree_sphere, camera);
@@ -213,6 +214,34 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         if d <= VIEW_RANGE * species.tree_sphere.w {
             view_point = vec4<f32>(camera, slope);
         }
+    }
+    // The far representation (`model::impostor`): a camera fades the
+    // tree's cut into its impostor while the spatial error grows from
+    // IMPOSTOR_FADE_START to IMPOSTOR_FADE_END texels, then draws only the
+    // impostor (and expands no placement). CPU reference:
+    // `model::impostor::impostor_fade`.
+    var fade = 0u;
+    var impostor = species.impostor_span.w > 1.5;
+    if (instance.flags & FLAG_IMPOSTOR_OVERRIDE) != 0u {
+        impostor = (instance.flags & FLAG_IMPOSTOR_ON) != 0u;
+    }
+    if impostor && species.impostor_span.w > 0.5 && species.lod_enabled != 0u
+        && (cull_view.perspective & VIEW_CAMERA) != 0u {
+        let texels = e / max(species.impostor_box.w, 1e-9);
+        let t = clamp((texels - IMPOSTOR_FADE_START) / (IMPOSTOR_FADE_END - IMPOSTOR_FADE_START), 0.0, 1.0);
+        fade = u32(round(t * 255.0));
+    }
+    if fade >= 255u {
+        for (var kind = 0u; kind < KIND_COUNT; kind += 1u) {
+            write_args(kind, i, 0u, 0u);
+        }
+        write_args(KIND_IMPOSTOR, i, 6u, 0u);
+        instance_lods[i].code = (255u << LOD_FADE_SHIFT) | (opacity_rule << LOD_OPACITY_SHIFT);
+        instance_lods[i].spatial_error = e;
+        instance_lods[i].pixel_error = max(pixel_error, 1e-6);
+        instance_lods[i].transition = clamp(transition, 0.0, 1.0);
+        instance_lods[i].view = vec4<f32>(0.0);
+        return;
     }
     var code = threshold_code(e);
     if species.placement_count > 0u {
@@ -241,7 +270,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let merged = select(0u, merged_prefix(code), species.lod_enabled != 0u);
     let wood_prisms = wood_prefix(e, 1.0);
     let wood_lines = select(0u, wood_prefix(e, species.wood_line_fade), species.lod_enabled != 0u);
-    instance_lods[i].code = code | lod_flags | (opacity_rule << LOD_OPACITY_SHIFT);
+    instance_lods[i].code = code | lod_flags | (opacity_rule << LOD_OPACITY_SHIFT) | (fade << LOD_FADE_SHIFT);
     instance_lods[i].spatial_error = e;
     instance_lods[i].pixel_error = max(pixel_error, 1e-6);
     instance_lods[i].transition = clamp(transition, 0.0, 1.0);
@@ -259,6 +288,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     write_args(KIND_WOOD_LINES, i, 2u * (wood_lines - wood_lines_first), 2u * wood_lines_first);
     write_args(KIND_WOOD_MESH, i, species.wood_index_count, 0u);
+    write_args(KIND_IMPOSTOR, i, select(0u, 6u, fade > 0u), 0u);
 }
 
 // Reserves tree `tree`'s expanded placements in the view's entry list and

@@ -21,6 +21,8 @@ pub enum PartKind {
     WoodLines,
     /// The imported wood mesh (opaque).
     WoodMesh,
+    /// The far tree's crown impostor: one camera-facing quad (blended).
+    Impostor,
     /// Expanded placements' needles as prisms (opaque).
     PlacedPrisms,
     /// Expanded placements' original lines (blended).
@@ -31,13 +33,14 @@ pub enum PartKind {
 
 impl PartKind {
     /// Every part, in the order of the indirect-argument blocks.
-    pub const ALL: [PartKind; 9] = [
+    pub const ALL: [PartKind; 10] = [
         PartKind::Prisms,
         PartKind::OriginalLines,
         PartKind::MergedLines,
         PartKind::WoodPrisms,
         PartKind::WoodLines,
         PartKind::WoodMesh,
+        PartKind::Impostor,
         PartKind::PlacedPrisms,
         PartKind::PlacedOriginalLines,
         PartKind::PlacedMergedLines,
@@ -67,6 +70,12 @@ impl PartKind {
         )
     }
 
+    /// Whether the part is blended (drawn in the transparent phase): the
+    /// lines and the impostor.
+    pub fn is_blended(self) -> bool {
+        self.is_lines() || self == PartKind::Impostor
+    }
+
     /// The shader definition that selects the part's vertex function.
     pub fn shader_def(self) -> &'static str {
         match self {
@@ -76,6 +85,7 @@ impl PartKind {
             PartKind::WoodPrisms => "CONIFER_WOOD_PRISMS",
             PartKind::WoodLines => "CONIFER_WOOD_LINES",
             PartKind::WoodMesh => "CONIFER_WOOD_MESH",
+            PartKind::Impostor => "CONIFER_IMPOSTOR",
             PartKind::PlacedPrisms => "CONIFER_PRISMS",
             PartKind::PlacedOriginalLines => "CONIFER_ORIGINAL_LINES",
             PartKind::PlacedMergedLines => "CONIFER_MERGED_LINES",
@@ -90,6 +100,9 @@ impl PartKind {
             PartKind::MergedLines => species.tree_counts[2] > 0,
             PartKind::WoodPrisms | PartKind::WoodLines => !species.wood_segments.is_empty(),
             PartKind::WoodMesh => !species.wood_indices.is_empty(),
+            // Whether the species has an impostor is the caller's to check
+            // (it is not part of the compact arrays).
+            PartKind::Impostor => true,
             PartKind::PlacedPrisms => !species.placements.is_empty(),
             PartKind::PlacedOriginalLines => species.prototypes.iter().any(|p| p.needles[1] > 1),
             PartKind::PlacedMergedLines => species.prototypes.iter().any(|p| p.merged_lines[1] > 0),
@@ -101,7 +114,7 @@ impl PartKind {
 pub const PART_KINDS: usize = PartKind::ALL.len();
 
 /// The tree's own parts, drawn once per tree (`KIND_COUNT` in WGSL).
-pub const TREE_PART_KINDS: usize = 6;
+pub const TREE_PART_KINDS: usize = 7;
 
 /// The placed parts, drawn once per prototype and band (`PLACED_KINDS` in WGSL).
 pub const PLACED_PART_KINDS: usize = PART_KINDS - TREE_PART_KINDS;
@@ -114,6 +127,11 @@ pub const OPACITY_OVERRIDE_SHIFT: u32 = 1;
 pub const FLAG_PIXEL_ERROR_OVERRIDE: u32 = 8;
 /// Instance flag: `transition` overrides the global setting.
 pub const FLAG_TRANSITION_OVERRIDE: u32 = 16;
+/// Instance flag: the tree's own choice of the far impostor overrides the
+/// global setting ...
+pub const FLAG_IMPOSTOR_OVERRIDE: u32 = 32;
+/// ... and it is to draw it.
+pub const FLAG_IMPOSTOR_ON: u32 = 64;
 
 /// One tree (`Instance` in WGSL), 64 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -131,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 192 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 224 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -193,7 +211,17 @@ pub struct SpeciesParams {
     pub padding: [u32; 2],
     /// A sphere holding every node's sphere and the wood (tree-local centre, radius).
     pub tree_sphere: [f32; 4],
+    /// The crown impostor's axis (tree-local x, z), half width and texel
+    /// side, metres.
+    pub impostor_box: [f32; 4],
+    /// Its bottom and top heights, its views, and 0 without an impostor,
+    /// 1 with one off by default, 2 with one on by default.
+    pub impostor_span: [f32; 4],
 }
+
+/// [`CullView::perspective`] flag: the view is a camera (a shadow view
+/// never draws impostors).
+pub const VIEW_CAMERA: u32 = 2;
 
 /// A view as the compute pass sees it (`CullView` in WGSL), 128 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -205,7 +233,7 @@ pub struct CullView {
     pub world_position: [f32; 4],
     /// `2 / (P₁₁ · H)`.
     pub error_slope: f32,
-    /// 1 for a perspective view.
+    /// 1 for a perspective view, plus [`VIEW_CAMERA`] for a camera.
     pub perspective: u32,
     /// Render layers 0–31 the view sees.
     pub layers: u32,

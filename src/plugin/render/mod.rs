@@ -28,16 +28,17 @@ mod readback;
 pub use readback::{CompactReadback, ViewReadback};
 
 use self::gpu::{
-    CullView, DRAW_ARGS_BYTES, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance,
+    CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance,
     GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS,
     PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
-    prism_vertices,
+    VIEW_CAMERA, prism_vertices,
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ErrorScope, LineLighting, LineOpacity,
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
+use crate::model::impostor::CrownImpostor;
 use crate::model::prism::WOOD_LINE_FADE;
 use bevy::asset::{embedded_asset, embedded_path};
 use bevy::camera::visibility::RenderLayers;
@@ -64,7 +65,7 @@ use bevy::render::render_phase::{
     ViewSortedRenderPhases,
 };
 use bevy::render::render_resource::binding_types::{
-    storage_buffer_read_only_sized, storage_buffer_sized, uniform_buffer_sized,
+    sampler, storage_buffer_read_only_sized, storage_buffer_sized, texture_2d_array, uniform_buffer_sized,
 };
 use bevy::render::render_resource::{
     BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor, BufferId,
@@ -72,7 +73,11 @@ use bevy::render::render_resource::{
     DepthStencilState, FragmentState, PipelineCache, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
     SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
 };
-use bevy::render::render_resource::{Face, WgpuFeatures};
+use bevy::render::render_resource::{
+    AddressMode, Extent3d, Face, FilterMode, MipmapFilterMode, Sampler, SamplerBindingType, SamplerDescriptor,
+    TextureDataOrder, TextureDescriptor, TextureDimension, TextureSampleType, TextureUsages, TextureView,
+    TextureViewDescriptor, TextureViewDimension, WgpuFeatures,
+};
 use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::view::ExtractedView;
@@ -209,7 +214,12 @@ fn gpu_instance(
         flags: (u32::from(visible) * FLAG_VISIBLE)
             | (u32::from(pixel_error.is_some()) * FLAG_PIXEL_ERROR_OVERRIDE)
             | (u32::from(transition.is_some()) * FLAG_TRANSITION_OVERRIDE)
-            | (rule << OPACITY_OVERRIDE_SHIFT),
+            | (rule << OPACITY_OVERRIDE_SHIFT)
+            | match over.and_then(|o| o.far_impostor) {
+                None => 0,
+                Some(false) => FLAG_IMPOSTOR_OVERRIDE,
+                Some(true) => FLAG_IMPOSTOR_OVERRIDE | FLAG_IMPOSTOR_ON,
+            },
         layers: layer_mask,
     }
 }
@@ -272,6 +282,8 @@ pub(super) fn track_instances(
 /// and (once prepared) its GPU buffers.
 struct RenderSpecies {
     compact: Arc<CompactSpecies>,
+    /// The far representation, when the species has one.
+    impostor: Option<Arc<CrownImpostor>>,
     params: SpeciesParams,
     instances: Vec<GpuInstance>,
     generation: u64,
@@ -283,6 +295,16 @@ struct RenderSpecies {
     draw_entities: [Entity; PART_KINDS],
     /// The main-world entities that key them there.
     phase_keys: [MainEntity; PART_KINDS],
+}
+
+impl RenderSpecies {
+    /// Whether the species has anything `kind` could draw.
+    fn draws(&self, kind: PartKind) -> bool {
+        match kind {
+            PartKind::Impostor => self.impostor.is_some(),
+            _ => kind.present_in(&self.compact),
+        }
+    }
 }
 
 /// A species' GPU buffers.
@@ -299,6 +321,11 @@ struct SpeciesBuffers {
     prototypes: Buffer,
     tree_spheres: Buffer,
     tree_line_parents: Buffer,
+    /// The crown impostor's views, one layer each, with their mips (a
+    /// blank 1×1 layer for a species without one).
+    impostor: TextureView,
+    /// Bytes of the impostor texture, every mip level.
+    impostor_bytes: u64,
 }
 
 impl SpeciesBuffers {
@@ -358,6 +385,9 @@ pub struct CompactGpuMemory {
     pub species_bytes: HashMap<AssetId<ConiferSpecies>, u64>,
     /// Per species: bytes of its parameters and instance buffer.
     pub instance_bytes: HashMap<AssetId<ConiferSpecies>, u64>,
+    /// Per species: bytes of its crown impostor's texture, every mip level
+    /// (a 4-byte blank without one).
+    pub impostor_bytes: HashMap<AssetId<ConiferSpecies>, u64>,
     /// Bytes of the per-view buffers (culling inputs, LOD results,
     /// indirect draws) over all views and species.
     pub view_bytes: u64,
@@ -371,11 +401,21 @@ pub struct CompactGpuMemory {
 impl CompactGpuMemory {
     /// All bytes.
     pub fn total(&self) -> u64 {
-        self.species_bytes.values().sum::<u64>() + self.instance_bytes.values().sum::<u64>() + self.view_bytes
+        self.species_bytes.values().sum::<u64>()
+            + self.instance_bytes.values().sum::<u64>()
+            + self.impostor_bytes.values().sum::<u64>()
+            + self.view_bytes
     }
 }
 
 fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: &ConiferLodSettings) -> SpeciesParams {
+    let (impostor_box, impostor_span) = match &species.impostor {
+        Some(i) => (
+            [i.axis.x, i.axis.y, i.half_width, i.texel],
+            [i.bottom, i.top(), i.views as f32, if settings.far_impostor { 2.0 } else { 1.0 }],
+        ),
+        None => ([0.0; 4], [0.0; 4]),
+    };
     let material = &species.record.material;
     let center = species.crown_center;
     let (lo, hi) = (Vec3::from(species.aabb.min()), Vec3::from(species.aabb.max()));
@@ -417,6 +457,8 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         },
         padding: [0; 2],
         tree_sphere: compact.tree_sphere.to_array(),
+        impostor_box,
+        impostor_span,
     }
 }
 
@@ -455,6 +497,7 @@ fn extract_compact(
         };
         let entry = render.species.entry(id).or_insert_with(|| RenderSpecies {
             compact: compact.clone(),
+            impostor: asset.impostor.clone(),
             params: SpeciesParams::default(),
             instances: Vec::new(),
             generation: u64::MAX,
@@ -467,6 +510,7 @@ fn extract_compact(
         if !Arc::ptr_eq(&entry.compact, compact) {
             // A reloaded record: new arrays.
             entry.compact = compact.clone();
+            entry.impostor = asset.impostor.clone();
             entry.gpu = None;
             entry.instances_dirty = true;
         }
@@ -534,6 +578,7 @@ fn prepare_species(
 ) {
     memory.species_bytes.clear();
     memory.instance_bytes.clear();
+    memory.impostor_bytes.clear();
     for (&id, species) in &mut render.species {
         let instance_bytes: &[u8] = bytemuck::cast_slice(&species.instances);
         if species.gpu.is_none() {
@@ -541,6 +586,7 @@ fn prepare_species(
             let mut wood_mesh: Vec<u32> = c.wood_indices.clone();
             wood_mesh.extend(c.wood_vertices.iter().flatten());
             let capacity = initial_capacity(species.instances.len());
+            let (impostor, impostor_bytes) = impostor_texture(&device, &queue, species.impostor.as_deref());
             species.gpu = Some(SpeciesBuffers {
                 params: device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
                     label: Some("conifer species params"),
@@ -578,6 +624,8 @@ fn prepare_species(
                     "conifer tree line parents",
                     bytemuck::cast_slice(&c.tree_line_parents),
                 ),
+                impostor,
+                impostor_bytes,
             });
             species.instances_dirty = true;
         }
@@ -594,8 +642,55 @@ fn prepare_species(
         species.instances_dirty = false;
         queue.write_buffer(&gpu.params, 0, bytemuck::bytes_of(&species.params));
         memory.species_bytes.insert(id, allocated(&gpu.arrays()));
+        memory.impostor_bytes.insert(id, gpu.impostor_bytes);
         memory.instance_bytes.insert(id, allocated(&gpu.per_tree()));
     }
+}
+
+/// The texture of `impostor`'s views (an array layer each, every mip
+/// level) and its bytes; a blank 1×1 layer without one.
+fn impostor_texture(device: &RenderDevice, queue: &RenderQueue, impostor: Option<&CrownImpostor>) -> (TextureView, u64) {
+    let (views, columns, rows, levels, data) = match impostor {
+        Some(impostor) => {
+            let chain = impostor.mip_chain();
+            // Layer-major: each view's levels, then the next view's.
+            let mut data = Vec::new();
+            for view in 0..impostor.views {
+                for (w, h, texels) in &chain {
+                    let size = (w * h) as usize;
+                    let first = view as usize * size;
+                    data.extend(texels[first..first + size].iter().flatten());
+                }
+            }
+            (impostor.views, impostor.columns, impostor.rows, chain.len() as u32, data)
+        }
+        None => (1, 1, 1, 1, vec![0u8; 4]),
+    };
+    let texture = device.create_texture_with_data(
+        queue,
+        &TextureDescriptor {
+            label: Some("conifer impostor"),
+            size: Extent3d {
+                width: columns,
+                height: rows,
+                depth_or_array_layers: views,
+            },
+            mip_level_count: levels,
+            sample_count: 1,
+            dimension: TextureDimension::D2,
+            format: TextureFormat::Rgba8Unorm,
+            usage: TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+        TextureDataOrder::LayerMajor,
+        &data,
+    );
+    let view = texture.create_view(&TextureViewDescriptor {
+        label: Some("conifer impostor"),
+        dimension: Some(TextureViewDimension::D2Array),
+        ..default()
+    });
+    (view, data.len() as u64)
 }
 
 /// Per view and species: the culling inputs and outputs and both bind groups.
@@ -713,6 +808,8 @@ pub struct CompactPipeline {
     cull_layout: BindGroupLayoutDescriptor,
     placed_layout: BindGroupLayoutDescriptor,
     dispatch_layout: BindGroupLayoutDescriptor,
+    /// Trilinear, clamped: the impostors' sampler.
+    impostor_sampler: Sampler,
     /// `cull`, then the placed passes: `prepare_dispatch`,
     /// `count_placements`, `scan_placements`, `scatter_placements`.
     cull_pipelines: [CachedComputePipelineId; 5],
@@ -789,6 +886,8 @@ fn init_compact_pipeline(
                 read(),
                 read(),
                 read(),
+                texture_2d_array(TextureSampleType::Float { filterable: true }),
+                sampler(SamplerBindingType::Filtering),
             ),
         ),
     );
@@ -863,6 +962,16 @@ fn init_compact_pipeline(
         cull_layout,
         placed_layout,
         dispatch_layout,
+        impostor_sampler: device.create_sampler(&SamplerDescriptor {
+            label: Some("conifer impostor sampler"),
+            address_mode_u: AddressMode::ClampToEdge,
+            address_mode_v: AddressMode::ClampToEdge,
+            address_mode_w: AddressMode::ClampToEdge,
+            mag_filter: FilterMode::Linear,
+            min_filter: FilterMode::Linear,
+            mipmap_filter: MipmapFilterMode::Linear,
+            ..default()
+        }),
         cull_pipelines,
         no_vertices,
         supported,
@@ -894,7 +1003,7 @@ impl SpecializedRenderPipeline for CompactPipeline {
             key.kind.shader_def().into(),
             ShaderDefVal::UInt("MATERIAL_BIND_GROUP".into(), 3),
         ];
-        if key.kind.is_lines() {
+        if key.kind.is_blended() {
             defs.push("CONIFER_LINES".into());
             if key.facing_strip {
                 defs.push("CONIFER_FACING_STRIP".into());
@@ -911,7 +1020,7 @@ impl SpecializedRenderPipeline for CompactPipeline {
         descriptor.layout.truncate(2);
         descriptor.layout.push(self.draw_layout.clone());
         // Prisms are closed and wound as the CPU tessellator winds them.
-        descriptor.primitive.cull_mode = (!key.kind.is_lines()).then_some(Face::Back);
+        descriptor.primitive.cull_mode = (!key.kind.is_blended()).then_some(Face::Back);
         descriptor
     }
 }
@@ -1042,11 +1151,14 @@ fn prepare_views(
             // flattened onto it), so the near plane culls nothing.
             planes[5] = [0.0, 0.0, 0.0, 1.0];
         }
+        // Only cameras draw impostors: a shadow view casts the lines'
+        // shadows at its own texel's error.
+        let camera = opaque_phases.contains_key(&view.retained_view_entity);
         let cull_view = CullView {
             planes,
             world_position: view.world_from_view.translation().extend(1.0).to_array(),
             error_slope: slope,
-            perspective: u32::from(perspective),
+            perspective: u32::from(perspective) | if camera { VIEW_CAMERA } else { 0 },
             layers: view_layers(layers),
             entry_capacity: 0,
         };
@@ -1144,6 +1256,8 @@ fn prepare_views(
                         placed.sorted.as_entire_binding(),
                         gpu.tree_spheres.as_entire_binding(),
                         gpu.tree_line_parents.as_entire_binding(),
+                        &gpu.impostor,
+                        &pipeline.impostor_sampler,
                     )),
                 );
                 ViewBindGroups {
@@ -1246,10 +1360,10 @@ fn queue_compact(
             for kind in PartKind::ALL {
                 let entity = species.draw_entities[kind.index()];
                 let main_entity = species.phase_keys[kind.index()];
-                if !kind.is_lines() {
+                if !kind.is_blended() {
                     opaque.remove(main_entity);
                 }
-                if !drawn || !kind.present_in(&species.compact) {
+                if !drawn || !species.draws(kind) {
                     continue;
                 }
                 let (topology, blend, mesh_view_key) = if kind.is_lines() {
@@ -1258,6 +1372,8 @@ fn queue_compact(
                         MeshPipelineKey::BLEND_ALPHA,
                         line_view_key(view_key),
                     )
+                } else if kind == PartKind::Impostor {
+                    (PrimitiveTopology::TriangleList, MeshPipelineKey::BLEND_ALPHA, view_key)
                 } else {
                     (PrimitiveTopology::TriangleList, MeshPipelineKey::empty(), view_key)
                 };
@@ -1267,10 +1383,10 @@ fn queue_compact(
                         | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
                     kind,
                     shadow: false,
-                    facing_strip: kind.is_lines() && render.line_lighting == LineLighting::FacingStrip,
+                    facing_strip: kind.is_blended() && render.line_lighting == LineLighting::FacingStrip,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
-                if kind.is_lines() {
+                if kind.is_blended() {
                     transparent.add_transient(Transparent3d {
                         sorting_info: TransparentSortingInfo3d::Sorted {
                             mesh_center: species.center,
@@ -1342,7 +1458,7 @@ fn queue_compact_shadows(
                 let entity = species.draw_entities[kind.index()];
                 let main_entity = species.phase_keys[kind.index()];
                 phase.remove(main_entity);
-                if !drawn || !kind.present_in(&species.compact) {
+                if !drawn || kind == PartKind::Impostor || !species.draws(kind) {
                     continue;
                 }
                 let key = CompactPipelineKey {

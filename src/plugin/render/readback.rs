@@ -52,6 +52,17 @@ impl ViewReadback {
         ((code & 0xffff) as u16, f32::from_bits(e))
     }
 
+    /// How far tree `tree` has faded into its crown impostor, in `[0, 1]`
+    /// (the cull pass's 8 bits; `model::impostor::impostor_fade`).
+    pub fn impostor_fade(&self, tree: usize) -> f32 {
+        f32::from((self.lods[tree][0] >> 24) as u8) / 255.0
+    }
+
+    /// Tree `tree`'s indirect draw of part `kind`.
+    pub fn tree_draw(&self, kind: super::gpu::PartKind, tree: usize) -> [u32; 4] {
+        self.tree_draws[kind.index() * self.lods.len() + tree]
+    }
+
     /// Tree `tree`'s view point (view-dependent detail: the camera in the
     /// tree's frame and the error per metre), if the cull pass wrote one.
     pub fn view_point(&self, tree: usize) -> Option<crate::model::ViewPoint> {

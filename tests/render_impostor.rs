@@ -1,0 +1,175 @@
+//! The far representation on Mesa's lavapipe: a camera fades a tree's cut
+//! into its crown impostor as the spatial error grows from one texel to
+//! two (the cull pass against its CPU reference, `impostor_fade`), a shadow
+//! view never does, and the impostor covers what the needles cover, as
+//! `conifer eval` measures against the supersampled reference.
+//! Pictures go to `target/test-output/render/`.
+#![cfg(feature = "plugin")]
+
+use bevy::prelude::*;
+use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
+use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
+use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::impostor::{FADE_END, FADE_START, impostor_fade};
+use bevy_conifer_lod::model::{BakeOptions, LodRecord, bake};
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
+use bevy_conifer_lod::prelude::*;
+use std::path::PathBuf;
+
+const SIZE: u32 = 192;
+const FOV_DEG: f32 = 45.0;
+
+/// A 12,000-needle young Norway spruce (with wood segments).
+fn spruce() -> LodRecord {
+    let tree = generate(
+        Species::NorwaySpruce,
+        &GenerateOptions {
+            seed: 3,
+            target_needles: Some(12_000),
+            age: Age::Young,
+        },
+    );
+    bake(&tree, &BakeOptions::default(), &()).unwrap()
+}
+
+/// Spatial error per metre of distance at ε = 1 in the tests' view.
+fn error_per_metre() -> f32 {
+    2.0 * (0.5 * FOV_DEG.to_radians()).tan() / SIZE as f32
+}
+
+fn out_dir() -> PathBuf {
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    out
+}
+
+#[test]
+fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
+    let species = ConiferSpecies::from_record(spruce()).unwrap();
+    let texel = species.impostor.as_ref().expect("an impostor").texel;
+    let crown = species.crown_center;
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(SIZE, SIZE);
+    let world = renderer.world_mut();
+    HeadlessRenderer::spawn_lights(world);
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+    world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+    let camera = world
+        .spawn(HeadlessRenderer::camera_bundle(
+            &target,
+            Transform::IDENTITY,
+            FOV_DEG.to_radians(),
+        ))
+        .id();
+    world.resource_mut::<CompactReadback>().enabled = true;
+    // Texels a pixel's error covers: before the fade, inside it, after it.
+    for texels in [0.5 * FADE_START, 0.5 * (FADE_START + FADE_END), 1.5 * FADE_END] {
+        let distance = texels * texel / error_per_metre();
+        *renderer.world_mut().get_mut::<Transform>(camera).unwrap() =
+            Transform::from_translation(crown + Vec3::Z * distance).looking_at(crown, Vec3::Y);
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+            renderer.update().unwrap();
+        }
+        let readback = renderer.world().resource::<CompactReadback>();
+        let view = readback
+            .views
+            .iter()
+            .find(|v| v.species == handle.id() && v.perspective)
+            .expect("the camera's compute results");
+        let (_, e) = view.tree_lod(0);
+        let expected = impostor_fade(e, texel);
+        let fade = view.impostor_fade(0);
+        println!("{texels} texels ({distance:.1} m): e = {e:.4} m, fade {fade:.3} (CPU {expected:.3})");
+        assert!((fade - expected).abs() <= 1.0 / 255.0 + 1e-6, "{fade} vs {expected}");
+        let impostor = view.tree_draw(PartKind::Impostor, 0);
+        let lines: u32 = [PartKind::OriginalLines, PartKind::MergedLines]
+            .into_iter()
+            .map(|kind| view.tree_draw(kind, 0)[0])
+            .sum();
+        match texels {
+            t if t <= FADE_START => {
+                assert_eq!(fade, 0.0);
+                assert_eq!(impostor[0], 0, "no impostor before the fade");
+                assert!(lines > 0);
+            }
+            t if t >= FADE_END => {
+                assert_eq!(fade, 1.0);
+                assert_eq!(impostor[..2], [6, 1], "one quad");
+                let others: u32 = PartKind::ALL[..6].iter().map(|&kind| view.tree_draw(kind, 0)[0]).sum();
+                assert_eq!(others, 0, "nothing else once the impostor is opaque");
+                assert_eq!(view.processed_primitives(8), 0);
+            }
+            _ => {
+                assert!(fade > 0.2 && fade < 0.8, "{fade}");
+                assert_eq!(impostor[..2], [6, 1]);
+                assert!(lines > 0, "the lines fade out while the impostor fades in");
+            }
+        }
+        // Shadow views (the sun's cascades) never draw the impostor.
+        for shadow in readback.views.iter().filter(|v| v.species == handle.id() && !v.perspective) {
+            assert_eq!(shadow.impostor_fade(0), 0.0);
+            assert_eq!(shadow.tree_draw(PartKind::Impostor, 0)[0], 0);
+        }
+    }
+}
+
+#[test]
+fn the_impostor_covers_what_the_needles_cover() {
+    let record = spruce();
+    let texel = ConiferSpecies::from_record(record.clone())
+        .unwrap()
+        .impostor
+        .expect("an impostor")
+        .texel;
+    let view = EvalView {
+        width: SIZE,
+        height: SIZE,
+        fov_deg: FOV_DEG,
+        pixel_error: 1.0,
+        transition: 1.0,
+        supersampling: 4,
+        sun: Default::default(),
+        line_lighting: Default::default(),
+        ours_line_opacity: Default::default(),
+    };
+    let mut scene = EvalScene::new(record, &[Method::Paper, Method::Ours], view).unwrap();
+    let out = out_dir();
+    // Ours is the impostor alone (3 texels a pixel error: the tree is ~64
+    // pixels tall), then half faded (1.5 texels); the paper draws lines
+    // (its opacity `2/ρ` overshoots: it is only compared).
+    for (texels, what) in [(3.0, "impostor"), (0.5 * (FADE_START + FADE_END), "fading")] {
+        let distance = texels * texel / error_per_metre();
+        scene.set_distance(distance);
+        let frame = scene.capture().unwrap();
+        let rect = scene.screen_rect(distance);
+        let reference = mean_coverage(&frame.reference, &rect);
+        let mut errors = Vec::new();
+        frame
+            .reference
+            .save(out.join(format!("impostor_{what}_reference.png")))
+            .unwrap();
+        for (method, picture) in &frame.methods {
+            picture
+                .save(out.join(format!("impostor_{what}_{}.png", method.name())))
+                .unwrap();
+            let error = coverage_error(&frame.reference, picture, &rect).unwrap();
+            let mean = mean_coverage(picture, &rect);
+            println!(
+                "{what} ({distance:.1} m) {}: coverage error {error:.4}, mean coverage {mean:.3} (reference {reference:.3})",
+                method.name()
+            );
+            assert!(reference > 0.05, "the reference shows the tree");
+            errors.push(error);
+            if *method == Method::Ours {
+                assert!(error < 0.05, "{what}: coverage error {error}");
+                assert!(
+                    (mean - reference).abs() < 0.12 * reference,
+                    "{what}: mean coverage {mean} vs {reference}"
+                );
+            }
+        }
+        // Methods in order: the paper's lines, then ours.
+        assert!(errors[1] <= errors[0], "{what}: ours {} vs the paper's {}", errors[1], errors[0]);
+    }
+}
