@@ -40,7 +40,11 @@ const SPECIES: [(Species, &str, f32); 6] = [
     (Species::ScotsPine, "trees/mature/scots-pine.conifer", 3.0),
     (Species::SilverFir, "trees/mature/silver-fir.conifer", 2.0),
     (Species::DouglasFir, "trees/mature/douglas-fir.conifer", 2.0),
-    (Species::EasternWhitePine, "trees/mature/eastern-white-pine.conifer", 1.0),
+    (
+        Species::EasternWhitePine,
+        "trees/mature/eastern-white-pine.conifer",
+        1.0,
+    ),
     (Species::LawsonCypress, "trees/mature/lawson-cypress.conifer", 0.5),
 ];
 
@@ -208,7 +212,10 @@ fn camera_view(view: &str) -> Result<(Vec3, Vec3), String> {
             ground(20.0, 60.0) + Vec3::Y * 4.0,
         )),
         "ground" => Ok((ground(-6.0, 120.0) + Vec3::Y * 2.0, ground(10.0, 60.0) + Vec3::Y * 12.0)),
-        "tree" => Ok((ground(-18.0, 150.0) + Vec3::Y * 10.0, ground(-2.0, 128.0) + Vec3::Y * 12.0)),
+        "tree" => Ok((
+            ground(-18.0, 150.0) + Vec3::Y * 10.0,
+            ground(-2.0, 128.0) + Vec3::Y * 12.0,
+        )),
         custom => {
             let parse = |s: &str| -> Option<Vec3> {
                 let v: Vec<f32> = s.split(',').map(|x| x.trim().parse().ok()).collect::<Option<_>>()?;

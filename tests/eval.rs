@@ -61,15 +61,29 @@ fn every_method_renders_and_is_measured() {
     let raw = &m("raw").distances[0];
     assert_eq!(raw.needle_primitives, needles * 28);
     assert_eq!(raw.lines, 0);
-    // Ours and the paper draw the same cut; far away it is far below raw.
+    // Ours and the paper draw the same cut, ours plus its crown impostor's
+    // quad (two triangles) while the tree fades into it (at 20 m the tree
+    // is ~80 pixels tall); far away it is far below raw.
     for (o, p) in m("ours").distances.iter().zip(&m("paper").distances) {
-        assert_eq!((o.triangles, o.lines), (p.triangles, p.lines));
+        assert!(o.lines == p.lines || o.lines == 0, "{o:?} vs {p:?}");
+        assert!(
+            o.triangles == p.triangles || o.triangles == p.triangles + 2,
+            "{o:?} vs {p:?}"
+        );
     }
+    assert_eq!(m("ours").distances[1].triangles, m("paper").distances[1].triangles + 2);
     assert!(m("ours").distances[1].primitives * 10 < raw.primitives);
-    // Sampling spends ours' budget: same triangles, no more needle lines.
-    for (o, s) in m("ours").distances.iter().zip(&m("sampling").distances) {
-        assert_eq!(o.triangles, s.triangles);
-        assert!(s.needle_primitives <= o.needle_primitives + 1, "{s:?} vs {o:?}");
+    // Sampling spends the paper's cut's budget: same triangles, no more
+    // needle lines; ours no more than the cut and its quad.
+    for ((o, p), s) in m("ours")
+        .distances
+        .iter()
+        .zip(&m("paper").distances)
+        .zip(&m("sampling").distances)
+    {
+        assert_eq!(p.triangles, s.triangles);
+        assert!(s.needle_primitives <= p.needle_primitives + 1, "{s:?} vs {p:?}");
+        assert!(o.needle_primitives <= p.needle_primitives + 2, "{o:?} vs {p:?}");
     }
     // bevy-lod's chain shrinks and its levels enter in order.
     let levels = &report.bevy_lod_levels;

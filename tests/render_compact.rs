@@ -206,12 +206,15 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     assert!(species_bytes >= compact.bytes().total() && species_bytes <= compact.bytes().total() + 9 * 128);
     assert!(per_needle <= 36.0, "{per_needle} B/needle");
     // 3,000 trees: a 4,096-slot instance buffer (64 B each) and the
-    // species' 192-byte parameters, and per view 4,096 LOD slots (32 B)
-    // and 6 × 4,096 indirect draws (16 B), and five 16-byte stand-ins for
+    // species' 224-byte parameters, and per view 4,096 LOD slots (32 B)
+    // and 7 × 4,096 indirect draws (16 B), and five 16-byte stand-ins for
     // the placement buffers a flat species leaves empty.
     let placed_stand_ins = 5 * 16;
-    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 192);
-    assert_eq!(memory.view_bytes, 128 + 4096 * 32 + 6 * 4096 * 16 + placed_stand_ins);
+    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 224);
+    // The impostor's texture: every mip level of every view, as uploaded.
+    let impostor = record_species_impostor_bytes(&scene, id);
+    assert_eq!(memory.impostor_bytes[&id], impostor);
+    assert_eq!(memory.view_bytes, 128 + 4096 * 32 + 7 * 4096 * 16 + placed_stand_ins);
     let buffers = memory.buffers;
     // Frames with nothing replaced make no bind groups.
     let made = memory.bind_group_sets_made;
@@ -227,8 +230,8 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     }
     scene.shot("forest_thinned");
     let memory = scene.memory();
-    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 192);
-    assert_eq!(memory.view_bytes, 128 + 128 * 32 + 6 * 128 * 16 + placed_stand_ins);
+    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 224);
+    assert_eq!(memory.view_bytes, 128 + 128 * 32 + 7 * 128 * 16 + placed_stand_ins);
     assert_eq!(memory.buffers, buffers);
     // All go: nothing is left.
     for &tree in &trees[..100] {
@@ -237,7 +240,14 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     scene.shot("forest_gone");
     let memory = scene.memory();
     assert_eq!(memory.total(), 0, "{memory:?}");
+    assert!(memory.impostor_bytes.is_empty());
     assert_eq!(memory.buffers, 0);
+}
+
+/// Bytes of the mip chain of `id`'s crown impostor.
+fn record_species_impostor_bytes(scene: &Scene, id: AssetId<ConiferSpecies>) -> u64 {
+    let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
+    species.get(id).unwrap().impostor.as_ref().unwrap().byte_size()
 }
 
 #[test]
@@ -327,8 +337,14 @@ fn lines_are_lit_as_the_cylinders_they_stand_for() {
 #[test]
 fn merged_lines_cover_at_most_their_summed_area_under_the_coverage_rule() {
     let mut scene = Scene::new();
-    // 60 m through a telephoto: merged lines carry most of the crown.
+    // 60 m through a telephoto: merged lines carry most of the crown (the
+    // lines are what is measured: no impostor).
     scene.look_from(60.0, 12.0);
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .far_impostor = false;
     let empty = scene.shot("opacity_empty");
     scene.spawn_tree(Transform::IDENTITY);
     let darkness = |scene: &mut Scene, rule: LineOpacity, name: &str| -> f32 {

@@ -133,6 +133,8 @@ fn overlay_colours_each_representation() {
     let out = output_dir();
     let (mut renderer, crown) = scene(dir.path());
     renderer.world_mut().resource_mut::<ConiferLodSettings>().debug_colors = true;
+    // The lines' colours (at 60 m the tree would be its impostor).
+    renderer.world_mut().resource_mut::<ConiferLodSettings>().far_impostor = false;
     let mut found = Vec::new();
     for distance in [0.6f32, 4.0, 60.0] {
         let (camera, target) = camera(&mut renderer, crown, distance);

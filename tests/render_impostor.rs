@@ -78,7 +78,7 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
             .find(|v| v.species == handle.id() && v.perspective)
             .expect("the camera's compute results");
         let (_, e) = view.tree_lod(0);
-        let expected = impostor_fade(e, texel);
+        let expected = impostor_fade(e, texel, 0.0);
         let fade = view.impostor_fade(0);
         println!("{texels} texels ({distance:.1} m): e = {e:.4} m, fade {fade:.3} (CPU {expected:.3})");
         assert!((fade - expected).abs() <= 1.0 / 255.0 + 1e-6, "{fade} vs {expected}");
@@ -106,8 +106,30 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
                 assert!(lines > 0, "the lines fade out while the impostor fades in");
             }
         }
+        // Straight above the tree at the same distance the camera looks
+        // down on it: its lines, never the side views.
+        if texels >= FADE_END {
+            *renderer.world_mut().get_mut::<Transform>(camera).unwrap() =
+                Transform::from_translation(crown + Vec3::Y * distance).looking_at(crown, Vec3::X);
+            for _ in 0..2 {
+                renderer.update().unwrap();
+            }
+            let readback = renderer.world().resource::<CompactReadback>();
+            let above = readback
+                .views
+                .iter()
+                .find(|v| v.species == handle.id() && v.perspective)
+                .expect("the camera's compute results");
+            assert_eq!(above.impostor_fade(0), 0.0, "no impostor seen from above");
+            assert_eq!(above.tree_draw(PartKind::Impostor, 0)[0], 0);
+        }
+        let readback = renderer.world().resource::<CompactReadback>();
         // Shadow views (the sun's cascades) never draw the impostor.
-        for shadow in readback.views.iter().filter(|v| v.species == handle.id() && !v.perspective) {
+        for shadow in readback
+            .views
+            .iter()
+            .filter(|v| v.species == handle.id() && !v.perspective)
+        {
             assert_eq!(shadow.impostor_fade(0), 0.0);
             assert_eq!(shadow.tree_draw(PartKind::Impostor, 0)[0], 0);
         }
@@ -170,6 +192,11 @@ fn the_impostor_covers_what_the_needles_cover() {
             }
         }
         // Methods in order: the paper's lines, then ours.
-        assert!(errors[1] <= errors[0], "{what}: ours {} vs the paper's {}", errors[1], errors[0]);
+        assert!(
+            errors[1] <= errors[0],
+            "{what}: ours {} vs the paper's {}",
+            errors[1],
+            errors[0]
+        );
     }
 }

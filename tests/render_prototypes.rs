@@ -254,6 +254,12 @@ fn reference_tree_draws(compact: &CompactSpecies, code: u16, e: f32) -> [[u32; 2
 fn gpu_draws_equal_the_cpu_reference() {
     let mut scene = Scene::new();
     scene.renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
+    // The cut is what is compared: no impostor far away.
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .far_impostor = false;
     let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
     let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
     let placed_compact = species.get(&placed).unwrap().compact.clone();

@@ -575,7 +575,8 @@ impl EvalScene {
                 // is two triangles, and once it is opaque nothing else is
                 // drawn (the cull pass's rule, `impostor_fade`).
                 let fade = match (method, self.impostor_texel) {
-                    (Method::Ours, Some(texel)) => impostor_fade(e, texel),
+                    // The camera looks at the crown level.
+                    (Method::Ours, Some(texel)) => impostor_fade(e, texel, 0.0),
                     _ => 0.0,
                 };
                 let impostor = if fade > 0.0 { 2 } else { 0 };

@@ -50,17 +50,29 @@ pub const FADE_START: f32 = 1.0;
 /// Spatial error, in texels, from which the plugin draws only the impostor.
 pub const FADE_END: f32 = 2.0;
 
+/// Tangent of the camera's elevation over the crown centre up to which
+/// the impostor is drawn in full (30°): its pictures are side views.
+pub const STEEP_START: f32 = 0.577_350_26;
+
+/// Tangent of the elevation from which it is not drawn at all (45°): a
+/// camera looking down on a tree sees its lines.
+pub const STEEP_END: f32 = 1.0;
+
 /// How far a tree at spatial error `spatial_error` (tree metres) has
-/// faded into an impostor of texel side `texel`, in `[0, 1]`: 0 up to
-/// [`FADE_START`] texels, 1 from [`FADE_END`], linear between, in steps of
-/// 1/255 (the CPU reference of the plugin's cull pass, which stores it in
-/// 8 bits). 0 for a texel or error that is not positive and finite.
-pub fn impostor_fade(spatial_error: f32, texel: f32) -> f32 {
+/// faded into an impostor of texel side `texel`, seen at an elevation of
+/// tangent `elevation` over its crown centre, in `[0, 1]`: 0 up to
+/// [`FADE_START`] texels, 1 from [`FADE_END`], linear between, times 1
+/// up to [`STEEP_START`] falling linearly to 0 at [`STEEP_END`], in steps
+/// of 1/255 (the CPU reference of the plugin's cull pass, which stores it
+/// in 8 bits). 0 for a texel or error that is not positive and finite.
+pub fn impostor_fade(spatial_error: f32, texel: f32, elevation: f32) -> f32 {
     if !(texel > 0.0 && texel.is_finite() && spatial_error.is_finite()) {
         return 0.0;
     }
     let t = ((spatial_error / texel - FADE_START) / (FADE_END - FADE_START)).clamp(0.0, 1.0);
-    (t * 255.0).round() / 255.0
+    let steep = ((elevation.abs() - STEEP_START) / (STEEP_END - STEEP_START)).clamp(0.0, 1.0);
+    let steep = if elevation.is_nan() { 1.0 } else { steep };
+    (t * (1.0 - steep) * 255.0).round() / 255.0
 }
 
 /// How a [`CrownImpostor`] is baked.
@@ -144,7 +156,10 @@ impl CrownImpostor {
         let pieces = needles
             .iter()
             .flat_map(|n| [(n.base, n.radius), (n.tip, n.radius)])
-            .chain(wood.iter().flat_map(|w| [(w.start, w.start_radius), (w.end, w.end_radius)]));
+            .chain(
+                wood.iter()
+                    .flat_map(|w| [(w.start, w.start_radius), (w.end, w.end_radius)]),
+            );
         for (p, r) in pieces.clone() {
             lo = lo.min(p - r);
             hi = hi.max(p + r);
@@ -296,7 +311,10 @@ impl CrownImpostor {
     }
 
     fn splat_needle(&self, canvas: &mut ViewCanvas, needle: &Needle) {
-        let (a, b) = (self.cell_point(canvas, needle.base), self.cell_point(canvas, needle.tip));
+        let (a, b) = (
+            self.cell_point(canvas, needle.base),
+            self.cell_point(canvas, needle.tip),
+        );
         let cell = self.texel / SUPERSAMPLING as f32;
         let length = a.distance(b);
         // Projected area over the cell area, spread over points half a cell
@@ -324,7 +342,10 @@ impl CrownImpostor {
 
     fn stamp_wood(&self, canvas: &mut ViewCanvas, segment: &WoodSegment) {
         let cell = self.texel / SUPERSAMPLING as f32;
-        let (a, b) = (self.cell_point(canvas, segment.start), self.cell_point(canvas, segment.end));
+        let (a, b) = (
+            self.cell_point(canvas, segment.start),
+            self.cell_point(canvas, segment.end),
+        );
         let (ra, rb) = (segment.start_radius / cell, segment.end_radius / cell);
         let r = ra.max(rb);
         let (cw, ch) = (self.columns * SUPERSAMPLING, self.rows * SUPERSAMPLING);
@@ -507,34 +528,42 @@ mod tests {
         // The trunk below the crown is opaque wood in the impostor.
         let (column, row) = impostor.project(0, Vec3::new(0.0, -1.0, 0.0));
         let trunk_texel = impostor.texel_at(0, column as u32, row as u32).expect("inside");
-        assert!(trunk_texel.coverage > 0.95 && trunk_texel.wood > 0.95, "{trunk_texel:?}");
+        assert!(
+            trunk_texel.coverage > 0.95 && trunk_texel.wood > 0.95,
+            "{trunk_texel:?}"
+        );
         assert!(trunk_texel.axis.y > 0.99, "{trunk_texel:?}");
     }
 
     #[test]
     fn the_fade_rises_from_one_texel_to_two_in_8_bit_steps() {
         let texel = 0.25;
-        assert_eq!(impostor_fade(0.0, texel), 0.0);
-        assert_eq!(impostor_fade(FADE_START * texel, texel), 0.0);
-        assert_eq!(impostor_fade(FADE_END * texel, texel), 1.0);
-        assert_eq!(impostor_fade(1e9, texel), 1.0);
-        assert!((impostor_fade(0.5 * (FADE_START + FADE_END) * texel, texel) - 0.5).abs() <= 1.0 / 255.0);
+        assert_eq!(impostor_fade(0.0, texel, 0.0), 0.0);
+        assert_eq!(impostor_fade(FADE_START * texel, texel, 0.0), 0.0);
+        assert_eq!(impostor_fade(FADE_END * texel, texel, 0.0), 1.0);
+        assert_eq!(impostor_fade(1e9, texel, 0.2), 1.0);
+        assert!((impostor_fade(0.5 * (FADE_START + FADE_END) * texel, texel, -0.3) - 0.5).abs() <= 1.0 / 255.0);
         let mut last = 0.0;
         for k in 0..1000 {
-            let fade = impostor_fade(k as f32 * 0.001, texel);
+            let fade = impostor_fade(k as f32 * 0.001, texel, 0.0);
             assert!(fade >= last && (fade * 255.0 - (fade * 255.0).round()).abs() < 1e-4);
             last = fade;
         }
         for bad in [f32::NAN, 0.0, -1.0, f32::INFINITY] {
-            assert_eq!(impostor_fade(1.0, bad), 0.0);
+            assert_eq!(impostor_fade(1.0, bad, 0.0), 0.0);
         }
-        assert_eq!(impostor_fade(f32::NAN, texel), 0.0);
+        assert_eq!(impostor_fade(f32::NAN, texel, 0.0), 0.0);
+        // Looking down on the tree: the impostor gives way to the lines.
+        assert_eq!(impostor_fade(1e9, texel, STEEP_END), 0.0);
+        assert_eq!(impostor_fade(1e9, texel, -2.0), 0.0);
+        assert_eq!(impostor_fade(1e9, texel, f32::NAN), 0.0);
+        assert!((impostor_fade(1e9, texel, 0.5 * (STEEP_START + STEEP_END)) - 0.5).abs() <= 1.0 / 255.0);
     }
 
     #[test]
     fn mips_keep_the_mean_coverage() {
-        let impostor = CrownImpostor::bake(&cone(20_000, 0.003), &[], ImpostorOptions { views: 2, rows: 40 })
-            .expect("needles");
+        let impostor =
+            CrownImpostor::bake(&cone(20_000, 0.003), &[], ImpostorOptions { views: 2, rows: 40 }).expect("needles");
         let chain = impostor.mip_chain();
         assert_eq!(chain.last().map(|l| (l.0, l.1)), Some((1, 1)));
         let mean = |(w, h, t): &(u32, u32, Vec<[u8; 4]>)| {
@@ -542,7 +571,12 @@ mod tests {
         };
         // Levels whose sides halve exactly keep the mean (to rounding).
         for pair in chain.windows(2).take_while(|p| p[0].0 % 2 == 0 && p[0].1 % 2 == 0) {
-            assert!((mean(&pair[0]) - mean(&pair[1])).abs() < 0.6, "{} vs {}", mean(&pair[0]), mean(&pair[1]));
+            assert!(
+                (mean(&pair[0]) - mean(&pair[1])).abs() < 0.6,
+                "{} vs {}",
+                mean(&pair[0]),
+                mean(&pair[1])
+            );
         }
         let bytes: u64 = chain.iter().map(|l| 4 * l.2.len() as u64).sum();
         assert_eq!(impostor.byte_size(), bytes);

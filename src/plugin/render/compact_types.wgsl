@@ -41,6 +41,11 @@ const LOD_FADE_SHIFT: u32 = 24u;
 // where the fade into the impostor starts and ends.
 const IMPOSTOR_FADE_START: f32 = 1.0;
 const IMPOSTOR_FADE_END: f32 = 2.0;
+// `model::impostor::STEEP_START`, `STEEP_END`: tangents of the camera's
+// elevation over the crown where the impostor starts giving way to lines
+// and where it is gone.
+const IMPOSTOR_STEEP_START: f32 = 0.57735026;
+const IMPOSTOR_STEEP_END: f32 = 1.0;
 // CullView.perspective: bit 0 a perspective view, bit 1 a camera.
 const VIEW_PERSPECTIVE: u32 = 1u;
 const VIEW_CAMERA: u32 = 2u;

@@ -18,7 +18,7 @@
     ARRAY_COUNT, ARRAY_CURSOR, ARRAY_PRISMS, ARRAY_AFTER_PRISMS, ARRAY_BY_PARENT, ARRAY_MERGED, ARRAY_OFFSET, ARRAY_FLAGS,
     placement_band,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
-    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA,
+    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
@@ -229,7 +229,11 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         && (cull_view.perspective & VIEW_CAMERA) != 0u {
         let texels = e / max(species.impostor_box.w, 1e-9);
         let t = clamp((texels - IMPOSTOR_FADE_START) / (IMPOSTOR_FADE_END - IMPOSTOR_FADE_START), 0.0, 1.0);
-        fade = u32(round(t * 255.0));
+        // Side views: a camera looking down on the tree keeps its lines.
+        let camera = tree_local_point(world_from_local, scale, cull_view.world_position.xyz) - species.crown_center.xyz;
+        let elevation = abs(camera.y) / max(length(camera.xz), 1e-9);
+        let steep = clamp((elevation - IMPOSTOR_STEEP_START) / (IMPOSTOR_STEEP_END - IMPOSTOR_STEEP_START), 0.0, 1.0);
+        fade = u32(round(t * (1.0 - steep) * 255.0));
     }
     if fade >= 255u {
         for (var kind = 0u; kind < KIND_COUNT; kind += 1u) {

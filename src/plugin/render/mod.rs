@@ -28,10 +28,10 @@ mod readback;
 pub use readback::{CompactReadback, ViewReadback};
 
 use self::gpu::{
-    CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance,
-    GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES, OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS,
-    PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
-    VIEW_CAMERA, prism_vertices,
+    CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE,
+    FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES,
+    OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES,
+    PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, prism_vertices,
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ErrorScope, LineLighting, LineOpacity,
@@ -68,15 +68,15 @@ use bevy::render::render_resource::binding_types::{
     sampler, storage_buffer_read_only_sized, storage_buffer_sized, texture_2d_array, uniform_buffer_sized,
 };
 use bevy::render::render_resource::{
+    AddressMode, Extent3d, Face, FilterMode, MipmapFilterMode, Sampler, SamplerBindingType, SamplerDescriptor,
+    TextureDataOrder, TextureDescriptor, TextureDimension, TextureSampleType, TextureUsages, TextureView,
+    TextureViewDescriptor, TextureViewDimension, WgpuFeatures,
+};
+use bevy::render::render_resource::{
     BindGroup, BindGroupEntries, BindGroupLayoutDescriptor, BindGroupLayoutEntries, Buffer, BufferDescriptor, BufferId,
     BufferUsages, CachedComputePipelineId, CompareFunction, ComputePassDescriptor, ComputePipelineDescriptor,
     DepthStencilState, FragmentState, PipelineCache, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
     SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
-};
-use bevy::render::render_resource::{
-    AddressMode, Extent3d, Face, FilterMode, MipmapFilterMode, Sampler, SamplerBindingType, SamplerDescriptor,
-    TextureDataOrder, TextureDescriptor, TextureDimension, TextureSampleType, TextureUsages, TextureView,
-    TextureViewDescriptor, TextureViewDimension, WgpuFeatures,
 };
 use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue};
 use bevy::render::sync_world::MainEntity;
@@ -412,7 +412,12 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
     let (impostor_box, impostor_span) = match &species.impostor {
         Some(i) => (
             [i.axis.x, i.axis.y, i.half_width, i.texel],
-            [i.bottom, i.top(), i.views as f32, if settings.far_impostor { 2.0 } else { 1.0 }],
+            [
+                i.bottom,
+                i.top(),
+                i.views as f32,
+                if settings.far_impostor { 2.0 } else { 1.0 },
+            ],
         ),
         None => ([0.0; 4], [0.0; 4]),
     };
@@ -649,7 +654,11 @@ fn prepare_species(
 
 /// The texture of `impostor`'s views (an array layer each, every mip
 /// level) and its bytes; a blank 1×1 layer without one.
-fn impostor_texture(device: &RenderDevice, queue: &RenderQueue, impostor: Option<&CrownImpostor>) -> (TextureView, u64) {
+fn impostor_texture(
+    device: &RenderDevice,
+    queue: &RenderQueue,
+    impostor: Option<&CrownImpostor>,
+) -> (TextureView, u64) {
     let (views, columns, rows, levels, data) = match impostor {
         Some(impostor) => {
             let chain = impostor.mip_chain();
@@ -662,7 +671,13 @@ fn impostor_texture(device: &RenderDevice, queue: &RenderQueue, impostor: Option
                     data.extend(texels[first..first + size].iter().flatten());
                 }
             }
-            (impostor.views, impostor.columns, impostor.rows, chain.len() as u32, data)
+            (
+                impostor.views,
+                impostor.columns,
+                impostor.rows,
+                chain.len() as u32,
+                data,
+            )
         }
         None => (1, 1, 1, 1, vec![0u8; 4]),
     };
