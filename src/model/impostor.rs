@@ -5,10 +5,11 @@
 //! Merged lines hold their error bound at any distance, but a dense crown
 //! stacks them in depth: a 30 m spruce still needs ~380,000 lines at 1 km
 //! (`conifer cut --distance 1000`), where it is ~40 pixels tall. Past the
-//! distance where one of its texels is smaller than the pixel error, the
+//! distance where two of its texels are smaller than the pixel error, the
 //! plugin draws the tree as one camera-facing quad textured with the two
 //! views nearest the camera's azimuth instead, cross-faded with the lines
-//! over a band of distances ([`FADE_START`], [`FADE_END`]).
+//! over a band of distances ([`FADE_START`], [`FADE_END`]): from where
+//! the tree is ~384·ε pixels tall to where it is ~192·ε.
 //!
 //! ## What a texel holds
 //!
@@ -18,7 +19,9 @@
 //! [`CrownImpostor::texel`] metres. A texel stores four bytes:
 //!
 //! * **coverage**: the fraction of the texel the needles and wood hide;
-//! * **wood**: the fraction hidden by wood (drawn with the wood's colour);
+//! * **wood**: the fraction hidden by wood and seen (wood stands amid
+//!   its needles: half of them, in depth, hide it), drawn with the wood's
+//!   colour;
 //! * **axis x, z**: the mean direction of what covers it (its `y` is
 //!   positive and follows from the unit length), lit as the cylinders the
 //!   lines stand for.
@@ -44,11 +47,12 @@ pub const SUPERSAMPLING: u32 = 4;
 
 /// Spatial error, in texels, from which the plugin starts fading the
 /// lines into the impostor (a texel projects to `1 / FADE_START` of the
-/// pixel error).
-pub const FADE_START: f32 = 1.0;
+/// pixel error: the impostor starts magnified twice).
+pub const FADE_START: f32 = 0.5;
 
-/// Spatial error, in texels, from which the plugin draws only the impostor.
-pub const FADE_END: f32 = 2.0;
+/// Spatial error, in texels, from which the plugin draws only the impostor
+/// (a texel is the pixel error: the impostor at its own resolution).
+pub const FADE_END: f32 = 1.0;
 
 /// Tangent of the camera's elevation over the crown centre up to which
 /// the impostor is drawn in full (30°): its pictures are side views.
@@ -400,11 +404,14 @@ impl CrownImpostor {
                 for sy in 0..SUPERSAMPLING {
                     for sx in 0..SUPERSAMPLING {
                         let index = ((row * SUPERSAMPLING + sy) * cw + column * SUPERSAMPLING + sx) as usize;
-                        let needles = 1.0 - (-canvas.depth[index]).exp();
+                        let depth = canvas.depth[index];
+                        let needles = 1.0 - (-depth).exp();
                         let w = canvas.wood[index];
-                        // Wood is opaque; needles cover what is left.
+                        // Wood is opaque; needles cover what is left. Wood
+                        // stands amid its needles: half of them (in depth)
+                        // hide it.
                         coverage += 1.0 - (1.0 - w) * (1.0 - needles);
-                        wood += w;
+                        wood += w * (-0.5 * depth).exp();
                     }
                 }
                 let axis = canvas.axis[(row * self.columns + column) as usize].normalize_or(Vec3::Y);

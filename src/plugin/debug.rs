@@ -134,6 +134,11 @@ pub struct ConiferLodStats {
     pub triangles: u64,
     /// Lines drawn (original and merged).
     pub lines: u64,
+    /// Trees drawn as their crown impostor alone (one quad each, not in
+    /// the counts above), as the first active perspective camera sees them.
+    pub impostors: u64,
+    /// Trees fading between their lines and their impostor (in both).
+    pub fading: u64,
     /// The global pixel error ε.
     pub pixel_error: f32,
     /// Time of the plugin's systems last frame ([`ConiferLodCpuTime`]), milliseconds.
@@ -223,6 +228,7 @@ fn collect_stats(
         &ConiferLodState,
         &GlobalTransform,
         &InheritedVisibility,
+        Option<&ConiferLodOverride>,
     )>,
     cameras: Query<(&Camera, &GlobalTransform, &Projection)>,
     species_assets: Res<Assets<ConiferSpecies>>,
@@ -249,7 +255,14 @@ fn collect_stats(
         .filter(|(camera, _, _)| camera.is_active)
         .map(|(_, transform, projection)| projection.compute_frustum(transform))
         .collect();
-    for (foliage, state, transform, visibility) in &trees {
+    // The first active perspective camera decides which trees are
+    // impostors (as its cull pass does: `impostor_fade`).
+    let viewer = cameras.iter().filter(|(c, _, _)| c.is_active).find_map(|(c, t, p)| {
+        let height = c.physical_viewport_size()?.y as f32;
+        let (slope, perspective) = view_error_slope(&p.get_clip_from_view(), height)?;
+        perspective.then_some((t.translation(), slope))
+    });
+    for (foliage, state, transform, visibility, over) in &trees {
         next.instances += 1;
         let Some(species) = species_assets.get(&foliage.0) else {
             continue;
@@ -269,6 +282,25 @@ fn collect_stats(
             .0
             .entry(foliage.0.id())
             .or_insert_with(|| SpeciesDistances::new(species));
+        let fade = match (&species.impostor, viewer) {
+            (Some(impostor), Some((camera, slope)))
+                if settings.enabled && over.and_then(|o| o.far_impostor).unwrap_or(settings.far_impostor) =>
+            {
+                let scale = transform.compute_transform().scale.abs().element_sum() / 3.0;
+                let centre = transform.transform_point(species.crown_center);
+                let pixel_error = over.and_then(|o| o.pixel_error).unwrap_or(settings.pixel_error);
+                let e = pixel_error.max(0.0) * centre.distance(camera) * slope / scale.max(1e-6);
+                let offset = camera - centre;
+                let elevation = offset.y.abs() / Vec2::new(offset.x, offset.z).length().max(1e-9);
+                crate::model::impostor::impostor_fade(e, impostor.texel, elevation)
+            }
+            _ => 0.0,
+        };
+        if fade >= 1.0 {
+            next.impostors += 1;
+            continue;
+        }
+        next.fading += u64::from(fade > 0.0);
         let counts = entry.counter.count(state.min_spatial_error);
         next.prisms += counts.prisms;
         next.triangles += counts.triangles;
@@ -366,6 +398,7 @@ fn update_panel(
          trees {} ({} visible)\n\
          prisms {}   triangles {}\n\
          lines {} original + {} merged = {}\n\
+         impostors {} (+{} fading)\n\
          plugin CPU {:.3} ms   {:.0} FPS",
         stats.pixel_error,
         stats.instances,
@@ -375,6 +408,8 @@ fn update_panel(
         stats.lines_original,
         stats.lines_merged,
         stats.lines,
+        stats.impostors,
+        stats.fading,
         stats.plugin_cpu_ms,
         stats.fps,
     );
