@@ -215,9 +215,10 @@ fn camera_view(view: &str) -> Result<(Vec3, Vec3), String> {
             ground(20.0, 60.0) + Vec3::Y * 4.0,
         )),
         "ground" => Ok((ground(-6.0, 120.0) + Vec3::Y * 2.0, ground(10.0, 60.0) + Vec3::Y * 12.0)),
+        // Replaced in `setup` by the spruce or fir nearest this point.
         "tree" => Ok((
-            ground(-18.0, 150.0) + Vec3::Y * 10.0,
-            ground(-2.0, 128.0) + Vec3::Y * 12.0,
+            ground(-18.0, 150.0) + Vec3::Y * 2.0,
+            ground(-2.0, 128.0) + Vec3::Y * 2.0,
         )),
         custom => {
             let parse = |s: &str| -> Option<Vec3> {
@@ -383,6 +384,28 @@ fn setup(
     .seed(args.seed)
     .place();
     spawn_forest(&mut commands, &placements, &species);
+    // `--view tree`: 14 m from the nearest spruce or fir, at eye height,
+    // looking up its crown.
+    let (mut eye, mut look_at) = (start.eye, start.target);
+    if args.view == "tree" {
+        let per_species = if args.grow { SEEDS_PER_SPECIES as usize } else { 1 };
+        let conical = [Species::NorwaySpruce, Species::SilverFir, Species::DouglasFir];
+        let nearest = placements
+            .iter()
+            .filter(|p| conical.contains(&SPECIES[p.species / per_species].0))
+            .min_by(|a, b| {
+                a.position
+                    .distance(start.eye)
+                    .total_cmp(&b.position.distance(start.eye))
+            });
+        if let Some(tree) = nearest {
+            let away =
+                Vec3::new(start.eye.x - tree.position.x, 0.0, start.eye.z - tree.position.z).normalize_or(Vec3::Z);
+            let foot = tree.position + away * 14.0;
+            eye = Vec3::new(foot.x, terrain_height(Vec2::new(foot.x, foot.z)) + 1.7, foot.z);
+            look_at = tree.position + Vec3::Y * 9.0;
+        }
+    }
     info!("{} trees", placements.len());
     commands.insert_resource(SpeciesHandles(species));
 
@@ -421,7 +444,7 @@ fn setup(
             far: 2000.0,
             ..default()
         }),
-        Transform::from_translation(start.eye).looking_at(start.target, Vec3::Y),
+        Transform::from_translation(eye).looking_at(look_at, Vec3::Y),
         DistanceFog {
             color: sky,
             // Aerial perspective: grey-blue haze, half gone at ~1 km.

@@ -703,6 +703,13 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     pbr_input.world_normal = normalize(axis);
     pbr_input.is_orthographic = view.clip_from_view[3].w == 1.0;
     pbr_input.V = pbr_functions::calculate_view(in.world_position, pbr_input.is_orthographic);
+#ifdef CONIFER_IMPOSTOR
+    // The quad stands on the trunk, inside the crown, where the crown's own
+    // shadow falls: what the camera sees is the crown's near side, half its
+    // width nearer. Lights and shadows are taken there.
+    let reach = species.impostor_box.z * length(world_from_local[0].xyz);
+    pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * reach, 1.0);
+#endif
     pbr_input.N = pbr_input.world_normal;
     pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;
 #ifdef CONIFER_FACING_STRIP
