@@ -430,17 +430,8 @@ impl CrownImpostor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::look::tests::needle;
     use crate::model::look::{SideView, side_coverage};
-
-    fn needle(base: Vec3, tip: Vec3, radius: f32) -> Needle {
-        Needle {
-            base,
-            tip,
-            radius,
-            normal: Vec3::Z,
-            group: 0,
-        }
-    }
 
     /// A cone of random needles, 10 m tall, 3 m across at the bottom.
     fn cone(count: u32, radius: f32) -> Vec<Needle> {

@@ -309,10 +309,11 @@ pub fn side_coverage(needles: &[Needle], wood: &[WoodSegment], view: SideView) -
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    fn needle(base: Vec3, tip: Vec3, radius: f32) -> Needle {
+    /// A needle from `base` to `tip` (the model tests' shorthand).
+    pub(crate) fn needle(base: Vec3, tip: Vec3, radius: f32) -> Needle {
         Needle {
             base,
             tip,
