@@ -480,6 +480,8 @@ fn debug_overlay_switches_colours_and_counts_the_cut() {
     let crown = write_tree(dir.path(), "spruce.conifer");
     let mut app = app(dir.path());
     app.add_plugins(ConiferLodDebugPlugin::default());
+    // The cut's counts (the far tree would be its impostor).
+    app.world_mut().resource_mut::<ConiferLodSettings>().far_impostor = false;
     app.world_mut().spawn(camera(6.0));
     let (tree, handle) = spawn_tree(&mut app, "spruce.conifer", crown);
     // A second tree far behind: two instances, two different cuts.

@@ -131,6 +131,13 @@ fn the_plugin_covers_what_the_needles_cover() {
         ours_line_opacity: Default::default(),
     };
     let mut scene = EvalScene::new(record, &[Method::Ours], view).unwrap();
+    // Each representation of the line path (the impostor has its own test,
+    // `tests/render_impostor.rs`).
+    let world = scene.world_mut();
+    let mut overrides = world.query::<&mut ConiferLodOverride>();
+    for mut over in overrides.iter_mut(world) {
+        over.far_impostor = Some(false);
+    }
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
     // (distance, name, coverage error bound, mean coverage bound relative
@@ -420,6 +427,12 @@ fn two_cameras_and_a_split_screen_each_get_their_own_cut() {
 #[test]
 fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
     let mut scene = Scene::new();
+    // The cut is what changes (no impostor).
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .far_impostor = false;
     scene.look_from(8.0, 45.0);
     let tree = scene
         .renderer
@@ -476,6 +489,11 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
     // What a fresh scene draws of the new record.
     let fresh = {
         let mut fresh = Scene::new();
+        fresh
+            .renderer
+            .world_mut()
+            .resource_mut::<ConiferLodSettings>()
+            .far_impostor = false;
         write_record(&record, &fresh.dir.path().join("spruce.conifer")).unwrap();
         let handle: Handle<ConiferSpecies> = fresh.renderer.world().resource::<AssetServer>().load("spruce.conifer");
         fresh.renderer.load(&[handle.clone().untyped()], 600).unwrap();

@@ -217,6 +217,12 @@ fn placed_species_hold_each_prototype_once() {
 #[test]
 fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
     let mut scene = Scene::new();
+    // The coarser cut is what is compared (no impostor).
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .far_impostor = false;
     scene.look_from(6.0, 45.0);
     let placed = scene.placed.clone();
     let full = scene.shot(&placed, "capacity_full");

@@ -517,6 +517,11 @@ impl EvalScene {
         self.record.crown_center() + Vec3::Z * distance
     }
 
+    /// The scene's world (e.g. to change a tree's `ConiferLodOverride`).
+    pub fn world_mut(&mut self) -> &mut World {
+        self.renderer.world_mut()
+    }
+
     /// Moves every camera to `distance` from the crown and updates the
     /// sampled lines for it.
     pub fn set_distance(&mut self, distance: f32) {
