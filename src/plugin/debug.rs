@@ -257,11 +257,7 @@ fn collect_stats(
         .collect();
     // The first active perspective camera decides which trees are
     // impostors (as its cull pass does: `impostor_fade`).
-    let viewer = cameras.iter().filter(|(c, _, _)| c.is_active).find_map(|(c, t, p)| {
-        let height = c.physical_viewport_size()?.y as f32;
-        let (slope, perspective) = view_error_slope(&p.get_clip_from_view(), height)?;
-        perspective.then_some((t.translation(), slope))
-    });
+    let viewer = first_perspective_camera(&cameras);
     for (foliage, state, transform, visibility, over) in &trees {
         next.instances += 1;
         let Some(species) = species_assets.get(&foliage.0) else {
@@ -324,12 +320,7 @@ fn draw_gizmos(
     if !(debug.enabled && debug.gizmos) {
         return;
     }
-    // The first active perspective camera with a viewport.
-    let Some((camera_position, slope)) = cameras.iter().filter(|(c, _, _)| c.is_active).find_map(|(c, t, p)| {
-        let height = c.physical_viewport_size()?.y as f32;
-        let (slope, perspective) = view_error_slope(&p.get_clip_from_view(), height)?;
-        perspective.then_some((t.translation(), slope))
-    }) else {
+    let Some((camera_position, slope)) = first_perspective_camera(&cameras) else {
         return;
     };
     let mut nearest: Vec<(f32, Vec3, f32, &ConiferFoliage, f32)> = trees
@@ -374,6 +365,16 @@ fn draw_gizmos(
             }
         }
     }
+}
+
+/// The position and error slope (`view_error_slope`) of the first active
+/// perspective camera with a viewport.
+fn first_perspective_camera(cameras: &Query<(&Camera, &GlobalTransform, &Projection)>) -> Option<(Vec3, f32)> {
+    cameras.iter().filter(|(c, _, _)| c.is_active).find_map(|(c, t, p)| {
+        let height = c.physical_viewport_size()?.y as f32;
+        let (slope, perspective) = view_error_slope(&p.get_clip_from_view(), height)?;
+        perspective.then_some((t.translation(), slope))
+    })
 }
 
 /// Marks the stats panel's text.

@@ -245,6 +245,13 @@ fn instance_world_from_local(instance: Instance) -> mat4x4<f32> {
     );
 }
 
+// `world` in the frame of a tree whose `world_from_local` is a rotation, a
+// uniform `scale` and a translation.
+fn tree_local_point(world_from_local: mat4x4<f32>, scale: f32, world: vec3<f32>) -> vec3<f32> {
+    let basis = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
+    return (transpose(basis) * (world - world_from_local[3].xyz)) / max(scale * scale, 1e-12);
+}
+
 // Mean length of the basis vectors: the instance's (uniform) scale.
 fn instance_scale(instance: Instance) -> f32 {
     let x = vec3<f32>(instance.row_x.x, instance.row_y.x, instance.row_z.x);

@@ -39,7 +39,7 @@
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
     instance_world_from_local, log_decode, placement_matrix,
-    threshold_code, sphere_error, placement_error,
+    threshold_code, sphere_error, placement_error, tree_local_point,
 }
 
 @group(2) @binding(0) var<uniform> species: SpeciesParams;
@@ -306,14 +306,6 @@ fn line_color(lod: InstanceLod, color: vec4<f32>, line: u32, tree: u32) -> vec4<
 #endif
 }
 
-// `world` in the frame of a tree whose `world_from_local` is a rotation, a
-// uniform scale and a translation.
-fn local_point(world_from_local: mat4x4<f32>, world: vec3<f32>) -> vec3<f32> {
-    let m = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
-    let scale_sq = max(dot(m[0], m[0]), 1e-12);
-    return (transpose(m) * (world - world_from_local[3].xyz)) / scale_sq;
-}
-
 // Spatial error of a wood segment (`start`, `end`: centre and radius of
 // each end): the tree's, or seen from a view point, its own sphere's (the
 // one `model::view` bounds it by).
@@ -469,7 +461,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let frame = species.impostor_box;
     let span = species.impostor_span;
-    let camera = local_point(world_from_local, view.world_position);
+    let camera = tree_local_point(world_from_local, length(world_from_local[0].xyz), view.world_position);
     var toward = vec2<f32>(camera.x - frame.x, camera.z - frame.y);
     if dot(toward, toward) < 1e-12 {
         toward = vec2<f32>(0.0, 1.0);

@@ -20,7 +20,7 @@
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
     LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
-    instance_world_from_local, instance_scale,
+    instance_world_from_local, instance_scale, tree_local_point,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
 }
 
@@ -151,13 +151,6 @@ fn hide(instance: u32) {
     instance_lods[instance].view = vec4<f32>(0.0);
 }
 
-// `world` in the frame of a tree whose `world_from_local` is a rotation, a
-// uniform `scale` and a translation.
-fn tree_local_point(world_from_local: mat4x4<f32>, scale: f32, world: vec3<f32>) -> vec3<f32> {
-    let basis = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
-    return (transpose(basis) * (world - world_from_local[3].xyz)) / max(scale * scale, 1e-12);
-}
-
 @compute @workgroup_size(64)
 fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -205,9 +198,10 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     // nearest point of its sphere (a lower bound of every node's), each
     // node's from its own sphere, unless the camera is beyond range.
     var view_point = vec4<f32>(0.0);
+    // The camera in the tree's frame (view points, the impostor's elevation).
+    let camera = tree_local_point(world_from_local, scale, cull_view.world_position.xyz);
     if species.error_scope != 0u && species.placement_count > 0u && species.lod_enabled != 0u
         && (cull_view.perspective & VIEW_PERSPECTIVE) != 0u {
-        let camera = tree_local_point(world_from_local, scale, cull_view.world_position.xyz);
         let slope = max(pixel_error, 0.0) * cull_view.error_slope;
         let d = sphere_distance(species.tree_sphere, camera);
         e = slope * d;
@@ -230,8 +224,8 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         let texels = e / max(species.impostor_box.w, 1e-9);
         let t = clamp((texels - IMPOSTOR_FADE_START) / (IMPOSTOR_FADE_END - IMPOSTOR_FADE_START), 0.0, 1.0);
         // Side views: a camera looking down on the tree keeps its lines.
-        let camera = tree_local_point(world_from_local, scale, cull_view.world_position.xyz) - species.crown_center.xyz;
-        let elevation = abs(camera.y) / max(length(camera.xz), 1e-9);
+        let above = camera - species.crown_center.xyz;
+        let elevation = abs(above.y) / max(length(above.xz), 1e-9);
         let steep = clamp((elevation - IMPOSTOR_STEEP_START) / (IMPOSTOR_STEEP_END - IMPOSTOR_STEEP_START), 0.0, 1.0);
         fade = u32(round(t * (1.0 - steep) * 255.0));
     }
