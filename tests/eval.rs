@@ -3,6 +3,8 @@
 //! see what they should.
 #![cfg(feature = "eval")]
 
+mod common;
+
 use bevy_conifer_lod::eval::scene::{EvalView, Method};
 use bevy_conifer_lod::eval::{EvalOptions, evaluate};
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
@@ -10,6 +12,7 @@ use bevy_conifer_lod::model::{BakeOptions, bake};
 
 #[test]
 fn every_method_renders_and_is_measured() {
+    let _turn = common::gpu_turn();
     let tree = generate(
         Species::ScotsPine,
         &GenerateOptions {
@@ -112,6 +115,7 @@ fn every_method_renders_and_is_measured() {
 
 #[test]
 fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
+    let _turn = common::gpu_turn();
     // `conifer eval --inside` on a small tree of shared prototypes: the
     // camera 2 m from the trunk at 40 % of the height, both error scopes
     // against the supersampled reference.

@@ -116,6 +116,7 @@ impl Scene {
 /// (every needle a prism, 4×4 samples a pixel), as `conifer eval` measures.
 #[test]
 fn the_plugin_covers_what_the_needles_cover() {
+    let _turn = common::gpu_turn();
     use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
     use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
     let record = pine();
@@ -171,6 +172,7 @@ fn the_plugin_covers_what_the_needles_cover() {
 
 #[test]
 fn a_hidden_tree_is_not_drawn() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     let tree = scene.spawn_tree(Transform::IDENTITY);
     scene.look_from(6.0, 45.0);
@@ -182,6 +184,7 @@ fn a_hidden_tree_is_not_drawn() {
 
 #[test]
 fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.look_from(60.0, 45.0);
     let mut trees = Vec::new();
@@ -213,11 +216,11 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     assert!(species_bytes >= compact.bytes().total() && species_bytes <= compact.bytes().total() + 9 * 128);
     assert!(per_needle <= 36.0, "{per_needle} B/needle");
     // 3,000 trees: a 4,096-slot instance buffer (64 B each) and the
-    // species' 224-byte parameters, and per view 4,096 LOD slots (32 B)
+    // species' 304-byte parameters, and per view 4,096 LOD slots (32 B)
     // and 7 × 4,096 indirect draws (16 B), and five 16-byte stand-ins for
     // the placement buffers a flat species leaves empty.
     let placed_stand_ins = 5 * 16;
-    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 224);
+    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 304);
     // The impostor's texture: every mip level of every view, as uploaded.
     let impostor = record_species_impostor_bytes(&scene, id);
     assert_eq!(memory.impostor_bytes[&id], impostor);
@@ -237,7 +240,7 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     }
     scene.shot("forest_thinned");
     let memory = scene.memory();
-    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 224);
+    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 304);
     assert_eq!(memory.view_bytes, 128 + 128 * 32 + 7 * 128 * 16 + placed_stand_ins);
     assert_eq!(memory.buffers, buffers);
     // All go: nothing is left.
@@ -259,6 +262,7 @@ fn record_species_impostor_bytes(scene: &Scene, id: AssetId<ConiferSpecies>) -> 
 
 #[test]
 fn trees_spawned_before_their_species_loads_are_drawn() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::with_trees(&[Transform::from_xyz(0.0, 0.0, 500.0), Transform::IDENTITY]);
     scene.look_from(6.0, 45.0);
     let image = scene.shot("early_trees");
@@ -268,6 +272,7 @@ fn trees_spawned_before_their_species_loads_are_drawn() {
 
 #[test]
 fn a_tree_after_a_culled_tree_is_drawn() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.look_from(6.0, 45.0);
     // Instance 0 far behind the camera (culled), instance 1 in view.
@@ -302,6 +307,7 @@ fn extra_camera(scene: &mut Scene, target: &Handle<Image>, distance: f32, viewpo
 /// the light edge-on, and with the sun behind the tree both see its shade.
 #[test]
 fn lines_are_lit_as_the_cylinders_they_stand_for() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.spawn_tree(Transform::IDENTITY);
     // 30 m: every needle is a line (original or merged).
@@ -343,6 +349,7 @@ fn lines_are_lit_as_the_cylinders_they_stand_for() {
 /// where `Σa/A ≤ 1`, at least `1 − 1/e` of it.
 #[test]
 fn merged_lines_cover_at_most_their_summed_area_under_the_coverage_rule() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     // 60 m through a telephoto: merged lines carry most of the crown (the
     // lines are what is measured: no impostor).
@@ -380,6 +387,7 @@ fn merged_lines_cover_at_most_their_summed_area_under_the_coverage_rule() {
 
 #[test]
 fn two_cameras_and_a_split_screen_each_get_their_own_cut() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.spawn_tree(Transform::IDENTITY);
     // The scene's camera at 1.5 m, a second one at 40 m into its own target.
@@ -426,6 +434,7 @@ fn two_cameras_and_a_split_screen_each_get_their_own_cut() {
 
 #[test]
 fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     // The cut is what changes (no impostor).
     scene

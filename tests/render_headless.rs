@@ -4,6 +4,8 @@
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
+mod common;
+
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
@@ -76,6 +78,7 @@ fn coverage(image: &image::RgbaImage) -> (usize, usize) {
 
 #[test]
 fn close_prisms_far_lines_and_two_cameras() {
+    let _turn = common::gpu_turn();
     let dir = tempfile::tempdir().unwrap();
     let out = output_dir();
     let (mut renderer, crown) = scene(dir.path());
@@ -129,6 +132,7 @@ fn hues(image: &image::RgbaImage) -> (usize, usize, usize) {
 
 #[test]
 fn overlay_colours_each_representation() {
+    let _turn = common::gpu_turn();
     let dir = tempfile::tempdir().unwrap();
     let out = output_dir();
     let (mut renderer, crown) = scene(dir.path());

@@ -6,6 +6,8 @@
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
+mod common;
+
 use bevy::prelude::*;
 use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
 use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
@@ -46,6 +48,7 @@ fn out_dir() -> PathBuf {
 
 #[test]
 fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
+    let _turn = common::gpu_turn();
     let species = ConiferSpecies::from_record(spruce()).unwrap();
     let texel = species.impostor.as_ref().expect("an impostor").texel;
     let crown = species.crown_center;
@@ -138,6 +141,7 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
 
 #[test]
 fn the_impostor_covers_what_the_needles_cover() {
+    let _turn = common::gpu_turn();
     let record = spruce();
     let texel = ConiferSpecies::from_record(record.clone())
         .unwrap()

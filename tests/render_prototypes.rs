@@ -125,6 +125,7 @@ fn assert_alike(what: &str, placed: &image::RgbaImage, flat: &image::RgbaImage) 
 
 #[test]
 fn placed_prototypes_draw_what_the_flattened_tree_draws() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     // One error per tree, as a flat species has: the same cut both ways.
     scene
@@ -155,6 +156,7 @@ fn placed_prototypes_draw_what_the_flattened_tree_draws() {
 
 #[test]
 fn inside_the_crown_errors_per_placement_keep_the_full_detail_picture() {
+    let _turn = common::gpu_turn();
     // The camera 1.5 m from the crown's centre, inside the tree's sphere:
     // with one error for the tree (from that centre) the needles beside
     // the camera get the far side's error; with each placement's own, the
@@ -196,6 +198,7 @@ fn inside_the_crown_errors_per_placement_keep_the_full_detail_picture() {
 
 #[test]
 fn placed_species_hold_each_prototype_once() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.look_from(6.0, 45.0);
     let (placed, flat) = (scene.placed.clone(), scene.flat.clone());
@@ -216,6 +219,7 @@ fn placed_species_hold_each_prototype_once() {
 
 #[test]
 fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     // The coarser cut is what is compared (no impostor).
     scene
@@ -258,6 +262,7 @@ fn reference_tree_draws(compact: &CompactSpecies, code: u16, e: f32) -> [[u32; 2
 
 #[test]
 fn gpu_draws_equal_the_cpu_reference() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
     // The cut is what is compared: no impostor far away.
@@ -387,6 +392,7 @@ fn gpu_draws_equal_the_cpu_reference() {
 
 #[test]
 fn placed_prototypes_cast_the_flattened_tree_shadow() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     let world = scene.renderer.world_mut();
     let mut lights = world.query::<&mut DirectionalLight>();
@@ -430,6 +436,7 @@ fn placed_prototypes_cast_the_flattened_tree_shadow() {
 
 #[test]
 fn with_lod_off_every_tree_of_a_forest_is_drawn() {
+    let _turn = common::gpu_turn();
     let mut scene = Scene::new();
     scene.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
     scene.look_from(30.0, 45.0);

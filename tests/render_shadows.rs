@@ -20,12 +20,6 @@ use std::path::PathBuf;
 
 const SIZE: u32 = 256;
 
-/// Held by each test while it renders. With both tests' apps rendering at
-/// once in one process on lavapipe, about one run in five brought back one
-/// test's three pictures blank white (its sun scene as if under the other
-/// test's 2,000,000 lm lamp), so the two take turns.
-static RENDERING: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
 fn luminance(image: &image::RgbaImage) -> Vec<f32> {
     image
         .pixels()
@@ -199,7 +193,7 @@ fn spawn_lamp(world: &mut World) {
 
 #[test]
 fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
-    let _turn = RENDERING.lock().unwrap_or_else(|e| e.into_inner());
+    let _turn = common::gpu_turn();
     let mut scene = ShadowScene::new();
     spawn_sun(scene.renderer.world_mut());
     // From 10 m above the shadow: the tree stands at the top edge, its
@@ -210,7 +204,7 @@ fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
 
 #[test]
 fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
-    let _turn = RENDERING.lock().unwrap_or_else(|e| e.into_inner());
+    let _turn = common::gpu_turn();
     let mut scene = ShadowScene::new();
     spawn_lamp(scene.renderer.world_mut());
     // The camera is 80 m up (its cut is coarse lines), the lamp 3 m from the

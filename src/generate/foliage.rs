@@ -128,6 +128,7 @@ pub(crate) fn grow_shoot_prototypes(
             weight: length,
             group_key: 0,
             vigor: vigors[vigors.len() / 2],
+            age: 0.0,
         };
         let mut placer = Placer::new(params, &mut *rng, Vec3::Z, budget);
         placer.grow(&canonical, key.0);
@@ -147,6 +148,7 @@ pub(crate) fn grow_shoot_prototypes(
                 rotation: Quat::from_mat3(&frame).normalize(),
                 translation: site.start,
                 scale: (site.start.distance(site.end) / length).max(1e-3),
+                needle_age: needle_age(site.age),
             }
         })
         .collect();
@@ -200,6 +202,22 @@ fn grow_twig_prototypes(
         (units, total)
     });
     let mut prototype_of = vec![None; skeleton.twigs.len()];
+    // A twig's needles are of several ages; it is placed at their mean.
+    let twig_ages: Vec<u8> = skeleton
+        .twigs
+        .iter()
+        .zip(&units)
+        .map(|(twig, units)| {
+            let (sum, count) = twig
+                .sites
+                .iter()
+                .zip(units)
+                .fold((0.0f32, 0u32), |(sum, count), (site, &u)| {
+                    (sum + site.age * u as f32, count + u)
+                });
+            needle_age(sum / count.max(1) as f32)
+        })
+        .collect();
     for (index, twig) in skeleton.twigs.iter().enumerate() {
         if uses[index] == 0 || units[index].iter().all(|&u| u == 0) {
             continue;
@@ -217,8 +235,14 @@ fn grow_twig_prototypes(
             rotation: p.rotation,
             translation: p.translation,
             scale: p.scale.max(1e-3),
+            needle_age: twig_ages[p.twig as usize],
         })
     }));
+}
+
+/// A site's mean needle age as a placement's whole years.
+fn needle_age(age: f32) -> u8 {
+    age.round().clamp(0.0, u8::MAX as f32) as u8
 }
 
 /// Needles per placed unit: a fascicle's needles, or 1.

@@ -95,10 +95,13 @@ pub(crate) fn scots_pine() -> SpeciesParams {
         spray: None,
         foliage: FoliageFor::pine(2, (0.03, 0.06), (0.0007, 0.001), 3, 1_000.0),
         material: FoliageMaterial {
-            needle_color: srgb(52, 84, 62),
-            wood_color: srgb(140, 92, 62),
-            roughness: 0.7,
-            reflectance: 0.35,
+            // Grey-brown and scaly at the foot, turning thin, flaky and
+            // orange between 30 % and 50 % of the height.
+            young_needle_color: srgb(80, 112, 62),
+            needle_underside_color: srgb(52, 84, 62),
+            upper_wood_color: srgb(176, 98, 52),
+            upper_wood_heights: [0.3, 0.5],
+            ..FoliageMaterial::uniform(srgb(52, 84, 62), srgb(92, 74, 62), 0.7, 0.35)
         },
     }
 }
@@ -160,10 +163,9 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             DENSE_CROWN_GROWTH,
         ),
         material: FoliageMaterial {
-            needle_color: srgb(48, 82, 50),
-            wood_color: srgb(104, 78, 62),
-            roughness: 0.65,
-            reflectance: 0.3,
+            // This year's shoots a bright light green.
+            young_needle_color: srgb(96, 132, 58),
+            ..FoliageMaterial::uniform(srgb(48, 82, 50), srgb(104, 78, 62), 0.65, 0.3)
         },
     }
 }
@@ -234,10 +236,13 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
         spray: None,
         foliage,
         material: FoliageMaterial {
-            needle_color: srgb(56, 88, 66),
-            wood_color: srgb(92, 86, 80),
-            roughness: 0.5,
-            reflectance: 0.3,
+            // White stomatal lines on the needles' inner faces; dark,
+            // furrowed bark at the foot, smooth grey-green above.
+            young_needle_color: srgb(82, 114, 72),
+            needle_underside_color: srgb(76, 102, 88),
+            upper_wood_color: srgb(108, 106, 96),
+            upper_wood_heights: [0.35, 0.6],
+            ..FoliageMaterial::uniform(srgb(56, 88, 66), srgb(76, 70, 66), 0.5, 0.3)
         },
     }
 }
@@ -310,10 +315,10 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
         }),
         foliage,
         material: FoliageMaterial {
-            needle_color: srgb(50, 86, 54),
-            wood_color: srgb(120, 80, 60),
-            roughness: 0.55,
-            reflectance: 0.3,
+            // Faint pale marks under the sprays.
+            young_needle_color: srgb(72, 106, 62),
+            needle_underside_color: srgb(70, 100, 80),
+            ..FoliageMaterial::uniform(srgb(50, 86, 54), srgb(120, 80, 60), 0.55, 0.3)
         },
     }
 }
@@ -371,10 +376,13 @@ pub(crate) fn douglas_fir() -> SpeciesParams {
         spray: None,
         foliage: FoliageFor::single((0.015, 0.03), (0.0006, 0.0008), 6, 45_000.0, Phyllotaxy::Spiral),
         material: FoliageMaterial {
-            needle_color: srgb(54, 85, 52),
-            wood_color: srgb(96, 72, 58),
-            roughness: 0.6,
-            reflectance: 0.3,
+            // Two pale bands under each needle; thick, dark, furrowed bark
+            // at the foot, smoother and greyer up the stem.
+            young_needle_color: srgb(92, 126, 62),
+            needle_underside_color: srgb(80, 106, 82),
+            upper_wood_color: srgb(112, 98, 86),
+            upper_wood_heights: [0.3, 0.6],
+            ..FoliageMaterial::uniform(srgb(54, 85, 52), srgb(80, 60, 48), 0.6, 0.3)
         },
     }
 }
@@ -438,10 +446,11 @@ pub(crate) fn silver_fir() -> SpeciesParams {
             Phyllotaxy::TwoRanked { lift: deg(15.0) },
         ),
         material: FoliageMaterial {
-            needle_color: srgb(46, 80, 50),
-            wood_color: srgb(150, 147, 140),
-            roughness: 0.5,
-            reflectance: 0.35,
+            // Dark, glossy above with two white stomatal bands beneath
+            // (the "silver"); pale grey bark.
+            young_needle_color: srgb(86, 122, 64),
+            needle_underside_color: srgb(112, 138, 122),
+            ..FoliageMaterial::uniform(srgb(46, 80, 50), srgb(150, 147, 140), 0.5, 0.35)
         },
     }
 }

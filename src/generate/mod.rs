@@ -40,7 +40,7 @@ use self::foliage::NeedleBudget;
 use self::params::{NeedleCount, SpeciesParams};
 pub use self::preset::{Preset, PresetParseError};
 use self::random::{Stream, TreeRng};
-use crate::model::{PrototypeInput, TreeInput};
+use crate::model::{PrototypeInput, TreeInput, WoodSegment};
 
 /// The conifer presets: the paper's four species and two firs. Each grows
 /// at either [`Age`]; [`Species::description`] gives its size at each.
@@ -276,9 +276,9 @@ pub fn generate(species: Species, options: &GenerateOptions) -> TreeInput {
     TreeInput {
         name: format!("{}-{}-s{}", species.name(), options.age, options.seed),
         needles,
+        material: params.material_for(tree_height(&skeleton.wood)),
         wood: skeleton.wood,
         wood_mesh: Default::default(),
-        material: params.material,
     }
 }
 
@@ -301,10 +301,15 @@ pub fn generate_prototypes(species: Species, options: &GenerateOptions) -> Proto
         name: format!("{}-{}-s{}", species.name(), options.age, options.seed),
         prototypes,
         placements,
+        material: params.material_for(tree_height(&skeleton.wood)),
         wood: skeleton.wood,
         wood_mesh: Default::default(),
-        material: params.material,
     }
+}
+
+/// Height of a tree's wood above its foot (the trunk's top), metres.
+fn tree_height(wood: &[WoodSegment]) -> f32 {
+    wood.iter().map(|w| w.start.y.max(w.end.y)).fold(0.0, f32::max)
 }
 
 /// Most a mature tree's needles widen before they also lengthen.

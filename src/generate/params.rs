@@ -13,7 +13,21 @@ pub(crate) struct SpeciesParams {
     /// Flattened scale-leaf sprays (cypresses); `None` for needle-bearing shoots.
     pub spray: Option<SprayParams>,
     pub foliage: FoliageParams,
+    /// The tree's material, its `upper_wood_heights` as fractions of the
+    /// tree's height ([`SpeciesParams::material_for`]).
     pub material: FoliageMaterial,
+}
+
+impl SpeciesParams {
+    /// The material of a grown tree `height` metres tall: the preset's
+    /// bark heights, fractions of the height, in metres.
+    pub(crate) fn material_for(&self, height: f32) -> FoliageMaterial {
+        let [start, end] = self.material.upper_wood_heights;
+        FoliageMaterial {
+            upper_wood_heights: [start * height, end * height],
+            ..self.material
+        }
+    }
 }
 
 /// The stem and its yearly height growth.
@@ -324,12 +338,7 @@ pub(crate) fn scots_pine() -> SpeciesParams {
             tip_crowding: 1.0,
             group_size: (2, 2),
         },
-        material: FoliageMaterial {
-            needle_color: srgb(62, 98, 80),
-            wood_color: srgb(120, 72, 44),
-            roughness: 0.7,
-            reflectance: 0.35,
-        },
+        material: FoliageMaterial::uniform(srgb(62, 98, 80), srgb(120, 72, 44), 0.7, 0.35),
     }
 }
 
@@ -396,12 +405,7 @@ pub(crate) fn norway_spruce() -> SpeciesParams {
             tip_crowding: 1.0,
             group_size: (10, 60),
         },
-        material: FoliageMaterial {
-            needle_color: srgb(34, 72, 36),
-            wood_color: srgb(96, 66, 50),
-            roughness: 0.65,
-            reflectance: 0.3,
-        },
+        material: FoliageMaterial::uniform(srgb(34, 72, 36), srgb(96, 66, 50), 0.65, 0.3),
     }
 }
 
@@ -475,12 +479,7 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
             tip_crowding: 2.2,
             group_size: (5, 5),
         },
-        material: FoliageMaterial {
-            needle_color: srgb(74, 110, 88),
-            wood_color: srgb(88, 80, 68),
-            roughness: 0.5,
-            reflectance: 0.3,
-        },
+        material: FoliageMaterial::uniform(srgb(74, 110, 88), srgb(88, 80, 68), 0.5, 0.3),
     }
 }
 
@@ -560,11 +559,6 @@ pub(crate) fn lawson_cypress() -> SpeciesParams {
             tip_crowding: 1.0,
             group_size: (1, 600),
         },
-        material: FoliageMaterial {
-            needle_color: srgb(40, 88, 48),
-            wood_color: srgb(110, 62, 42),
-            roughness: 0.55,
-            reflectance: 0.3,
-        },
+        material: FoliageMaterial::uniform(srgb(40, 88, 48), srgb(110, 62, 42), 0.55, 0.3),
     }
 }

@@ -32,6 +32,9 @@ pub(crate) struct FoliageSite {
     pub group_key: u32,
     /// Shoot vigour (≈ 0.5–1.2): weaker shoots carry shorter needles.
     pub vigor: f32,
+    /// Age of its needles, years (0: grown this year); the mean over the
+    /// annual pieces it spans.
+    pub age: f32,
 }
 
 impl FoliageSite {
@@ -547,13 +550,14 @@ impl Grower<'_> {
         }
         let weight_scale = foliage.survival_per_year.powi(years_old as i32);
         match &self.params.spray {
-            Some(spray) => self.add_sprays(spray, start, end, weight_scale, vigor, is_tip),
+            Some(spray) => self.add_sprays(spray, start, end, weight_scale, vigor, years_old as f32, is_tip),
             None => {
                 let weight = start.distance(end) * weight_scale;
                 let merge = self.params.branching.merge_pieces.max(1);
                 if let Some(index) = run.site.filter(|_| run.pieces < merge) {
                     let site = &mut self.sites[index];
                     if site.end.distance_squared(start) < 1e-12 {
+                        site.age = (site.age * run.pieces as f32 + years_old as f32) / (run.pieces + 1) as f32;
                         site.end = end;
                         site.weight += weight;
                         site.up = perpendicular_toward((end - site.start).normalize_or(UP), UP);
@@ -569,6 +573,7 @@ impl Grower<'_> {
                     weight,
                     group_key: self.next_group_key,
                     vigor,
+                    age: years_old as f32,
                 });
                 self.next_group_key += 1;
                 *run = SiteRun {
@@ -581,7 +586,17 @@ impl Grower<'_> {
 
     /// Sprays along a young piece, alternating sides in the branch plane,
     /// plus one continuing the axis at its tip.
-    fn add_sprays(&mut self, spray: &SprayParams, start: Vec3, end: Vec3, weight_scale: f32, vigor: f32, is_tip: bool) {
+    #[allow(clippy::too_many_arguments)] // The piece, as `add_foliage` takes it.
+    fn add_sprays(
+        &mut self,
+        spray: &SprayParams,
+        start: Vec3,
+        end: Vec3,
+        weight_scale: f32,
+        vigor: f32,
+        age: f32,
+        is_tip: bool,
+    ) {
         let dir = (end - start).normalize_or(UP);
         let side = perpendicular_toward(dir, dir.cross(UP));
         let count = self.rng.round(start.distance(end) / spray.spacing);
@@ -594,20 +609,30 @@ impl Grower<'_> {
             };
             let angle = self.rng.jitter(spray.angle, 0.2);
             let spray_dir = (dir * angle.cos() + toward * angle.sin()).normalize();
-            self.grow_one_spray(spray, start.lerp(end, t), spray_dir, weight_scale, vigor);
+            self.grow_one_spray(spray, start.lerp(end, t), spray_dir, weight_scale, vigor, age);
         }
         if is_tip {
-            self.grow_one_spray(spray, end, dir, weight_scale, vigor);
+            self.grow_one_spray(spray, end, dir, weight_scale, vigor, age);
         }
     }
 
-    fn grow_one_spray(&mut self, spray: &SprayParams, origin: Vec3, direction: Vec3, weight_scale: f32, vigor: f32) {
+    #[allow(clippy::too_many_arguments)] // The spray's start, as `SprayStart` holds it.
+    fn grow_one_spray(
+        &mut self,
+        spray: &SprayParams,
+        origin: Vec3,
+        direction: Vec3,
+        weight_scale: f32,
+        vigor: f32,
+        age: f32,
+    ) {
         let start = SprayStart {
             origin,
             direction,
             group_key: self.next_group_key,
             weight_scale,
             vigor,
+            age,
         };
         self.next_group_key += 1;
         grow_spray(&mut self.sites, self.rng, spray, start);

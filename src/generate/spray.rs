@@ -24,6 +24,8 @@ pub(crate) struct SprayStart {
     /// Needle survival factor of the shoot it grows on.
     pub weight_scale: f32,
     pub vigor: f32,
+    /// Age of the shoot's needles, years.
+    pub age: f32,
 }
 
 /// Adds the sites of one spray.
@@ -34,6 +36,7 @@ pub(crate) fn grow_spray(sites: &mut Vec<FoliageSite>, rng: &mut TreeRng, params
         group_key,
         weight_scale,
         vigor,
+        age,
     } = start;
     let length = rng.range(params.length) * vigor.min(1.0);
     let roll = params.roll * rng.signed();
@@ -48,6 +51,7 @@ pub(crate) fn grow_spray(sites: &mut Vec<FoliageSite>, rng: &mut TreeRng, params
             weight: start.distance(end) * weight_scale,
             group_key,
             vigor,
+            age,
         });
     };
     for &(start, end, up) in &axis {

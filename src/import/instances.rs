@@ -148,6 +148,7 @@ pub(crate) fn share_instances(
             rotation,
             translation,
             scale,
+            ..Placement::identity(prototype)
         });
     }
     PrototypeInput {

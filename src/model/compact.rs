@@ -132,6 +132,10 @@ pub struct CompactSpecies {
     /// A sphere holding every node's sphere and the wood (tree metres); a
     /// view's tree-wide threshold code comes from its nearest point.
     pub tree_sphere: Sphere,
+    /// Linear RGB the needles take where no placement gives them an age
+    /// (the tree's own lines, a flat species, the impostor):
+    /// [`super::color::far_needle_color`], or a flat record's needle colour.
+    pub far_needle_color: Vec3,
 }
 
 /// A root's parent sphere index: no parent.
@@ -160,6 +164,9 @@ pub struct CompactPrototype {
     /// from all of the prototype's to one, so the placements of a band
     /// need prefixes within a ratio of about 1.6 of each other.
     pub band_edges: [u16; PLACED_BANDS as usize - 1],
+    /// The upper side of its needles ([`super::color::upper_side`]): which
+    /// way a placement's needles show their undersides.
+    pub upper_side: Vec3,
 }
 
 /// A placement of a placed species, as the GPU reads it.
@@ -538,6 +545,7 @@ impl CompactSpecies {
             tree_spheres: Vec::new(),
             tree_line_parents: Vec::new(),
             tree_sphere: Sphere::default(),
+            far_needle_color: Vec3::from_slice(&record.material.needle_color[..3]),
         })
     }
 
@@ -767,6 +775,7 @@ impl CompactSpecies {
             tree_spheres: Vec::new(),
             tree_line_parents: Vec::new(),
             tree_sphere: record.tree_sphere(),
+            far_needle_color: super::color::far_needle_color(record),
         };
         for (slot, &i) in order.iter().enumerate() {
             let (parent, own, width, node) = lines[i];
@@ -840,6 +849,7 @@ impl CompactSpecies {
                 original_lines: first(species.original_lines.len(), section.original_lines.len()),
                 merged_lines: first(species.merged_lines.len(), section.merged_lines.len()),
                 band_edges,
+                upper_side: super::color::upper_side(&prototype.needles),
             });
             species.needles.extend(&section.needles);
             species.needle_source.extend(&section.needle_source);

@@ -22,6 +22,8 @@
 //! * each placement as its prototype id (varint) and, unless it is the
 //!   identity, its rotation (4 f32), translation (3 f32) and scale (f32);
 //! * wood segments, material and bake information;
+//! * after that payload (format 5), the material's extra colours and each
+//!   placement's needle age, a byte each ([`StoredAppearance`]).
 //! * the wood mesh of imported trees: positions (f32), normals (4-byte
 //!   octahedral) and indices as zigzag varint differences from the previous
 //!   index (neighbouring triangles share nearby vertices: 1–2 bytes each).
@@ -30,6 +32,8 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 5 added needle ages and the colours by age, side and height;
+//! version 4 files read as one colour per tree, every needle mature.
 //! Version 3 added prototypes and placements. Version 2 files (flat, with
 //! the wood mesh) are still read and converted; version 1 files are refused
 //! with [`RecordError::UnsupportedVersion`] (re-bake them).
@@ -55,7 +59,7 @@ use std::path::Path;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -209,6 +213,75 @@ impl QuantizedMesh {
     }
 }
 
+/// The material as formats 2–4 store it: one needle and one bark colour.
+#[derive(Clone, Copy, Serialize, Deserialize)]
+struct StoredMaterial {
+    needle_color: [f32; 4],
+    wood_color: [f32; 4],
+    roughness: f32,
+    reflectance: f32,
+}
+
+impl From<&FoliageMaterial> for StoredMaterial {
+    fn from(m: &FoliageMaterial) -> Self {
+        Self {
+            needle_color: m.needle_color,
+            wood_color: m.wood_color,
+            roughness: m.roughness,
+            reflectance: m.reflectance,
+        }
+    }
+}
+
+impl From<StoredMaterial> for FoliageMaterial {
+    fn from(m: StoredMaterial) -> Self {
+        FoliageMaterial::uniform(m.needle_color, m.wood_color, m.roughness, m.reflectance)
+    }
+}
+
+/// What format 5 adds after the payload: the material's colours by age,
+/// side and height, and each placement's needle age.
+#[derive(Serialize, Deserialize)]
+struct StoredAppearance {
+    young_needle_color: [f32; 4],
+    needle_underside_color: [f32; 4],
+    upper_wood_color: [f32; 4],
+    upper_wood_heights: [f32; 2],
+    needle_ages: Vec<u8>,
+}
+
+impl StoredAppearance {
+    fn encode(record: &PrototypeRecord) -> Self {
+        let m = &record.material;
+        Self {
+            young_needle_color: m.young_needle_color,
+            needle_underside_color: m.needle_underside_color,
+            upper_wood_color: m.upper_wood_color,
+            upper_wood_heights: m.upper_wood_heights,
+            needle_ages: record.placements.iter().map(|p| p.needle_age).collect(),
+        }
+    }
+
+    /// `material` with these colours, and `placements` with these ages.
+    fn apply(self, material: &mut FoliageMaterial, placements: &mut [Placement]) -> Result<(), RecordError> {
+        if self.needle_ages.len() != placements.len() {
+            return Err(RecordError::Malformed(format!(
+                "{} needle ages for {} placements",
+                self.needle_ages.len(),
+                placements.len()
+            )));
+        }
+        material.young_needle_color = self.young_needle_color;
+        material.needle_underside_color = self.needle_underside_color;
+        material.upper_wood_color = self.upper_wood_color;
+        material.upper_wood_heights = self.upper_wood_heights;
+        for (placement, age) in placements.iter_mut().zip(self.needle_ages) {
+            placement.needle_age = age;
+        }
+        Ok(())
+    }
+}
+
 /// The payload of a format 2 file: one flat tree.
 #[derive(Serialize, Deserialize)]
 struct PayloadV2 {
@@ -217,7 +290,7 @@ struct PayloadV2 {
     bake_seconds: Option<f64>,
     weights: [f32; 3],
     max_sides: u8,
-    material: FoliageMaterial,
+    material: StoredMaterial,
     group_sizes: Vec<u32>,
     needles: StoredNeedles,
     merged: Vec<MergedEntry>,
@@ -236,7 +309,7 @@ struct PrototypePayload<Prototypes, Merged, Mesh> {
     bake_seconds: Option<f64>,
     weights: [f32; 3],
     max_sides: u8,
-    material: FoliageMaterial,
+    material: StoredMaterial,
     prototypes: Prototypes,
     placements: Vec<StoredPlacement>,
     tree_merged: Vec<Merged>,
@@ -421,6 +494,7 @@ impl StoredPlacement {
                 rotation: glam::Quat::from_array(rotation),
                 translation: Vec3::from(translation),
                 scale,
+                ..Placement::identity(prototype)
             },
         }
     }
@@ -666,14 +740,17 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         bake_seconds: record.bake.bake_seconds,
         weights: [w.direction, w.distance, w.needle_count],
         max_sides: record.max_sides,
-        material: record.material,
+        material: StoredMaterial::from(&record.material),
         prototypes,
         placements,
         tree_merged,
         wood: encode_wood(&record.wood),
         wood_mesh: QuantizedMesh::encode(&record.wood_mesh, &quantized.mesh_grid),
     };
-    let body = postcard::to_allocvec(&payload).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    let mut body = postcard::to_allocvec(&payload).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    body.extend(
+        postcard::to_allocvec(&StoredAppearance::encode(record)).map_err(|e| RecordError::Malformed(e.to_string()))?,
+    );
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -748,7 +825,8 @@ pub fn decode_prototype_record(bytes: &[u8]) -> Result<PrototypeRecord, RecordEr
     if version == 2 {
         return Ok(PrototypeRecord::from_flat(&decode_v2(body)?)?);
     }
-    payload_to_prototype_record(decode_payload(version, body)?)
+    let (payload, appearance) = decode_payload(version, body)?;
+    payload_to_prototype_record(payload, appearance)
 }
 
 /// Decodes the bytes of a record file as a flat record (placements expanded).
@@ -757,14 +835,16 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     if version == 2 {
         return decode_v2(body);
     }
-    Ok(payload_to_prototype_record(decode_payload(version, body)?)?.flatten()?)
+    let (payload, appearance) = decode_payload(version, body)?;
+    Ok(payload_to_prototype_record(payload, appearance)?.flatten()?)
 }
 
-fn decode_payload(version: u32, body: &[u8]) -> Result<DecodedPayload, RecordError> {
+/// A format 3–5 payload, and what format 5 stores after it.
+fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, Option<StoredAppearance>), RecordError> {
     let malformed = |e: postcard::Error| RecordError::Malformed(e.to_string());
     if version == 3 {
         let p: PayloadV3 = postcard::from_bytes(body).map_err(malformed)?;
-        return p.convert(
+        let decoded = p.convert(
             |stored| {
                 Ok(DecodedPrototypes {
                     needles: stored.needles.decode(|_| 0)?,
@@ -774,14 +854,28 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<DecodedPayload, RecordErr
             },
             |entry| entry,
             StoredMesh::decode,
-        );
+        )?;
+        return Ok((decoded, None));
     }
-    let p: Payload = postcard::from_bytes(body).map_err(malformed)?;
-    p.convert(
+    let (p, rest): (Payload, &[u8]) = postcard::take_from_bytes(body).map_err(malformed)?;
+    let (appearance, rest) = if version >= 5 {
+        let (appearance, rest) = postcard::take_from_bytes::<StoredAppearance>(rest).map_err(malformed)?;
+        (Some(appearance), rest)
+    } else {
+        (None, rest)
+    };
+    if !rest.is_empty() {
+        return Err(RecordError::Malformed(format!(
+            "{} bytes after the payload of a format {version} record",
+            rest.len()
+        )));
+    }
+    let decoded = p.convert(
         QuantizedPrototypes::decode,
         |entry| entry.decode(),
         QuantizedMesh::decode,
-    )
+    )?;
+    Ok((decoded, appearance))
 }
 
 impl QuantizedPrototypes {
@@ -826,7 +920,10 @@ impl QuantizedPrototypes {
     }
 }
 
-fn payload_to_prototype_record(p: DecodedPayload) -> Result<PrototypeRecord, RecordError> {
+fn payload_to_prototype_record(
+    p: DecodedPayload,
+    appearance: Option<StoredAppearance>,
+) -> Result<PrototypeRecord, RecordError> {
     let stored = &p.prototypes;
     let all_needles = &stored.needles;
     let needle_total: u64 = stored.needle_counts.iter().map(|&c| c as u64).sum();
@@ -861,7 +958,7 @@ fn payload_to_prototype_record(p: DecodedPayload) -> Result<PrototypeRecord, Rec
     }
     // Where each placement's needles start, checked before any id is used.
     let mut previous = None;
-    let placements: Vec<Placement> = p
+    let mut placements: Vec<Placement> = p
         .placements
         .iter()
         .map(|stored| {
@@ -870,6 +967,10 @@ fn payload_to_prototype_record(p: DecodedPayload) -> Result<PrototypeRecord, Rec
             placement
         })
         .collect();
+    let mut material = FoliageMaterial::from(p.material);
+    if let Some(appearance) = appearance {
+        appearance.apply(&mut material, &mut placements)?;
+    }
     let mut first_end = Vec::with_capacity(placements.len());
     let mut needles = 0u64;
     for (index, placement) in placements.iter().enumerate() {
@@ -899,7 +1000,7 @@ fn payload_to_prototype_record(p: DecodedPayload) -> Result<PrototypeRecord, Rec
         tree_merged,
         decode_wood(&p.wood),
         p.wood_mesh,
-        p.material,
+        material,
         p.max_sides,
         bake,
     )?)
@@ -930,7 +1031,7 @@ fn decode_v2(body: &[u8]) -> Result<LodRecord, RecordError> {
         merged,
         decode_wood(&p.wood),
         p.wood_mesh.decode()?,
-        p.material,
+        p.material.into(),
         p.max_sides,
         bake,
     )?)
@@ -1014,7 +1115,7 @@ mod tests {
             bake_seconds: None,
             weights: [0.25, 0.25, 0.5],
             max_sides: 8,
-            material: FoliageMaterial::default(),
+            material: StoredMaterial::from(&FoliageMaterial::default()),
             prototypes: StoredPrototypes {
                 needle_counts: vec![3],
                 needles: StoredNeedles::encode(&prototype.needles),
@@ -1042,7 +1143,8 @@ mod tests {
         decode_prototype_record(&file(&postcard::to_allocvec(payload).unwrap()))
     }
 
-    /// A baked tree of three one-needle groups: its format 4 payload, edited by `edit`, in a
+    /// A baked tree of three one-needle groups: its format 4 payload (the
+    /// format 5 payload without its appearance), edited by `edit`, in a
     /// well-formed format 4 file.
     fn edited_v4(edit: impl FnOnce(&mut Payload)) -> Result<PrototypeRecord, RecordError> {
         let needle = |k: f32| Needle {
@@ -1063,11 +1165,80 @@ mod tests {
         edit(&mut payload);
         let body = postcard::to_allocvec(&payload).unwrap();
         let mut file = MAGIC.to_vec();
-        file.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        file.extend_from_slice(&4u32.to_le_bytes());
         file.extend_from_slice(&(body.len() as u64).to_le_bytes());
         file.extend_from_slice(&crc32fast::hash(&body).to_le_bytes());
         file.extend_from_slice(&body);
         decode_prototype_record(&file)
+    }
+
+    /// `body` in a well-formed file of format `version`.
+    fn file_of_version(version: u32, body: &[u8]) -> Vec<u8> {
+        let mut file = MAGIC.to_vec();
+        file.extend_from_slice(&version.to_le_bytes());
+        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        file.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
+        file.extend_from_slice(body);
+        file
+    }
+
+    #[test]
+    fn needle_ages_and_colours_round_trip_and_format_4_reads_as_one_colour() {
+        let needle = |k: f32| Needle {
+            base: Vec3::new(k * 0.1, 0.0, 0.0),
+            tip: Vec3::new(k * 0.1 + 0.01, 0.05, 0.0),
+            radius: 0.001,
+            normal: Vec3::Z,
+            group: k as u32,
+        };
+        let input = super::super::needle::TreeInput {
+            name: "three".into(),
+            needles: vec![needle(0.0), needle(1.0), needle(2.0)],
+            ..Default::default()
+        };
+        let flat = super::super::bake(&input, &Default::default(), &()).unwrap();
+        let mut record = PrototypeRecord::from_flat(&flat).unwrap();
+        for (k, placement) in record.placements.iter_mut().enumerate() {
+            placement.needle_age = [0, 1, 7][k];
+        }
+        record.material.young_needle_color = [0.2, 0.3, 0.05, 1.0];
+        record.material.needle_underside_color = [0.3, 0.35, 0.3, 1.0];
+        record.material.upper_wood_color = [0.5, 0.2, 0.05, 1.0];
+        record.material.upper_wood_heights = [4.0, 9.5];
+        let bytes = encode_prototype_record(&record).unwrap();
+        let read = decode_prototype_record(&bytes).unwrap();
+        assert_eq!(read.material, record.material);
+        let ages: Vec<u8> = read.placements.iter().map(|p| p.needle_age).collect();
+        assert_eq!(ages, [0, 1, 7]);
+
+        // The same payload without what format 5 adds, as format 4: one
+        // colour per tree, every needle mature.
+        let body = &bytes[HEADER_BYTES..];
+        let (_, rest): (Payload, &[u8]) = postcard::take_from_bytes(body).unwrap();
+        let old = decode_prototype_record(&file_of_version(4, &body[..body.len() - rest.len()])).unwrap();
+        let uniform = FoliageMaterial::uniform(
+            record.material.needle_color,
+            record.material.wood_color,
+            record.material.roughness,
+            record.material.reflectance,
+        );
+        assert_eq!(old.material, uniform);
+        assert!(
+            old.placements
+                .iter()
+                .all(|p| p.needle_age == crate::model::color::MATURE_NEEDLE_AGE)
+        );
+
+        // Format 5 without its appearance, or with an age too few, is
+        // malformed.
+        let error = decode_prototype_record(&file_of_version(5, &body[..body.len() - rest.len()])).unwrap_err();
+        assert!(matches!(error, RecordError::Malformed(_)), "{error}");
+        let mut short = StoredAppearance::encode(&record);
+        short.needle_ages.pop();
+        let mut body_short = body[..body.len() - rest.len()].to_vec();
+        body_short.extend(postcard::to_allocvec(&short).unwrap());
+        let error = decode_prototype_record(&file_of_version(5, &body_short)).unwrap_err();
+        assert!(error.to_string().contains("2 needle ages for 3 placements"), "{error}");
     }
 
     #[test]

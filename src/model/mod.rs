@@ -13,9 +13,11 @@
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
 //! * [`impostor`]: the far representation (a crown impostor of a few views).
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
+//! * [`color`]: colour within a tree (needles by age and side, bark by height).
 //! * [`view`]: view-dependent detail inside a tree (bounding spheres, errors per placement).
 
 pub mod bake;
+pub mod color;
 pub mod compact;
 pub mod cut_count;
 pub mod file;

@@ -71,28 +71,74 @@ impl WoodSegment {
     }
 }
 
-/// Surface appearance shared by all needles of a tree (the paper: one
-/// material per tree, no textures).
+/// Surface appearance of a tree's needles and bark. The paper gives a tree
+/// one material; here needles also take their colour from their age (the
+/// [`super::Placement::needle_age`] of their shoot) and from the side of
+/// the shoot the viewer sees, and bark from its height
+/// ([`super::color`]). With the three extra colours equal to the base
+/// ones (as [`FoliageMaterial::uniform`] makes them), it is the paper's.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct FoliageMaterial {
-    /// Linear RGBA base (diffuse) colour of the needles.
+    /// Linear RGBA base (diffuse) colour of the needles, from
+    /// [`super::color::NEEDLE_MATURE_YEARS`] of age on.
     pub needle_color: [f32; 4],
-    /// Linear RGBA colour of the bark.
+    /// Linear RGBA colour of the bark up to `upper_wood_heights[0]`.
     pub wood_color: [f32; 4],
     /// Perceptual roughness in [0, 1] (stands in for the paper's specular exponent).
     pub roughness: f32,
     /// Specular reflectance in [0, 1].
     pub reflectance: f32,
+    /// Linear RGBA colour of this year's needles (age 0), blended into
+    /// `needle_color` as they age.
+    pub young_needle_color: [f32; 4],
+    /// Linear RGBA colour of a shoot's lower side, seen from beneath it
+    /// (the pale stomatal bands under a fir's needles).
+    pub needle_underside_color: [f32; 4],
+    /// Linear RGBA colour of the bark from `upper_wood_heights[1]` up (a
+    /// Scots pine's orange upper trunk).
+    pub upper_wood_color: [f32; 4],
+    /// Heights (tree metres) where the bark starts turning from
+    /// `wood_color` to `upper_wood_color`, and where it has.
+    pub upper_wood_heights: [f32; 2],
+}
+
+impl FoliageMaterial {
+    /// One needle colour and one bark colour for the whole tree (the
+    /// paper's material): the extra colours equal the base ones.
+    pub fn uniform(needle_color: [f32; 4], wood_color: [f32; 4], roughness: f32, reflectance: f32) -> Self {
+        Self {
+            needle_color,
+            wood_color,
+            roughness,
+            reflectance,
+            young_needle_color: needle_color,
+            needle_underside_color: needle_color,
+            upper_wood_color: wood_color,
+            upper_wood_heights: [0.0, 0.0],
+        }
+    }
+
+    /// Every colour channel, roughness and reflectance, for finiteness checks.
+    pub fn numbers(&self) -> impl Iterator<Item = f32> + '_ {
+        [
+            &self.needle_color,
+            &self.wood_color,
+            &self.young_needle_color,
+            &self.needle_underside_color,
+            &self.upper_wood_color,
+        ]
+        .into_iter()
+        .flatten()
+        .copied()
+        .chain([self.roughness, self.reflectance])
+        .chain(self.upper_wood_heights)
+    }
 }
 
 impl Default for FoliageMaterial {
     fn default() -> Self {
-        Self {
-            needle_color: [0.10, 0.24, 0.08, 1.0],
-            wood_color: [0.23, 0.16, 0.11, 1.0],
-            roughness: 0.6,
-            reflectance: 0.3,
-        }
+        Self::uniform([0.10, 0.24, 0.08, 1.0], [0.23, 0.16, 0.11, 1.0], 0.6, 0.3)
     }
 }
 

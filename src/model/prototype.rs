@@ -60,6 +60,9 @@ pub struct Placement {
     /// Uniform scale (> 0): lengths, radii and errors of the prototype are
     /// multiplied by it.
     pub scale: f32,
+    /// Age of the placed shoot's needles, years (0: grown this year); it
+    /// picks their colour ([`super::color`]).
+    pub needle_age: u8,
 }
 
 impl Placement {
@@ -70,6 +73,7 @@ impl Placement {
             rotation: Quat::IDENTITY,
             translation: Vec3::ZERO,
             scale: 1.0,
+            needle_age: super::color::MATURE_NEEDLE_AGE,
         }
     }
 

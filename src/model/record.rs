@@ -223,11 +223,7 @@ pub(crate) fn check_appearance(
     if !wood_mesh.is_valid() {
         return Err(RecordInvalid::BadWoodMesh);
     }
-    let colors = material.needle_color.iter().chain(&material.wood_color);
-    if !colors
-        .chain([&material.roughness, &material.reflectance])
-        .all(|x| x.is_finite())
-    {
+    if !material.numbers().all(f32::is_finite) {
         return Err(RecordInvalid::NonFinite("material"));
     }
     if bake.bake_seconds.is_some_and(|s| !s.is_finite()) {

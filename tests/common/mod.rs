@@ -5,6 +5,16 @@
 
 use bevy::prelude::*;
 
+/// Held by a render test for as long as it renders, so that the tests of
+/// one file take turns. With two apps rendering at once in one process on
+/// lavapipe, about one run in five of `render_shadows` brought back one
+/// test's pictures blank white (its sun scene as if lit by the other test's
+/// 2,000,000 lm lamp); CI failed on it.
+pub fn gpu_turn() -> std::sync::MutexGuard<'static, ()> {
+    static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    TURN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// The clear colour of the render tests' cameras.
 pub const BACKGROUND: [u8; 3] = [235, 237, 242];
 

@@ -98,6 +98,14 @@ struct SpeciesParams {
     // its bottom and top heights, its views, and 0 without an impostor, 1
     // with one off by default, 2 with one on by default
     impostor_span: vec4<f32>,
+    // colours by age, side and height (`model::color`)
+    young_needle_color: vec4<f32>,
+    needle_underside_color: vec4<f32>,
+    upper_wood_color: vec4<f32>,
+    // needles without a placement's age (tree lines, flat species, impostor)
+    far_needle_color: vec4<f32>,
+    // where the bark turns (tree-local heights x to y)
+    wood_heights: vec4<f32>,
 }
 
 struct CullView {
@@ -147,7 +155,8 @@ struct Prototype {
     original_count: u32,
     merged_first: u32,
     merged_count: u32,
-    padding_a: u32,
+    // its needles' upper side (`model::color::upper_side`), pack4x8snorm
+    upper_side: u32,
     padding_b: u32,
     // lower edges of bands 1…, two 16-bit codes a word
     band_edges: array<vec4<u32>, 2>,
@@ -165,7 +174,8 @@ struct Placement {
     parent_code: u32,
     // that parent's index in the tree's spheres (NO_SPHERE for a root)
     parent_sphere: u32,
-    padding_b: u32,
+    // age of its needles, years
+    needle_age: u32,
 }
 
 // `model::compact::NO_SPHERE`.

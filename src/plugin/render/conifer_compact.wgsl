@@ -77,6 +77,10 @@ struct VertexOutput {
     @location(3) uv: vec2<f32>,
     @location(4) @interpolate(flat) tree: u32,
 #endif
+#ifdef CONIFER_BARK
+    // Height in the tree's frame, for the bark's colour.
+    @location(3) local_height: f32,
+#endif
 }
 
 // A position outside every clip plane: the primitive is not drawn.
@@ -103,6 +107,15 @@ fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: 
     out.world_normal = normalize((world_from_local * vec4<f32>(local_normal, 0.0)).xyz);
     out.color = color;
     return out;
+}
+
+// `out` with the tree-local height the bark's colour is taken at.
+fn with_height(out: VertexOutput, height: f32) -> VertexOutput {
+    var result = out;
+#ifdef CONIFER_BARK
+    result.local_height = height;
+#endif
+    return result;
 }
 
 fn grid_point(grid: vec4<f32>, x: u32, y: u32, z: u32) -> vec3<f32> {
@@ -259,14 +272,60 @@ fn debug_color(kind: i32, amount: f32) -> vec3<f32> {
     return vec3<f32>(0.45, 0.3, 0.15);
 }
 
-fn base_color(kind: i32, amount: f32, alpha: f32) -> vec4<f32> {
+// `albedo` with `alpha`, or the debug colour of `kind` and `amount`.
+fn base_color(kind: i32, amount: f32, alpha: f32, albedo: vec3<f32>) -> vec4<f32> {
     if species.debug_colors != 0u {
         return vec4<f32>(debug_color(kind, amount), alpha);
     }
-    if kind == 2 {
-        return vec4<f32>(species.wood_color.rgb, alpha);
+    return vec4<f32>(albedo, alpha);
+}
+
+// `model::color::NEEDLE_MATURE_YEARS`.
+const NEEDLE_MATURE_YEARS: f32 = 2.0;
+
+// Needles `age` years old (`model::color::needle_age_color`).
+fn needle_age_albedo(age: u32) -> vec3<f32> {
+    let t = clamp(f32(age) / NEEDLE_MATURE_YEARS, 0.0, 1.0);
+    return mix(species.young_needle_color.rgb, species.needle_color.rgb, t);
+}
+
+// How much of a shoot's lower side a viewer sees (`model::color::underside_weight`).
+fn underside_weight(upper: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
+    let consistency = min(length(upper), 1.0);
+    if consistency < 1e-6 {
+        return 0.0;
     }
-    return vec4<f32>(species.needle_color.rgb, alpha);
+    let facing = dot(upper, to_viewer) / length(upper);
+    return clamp(0.5 - 2.0 * facing, 0.0, 1.0) * consistency;
+}
+
+// A placed shoot's needles seen from the view (`model::color::needle_color`,
+// from the centre of the prototype's sphere).
+fn placed_needle_albedo(placement: Placement, prototype: Prototype, world_from_local: mat4x4<f32>) -> vec3<f32> {
+    let upper_local = unpack4x8snorm(prototype.upper_side).xyz;
+    let placed = (world_from_local * vec4<f32>(upper_local, 0.0)).xyz;
+    var upper = vec3<f32>(0.0);
+    if dot(placed, placed) > 1e-24 {
+        upper = normalize(placed) * length(upper_local);
+    }
+    let centre = (world_from_local * vec4<f32>(prototype.sphere.xyz, 1.0)).xyz;
+    var to_viewer = view.world_position - centre;
+    if dot(to_viewer, to_viewer) > 1e-24 {
+        to_viewer = normalize(to_viewer);
+    }
+    let weight = underside_weight(upper, to_viewer);
+    return mix(needle_age_albedo(placement.needle_age), species.needle_underside_color.rgb, weight);
+}
+
+// Bark at tree-local `height` (`model::color::bark_color`).
+fn bark_albedo(height: f32) -> vec3<f32> {
+    let start = species.wood_heights.x;
+    let end = species.wood_heights.y;
+    var t = select(0.0, 1.0, height >= end);
+    if end > start {
+        t = clamp((height - start) / (end - start), 0.0, 1.0);
+    }
+    return mix(species.wood_color.rgb, species.upper_wood_color.rgb, t);
 }
 
 // A line of equivalent width `width` (metres) as coverage of its one-pixel
@@ -336,6 +395,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let grid = prototypes[placement.prototype].grid;
     // Shadow hash: the same per placement every frame.
     let hash_tree = tree ^ ((entry.y & ENTRY_PLACEMENT_MASK) << 9u);
+    let needle_albedo = placed_needle_albedo(placement, prototypes[placement.prototype], world_from_local);
 #else
     let tree = instance_index;
     let lod = instance_lods[tree];
@@ -345,6 +405,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let world_from_local = instance_world_from_local(instances[tree]);
     let grid = species.grid;
     let hash_tree = tree;
+    let needle_albedo = species.far_needle_color.rgb;
 #endif
 
 #ifdef CONIFER_PRISMS
@@ -358,7 +419,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let p = prism_vertex(base, tip, radius, radius, sides, corner, toward);
     let m = max(species.max_sides, 3u);
     let amount = f32(m - sides) / max(f32(m - 3u), 1.0);
-    return finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0));
+    return finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0, needle_albedo));
 #endif
 
 #ifdef CONIFER_WOOD_PRISMS
@@ -374,11 +435,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let toward = toward_view_local(world_from_local, 0.5 * (start.xyz + end.xyz));
     let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner, toward);
     let m = max(species.max_sides, 3u);
-    var color = base_color(2, 0.0, 1.0);
+    var color = base_color(2, 0.0, 1.0, bark_albedo(p.position.y));
     if species.debug_colors != 0u {
-        color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0);
+        color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0, color.rgb);
     }
-    return finish(p.position, p.normal, world_from_local, color);
+    return with_height(finish(p.position, p.normal, world_from_local, color), p.position.y);
 #endif
 
 #ifdef CONIFER_ORIGINAL_LINES
@@ -397,7 +458,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha), k, hash_tree));
+    return finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -433,7 +494,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = end_position(grid, a);
     let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha), species.total_needle_count + line, hash_tree));
+    return finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -448,7 +509,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let alpha = line_alpha(lod, wood_error, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
-    return finish(position, end.xyz - start.xyz, world_from_local, line_color(lod, base_color(2, 0.0, alpha), 0xffffffu - s, hash_tree));
+    let color = line_color(lod, base_color(2, 0.0, alpha, bark_albedo(position.y)), 0xffffffu - s, hash_tree);
+    return with_height(finish(position, end.xyz - start.xyz, world_from_local, color), position.y);
 #endif
 
 #ifdef CONIFER_IMPOSTOR
@@ -496,7 +558,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let z = 1.0 - abs(x) - abs(y);
     let t = max(-z, 0.0);
     let normal = vec3<f32>(x + select(t, -t, x >= 0.0), y + select(t, -t, y >= 0.0), z);
-    return finish(position, normalize(normal), world_from_local, base_color(2, 0.0, 1.0));
+    let color = base_color(2, 0.0, 1.0, bark_albedo(position.y));
+    return with_height(finish(position, normalize(normal), world_from_local, color), position.y);
 #endif
 }
 
@@ -669,17 +732,25 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let wood = clamp(texel.g / texel.r, 0.0, 1.0);
-    var albedo = mix(species.needle_color.rgb, species.wood_color.rgb, wood);
+    let instance = instances[in.tree];
+    let world_from_local = instance_world_from_local(instance);
+    let height = tree_local_point(world_from_local, length(world_from_local[0].xyz), in.world_position.xyz).y;
+    var albedo = mix(species.far_needle_color.rgb, bark_albedo(height), wood);
     if species.debug_colors != 0u {
         albedo = vec3<f32>(0.85, 0.2, 0.85);
     }
     pbr_input.material.base_color = vec4<f32>(albedo, texel.r * in.color.w);
     let x = 2.0 * texel.b - 1.0;
     let z = 2.0 * texel.a - 1.0;
-    let instance = instances[in.tree];
-    let world_from_local = instance_world_from_local(instance);
     let local_axis = vec3<f32>(x, sqrt(max(1.0 - x * x - z * z, 0.0)), z);
     axis = normalize((world_from_local * vec4<f32>(local_axis, 0.0)).xyz);
+#endif
+#ifdef CONIFER_BARK
+    // The bark's colour at this fragment's height (the vertices' is only
+    // right at the segment's ends).
+    if species.debug_colors == 0u {
+        pbr_input.material.base_color = vec4<f32>(bark_albedo(in.local_height), in.color.a);
+    }
 #endif
     pbr_input.material.perceptual_roughness = species.roughness;
     pbr_input.material.reflectance = vec3<f32>(species.reflectance);

@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 224 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 304 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -217,6 +217,18 @@ pub struct SpeciesParams {
     /// Its bottom and top heights, its views, and 0 without an impostor,
     /// 1 with one off by default, 2 with one on by default.
     pub impostor_span: [f32; 4],
+    /// Linear colour of this year's needles
+    /// ([`crate::model::FoliageMaterial::young_needle_color`]).
+    pub young_needle_color: [f32; 4],
+    /// Linear colour of a shoot's lower side.
+    pub needle_underside_color: [f32; 4],
+    /// Linear colour of the upper bark.
+    pub upper_wood_color: [f32; 4],
+    /// Linear colour of needles without a placement's age
+    /// ([`crate::model::compact::CompactSpecies::far_needle_color`]).
+    pub far_needle_color: [f32; 4],
+    /// Where the bark turns (tree-local heights, x to y); z, w unused.
+    pub wood_heights: [f32; 4],
 }
 
 /// [`CullView::perspective`] flag: the view is a camera (a shadow view
@@ -264,8 +276,11 @@ pub struct GpuPrototype {
     /// First entry and length of its needles, original-line order and
     /// merged lines.
     pub sections: [u32; 6],
+    /// Its needles' upper side ([`crate::model::color::upper_side`]), x, y,
+    /// z as signed normalized bytes (WGSL's `unpack4x8snorm`).
+    pub upper_side: u32,
     /// Padding.
-    pub padding: [u32; 2],
+    pub padding: u32,
     /// Band edges, two 16-bit codes a word (the last half-word unused).
     pub band_edges: [u32; PLACED_BANDS as usize / 2],
     /// Bounding sphere, prototype metres (centre, radius).
@@ -287,7 +302,8 @@ impl GpuPrototype {
         Self {
             grid: prototype.grid.origin.extend(prototype.grid.step).to_array(),
             sections: [n0, n1, o0, o1, m0, m1],
-            padding: [0; 2],
+            upper_side: pack_snorm8(prototype.upper_side.extend(0.0).to_array()),
+            padding: 0,
             band_edges,
             sphere: prototype.sphere.to_array(),
         }
@@ -309,8 +325,8 @@ pub struct GpuPlacement {
     /// Index of that parent's sphere in the tree's spheres
     /// ([`crate::model::compact::NO_SPHERE`] for a root).
     pub parent_sphere: u32,
-    /// Padding.
-    pub padding: u32,
+    /// Age of its needles, years ([`crate::model::Placement::needle_age`]).
+    pub needle_age: u32,
 }
 
 impl GpuPlacement {
@@ -323,9 +339,18 @@ impl GpuPlacement {
             prototype: placement.prototype,
             parent_code: u32::from(placement.parent_code),
             parent_sphere: placement.parent_sphere,
-            padding: 0,
+            needle_age: u32::from(placement.transform.needle_age),
         }
     }
+}
+
+/// Four numbers in `[−1, 1]` as signed normalized bytes, the first in the
+/// lowest byte (WGSL's `pack4x8snorm`).
+pub fn pack_snorm8(values: [f32; 4]) -> u32 {
+    values.iter().enumerate().fold(0u32, |word, (k, &v)| {
+        let byte = (v.clamp(-1.0, 1.0) * 127.0).round() as i8 as u8;
+        word | u32::from(byte) << (8 * k)
+    })
 }
 
 /// One expanded placement of one view (`vec2<u32>` in WGSL), 8 bytes: its

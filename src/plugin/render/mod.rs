@@ -464,6 +464,11 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         tree_sphere: compact.tree_sphere.to_array(),
         impostor_box,
         impostor_span,
+        young_needle_color: material.young_needle_color,
+        needle_underside_color: material.needle_underside_color,
+        upper_wood_color: material.upper_wood_color,
+        far_needle_color: compact.far_needle_color.extend(1.0).to_array(),
+        wood_heights: [material.upper_wood_heights[0], material.upper_wood_heights[1], 0.0, 0.0],
     }
 }
 
@@ -1026,6 +1031,13 @@ impl SpecializedRenderPipeline for CompactPipeline {
         }
         if key.kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
+        }
+        if matches!(
+            key.kind,
+            PartKind::WoodPrisms | PartKind::WoodLines | PartKind::WoodMesh
+        ) {
+            // Bark coloured by the height of each fragment.
+            defs.push("CONIFER_BARK".into());
         }
         descriptor.vertex.shader_defs.extend(defs.iter().cloned());
         if let Some(fragment) = descriptor.fragment.as_mut() {
