@@ -22,8 +22,9 @@
 //! * each placement as its prototype id (varint) and, unless it is the
 //!   identity, its rotation (4 f32), translation (3 f32) and scale (f32);
 //! * wood segments, material and bake information;
-//! * after that payload (format 5), the material's extra colours and each
-//!   placement's needle age, a byte each ([`StoredAppearance`]).
+//! * after that payload (format 5), the material's extra colours and the
+//!   placements' needle ages as runs of one age (a byte and a varint
+//!   length; neighbouring shoots are mostly of an age).
 //! * the wood mesh of imported trees: positions (f32), normals (4-byte
 //!   octahedral) and indices as zigzag varint differences from the previous
 //!   index (neighbouring triangles share nearby vertices: 1–2 bytes each).
@@ -240,14 +241,15 @@ impl From<StoredMaterial> for FoliageMaterial {
 }
 
 /// What format 5 adds after the payload: the material's colours by age,
-/// side and height, and each placement's needle age.
+/// side and height, and the placements' needle ages, in order, as runs
+/// `(age, placements)`.
 #[derive(Serialize, Deserialize)]
 struct StoredAppearance {
     young_needle_color: [f32; 4],
     needle_underside_color: [f32; 4],
     upper_wood_color: [f32; 4],
     upper_wood_heights: [f32; 2],
-    needle_ages: Vec<u8>,
+    age_runs: Vec<(u8, u32)>,
 }
 
 impl StoredAppearance {
@@ -258,16 +260,22 @@ impl StoredAppearance {
             needle_underside_color: m.needle_underside_color,
             upper_wood_color: m.upper_wood_color,
             upper_wood_heights: m.upper_wood_heights,
-            needle_ages: record.placements.iter().map(|p| p.needle_age).collect(),
+            age_runs: record.placements.iter().fold(Vec::new(), |mut runs, p| {
+                match runs.last_mut() {
+                    Some((age, run)) if *age == p.needle_age && *run < u32::MAX => *run += 1,
+                    _ => runs.push((p.needle_age, 1)),
+                }
+                runs
+            }),
         }
     }
 
     /// `material` with these colours, and `placements` with these ages.
     fn apply(self, material: &mut FoliageMaterial, placements: &mut [Placement]) -> Result<(), RecordError> {
-        if self.needle_ages.len() != placements.len() {
+        let ages: u64 = self.age_runs.iter().map(|&(_, run)| u64::from(run)).sum();
+        if ages != placements.len() as u64 {
             return Err(RecordError::Malformed(format!(
-                "{} needle ages for {} placements",
-                self.needle_ages.len(),
+                "{ages} needle ages for {} placements",
                 placements.len()
             )));
         }
@@ -275,7 +283,11 @@ impl StoredAppearance {
         material.needle_underside_color = self.needle_underside_color;
         material.upper_wood_color = self.upper_wood_color;
         material.upper_wood_heights = self.upper_wood_heights;
-        for (placement, age) in placements.iter_mut().zip(self.needle_ages) {
+        let ages = self
+            .age_runs
+            .iter()
+            .flat_map(|&(age, run)| std::iter::repeat_n(age, run as usize));
+        for (placement, age) in placements.iter_mut().zip(ages) {
             placement.needle_age = age;
         }
         Ok(())
@@ -1234,7 +1246,7 @@ mod tests {
         let error = decode_prototype_record(&file_of_version(5, &body[..body.len() - rest.len()])).unwrap_err();
         assert!(matches!(error, RecordError::Malformed(_)), "{error}");
         let mut short = StoredAppearance::encode(&record);
-        short.needle_ages.pop();
+        short.age_runs.pop();
         let mut body_short = body[..body.len() - rest.len()].to_vec();
         body_short.extend(postcard::to_allocvec(&short).unwrap());
         let error = decode_prototype_record(&file_of_version(5, &body_short)).unwrap_err();
