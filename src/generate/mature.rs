@@ -379,7 +379,7 @@ pub(crate) fn douglas_fir() -> SpeciesParams {
             // Two pale bands under each needle; thick, dark, furrowed bark
             // at the foot, smoother and greyer up the stem.
             young_needle_color: srgb(92, 126, 62),
-            needle_underside_color: srgb(80, 106, 82),
+            needle_underside_color: srgb(72, 98, 78),
             upper_wood_color: srgb(112, 98, 86),
             upper_wood_heights: [0.3, 0.6],
             ..FoliageMaterial::uniform(srgb(54, 85, 52), srgb(80, 60, 48), 0.6, 0.3)
@@ -449,7 +449,7 @@ pub(crate) fn silver_fir() -> SpeciesParams {
             // Dark, glossy above with two white stomatal bands beneath
             // (the "silver"); pale grey bark.
             young_needle_color: srgb(86, 122, 64),
-            needle_underside_color: srgb(112, 138, 122),
+            needle_underside_color: srgb(84, 112, 98),
             ..FoliageMaterial::uniform(srgb(46, 80, 50), srgb(150, 147, 140), 0.5, 0.35)
         },
     }
