@@ -59,7 +59,7 @@ fn chroma(image: &image::RgbaImage, keep: impl Fn(u32, u32) -> bool) -> (f32, f3
         for x in 0..SIZE {
             let p = image.get_pixel(x, y);
             let brightest = p[0].max(p[1]).max(p[2]);
-            if brightest < 24 || brightest >= 250 || !keep(x, y) {
+            if !(24..250).contains(&brightest) || !keep(x, y) {
                 continue; // background, or clipped
             }
             sum += Vec3::new(srgb_to_linear(p[0]), srgb_to_linear(p[1]), srgb_to_linear(p[2]));
