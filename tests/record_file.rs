@@ -233,7 +233,7 @@ fn format_2_files_load_converted() {
     assert_eq!(prototypes, PrototypeRecord::from_flat(&flat).unwrap());
     assert_eq!(prototypes.placements.len(), 30);
     assert_eq!(prototypes.flatten().unwrap(), flat);
-    // Written again, it is a format 4 file holding the same tree, quantized:
+    // Written again, it is a current-format file holding the same tree, quantized:
     // needle ends within a grid step (micrometres for these fascicles),
     // radii within 0.025 %, merged errors rounded up (0.05 % a level, plus
     // what their children's rounding added), the merge forest unchanged;

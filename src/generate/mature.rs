@@ -237,8 +237,11 @@ pub(crate) fn eastern_white_pine() -> SpeciesParams {
         foliage,
         material: FoliageMaterial {
             // White stomatal lines on the needles' inner faces; dark,
-            // furrowed bark at the foot, smooth grey-green above.
-            young_needle_color: srgb(82, 114, 72),
+            // furrowed bark at the foot, smooth grey-green above. This
+            // year's needles only a little lighter: its twigs hold both of
+            // its two years and are placed at their mean age, which rounds
+            // to 0 for 88 % of them.
+            young_needle_color: srgb(66, 98, 68),
             needle_underside_color: srgb(76, 102, 88),
             upper_wood_color: srgb(108, 106, 96),
             upper_wood_heights: [0.35, 0.6],

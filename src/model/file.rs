@@ -1140,50 +1140,6 @@ mod tests {
         }
     }
 
-    /// A well-formed format 3 header around `body` (format 3 and 4 decode
-    /// placements, references and counts alike).
-    fn file(body: &[u8]) -> Vec<u8> {
-        let mut bytes = MAGIC.to_vec();
-        bytes.extend_from_slice(&3u32.to_le_bytes());
-        bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
-        bytes.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
-        bytes.extend_from_slice(body);
-        bytes
-    }
-
-    fn decode(payload: &PayloadV3) -> Result<PrototypeRecord, RecordError> {
-        decode_prototype_record(&file(&postcard::to_allocvec(payload).unwrap()))
-    }
-
-    /// A baked tree of three one-needle groups: its format 4 payload (the
-    /// format 5 payload without its appearance), edited by `edit`, in a
-    /// well-formed format 4 file.
-    fn edited_v4(edit: impl FnOnce(&mut Payload)) -> Result<PrototypeRecord, RecordError> {
-        let needle = |k: f32| Needle {
-            base: Vec3::new(k * 0.1, 0.0, 0.0),
-            tip: Vec3::new(k * 0.1 + 0.01, 0.05, 0.0),
-            radius: 0.001,
-            normal: Vec3::Z,
-            group: k as u32,
-        };
-        let input = super::super::needle::TreeInput {
-            name: "three".into(),
-            needles: vec![needle(0.0), needle(1.0), needle(2.0)],
-            ..Default::default()
-        };
-        let record = super::super::bake(&input, &Default::default(), &()).unwrap();
-        let bytes = encode_record(&record).unwrap();
-        let mut payload: Payload = postcard::from_bytes(&bytes[HEADER_BYTES..]).unwrap();
-        edit(&mut payload);
-        let body = postcard::to_allocvec(&payload).unwrap();
-        let mut file = MAGIC.to_vec();
-        file.extend_from_slice(&4u32.to_le_bytes());
-        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
-        file.extend_from_slice(&crc32fast::hash(&body).to_le_bytes());
-        file.extend_from_slice(&body);
-        decode_prototype_record(&file)
-    }
-
     /// `body` in a well-formed file of format `version`.
     fn file_of_version(version: u32, body: &[u8]) -> Vec<u8> {
         let mut file = MAGIC.to_vec();
@@ -1194,8 +1150,28 @@ mod tests {
         file
     }
 
-    #[test]
-    fn needle_ages_and_colours_round_trip_and_format_4_reads_as_one_colour() {
+    /// A well-formed format 3 header around `body` (formats 3 to 5 decode
+    /// placements, references and counts alike).
+    fn file(body: &[u8]) -> Vec<u8> {
+        file_of_version(3, body)
+    }
+
+    fn decode(payload: &PayloadV3) -> Result<PrototypeRecord, RecordError> {
+        decode_prototype_record(&file(&postcard::to_allocvec(payload).unwrap()))
+    }
+
+    /// A baked tree of three one-needle groups: its format 4 payload (the
+    /// format 5 payload without its appearance), edited by `edit`, in a
+    /// well-formed format 4 file.
+    fn edited_v4(edit: impl FnOnce(&mut Payload)) -> Result<PrototypeRecord, RecordError> {
+        let bytes = encode_record(&three_groups()).unwrap();
+        let mut payload: Payload = postcard::from_bytes(&bytes[HEADER_BYTES..]).unwrap();
+        edit(&mut payload);
+        decode_prototype_record(&file_of_version(4, &postcard::to_allocvec(&payload).unwrap()))
+    }
+
+    /// A baked flat tree of three one-needle groups.
+    fn three_groups() -> LodRecord {
         let needle = |k: f32| Needle {
             base: Vec3::new(k * 0.1, 0.0, 0.0),
             tip: Vec3::new(k * 0.1 + 0.01, 0.05, 0.0),
@@ -1208,8 +1184,12 @@ mod tests {
             needles: vec![needle(0.0), needle(1.0), needle(2.0)],
             ..Default::default()
         };
-        let flat = super::super::bake(&input, &Default::default(), &()).unwrap();
-        let mut record = PrototypeRecord::from_flat(&flat).unwrap();
+        super::super::bake(&input, &Default::default(), &()).unwrap()
+    }
+
+    #[test]
+    fn needle_ages_and_colours_round_trip_and_format_4_reads_as_one_colour() {
+        let mut record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         for (k, placement) in record.placements.iter_mut().enumerate() {
             placement.needle_age = [0, 1, 7][k];
         }
