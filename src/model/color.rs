@@ -25,13 +25,13 @@
 //! placements merge.
 
 use super::needle::{FoliageMaterial, Needle};
-use super::prototype::{Placement, PrototypeRecord};
+use super::prototype::PrototypeRecord;
 use glam::Vec3;
 
 /// Age (years) from which needles have their mature colour.
 pub const NEEDLE_MATURE_YEARS: f32 = 2.0;
 
-/// The age [`Placement::identity`] gives: mature (the base colour).
+/// The age [`super::Placement::identity`] gives: mature (the base colour).
 pub const MATURE_NEEDLE_AGE: u8 = 2;
 
 /// Linear RGB of needles `age` years old, seen from above their shoot.
@@ -125,11 +125,6 @@ pub fn far_needle_color(record: &PrototypeRecord) -> Vec3 {
     }
 }
 
-/// A placement's upper side in the tree: its prototype's, rotated.
-pub fn placed_upper_side(placement: &Placement, prototype_upper: Vec3) -> Vec3 {
-    placement.rotation * prototype_upper
-}
-
 fn rgb(color: [f32; 4]) -> Vec3 {
     Vec3::new(color[0], color[1], color[2])
 }
@@ -137,7 +132,7 @@ fn rgb(color: [f32; 4]) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::FoliageMaterial;
+    use crate::model::{FoliageMaterial, Placement};
 
     fn material() -> FoliageMaterial {
         FoliageMaterial {

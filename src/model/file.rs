@@ -22,12 +22,12 @@
 //! * each placement as its prototype id (varint) and, unless it is the
 //!   identity, its rotation (4 f32), translation (3 f32) and scale (f32);
 //! * wood segments, material and bake information;
+//! * the wood mesh of imported trees: positions (f32), normals (4-byte
+//!   octahedral) and indices as zigzag varint differences from the previous
+//!   index (neighbouring triangles share nearby vertices: 1–2 bytes each);
 //! * after that payload (format 5), the material's extra colours and the
 //!   placements' needle ages as runs of one age (a byte and a varint
 //!   length; neighbouring shoots are mostly of an age).
-//! * the wood mesh of imported trees: positions (f32), normals (4-byte
-//!   octahedral) and indices as zigzag varint differences from the previous
-//!   index (neighbouring triangles share nearby vertices: 1–2 bytes each).
 //!
 //! A flat record ([`LodRecord`], an imported tree) is written as every group
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives

@@ -435,7 +435,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let toward = toward_view_local(world_from_local, 0.5 * (start.xyz + end.xyz));
     let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner, toward);
     let m = max(species.max_sides, 3u);
-    var color = base_color(2, 0.0, 1.0, bark_albedo(p.position.y));
+    // The fragment takes the bark's colour at its own height (CONIFER_BARK).
+    var color = base_color(2, 0.0, 1.0, species.wood_color.rgb);
     if species.debug_colors != 0u {
         color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0, color.rgb);
     }
@@ -509,7 +510,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let alpha = line_alpha(lod, wood_error, width, width);
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
-    let color = line_color(lod, base_color(2, 0.0, alpha, bark_albedo(position.y)), 0xffffffu - s, hash_tree);
+    // The fragment takes the bark's colour at its own height (CONIFER_BARK).
+    let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
     return with_height(finish(position, end.xyz - start.xyz, world_from_local, color), position.y);
 #endif
 
@@ -558,7 +560,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let z = 1.0 - abs(x) - abs(y);
     let t = max(-z, 0.0);
     let normal = vec3<f32>(x + select(t, -t, x >= 0.0), y + select(t, -t, y >= 0.0), z);
-    let color = base_color(2, 0.0, 1.0, bark_albedo(position.y));
+    // The fragment takes the bark's colour at its own height (CONIFER_BARK).
+    let color = base_color(2, 0.0, 1.0, species.wood_color.rgb);
     return with_height(finish(position, normalize(normal), world_from_local, color), position.y);
 #endif
 }
@@ -746,8 +749,8 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     axis = normalize((world_from_local * vec4<f32>(local_axis, 0.0)).xyz);
 #endif
 #ifdef CONIFER_BARK
-    // The bark's colour at this fragment's height (the vertices' is only
-    // right at the segment's ends).
+    // The bark's colour at this fragment's height (taken at the vertices,
+    // it would be right only at a segment's ends).
     if species.debug_colors == 0u {
         pbr_input.material.base_color = vec4<f32>(bark_albedo(in.local_height), in.color.a);
     }
