@@ -51,8 +51,8 @@ pub mod prelude {
     pub use crate::generate::{Age, Preset, Species};
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
-        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, ErrorScope, LineLighting,
-        LineOpacity, PresetCache, conifer_lod_keys, spawn_forest,
+        ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, ConiferWind, ErrorScope,
+        LineLighting, LineOpacity, PresetCache, conifer_lod_keys, spawn_forest,
     };
 }
 

@@ -15,6 +15,7 @@
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
 //! * [`color`]: colour within a tree (needles by age and side, bark by height).
 //! * [`view`]: view-dependent detail inside a tree (bounding spheres, errors per placement).
+//! * [`wind`]: wind, one displacement field per tree that every representation shares.
 
 pub mod bake;
 pub mod color;
@@ -32,6 +33,7 @@ pub mod quantize;
 pub mod record;
 pub mod shading;
 pub mod view;
+pub mod wind;
 
 pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_prototypes};
 pub use cut_count::{CutCounter, CutCounts};

@@ -116,6 +116,25 @@ impl ConiferSpecies {
         Self::new(flat, Some(record))
     }
 
+    /// The tree as the wind sees it ([`crate::model::wind::WindShape`]):
+    /// its box; its trunk stands where its lowest wood starts, or under the
+    /// crown centre for a tree without wood.
+    pub fn wind_shape(&self) -> crate::model::wind::WindShape {
+        let foot = self
+            .record
+            .wood
+            .iter()
+            .map(|w| w.start)
+            .filter(|p| p.is_finite())
+            .min_by(|a, b| a.y.total_cmp(&b.y))
+            .unwrap_or(self.crown_center);
+        crate::model::wind::WindShape::from_bounds(
+            Vec3::from(self.aabb.min()),
+            Vec3::from(self.aabb.max()),
+            Vec2::new(foot.x, foot.z),
+        )
+    }
+
     fn new(record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();

@@ -6,7 +6,7 @@
 //! pumped by hand with a blocking device poll after every frame, and
 //! screenshots of an image render target read back into memory.
 
-use super::ConiferLodPlugin;
+use super::{ConiferLodPlugin, ConiferWind};
 use bevy::app::SubApps;
 use bevy::asset::{LoadState, RenderAssetUsages};
 use bevy::camera::RenderTarget;
@@ -80,7 +80,8 @@ pub struct HeadlessRenderer {
 
 impl HeadlessRenderer {
     /// Builds the app: Bevy's default plugins without winit or a window, the
-    /// conifer plugin, assets read from `asset_root`.
+    /// conifer plugin in calm ([`ConiferWind::CALM`]), assets read from
+    /// `asset_root`.
     pub fn new(asset_root: &str) -> Self {
         Self::with_setup(asset_root, |_| {})
     }
@@ -113,7 +114,9 @@ impl HeadlessRenderer {
                 })
                 .disable::<WinitPlugin>(),
         )
-        .add_plugins(ConiferLodPlugin::default());
+        .add_plugins(ConiferLodPlugin::default())
+        // Pictures repeat: calm, unless the caller's setup brings wind.
+        .insert_resource(ConiferWind::CALM);
         setup(&mut app);
         app.finish();
         app.cleanup();

@@ -49,6 +49,7 @@ pub mod headless;
 mod preset;
 mod render;
 mod systems;
+mod wind;
 
 pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, triangle_mesh, wood_mesh};
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
@@ -59,6 +60,7 @@ pub use render::gpu::{
 };
 pub use render::{CompactGpuMemory, CompactInstances, CompactReadback, ViewReadback};
 pub use systems::{ConiferLodCpuTime, view_error_slope};
+pub use wind::ConiferWind;
 
 use bevy::asset::AssetApp;
 use bevy::camera::visibility::VisibilitySystems;
@@ -120,12 +122,14 @@ impl Plugin for ConiferLodPlugin {
             .insert_resource(preset::PresetStore::new(&self.preset_cache))
             .init_resource::<ConiferLodCpuTime>()
             .init_resource::<CompactInstances>()
+            .init_resource::<ConiferWind>()
             // Inspectors and Bevy's remote protocol see and edit these.
             .register_type::<ConiferLodSettings>()
             .register_type::<ConiferFoliage>()
             .register_type::<ConiferLodOverride>()
             .register_type::<ConiferLodState>()
             .register_type::<ConiferLodCpuTime>()
+            .register_type::<ConiferWind>()
             .configure_sets(
                 PostUpdate,
                 ConiferLodSet::Select

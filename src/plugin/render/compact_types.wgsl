@@ -106,6 +106,16 @@ struct SpeciesParams {
     far_needle_color: vec4<f32>,
     // where the bark turns (tree-local heights x to y)
     wood_heights: vec4<f32>,
+    // the wind (`model::wind`): unit direction (world x, z), strength (0:
+    // calm), gustiness
+    wind: vec4<f32>,
+    // turbulence, reach (tree metres: what culling and error spheres grow
+    // by), trunk and branch oscillators (radians)
+    wind_motion: vec4<f32>,
+    // flutter and the two gust oscillators (radians), crown radius
+    wind_clock: vec4<f32>,
+    // trunk axis (tree-local x, z), base height, height
+    wind_shape: vec4<f32>,
 }
 
 struct CullView {
@@ -285,21 +295,23 @@ fn sphere_distance(sphere: vec4<f32>, point: vec3<f32>) -> f32 {
     return max(length(point - sphere.xyz) - sphere.w, 0.0);
 }
 
-// Spatial error (tree metres) a view gives what `sphere` bounds: its own
-// nearest point's, or the tree's error when the view has no view point
-// (`model::compact::CompactSpecies::sphere_error`).
-fn sphere_error(lod: InstanceLod, sphere: vec4<f32>) -> f32 {
+// Spatial error (tree metres) a view gives what `sphere` bounds, grown by
+// the wind's `reach` (tree metres; 0 in calm): its own nearest point's, or
+// the tree's error when the view has no view point
+// (`model::compact::CompactSpecies::sphere_error`, which is calm).
+fn sphere_error(lod: InstanceLod, sphere: vec4<f32>, reach: f32) -> f32 {
     if lod.view.w > 0.0 {
-        return lod.view.w * sphere_distance(sphere, lod.view.xyz);
+        return lod.view.w * sphere_distance(vec4<f32>(sphere.xyz, sphere.w + reach), lod.view.xyz);
     }
     return lod.spatial_error;
 }
 
 // Spatial error (tree metres) of a placement of a prototype with bounding
-// sphere `prototype_sphere` (`model::compact::CompactSpecies::placement_error`).
-fn placement_error(lod: InstanceLod, placement: Placement, prototype_sphere: vec4<f32>) -> f32 {
+// sphere `prototype_sphere`, grown by the wind's `reach`
+// (`model::compact::CompactSpecies::placement_error`).
+fn placement_error(lod: InstanceLod, placement: Placement, prototype_sphere: vec4<f32>, reach: f32) -> f32 {
     let center = (placement_matrix(placement) * vec4<f32>(prototype_sphere.xyz, 1.0)).xyz;
-    return sphere_error(lod, vec4<f32>(center, prototype_sphere.w * placement.translation_scale.w));
+    return sphere_error(lod, vec4<f32>(center, prototype_sphere.w * placement.translation_scale.w), reach);
 }
 
 // A logarithmic code's value (`model::compact::shader_log_decode`).

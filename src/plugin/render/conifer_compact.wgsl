@@ -61,6 +61,15 @@
 
 const PI: f32 = 3.14159265358979;
 const TAU: f32 = 6.28318530717959;
+// `model::wind`'s constants.
+const WIND_TRUNK_LEAN: f32 = 0.008;
+const WIND_TRUNK_SWAY: f32 = 0.005;
+const WIND_BRANCH_SWAY: f32 = 0.015;
+const WIND_FLUTTER: f32 = 0.015;
+const WIND_GUST_WAVELENGTH: f32 = 60.0;
+const WIND_BRANCH_WAVES: vec3<f32> = vec3<f32>(0.7, 1.1, 0.9);
+const WIND_FLUTTER_WAVES: vec3<f32> = vec3<f32>(4.1, 3.3, 4.7);
+const WIND_MAX_REACH_RATIO: f32 = 1.5;
 
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
@@ -93,9 +102,66 @@ fn culled() -> VertexOutput {
     return out;
 }
 
+// The tree the vertex belongs to (its world_from_local), for the wind;
+// set first thing by `vertex`.
+var<private> wind_tree: mat4x4<f32>;
+// The impostor sways with the trunk only (its quad's corners stand off
+// the tree, where branch sway would wobble the picture).
+var<private> wind_trunk_only: bool;
+
+// PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering", JCGT 2020).
+fn pcg(value: u32) -> u32 {
+    let state = value * 747796405u + 2891336453u;
+    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// The world displacement of the tree's point at `world` (where it stands
+// in calm): one field for every representation, so a needle's prism, its
+// line and the merged lines that stand for it move together. CPU
+// reference: `model::wind::wind_offset` and `WindOffset::world`.
+fn wind_displacement(world: vec3<f32>) -> vec3<f32> {
+    let strength = species.wind.z;
+    if !(strength > 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let scale = length(wind_tree[0].xyz);
+    let p = tree_local_point(wind_tree, scale, world);
+    let direction = species.wind.xy;
+    // The tree's own phases (`model::wind::TreeWindPhase::of_root`).
+    let root = wind_tree[3].xyz;
+    let cell_x = bitcast<u32>(i32(floor(root.x * 100.0)));
+    let cell_z = bitcast<u32>(i32(floor(root.z * 100.0)));
+    let sway_phase = f32(pcg(cell_x ^ pcg(cell_z)) >> 8u) / 16777216.0 * TAU;
+    let gust_phase = -TAU * fract(dot(root.xz, direction) / WIND_GUST_WAVELENGTH);
+    let gust = 0.6 * sin(species.wind_clock.y + gust_phase) + 0.4 * sin(species.wind_clock.z + 1.7 * gust_phase);
+    let force = strength * (1.0 + species.wind.w * gust);
+    let shape = species.wind_shape;
+    let crown_radius = species.wind_clock.w;
+    let h = clamp((p.y - shape.z) / shape.w, 0.0, 1.0);
+    let r = min(length(p.xz - shape.xy) / crown_radius, WIND_MAX_REACH_RATIO);
+    let trunk = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(species.wind_motion.z + sway_phase));
+    var along = trunk;
+    var across = 0.0;
+    var up = 0.0;
+    if !wind_trunk_only {
+        let branch_amplitude = force * WIND_BRANCH_SWAY * crown_radius * r * sqrt(r);
+        let branch = species.wind_motion.w + sway_phase + dot(p, WIND_BRANCH_WAVES);
+        let flutter_amplitude = force * species.wind_motion.x * WIND_FLUTTER * r;
+        let flutter = species.wind_clock.x + sway_phase + dot(p, WIND_FLUTTER_WAVES);
+        along += 0.5 * branch_amplitude * sin(branch + 1.0);
+        across = flutter_amplitude * sin(flutter);
+        up = branch_amplitude * sin(branch) + 0.5 * flutter_amplitude * sin(flutter + 2.1);
+    }
+    let along_axis = vec3<f32>(direction.x, 0.0, direction.y);
+    let across_axis = vec3<f32>(direction.y, 0.0, -direction.x);
+    return (along_axis * along + across_axis * across + vec3<f32>(0.0, up, 0.0)) * scale;
+}
+
 fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
     var out: VertexOutput;
     out.world_position = world_from_local * vec4<f32>(local_position, 1.0);
+    out.world_position = vec4<f32>(out.world_position.xyz + wind_displacement(out.world_position.xyz), 1.0);
     out.position = position_world_to_clip(out.world_position.xyz);
 #ifdef CONIFER_SHADOW
     // Directional shadow maps: casters nearer the light than the cascade's
@@ -371,7 +437,7 @@ fn line_color(lod: InstanceLod, color: vec4<f32>, line: u32, tree: u32) -> vec4<
 fn wood_segment_error(lod: InstanceLod, start: vec4<f32>, end: vec4<f32>, tree_error: f32) -> f32 {
     if lod.view.w > 0.0 {
         let sphere = vec4<f32>(0.5 * (start.xyz + end.xyz), 0.5 * distance(start.xyz, end.xyz) + max(start.w, end.w));
-        return sphere_error(lod, sphere);
+        return sphere_error(lod, sphere, species.wind_motion.y);
     }
     return tree_error;
 }
@@ -385,11 +451,12 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #ifdef CONIFER_PLACED
     let entry = placed_entries[instance_index];
     let tree = entry.x & ENTRY_TREE_MASK;
+    wind_tree = instance_world_from_local(instances[tree]);
     let placement = placements[entry.y & ENTRY_PLACEMENT_MASK];
     let lod = instance_lods[tree];
     let code = entry.y >> 16u;
     let original_from_needles = (entry.x & ENTRY_FROM_NEEDLES) != 0u;
-    let spatial_error = placement_error(lod, placement, prototypes[placement.prototype].sphere)
+    let spatial_error = placement_error(lod, placement, prototypes[placement.prototype].sphere, species.wind_motion.y)
         / placement.translation_scale.w;
     let world_from_local = instance_world_from_local(instances[tree]) * placement_matrix(placement);
     let grid = prototypes[placement.prototype].grid;
@@ -398,6 +465,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let needle_albedo = placed_needle_albedo(placement, prototypes[placement.prototype], world_from_local);
 #else
     let tree = instance_index;
+    wind_tree = instance_world_from_local(instances[tree]);
     let lod = instance_lods[tree];
     let code = lod.code & LOD_CODE_MASK;
     let original_from_needles = (lod.code & LOD_ORIGINAL_FROM_NEEDLES) != 0u;
@@ -476,12 +544,12 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     var line_error = spatial_error;
 #ifndef CONIFER_PLACED
     if lod.view.w > 0.0 && species.placement_count > 0u {
-        line_error = sphere_error(lod, tree_spheres[line]);
+        line_error = sphere_error(lod, tree_spheres[line], species.wind_motion.y);
         line_code = threshold_code(line_error);
         let parent = tree_line_parents[line];
         parent_view_code = 0u;
         if parent != NO_SPHERE {
-            parent_view_code = threshold_code(sphere_error(lod, tree_spheres[parent]));
+            parent_view_code = threshold_code(sphere_error(lod, tree_spheres[parent], species.wind_motion.y));
         }
     }
 #endif
@@ -519,6 +587,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     // One quad standing on the impostor's axis, turned about it toward the
     // camera; its pictures are the two views nearest the camera's azimuth,
     // blended (`model::impostor`).
+    wind_trunk_only = true;
     let fade = impostor_fade(lod);
     if !(fade > 0.0) {
         return culled();
@@ -567,12 +636,6 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 }
 
 #ifdef CONIFER_SHADOW
-// PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering", JCGT 2020).
-fn pcg(value: u32) -> u32 {
-    let state = value * 747796405u + 2891336453u;
-    let word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
 
 // Shadows of translucent lines: each fragment is kept with the line's
 // opacity, by a hash of its texel, line and tree, so a line casts the

@@ -165,7 +165,11 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let world_from_local = instance_world_from_local(instance);
     let scale = instance_scale(instance);
     let center = (world_from_local * vec4<f32>(species.crown_center.xyz, 1.0)).xyz;
-    let radius = species.crown_center.w * scale;
+    // The wind moves nothing farther than its reach (`model::wind::wind_reach`,
+    // 0 in calm): a swaying tree is culled and detailed as if it could
+    // stand that much nearer.
+    let reach = species.wind_motion.y;
+    let radius = (species.crown_center.w + reach) * scale;
     for (var p = 0u; p < 6u; p += 1u) {
         if dot(cull_view.planes[p].xyz, center) + cull_view.planes[p].w < -radius {
             hide(i);
@@ -188,7 +192,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var distance = 1.0;
     if (cull_view.perspective & VIEW_PERSPECTIVE) != 0u {
-        distance = length(center - cull_view.world_position.xyz);
+        distance = max(length(center - cull_view.world_position.xyz) - reach * scale, 0.0);
     }
     var e = max(pixel_error, 0.0) * distance * cull_view.error_slope / max(scale, 1e-6);
     if species.lod_enabled == 0u {
@@ -203,7 +207,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     if species.error_scope != 0u && species.placement_count > 0u && species.lod_enabled != 0u
         && (cull_view.perspective & VIEW_PERSPECTIVE) != 0u {
         let slope = max(pixel_error, 0.0) * cull_view.error_slope;
-        let d = sphere_distance(species.tree_sphere, camera);
+        let d = sphere_distance(vec4<f32>(species.tree_sphere.xyz, species.tree_sphere.w + reach), camera);
         e = slope * d;
         if d <= VIEW_RANGE * species.tree_sphere.w {
             view_point = vec4<f32>(camera, slope);
@@ -356,14 +360,14 @@ fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
     let placement = placements[entry.y];
     let lod = instance_lods[entry.x];
     if lod.view.w > 0.0 && placement.parent_sphere != NO_SPHERE {
-        let parent = threshold_code(sphere_error(lod, tree_spheres[placement.parent_sphere]));
+        let parent = threshold_code(sphere_error(lod, tree_spheres[placement.parent_sphere], species.wind_motion.y));
         if parent >= placement.parent_code {
             entries[i] = vec2<u32>(ENTRY_INVALID, ENTRY_INVALID);
             return;
         }
     }
     let prototype = prototypes[placement.prototype];
-    let e = placement_error(lod, placement, prototype.sphere) / placement.translation_scale.w;
+    let e = placement_error(lod, placement, prototype.sphere, species.wind_motion.y) / placement.translation_scale.w;
     let code = threshold_code(e);
     let draw = entry_draw(placement, code);
     let prisms = prism_prefix_in(prototype.needle_first, prototype.needle_count, code);

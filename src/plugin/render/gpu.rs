@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 304 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 368 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -229,6 +229,31 @@ pub struct SpeciesParams {
     pub far_needle_color: [f32; 4],
     /// Where the bark turns (tree-local heights, x to y); z, w unused.
     pub wood_heights: [f32; 4],
+    /// The wind ([`crate::model::wind::Wind`]): unit direction (world x,
+    /// z), strength (0: calm, nothing moves), gustiness.
+    pub wind: [f32; 4],
+    /// Turbulence, the reach ([`crate::model::wind::wind_reach`], tree
+    /// metres) that culling and error spheres grow by, the trunk and
+    /// branch oscillators (radians, [`crate::model::wind::WindClock`]).
+    pub wind_motion: [f32; 4],
+    /// The flutter and two gust oscillators (radians), the crown radius.
+    pub wind_clock: [f32; 4],
+    /// The trunk axis (tree-local x, z), the tree's base height and height
+    /// ([`crate::model::wind::WindShape`]).
+    pub wind_shape: [f32; 4],
+}
+
+impl SpeciesParams {
+    /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`.
+    pub fn set_wind(&mut self, wind: &crate::model::wind::Wind, shape: &crate::model::wind::WindShape, seconds: f64) {
+        let w = wind.clamped();
+        let clock = crate::model::wind::WindClock::at(seconds, shape);
+        let reach = crate::model::wind::wind_reach(&w, shape);
+        self.wind = [w.direction.x, w.direction.y, w.strength, w.gustiness];
+        self.wind_motion = [w.turbulence, reach, clock.trunk, clock.branch];
+        self.wind_clock = [clock.flutter, clock.gust[0], clock.gust[1], shape.crown_radius];
+        self.wind_shape = [shape.axis.x, shape.axis.y, shape.base, shape.height];
+    }
 }
 
 /// [`CullView::perspective`] flag: the view is a camera (a shadow view
@@ -364,3 +389,39 @@ pub const PLACED_COUNTER_HEADER: u64 = 4;
 /// Per-draw arrays of a view's placement counters (count, cursor, four
 /// longest prefixes, offset, flags).
 pub const PLACED_COUNTER_ARRAYS: u64 = 8;
+
+#[cfg(test)]
+mod tests {
+    use crate::model::wind;
+
+    /// The vertex shader's copies of `model::wind`'s constants.
+    #[test]
+    fn the_shader_has_the_wind_models_constants() {
+        let shader = include_str!("conifer_compact.wgsl");
+        let scalars = [
+            ("WIND_TRUNK_LEAN", wind::TRUNK_LEAN),
+            ("WIND_TRUNK_SWAY", wind::TRUNK_SWAY),
+            ("WIND_BRANCH_SWAY", wind::BRANCH_SWAY),
+            ("WIND_FLUTTER", wind::FLUTTER),
+            ("WIND_GUST_WAVELENGTH", wind::GUST_WAVELENGTH),
+            ("WIND_MAX_REACH_RATIO", wind::MAX_REACH_RATIO),
+        ];
+        for (name, value) in scalars {
+            let line = format!("const {name}: f32 = {value:?};");
+            assert!(shader.contains(&line), "{line}");
+        }
+        for (name, v) in [
+            ("WIND_BRANCH_WAVES", wind::BRANCH_WAVES),
+            ("WIND_FLUTTER_WAVES", wind::FLUTTER_WAVES),
+        ] {
+            let line = format!("const {name}: vec3<f32> = vec3<f32>({:?}, {:?}, {:?});", v.x, v.y, v.z);
+            assert!(shader.contains(&line), "{line}");
+        }
+    }
+
+    /// The Rust mirror is as long as the WGSL struct (16-byte rows).
+    #[test]
+    fn species_params_is_368_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 368);
+    }
+}

@@ -34,7 +34,8 @@ use self::gpu::{
     PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, prism_vertices,
 };
 use super::{
-    ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ErrorScope, LineLighting, LineOpacity,
+    ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
+    LineOpacity,
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
@@ -408,7 +409,13 @@ impl CompactGpuMemory {
     }
 }
 
-fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: &ConiferLodSettings) -> SpeciesParams {
+fn species_params(
+    species: &ConiferSpecies,
+    compact: &CompactSpecies,
+    settings: &ConiferLodSettings,
+    wind: &ConiferWind,
+    seconds: f64,
+) -> SpeciesParams {
     let (impostor_box, impostor_span) = match &species.impostor {
         Some(i) => (
             [i.axis.x, i.axis.y, i.half_width, i.texel],
@@ -425,7 +432,7 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
     let center = species.crown_center;
     let (lo, hi) = (Vec3::from(species.aabb.min()), Vec3::from(species.aabb.max()));
     let radius = (lo - center).abs().max((hi - center).abs()).length();
-    SpeciesParams {
+    let mut params = SpeciesParams {
         crown_center: center.extend(radius).to_array(),
         grid: compact.grid.origin.extend(compact.grid.step).to_array(),
         wood_grid: compact.wood_grid.origin.extend(compact.wood_grid.step).to_array(),
@@ -469,7 +476,10 @@ fn species_params(species: &ConiferSpecies, compact: &CompactSpecies, settings: 
         upper_wood_color: material.upper_wood_color,
         far_needle_color: compact.far_needle_color.extend(1.0).to_array(),
         wood_heights: [material.upper_wood_heights[0], material.upper_wood_heights[1], 0.0, 0.0],
-    }
+        ..SpeciesParams::default()
+    };
+    params.set_wind(&wind.model(), &species.wind_shape(), wind.seconds(seconds));
+    params
 }
 
 /// Copies the species and trees that changed into the render world.
@@ -478,8 +488,11 @@ fn extract_compact(
     instances: Extract<Res<CompactInstances>>,
     species_assets: Extract<Res<Assets<ConiferSpecies>>>,
     settings: Extract<Res<ConiferLodSettings>>,
+    wind: Extract<Res<ConiferWind>>,
+    time: Extract<Res<Time>>,
     mut render: ResMut<RenderCompactSpecies>,
 ) {
+    let seconds = time.elapsed_secs_f64();
     let render = &mut *render;
     render.max_expanded_placements = settings.max_expanded_placements;
     render.line_lighting = settings.line_lighting;
@@ -533,7 +546,7 @@ fn extract_compact(
             });
             entry.center = sum / entry.instances.len().max(1) as f32 + asset.crown_center;
         }
-        entry.params = species_params(asset, compact, &settings);
+        entry.params = species_params(asset, compact, &settings, &wind, seconds);
         entry.params.instance_count = entry.instances.len() as u32;
     }
 }

@@ -1,0 +1,494 @@
+//! Wind, free of Bevy: one displacement field per tree, the CPU reference
+//! of the vertex shader's `wind_displacement` (`conifer_compact.wgsl`).
+//!
+//! The field is a function of where a point sits in the tree (its
+//! tree-local position) and of time, never of what is drawn there. A
+//! needle's prism, its original line and every merged line that stands for
+//! it therefore move together (merged-line ends are needle ends), and the
+//! wood moves with the needles beside it: switching LOD never jumps.
+//!
+//! Three motions, summed, as foliage systems users know have them
+//! (SpeedTree, UE's skeletal foliage wind):
+//!
+//! * **Trunk bend.** Along the wind, growing with the square of the height
+//!   over the tree's base (a cantilever's first mode), a steady lean plus a
+//!   sway at the tree's own frequency ([`WindShape::trunk_hz`], lower for
+//!   taller trees).
+//! * **Branch sway.** Up and down and along the wind, growing with the
+//!   distance from the trunk to the power 1.5 (a longer branch is less
+//!   stiff), at [`BRANCH_HZ_OVER_TRUNK`] times the trunk's frequency; its
+//!   phase varies smoothly through the crown ([`BRANCH_WAVES`]), so
+//!   branches a metre apart sway apart.
+//! * **Shoot flutter.** Across the wind and up, small and fast
+//!   ([`FLUTTER_HZ`]), scaled by [`Wind::turbulence`], with a phase that
+//!   varies over tens of centimetres ([`FLUTTER_WAVES`]).
+//!
+//! Gusts scale all three between `1 − gustiness` and `1 + gustiness`; they
+//! travel through a forest along the wind ([`GUST_WAVELENGTH`]), and each
+//! tree sways at its own phase ([`TreeWindPhase::of_root`]), so a forest
+//! does not sway in lockstep.
+//!
+//! Every displacement is at most [`wind_reach`]: culling and error spheres
+//! grow by it, so no tree is culled or under-detailed while it sways.
+
+use glam::{Vec2, Vec3};
+use std::f32::consts::TAU;
+
+/// Wind over the trees: where it blows, how hard, how gusty and turbulent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wind {
+    /// Where the wind blows to, horizontal (world x, z); normalised where
+    /// used; zero: no wind.
+    pub direction: Vec2,
+    /// 0: calm; 1: a light breeze (a 20 m tree's top leans about 25 cm);
+    /// 3: a strong wind. Negative and NaN read as calm.
+    pub strength: f32,
+    /// How much gusts vary the strength, 0–1.
+    pub gustiness: f32,
+    /// How much shoots flutter, 0–1.
+    pub turbulence: f32,
+}
+
+impl Wind {
+    /// No wind.
+    pub const CALM: Wind = Wind {
+        direction: Vec2::X,
+        strength: 0.0,
+        gustiness: 0.0,
+        turbulence: 0.0,
+    };
+
+    /// A light breeze along +x.
+    pub const LIGHT_BREEZE: Wind = Wind {
+        direction: Vec2::X,
+        strength: 1.0,
+        gustiness: 0.4,
+        turbulence: 0.4,
+    };
+
+    /// The wind's direction, unit length (+x when `direction` is zero or
+    /// not finite).
+    pub fn unit_direction(&self) -> Vec2 {
+        self.direction.try_normalize().unwrap_or(Vec2::X)
+    }
+
+    /// Strength, gustiness and turbulence as the field uses them: strength
+    /// ≥ 0, the others in `[0, 1]`, NaN read as 0.
+    pub fn clamped(&self) -> Wind {
+        let unit = |v: f32| if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) };
+        Wind {
+            direction: self.unit_direction(),
+            strength: if self.strength.is_nan() {
+                0.0
+            } else {
+                self.strength.clamp(0.0, 100.0)
+            },
+            gustiness: unit(self.gustiness),
+            turbulence: unit(self.turbulence),
+        }
+    }
+
+    /// Whether the wind moves anything.
+    pub fn is_calm(&self) -> bool {
+        self.clamped().strength == 0.0
+    }
+}
+
+impl Default for Wind {
+    fn default() -> Self {
+        Wind::LIGHT_BREEZE
+    }
+}
+
+/// Top of a tree leaning at strength 1, steady part, over its height.
+pub const TRUNK_LEAN: f32 = 0.008;
+/// Top of a tree swaying at strength 1, amplitude, over its height.
+pub const TRUNK_SWAY: f32 = 0.005;
+/// A branch tip at the crown's radius swaying at strength 1, amplitude,
+/// over the crown radius.
+pub const BRANCH_SWAY: f32 = 0.015;
+/// Shoot flutter at the crown's radius at strength and turbulence 1,
+/// metres.
+pub const FLUTTER: f32 = 0.015;
+/// Branch frequency over the trunk's.
+pub const BRANCH_HZ_OVER_TRUNK: f32 = 3.1;
+/// Shoot flutter, Hz.
+pub const FLUTTER_HZ: f32 = 3.7;
+/// The two gust oscillators, Hz.
+pub const GUST_HZ: [f32; 2] = [0.071, 0.173];
+/// How far apart gusts pass through a forest along the wind, metres.
+pub const GUST_WAVELENGTH: f32 = 60.0;
+/// Branch phase through the crown, radians per tree metre (x, y, z): a
+/// cycle every 6–9 m along an axis, so branches a metre apart sway about
+/// 60° apart while a branch moves as one.
+pub const BRANCH_WAVES: Vec3 = Vec3::new(0.7, 1.1, 0.9);
+/// Flutter phase, radians per tree metre: a cycle every 1.3–1.9 m along an
+/// axis.
+pub const FLUTTER_WAVES: Vec3 = Vec3::new(4.1, 3.3, 4.7);
+/// Distance from the trunk over the crown radius beyond which branch sway
+/// and flutter stop growing.
+pub const MAX_REACH_RATIO: f32 = 1.5;
+
+/// What the field needs to know of a tree: its trunk axis and size, in the
+/// tree's frame (record metres).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WindShape {
+    /// Trunk axis (tree-local x, z).
+    pub axis: Vec2,
+    /// Height of the tree's base.
+    pub base: f32,
+    /// Height from base to top (> 0).
+    pub height: f32,
+    /// Largest horizontal distance of the crown from the axis (> 0).
+    pub crown_radius: f32,
+}
+
+impl WindShape {
+    /// The shape of a tree whose bounding box is `min`–`max`, trunk at
+    /// `axis` (x, z). Degenerate boxes get a height and radius of at least
+    /// a millimetre.
+    pub fn from_bounds(min: Vec3, max: Vec3, axis: Vec2) -> WindShape {
+        let corners = [min.x - axis.x, max.x - axis.x];
+        let depths = [min.z - axis.y, max.z - axis.y];
+        let mut radius = 0f32;
+        for x in corners {
+            for z in depths {
+                radius = radius.max(Vec2::new(x, z).length());
+            }
+        }
+        WindShape {
+            axis,
+            base: if min.y.is_finite() { min.y } else { 0.0 },
+            height: finite_at_least(max.y - min.y, 1e-3),
+            crown_radius: finite_at_least(radius, 1e-3),
+        }
+    }
+
+    /// The trunk's sway frequency, Hz: 0.3 Hz for a 20 m tree, as `1/√h`
+    /// (slender cantilevers of one taper), within 0.15–1.0 Hz. Measured
+    /// conifers sway at 0.2–0.5 Hz (Moore and Maguire 2004, "Natural
+    /// sway frequencies and damping ratios of trees").
+    pub fn trunk_hz(&self) -> f32 {
+        (0.3 * (20.0 / self.height).sqrt()).clamp(0.15, 1.0)
+    }
+}
+
+fn finite_at_least(v: f32, floor: f32) -> f32 {
+    if v.is_finite() { v.max(floor) } else { floor }
+}
+
+/// The field's oscillators at one moment, radians in `[0, 2π)`: computed
+/// in double precision from seconds, so the shader's sines stay exact
+/// however long the game runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WindClock {
+    /// Trunk sway.
+    pub trunk: f32,
+    /// Branch sway.
+    pub branch: f32,
+    /// Shoot flutter.
+    pub flutter: f32,
+    /// The two gust oscillators.
+    pub gust: [f32; 2],
+}
+
+impl WindClock {
+    /// The oscillators of a tree of `shape` at `seconds`.
+    pub fn at(seconds: f64, shape: &WindShape) -> WindClock {
+        let seconds = if seconds.is_finite() { seconds } else { 0.0 };
+        let phase = |hz: f32| ((f64::from(hz) * seconds).rem_euclid(1.0) * std::f64::consts::TAU) as f32;
+        let trunk = shape.trunk_hz();
+        WindClock {
+            trunk: phase(trunk),
+            branch: phase(trunk * BRANCH_HZ_OVER_TRUNK),
+            flutter: phase(FLUTTER_HZ),
+            gust: [phase(GUST_HZ[0]), phase(GUST_HZ[1])],
+        }
+    }
+}
+
+/// A tree's own phases, from where it stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TreeWindPhase {
+    /// Added to the trunk, branch and flutter oscillators: a hash of the
+    /// root's position (centimetres), in `[0, 2π)`.
+    pub sway: f32,
+    /// Added to the gust oscillators: `−2π · fract((root · wind) /
+    /// GUST_WAVELENGTH)` (fract as WGSL's, `x − ⌊x⌋`), so gusts travel along
+    /// the wind.
+    pub gust: f32,
+}
+
+impl TreeWindPhase {
+    /// The phases of a tree whose root stands at `root` (world x, z) in
+    /// `wind`.
+    pub fn of_root(root: Vec2, wind: &Wind) -> TreeWindPhase {
+        let cell = |v: f32| {
+            if v.is_finite() {
+                (v * 100.0).floor() as i32 as u32
+            } else {
+                0
+            }
+        };
+        let hash = pcg(cell(root.x) ^ pcg(cell(root.y)));
+        let along = root.dot(wind.unit_direction());
+        TreeWindPhase {
+            sway: (hash >> 8) as f32 / (1u32 << 24) as f32 * TAU,
+            gust: if along.is_finite() {
+                -TAU * (along / GUST_WAVELENGTH).rem_euclid(1.0)
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering",
+/// JCGT 2020); the shader's `pcg`.
+pub fn pcg(value: u32) -> u32 {
+    let state = value.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// A point's displacement in the wind's frame, tree metres.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WindOffset {
+    /// Along the wind.
+    pub along: f32,
+    /// Across it (the wind turned 90° to the left, seen from above).
+    pub across: f32,
+    /// Up.
+    pub up: f32,
+}
+
+impl WindOffset {
+    /// Its length.
+    pub fn length(&self) -> f32 {
+        Vec3::new(self.along, self.across, self.up).length()
+    }
+
+    /// The world displacement of a tree scaled by `scale` in wind
+    /// `direction` (unit, world x, z).
+    pub fn world(&self, direction: Vec2, scale: f32) -> Vec3 {
+        let along = Vec3::new(direction.x, 0.0, direction.y);
+        let across = Vec3::new(direction.y, 0.0, -direction.x);
+        (along * self.along + across * self.across + Vec3::Y * self.up) * scale
+    }
+}
+
+/// How gusts scale the wind at this tree now, in `[1 − g, 1 + g]`.
+pub fn gust_factor(wind: &Wind, clock: &WindClock, phase: &TreeWindPhase) -> f32 {
+    let w = wind.clamped();
+    let g = 0.6 * (clock.gust[0] + phase.gust).sin() + 0.4 * (clock.gust[1] + 1.7 * phase.gust).sin();
+    1.0 + w.gustiness * g
+}
+
+/// The displacement of the tree-local point `point` (record metres) of a
+/// tree of `shape`, at `clock`, with its own `phase`. The shader computes
+/// the same ([`WindOffset::world`] turns it into world metres).
+pub fn wind_offset(
+    wind: &Wind,
+    shape: &WindShape,
+    clock: &WindClock,
+    phase: &TreeWindPhase,
+    point: Vec3,
+) -> WindOffset {
+    let w = wind.clamped();
+    if w.strength == 0.0 || !point.is_finite() {
+        return WindOffset::default();
+    }
+    let force = w.strength * gust_factor(&w, clock, phase);
+    let h = ((point.y - shape.base) / shape.height).clamp(0.0, 1.0);
+    let r = ((Vec2::new(point.x, point.z) - shape.axis).length() / shape.crown_radius).min(MAX_REACH_RATIO);
+    let trunk = force * shape.height * h * h * (TRUNK_LEAN + TRUNK_SWAY * (clock.trunk + phase.sway).sin());
+    let branch_amplitude = force * BRANCH_SWAY * shape.crown_radius * r * r.sqrt();
+    let branch = clock.branch + phase.sway + point.dot(BRANCH_WAVES);
+    let flutter_amplitude = force * w.turbulence * FLUTTER * r;
+    let flutter = clock.flutter + phase.sway + point.dot(FLUTTER_WAVES);
+    WindOffset {
+        along: trunk + 0.5 * branch_amplitude * (branch + 1.0).sin(),
+        across: flutter_amplitude * flutter.sin(),
+        up: branch_amplitude * branch.sin() + 0.5 * flutter_amplitude * (flutter + 2.1).sin(),
+    }
+}
+
+/// The largest displacement [`wind_offset`] can give in `shape` under
+/// `wind` (tree metres), whatever the time, phase and point: the sum of
+/// the three motions' largest.
+pub fn wind_reach(wind: &Wind, shape: &WindShape) -> f32 {
+    let w = wind.clamped();
+    if w.strength == 0.0 {
+        return 0.0;
+    }
+    let force = w.strength * (1.0 + w.gustiness);
+    let trunk = force * shape.height * (TRUNK_LEAN + TRUNK_SWAY);
+    let branch = force * BRANCH_SWAY * shape.crown_radius * MAX_REACH_RATIO.powf(1.5) * 1.25f32.sqrt();
+    let flutter = force * w.turbulence * FLUTTER * MAX_REACH_RATIO * 1.25f32.sqrt();
+    // Rounding head room, so the bound holds in f32 on the GPU too.
+    (trunk + branch + flutter) * 1.001
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shape() -> WindShape {
+        WindShape::from_bounds(Vec3::new(-3.0, 0.0, -2.5), Vec3::new(3.0, 20.0, 2.5), Vec2::ZERO)
+    }
+
+    #[test]
+    fn calm_moves_nothing_and_reaches_nothing() {
+        let s = shape();
+        let clock = WindClock::at(12.5, &s);
+        for wind in [
+            Wind::CALM,
+            Wind {
+                strength: f32::NAN,
+                ..Wind::LIGHT_BREEZE
+            },
+            Wind {
+                strength: -2.0,
+                ..Wind::LIGHT_BREEZE
+            },
+        ] {
+            assert!(wind.is_calm());
+            assert_eq!(wind_reach(&wind, &s), 0.0);
+            let o = wind_offset(&wind, &s, &clock, &TreeWindPhase::default(), Vec3::new(1.0, 15.0, 0.5));
+            assert_eq!(o, WindOffset::default());
+        }
+    }
+
+    #[test]
+    fn the_trunk_foot_stays_and_the_top_leans_downwind() {
+        let s = shape();
+        let wind = Wind {
+            gustiness: 0.0,
+            turbulence: 0.0,
+            ..Wind::LIGHT_BREEZE
+        };
+        let phase = TreeWindPhase::default();
+        for t in 0..40 {
+            let clock = WindClock::at(t as f64 * 0.37, &s);
+            let foot = wind_offset(&wind, &s, &clock, &phase, Vec3::ZERO);
+            assert!(foot.length() < 1e-6, "{foot:?}");
+            let top = wind_offset(&wind, &s, &clock, &phase, Vec3::new(0.0, 20.0, 0.0));
+            // Lean 0.8 % of 20 m, swaying ±0.5 %: always downwind.
+            assert!(top.along > 0.05 && top.along < 0.27, "{top:?}");
+            assert!(top.across.abs() < 1e-6 && top.up.abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn a_branch_tip_moves_more_than_its_base() {
+        let s = shape();
+        let wind = Wind::LIGHT_BREEZE;
+        let phase = TreeWindPhase::of_root(Vec2::new(3.0, 7.0), &wind);
+        let mut near = 0f32;
+        let mut tip = 0f32;
+        for t in 0..200 {
+            let clock = WindClock::at(t as f64 * 0.05, &s);
+            let trunk = wind_offset(&wind, &s, &clock, &phase, Vec3::new(0.0, 10.0, 0.0));
+            let at = |x: f32| {
+                let o = wind_offset(&wind, &s, &clock, &phase, Vec3::new(x, 10.0, 0.0));
+                Vec3::new(o.along - trunk.along, o.across, o.up).length()
+            };
+            near = near.max(at(0.3));
+            tip = tip.max(at(3.0));
+        }
+        assert!(tip > 5.0 * near, "tip {tip}, near {near}");
+        assert!(tip > 0.05, "{tip}");
+    }
+
+    #[test]
+    fn trees_apart_sway_apart() {
+        let wind = Wind::LIGHT_BREEZE;
+        let phases: Vec<f32> = (0..32)
+            .map(|i| TreeWindPhase::of_root(Vec2::new(i as f32 * 7.3, (i * i) as f32 * 0.9), &wind).sway)
+            .collect();
+        assert!(phases.iter().all(|p| (0.0..TAU).contains(p)));
+        let mean = phases.iter().sum::<f32>() / 32.0;
+        assert!((mean - std::f32::consts::PI).abs() < 1.0, "{mean}");
+        let mut sorted = phases.clone();
+        sorted.sort_by(f32::total_cmp);
+        sorted.dedup();
+        assert_eq!(sorted.len(), 32);
+    }
+
+    #[test]
+    fn gusts_travel_downwind() {
+        // A tree GUST_WAVELENGTH/4 downwind sees the gust a quarter period
+        // later.
+        let wind = Wind::LIGHT_BREEZE;
+        let here = TreeWindPhase::of_root(Vec2::ZERO, &wind);
+        let there = TreeWindPhase::of_root(Vec2::new(GUST_WAVELENGTH / 4.0, 0.0), &wind);
+        let d = (here.gust - there.gust).rem_euclid(TAU);
+        assert!((d - TAU / 4.0).abs() < 1e-4, "{d}");
+    }
+
+    #[test]
+    fn the_clock_is_exact_after_a_day() {
+        // A quarter period after a day's seconds, the trunk is a quarter
+        // turn on: f32 seconds would have lost it (86,400 s has 8 ms steps).
+        let s = shape();
+        let day = 86_400.0;
+        let quarter = 0.25 / f64::from(s.trunk_hz());
+        let turned = (WindClock::at(day + quarter, &s).trunk - WindClock::at(day, &s).trunk).rem_euclid(TAU);
+        assert!((turned - TAU / 4.0).abs() < 1e-4, "{turned}");
+        assert!(WindClock::at(f64::NAN, &s) == WindClock::at(0.0, &s));
+    }
+
+    #[test]
+    fn taller_trees_sway_slower() {
+        let low = WindShape { height: 5.0, ..shape() };
+        let tall = WindShape {
+            height: 40.0,
+            ..shape()
+        };
+        assert!(tall.trunk_hz() < shape().trunk_hz() && shape().trunk_hz() < low.trunk_hz());
+        assert!((shape().trunk_hz() - 0.3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn a_degenerate_box_gives_a_usable_shape() {
+        let s = WindShape::from_bounds(Vec3::splat(1.0), Vec3::splat(1.0), Vec2::ONE);
+        assert!(s.height > 0.0 && s.crown_radius > 0.0);
+        let n = WindShape::from_bounds(Vec3::splat(f32::NAN), Vec3::splat(f32::NAN), Vec2::ZERO);
+        assert!(n.height > 0.0 && n.crown_radius > 0.0 && n.base == 0.0);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn no_point_moves_beyond_the_reach(
+            x in -6.0f32..6.0, y in -2.0f32..25.0, z in -6.0f32..6.0,
+            seconds in 0.0f64..1e6, root_x in -1e3f32..1e3, root_z in -1e3f32..1e3,
+            strength in 0.0f32..4.0, gustiness in 0.0f32..1.0, turbulence in 0.0f32..1.0,
+        ) {
+            let s = shape();
+            let wind = Wind { direction: Vec2::new(0.3, -1.0), strength, gustiness, turbulence };
+            let clock = WindClock::at(seconds, &s);
+            let phase = TreeWindPhase::of_root(Vec2::new(root_x, root_z), &wind);
+            let o = wind_offset(&wind, &s, &clock, &phase, Vec3::new(x, y, z));
+            proptest::prop_assert!(o.length() <= wind_reach(&wind, &s), "{} > {}", o.length(), wind_reach(&wind, &s));
+        }
+
+        #[test]
+        fn the_field_is_smooth_so_a_needle_keeps_its_length(
+            x in -3.0f32..3.0, y in 0.0f32..20.0, z in -3.0f32..3.0, seconds in 0.0f64..1e4,
+        ) {
+            // Two ends 5 cm apart move at most a centimetre apart in a
+            // light breeze: a prism, its line and its merged lines keep
+            // the needle's shape.
+            let s = shape();
+            let wind = Wind::LIGHT_BREEZE;
+            let clock = WindClock::at(seconds, &s);
+            let phase = TreeWindPhase::default();
+            let a = Vec3::new(x, y, z);
+            let b = a + Vec3::new(0.03, 0.03, 0.0283);
+            let oa = wind_offset(&wind, &s, &clock, &phase, a);
+            let ob = wind_offset(&wind, &s, &clock, &phase, b);
+            let d = WindOffset { along: oa.along - ob.along, across: oa.across - ob.across, up: oa.up - ob.up };
+            proptest::prop_assert!(d.length() < 0.01, "{}", d.length());
+        }
+    }
+}

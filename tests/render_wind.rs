@@ -1,0 +1,283 @@
+//! Wind, rendered on Mesa's lavapipe and compared with the CPU reference
+//! (`model::wind`): each part of a tree moves where the field says, and
+//! culling and errors grow by the wind's reach.
+//! Pictures go to `target/test-output/render/`.
+#![cfg(feature = "plugin")]
+
+mod common;
+
+use bevy::prelude::*;
+use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, wind_offset, wind_reach};
+use bevy_conifer_lod::model::{
+    BakeOptions, FoliageMaterial, Needle, Placement, PrototypeInput, WoodSegment, bake_prototypes,
+};
+use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
+use bevy_conifer_lod::prelude::*;
+use common::{BACKGROUND, background_camera, covered};
+use std::path::PathBuf;
+
+const SIZE: u32 = 200;
+const FOV_DEG: f32 = 50.0;
+
+/// A shoot of 12 needles 30 cm long side by side in the prototype's x–y
+/// plane.
+fn shoot() -> Vec<Needle> {
+    (0..12)
+        .map(|k| Needle {
+            base: Vec3::new(k as f32 * 0.03, 0.0, 0.0),
+            tip: Vec3::new(k as f32 * 0.03, 0.3, 0.0),
+            radius: 0.012,
+            normal: Vec3::Z,
+            group: 0,
+        })
+        .collect()
+}
+
+/// A 10 m trunk with a shoot at its top and one at a branch's tip, 2.5 m
+/// out at 5 m up.
+fn tree() -> ConiferSpecies {
+    let placement = |translation: Vec3| Placement {
+        translation,
+        ..Placement::identity(0)
+    };
+    let input = PrototypeInput {
+        name: "wind".into(),
+        prototypes: vec![shoot()],
+        placements: vec![
+            placement(Vec3::new(-0.17, 9.7, 0.0)),
+            placement(Vec3::new(2.3, 4.85, 0.0)),
+        ],
+        // Ten pieces, as a grown trunk has: the wind bends it at their ends.
+        wood: (0..10)
+            .map(|k| WoodSegment {
+                start: Vec3::new(0.0, 0.97 * k as f32, 0.0),
+                end: Vec3::new(0.0, 0.97 * (k + 1) as f32, 0.0),
+                start_radius: 0.15 - 0.011 * k as f32,
+                end_radius: 0.15 - 0.011 * (k + 1) as f32,
+            })
+            .collect(),
+        wood_mesh: Default::default(),
+        material: FoliageMaterial::default(),
+    };
+    let record = bake_prototypes(&input, &BakeOptions::default(), &())
+        .unwrap()
+        .quantized()
+        .unwrap();
+    ConiferSpecies::from_prototype_record(&record).unwrap()
+}
+
+/// A strong wind blowing to +x (to the right of the pictures), its clock
+/// stopped at `seconds`.
+fn wind(seconds: f64) -> ConiferWind {
+    ConiferWind {
+        direction: Vec2::X,
+        strength: 4.0,
+        gustiness: 0.3,
+        turbulence: 0.6,
+        time: Some(seconds),
+    }
+}
+
+/// The centroid (pixels) of the covered pixels of `image` in columns
+/// `columns` and rows `rows`, and how many there were.
+fn centroid(image: &image::RgbaImage, columns: std::ops::Range<u32>, rows: std::ops::Range<u32>) -> (Vec2, usize) {
+    let mask = covered(image);
+    let (mut sum, mut n) = (Vec2::ZERO, 0usize);
+    for y in rows {
+        for x in columns.clone() {
+            if mask[(y * SIZE + x) as usize] {
+                sum += Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                n += 1;
+            }
+        }
+    }
+    (sum / n.max(1) as f32, n)
+}
+
+#[test]
+fn needles_and_wood_move_where_the_cpu_field_says() {
+    let _turn = common::gpu_turn();
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    let mut renderer = HeadlessRenderer::new(".");
+    let species = tree();
+    let shape = species.wind_shape();
+    let handle = renderer
+        .world_mut()
+        .resource_mut::<Assets<ConiferSpecies>>()
+        .add(species);
+    HeadlessRenderer::spawn_lights(renderer.world_mut());
+    renderer
+        .world_mut()
+        .spawn((ConiferFoliage(handle), Transform::IDENTITY));
+    let target = renderer.render_target(SIZE, SIZE);
+    let camera = background_camera(renderer.world_mut(), &target);
+    // 12 m in front of the tree's middle: a metre is 9.4 pixels, every
+    // needle a prism.
+    let look = Vec3::new(1.1, 5.2, 0.0);
+    let distance = 12.0f32;
+    common::look_at_crown(renderer.world_mut(), camera, look, distance, FOV_DEG);
+    let pixels_per_metre = SIZE as f32 / (2.0 * distance * (FOV_DEG.to_radians() / 2.0).tan());
+    let to_pixel = |p: Vec3| {
+        // Perspective: what lies off the look point's plane scales by depth.
+        let depth = distance - p.z;
+        let s = pixels_per_metre * distance / depth;
+        Vec2::new(
+            SIZE as f32 / 2.0 + (p.x - look.x) * s,
+            SIZE as f32 / 2.0 - (p.y - look.y) * s,
+        )
+    };
+    let mut shot = |wind: ConiferWind, name: &str| {
+        renderer.world_mut().insert_resource(wind);
+        for _ in 0..3 {
+            renderer.update().unwrap();
+        }
+        let image = renderer.capture(&target, 20).unwrap();
+        image.save(out.join(format!("wind_{name}.png"))).unwrap();
+        image
+    };
+    let calm = shot(ConiferWind::CALM, "calm");
+    // Regions: the top shoot, the branch shoot, the trunk at 3–4 m (its
+    // foot barely moves; higher up the shoots hide it).
+    let top = to_pixel(Vec3::new(0.0, 9.85, 0.0));
+    let branch = to_pixel(Vec3::new(2.47, 5.0, 0.0));
+    let around = |c: Vec2, half: f32| {
+        let lo = (c - half).max(Vec2::ZERO).as_uvec2();
+        let hi = (c + half).min(Vec2::splat(SIZE as f32)).as_uvec2();
+        (lo.x..hi.x, lo.y..hi.y)
+    };
+    let trunk_rows = to_pixel(Vec3::new(0.0, 4.0, 0.0)).y as u32..to_pixel(Vec3::new(0.0, 3.0, 0.0)).y as u32;
+    let trunk_columns = 0..(to_pixel(Vec3::new(1.0, 0.0, 0.0)).x as u32);
+    // Points along every needle of a shoot placed at `origin`.
+    let shoot_points = |origin: Vec3| -> Vec<Vec3> {
+        shoot()
+            .iter()
+            .flat_map(|n| (0..6).map(move |i| origin + n.base.lerp(n.tip, (i as f32 + 0.5) / 6.0)))
+            .collect()
+    };
+    let regions = [
+        ("top shoot", around(top, 16.0), shoot_points(Vec3::new(-0.17, 9.7, 0.0))),
+        (
+            "branch shoot",
+            around(branch, 16.0),
+            shoot_points(Vec3::new(2.3, 4.85, 0.0)),
+        ),
+        ("trunk", (trunk_columns, trunk_rows), vec![Vec3::new(0.0, 3.5, 0.0)]),
+    ];
+    let mut moved = 0.0f32;
+    for seconds in [0.8, 2.3, 3.9] {
+        let w = wind(seconds);
+        let windy = shot(w, &format!("{seconds}s"));
+        let clock = WindClock::at(seconds, &shape);
+        let phase = TreeWindPhase::of_root(Vec2::ZERO, &w.model());
+        for (what, (columns, rows), points) in regions.clone() {
+            let (before, n_before) = centroid(&calm, columns.clone(), rows.clone());
+            let (after, n_after) = centroid(&windy, columns, rows);
+            assert!(n_before > 20 && n_after > 20, "{what}: {n_before}, {n_after} pixels");
+            // The field varies across a shoot: the mean of its points' moves.
+            let expected = points
+                .iter()
+                .map(|&at| {
+                    let offset = wind_offset(&w.model(), &shape, &clock, &phase, at).world(Vec2::X, 1.0);
+                    to_pixel(at + offset) - to_pixel(at)
+                })
+                .sum::<Vec2>()
+                / points.len() as f32;
+            let measured = after - before;
+            moved = moved.max(measured.length());
+            assert!(
+                (measured - expected).length() < 0.6,
+                "{what} at {seconds} s: moved {measured} px, the field says {expected} px"
+            );
+        }
+    }
+    // The pictures did change: the top moved by pixels, not by nothing.
+    assert!(moved > 3.0, "{moved}");
+    assert_eq!(calm.get_pixel(0, 0).0[..3], BACKGROUND);
+}
+
+#[test]
+fn culling_and_errors_grow_by_the_winds_reach() {
+    let _turn = common::gpu_turn();
+    let mut renderer = HeadlessRenderer::new(".");
+    let species = tree();
+    let shape = species.wind_shape();
+    let crown = species.crown_center;
+    let crown_radius = {
+        let (lo, hi) = (Vec3::from(species.aabb.min()), Vec3::from(species.aabb.max()));
+        (lo - crown).abs().max((hi - crown).abs()).length()
+    };
+    let handle = renderer
+        .world_mut()
+        .resource_mut::<Assets<ConiferSpecies>>()
+        .add(species);
+    HeadlessRenderer::spawn_lights(renderer.world_mut());
+    renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
+    // Lines, not the crown impostor (which has no view point).
+    renderer.world_mut().resource_mut::<ConiferLodSettings>().far_impostor = false;
+    let reach = wind_reach(&wind(0.0).model(), &shape);
+    assert!(reach > 0.5, "{reach}");
+    // Tree 0 in full view 40 m away; tree 1 off the right edge of the
+    // frustum by half the reach (its crown sphere's, the cull test's).
+    let depth = 40.0f32;
+    let half_angle = (FOV_DEG / 2.0).to_radians();
+    let edge_x = depth * half_angle.tan() + (crown_radius + 0.5 * reach) / half_angle.cos();
+    let roots = [
+        Vec3::new(0.0, -crown.y, -depth),
+        Vec3::new(edge_x - crown.x, -crown.y, -depth),
+    ];
+    for root in roots {
+        renderer
+            .world_mut()
+            .spawn((ConiferFoliage(handle.clone()), Transform::from_translation(root)));
+    }
+    let target = renderer.render_target(SIZE, SIZE);
+    let camera = background_camera(renderer.world_mut(), &target);
+    *renderer.world_mut().get_mut::<Projection>(camera).unwrap() = Projection::Perspective(PerspectiveProjection {
+        fov: FOV_DEG.to_radians(),
+        ..default()
+    });
+    let mut frame = |wind: ConiferWind| {
+        renderer.world_mut().insert_resource(wind);
+        for _ in 0..4 {
+            renderer.update().unwrap();
+        }
+        renderer.capture(&target, 20).unwrap();
+        let readback = renderer.world().resource::<CompactReadback>();
+        readback
+            .views
+            .iter()
+            .find(|v| v.perspective)
+            .expect("the camera's readback")
+            .clone()
+    };
+    let calm = frame(ConiferWind::CALM);
+    let windy = frame(wind(1.0));
+    // Instance slots need not follow the spawn order: the tree in view is
+    // the one the calm frame gave a view point.
+    let in_view = (0..2)
+        .find(|&t| calm.view_point(t).is_some())
+        .unwrap_or_else(|| panic!("a tree in view: {:?}", calm.lods));
+    let edge = 1 - in_view;
+    // Off screen by half the reach: culled in calm, kept in wind.
+    let drawn = |view: &bevy_conifer_lod::plugin::ViewReadback| {
+        let own = PartKind::ALL
+            .iter()
+            .filter(|k| k.placed_index().is_none())
+            .any(|&k| view.tree_draw(k, edge)[0] > 0 && view.tree_draw(k, edge)[1] > 0);
+        own || view.entries.iter().any(|e| (e[0] & 0x7fff_ffff) as usize == edge)
+    };
+    assert!(!drawn(&calm), "in calm the tree off screen is culled");
+    assert!(drawn(&windy), "in wind the tree that may sway into view is kept");
+    // In view: the error is measured from its sphere grown by the reach,
+    // the slope times the reach smaller (tree metres).
+    let (_, e_calm) = calm.tree_lod(in_view);
+    let (_, e_windy) = windy.tree_lod(in_view);
+    let slope = calm.view_point(in_view).map(|v| v.error_per_metre).unwrap_or(0.0);
+    assert!(
+        ((e_calm - e_windy) - slope * reach).abs() < 1e-3 * e_calm,
+        "calm {e_calm}, windy {e_windy}, slope × reach {}",
+        slope * reach
+    );
+}
