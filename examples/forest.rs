@@ -12,7 +12,8 @@
 //! drag to look; `[`/`]` pixel error ε ÷/× 1.25; `,`/`.` transition δ −/+
 //! 0.1; `F3` (or `O`) the LOD debug overlay; `L` LOD on/off (off: every
 //! needle a full prism, to feel the difference); `P` the line opacity
-//! rule (ours → coverage → the paper's); `Esc` quits.
+//! rule (ours → coverage → the paper's); `-`/`=` wind strength −/+ 0.5;
+//! `Esc` quits.
 //!
 //! The trees are the shipped mature records under `assets/trees/mature/`
 //! (one tree per species, 1–2 M needles each); `--grow` grows them from
@@ -102,6 +103,10 @@ struct Args {
     /// `x,y,z:x,y,z` (eye and target).
     #[arg(long, default_value = "overview")]
     view: String,
+    /// Wind strength (0 calm, 1 a light breeze, 3 strong). Default: a
+    /// light breeze in a window, calm headless (repeatable pictures).
+    #[arg(long)]
+    wind: Option<f32>,
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -329,10 +334,14 @@ fn setup(
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut settings: ResMut<ConiferLodSettings>,
+    mut wind: ResMut<ConiferWind>,
     mut debug: ResMut<ConiferLodDebug>,
 ) {
     settings.pixel_error = args.pixel_error;
     settings.enabled = !args.lod_off;
+    if let Some(strength) = args.wind {
+        wind.strength = strength;
+    }
     debug.enabled = args.overlay;
     debug.always_collect_stats = args.headless;
 

@@ -10,8 +10,10 @@
 //! Keys: `W`/`S` (or the mouse wheel) closer/farther, `A`/`D` orbit, `R`/`F`
 //! up/down along the trunk; and the keys of `conifer_lod_keys`: `[`/`]`
 //! pixel error ε ÷/× 1.25, `,`/`.` δ, `F3` (or `O`) the overlay (colours by
-//! representation, distance rings, stats), `L` LOD on/off, `P` the opacity rule. The tree is baked at startup from a procedural preset (about a
-//! second), so any preset and needle count can be tried.
+//! representation, distance rings, stats), `L` LOD on/off, `P` the opacity
+//! rule, `-`/`=` wind strength −/+ 0.5. The tree is baked at startup from a
+//! procedural preset (about a second), so any preset and needle count can
+//! be tried.
 
 use bevy::input::mouse::AccumulatedMouseScroll;
 use bevy::prelude::*;
@@ -55,6 +57,10 @@ struct Args {
     /// Picture size, pixels (square).
     #[arg(long, default_value_t = 512)]
     size: u32,
+    /// Wind strength (0 calm, 1 a light breeze, 3 strong). Default: a
+    /// light breeze in a window, calm headless.
+    #[arg(long)]
+    wind: Option<f32>,
 }
 
 /// The orbit: distance, angle and height around the crown centre.
@@ -157,9 +163,13 @@ fn setup(
     mut species: ResMut<Assets<ConiferSpecies>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut settings: ResMut<ConiferLodSettings>,
+    mut wind: ResMut<ConiferWind>,
     mut debug: ResMut<ConiferLodDebug>,
 ) {
     settings.pixel_error = args.pixel_error;
+    if let Some(strength) = args.wind {
+        wind.strength = strength;
+    }
     debug.enabled = !args.no_overlay;
     debug.always_collect_stats = true;
     let Some(record) = record.0.take() else { return };

@@ -41,6 +41,10 @@ fn every_method_renders_and_is_measured() {
         dolly_steps: 4,
         timed_frames: 1,
         out_dir: Some(out.clone()),
+        wind: None,
+        flicker_distances: vec![20.0],
+        orbit_steps: 6,
+        pan_steps: 4,
     };
     let report = evaluate(record, &options, &mut |_| {}).unwrap();
     assert!(report.blank.is_empty(), "{:?}", report.blank);
@@ -57,6 +61,20 @@ fn every_method_renders_and_is_measured() {
             assert!((0.0..=1.0).contains(&at.perceptual), "{name}: {at:?}");
             assert_eq!(at.primitives, at.triangles + at.lines);
             assert!(at.frame_ms > 0.0);
+        }
+    }
+    // Shimmer: an orbit and a pan at 20 m for every method, measured over
+    // changes the reference sees too (the tree turns and crosses the view).
+    assert_eq!(report.reference.flicker.len(), 2);
+    for f in &report.reference.flicker {
+        assert!(f.mean_change > 0.0, "{f:?}");
+    }
+    for (name, method) in &report.methods {
+        let paths: Vec<&str> = method.flicker.iter().map(|f| f.path.name()).collect();
+        assert_eq!(paths, ["orbit", "pan"], "{name}");
+        for f in &method.flicker {
+            assert!(f.flicker_mean.is_finite() && f.flicker_p99 >= f.flicker_mean - 1e-9, "{name}: {f:?}");
+            assert!((0.0..=255.0).contains(&f.mean_change), "{name}: {f:?}");
         }
     }
     let m = |name: &str| &report.methods[name];
@@ -162,4 +180,62 @@ fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
     // prisms; one error for the tree thins them.
     assert!(placement.coarse_near_needles < tree.coarse_near_needles);
     assert!(placement.color_error < tree.color_error, "{placement:?} {tree:?}");
+}
+
+/// In wind, the reference (CPU field) and ours (GPU field) sway together:
+/// the reference's pictures move, ours keeps its calm coverage error.
+#[test]
+fn in_wind_ours_sways_with_the_reference() {
+    let _turn = common::gpu_turn();
+    let tree = generate(
+        Species::NorwaySpruce,
+        &GenerateOptions {
+            seed: 2,
+            target_needles: Some(6000),
+            age: bevy_conifer_lod::generate::Age::Young,
+        },
+    );
+    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    let run = |wind: Option<f32>| {
+        let options = EvalOptions {
+            methods: vec![Method::Ours],
+            distances: vec![3.0, 12.0],
+            view: EvalView {
+                width: 96,
+                height: 96,
+                fov_deg: 45.0,
+                pixel_error: 1.0,
+                transition: 1.0,
+                supersampling: 4,
+                sun: Default::default(),
+                line_lighting: Default::default(),
+                ours_line_opacity: Default::default(),
+            },
+            dolly_steps: 4,
+            timed_frames: 1,
+            out_dir: None,
+            wind,
+            flicker_distances: Vec::new(),
+            orbit_steps: 0,
+            pan_steps: 0,
+        };
+        evaluate(record.clone(), &options, &mut |_| {}).unwrap()
+    };
+    let calm = run(None);
+    let windy = run(Some(4.0));
+    assert_eq!((calm.wind, windy.wind), (0.0, 4.0));
+    // The reference swayed: its dolly pictures change more step to step.
+    let change = |r: &bevy_conifer_lod::eval::EvalReport| r.reference.dolly_change.iter().sum::<f64>();
+    assert!(change(&windy) > change(&calm) + 0.05, "{} vs {}", change(&windy), change(&calm));
+    let ours = |r: &bevy_conifer_lod::eval::EvalReport| r.methods["ours"].distances.clone();
+    for (c, w) in ours(&calm).iter().zip(ours(&windy)) {
+        assert!(
+            w.coverage_error <= c.coverage_error + 0.01,
+            "at {} m: {} in wind, {} calm",
+            c.distance,
+            w.coverage_error,
+            c.coverage_error
+        );
+    }
+    assert!(windy.methods["ours"].popping_max <= 1.0 + calm.methods["ours"].popping_max);
 }

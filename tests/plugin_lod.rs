@@ -601,6 +601,13 @@ fn lod_keys_change_the_settings_and_the_overlay() {
         app.world().resource::<ConiferLodSettings>().line_opacity,
         LineOpacity::Paper
     );
+    // The wind: a light breeze (1) to start, 1.5, then calm and no lower.
+    press(&mut app, KeyCode::Equal);
+    assert_eq!(app.world().resource::<ConiferWind>().strength, 1.5);
+    for _ in 0..4 {
+        press(&mut app, KeyCode::Minus);
+    }
+    assert_eq!(app.world().resource::<ConiferWind>().strength, 0.0);
     press(&mut app, KeyCode::F3);
     assert!(app.world().resource::<ConiferLodDebug>().enabled);
     app.update();

@@ -49,6 +49,23 @@ pub struct EvalArgs {
     /// A CI-sized run: small pictures, two distances, a short dolly.
     #[arg(long)]
     pub quick: bool,
+    /// Shimmer under camera motion: an orbit (the camera circles the
+    /// crown) and a lateral pan at each of these distances, metres (e.g.
+    /// 12,56,250); reports each method's flicker_mean and flicker_p99.
+    #[arg(long, value_delimiter = ',')]
+    pub flicker_distances: Vec<f32>,
+    /// Steps of each orbit (a full circle).
+    #[arg(long, default_value_t = 120)]
+    pub orbit_steps: usize,
+    /// Steps of each pan (0.37 pixels at the crown a step).
+    #[arg(long, default_value_t = 60)]
+    pub pan_steps: usize,
+    /// Wind strength (0 calm, 1 a light breeze, 3 strong), blowing across
+    /// the view: the plugin's trees sway on the GPU, the reference and the
+    /// peers by the CPU reference of the same field; the dolly's clock runs
+    /// 1/30 s a step.
+    #[arg(long)]
+    pub wind: Option<f32>,
     /// Exit non-zero if `ours` is worse than `paper` on coverage error or
     /// popping, or if any method's render is blank (what CI runs).
     #[arg(long)]
@@ -155,6 +172,10 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         dolly_steps: args.dolly_steps.unwrap_or(if args.quick { 16 } else { 150 }),
         timed_frames: args.frames.unwrap_or(if args.quick { 2 } else { 5 }),
         out_dir: args.out.clone(),
+        wind: args.wind,
+        flicker_distances: args.flicker_distances.clone(),
+        orbit_steps: args.orbit_steps,
+        pan_steps: args.pan_steps,
     };
     let report = evaluate(record, &options, &mut |line| eprintln!("eval: {line}"))
         .with_context(|| format!("{}: evaluation failed", args.file.display()))?;
@@ -215,6 +236,31 @@ pub fn print_table(report: &EvalReport) {
     println!("|---|---:|---:|");
     for (name, method) in &report.methods {
         println!("| {name} | {:.2} | {:.2} |", method.popping_max, method.popping_p99);
+    }
+    if report.methods.values().any(|m| !m.flicker.is_empty()) {
+        println!();
+        println!("| method | path | distance (m) | flicker mean | flicker p99 | mean change |");
+        println!("|---|---|---:|---:|---:|---:|");
+        for (name, method) in &report.methods {
+            for f in &method.flicker {
+                println!(
+                    "| {name} | {} | {:.1} | {:.3} | {:.3} | {:.3} |",
+                    f.path.name(),
+                    f.distance,
+                    f.flicker_mean,
+                    f.flicker_p99,
+                    f.mean_change
+                );
+            }
+        }
+        for f in &report.reference.flicker {
+            println!(
+                "| reference | {} | {:.1} | – | – | {:.3} |",
+                f.path.name(),
+                f.distance,
+                f.mean_change
+            );
+        }
     }
 }
 

@@ -18,10 +18,14 @@ pub mod scene;
 pub mod shadow;
 
 use measure::{PixelRect, Popping};
-use scene::{DrawCounts, EvalError, EvalScene, EvalView, LodLevelInfo, Method};
+use scene::{CameraPath, DrawCounts, EvalError, EvalScene, EvalView, LodLevelInfo, Method};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+
+/// The wind's clock at the first still picture, seconds (later ones 1.7 s
+/// apart).
+const STILL_SECONDS: f64 = 2.0;
 
 /// What [`evaluate`] measures.
 #[derive(Clone, Debug)]
@@ -39,6 +43,36 @@ pub struct EvalOptions {
     pub timed_frames: usize,
     /// Where the pictures and plots go (`None`: nothing written).
     pub out_dir: Option<PathBuf>,
+    /// Wind strength ([`crate::plugin::ConiferWind::strength`], blowing
+    /// across the view; `None` or 0: calm). The plugin's trees sway on the
+    /// GPU; the reference and the peers' meshes by the CPU reference of
+    /// the same field. Each still picture is a moment of its own, and the
+    /// dolly's clock runs [`scene::DOLLY_STEP_SECONDS`] a step. The
+    /// shadow scene stays calm.
+    pub wind: Option<f32>,
+    /// Shimmer under camera motion: an orbit and a lateral pan at each of
+    /// these distances (empty: not measured).
+    pub flicker_distances: Vec<f32>,
+    /// Steps of the orbit (one full circle).
+    pub orbit_steps: usize,
+    /// Steps of the pan ([`scene::PAN_PIXELS_PER_STEP`] pixels each).
+    pub pan_steps: usize,
+}
+
+/// Shimmer of one method along one camera path at one distance.
+#[derive(Clone, Debug, Serialize)]
+pub struct FlickerReport {
+    /// `orbit` or `pan`.
+    pub path: CameraPath,
+    /// Metres from the crown.
+    pub distance: f32,
+    /// Mean over the steps of the method's picture change minus the
+    /// reference's (mean absolute change over the tree's box, 0–255).
+    pub flicker_mean: f64,
+    /// 99th percentile of that excess.
+    pub flicker_p99: f64,
+    /// Mean picture change per step of the method itself, 0–255.
+    pub mean_change: f64,
 }
 
 /// One method at one distance.
@@ -88,6 +122,8 @@ pub struct MethodReport {
     pub popping_p99: f64,
     /// Mean absolute picture change per dolly step, 0–255.
     pub dolly_change: Vec<f64>,
+    /// Shimmer along the orbits and pans ([`EvalOptions::flicker_distances`]).
+    pub flicker: Vec<FlickerReport>,
 }
 
 /// The reference at one distance.
@@ -123,6 +159,20 @@ pub struct ReferenceReport {
     pub distances: Vec<ReferenceDistance>,
     /// Mean absolute picture change per dolly step, 0–255.
     pub dolly_change: Vec<f64>,
+    /// Mean picture change per step along each orbit and pan.
+    pub flicker: Vec<ReferenceFlicker>,
+}
+
+/// The reference's own change along one camera path (what the methods'
+/// shimmer is measured over).
+#[derive(Clone, Debug, Serialize)]
+pub struct ReferenceFlicker {
+    /// `orbit` or `pan`.
+    pub path: CameraPath,
+    /// Metres from the crown.
+    pub distance: f32,
+    /// Mean picture change per step, 0–255.
+    pub mean_change: f64,
 }
 
 /// Everything `conifer eval --json` prints.
@@ -155,6 +205,8 @@ pub struct EvalReport {
     pub needles: usize,
     /// Distances of the dolly's pictures.
     pub dolly_distances: Vec<f32>,
+    /// Wind strength the scene swayed in (0: calm).
+    pub wind: f32,
     /// The `bevy-lod` chain.
     pub bevy_lod_levels: Vec<LodLevelInfo>,
     /// Methods whose picture was blank at some distance (`name@distance`).
@@ -271,7 +323,17 @@ pub fn evaluate(
     }
     let needles = record.needle_count();
     progress("building the scene (raw mesh, meshoptimizer LODs, plugin)");
-    let mut scene = EvalScene::new(record, &options.methods, options.view)?;
+    let wind = options.wind.filter(|s| *s > 0.0 && s.is_finite());
+    let mut scene = EvalScene::new_in_wind(
+        record,
+        &options.methods,
+        options.view,
+        wind.map(|strength| crate::plugin::ConiferWind {
+            direction: bevy::math::Vec2::X,
+            strength,
+            ..Default::default()
+        }),
+    )?;
     let methods = scene.methods().to_vec();
     let mut files = Vec::new();
     let mut blank = Vec::new();
@@ -288,9 +350,11 @@ pub fn evaluate(
         Ok(())
     };
 
-    for &distance in &distances {
+    for (k, &distance) in distances.iter().enumerate() {
         progress(&format!("distance {distance} m"));
         scene.set_distance(distance);
+        // In wind, each still is a moment of its own (calm: nothing moves).
+        scene.set_wind_time(STILL_SECONDS + 1.7 * k as f64);
         let frame = scene.capture()?;
         let rect = scene.screen_rect(distance);
         let label = format_distance(distance);
@@ -369,8 +433,69 @@ pub fn evaluate(
             progress(&format!("dolly step {}/{}", step + 1, dolly.len()));
         }
     })?;
-    if let Some(e) = failure {
+    if let Some(e) = failure.take() {
         return Err(e.into());
+    }
+
+    // Shimmer: orbits and pans.
+    let mut flicker: BTreeMap<Method, Vec<FlickerReport>> = BTreeMap::new();
+    let mut reference_flicker = Vec::new();
+    for path in [CameraPath::Orbit, CameraPath::Pan] {
+        let steps = match path {
+            CameraPath::Orbit => options.orbit_steps,
+            CameraPath::Pan => options.pan_steps,
+        };
+        for &distance in options.flicker_distances.iter().filter(|d| d.is_finite() && **d > 0.0) {
+            if steps < 2 {
+                continue;
+            }
+            progress(&format!("{} of {steps} steps at {distance} m", path.name()));
+            let places: Vec<(f32, bevy::prelude::Transform)> = (0..steps)
+                .map(|k| (distance, scene.path_transform(path, distance, k, steps)))
+                .collect();
+            let rects: Vec<PixelRect> = places.iter().map(|(_, t)| scene.rect_from(t)).collect();
+            let mut previous: Option<scene::EvalFrame> = None;
+            let mut method_changes: BTreeMap<Method, Vec<f64>> = BTreeMap::new();
+            let mut reference_steps = Vec::new();
+            scene.capture_path(&places, |step, frame| {
+                if let Some(before) = &previous {
+                    let rect = rects[step - 1].union(&rects[step]);
+                    let mut measure = || -> Result<(), measure::MeasureError> {
+                        reference_steps.push(measure::color_error(&before.reference, &frame.reference, &rect)?);
+                        for ((method, now), (_, then)) in frame.methods.iter().zip(&before.methods) {
+                            method_changes
+                                .entry(*method)
+                                .or_default()
+                                .push(measure::color_error(then, now, &rect)?);
+                        }
+                        Ok(())
+                    };
+                    if let Err(e) = measure() {
+                        failure.get_or_insert(e);
+                    }
+                }
+                previous = Some(frame);
+            })?;
+            if let Some(e) = failure.take() {
+                return Err(e.into());
+            }
+            for (method, changes) in method_changes {
+                let excess: Vec<f64> = changes.iter().zip(&reference_steps).map(|(m, r)| m - r).collect();
+                let Popping { p99, .. } = measure::popping(&changes, &reference_steps);
+                flicker.entry(method).or_default().push(FlickerReport {
+                    path,
+                    distance,
+                    flicker_mean: excess.iter().sum::<f64>() / excess.len().max(1) as f64,
+                    flicker_p99: p99,
+                    mean_change: changes.iter().sum::<f64>() / changes.len().max(1) as f64,
+                });
+            }
+            reference_flicker.push(ReferenceFlicker {
+                path,
+                distance,
+                mean_change: reference_steps.iter().sum::<f64>() / reference_steps.len().max(1) as f64,
+            });
+        }
     }
 
     // Shadows, in a scene of their own.
@@ -412,6 +537,7 @@ pub fn evaluate(
                 popping_max: max,
                 popping_p99: p99,
                 dolly_change,
+                flicker: flicker.remove(&method).unwrap_or_default(),
             },
         );
     }
@@ -443,6 +569,7 @@ pub fn evaluate(
             supersampling: options.view.supersampling,
             distances: reference_distances,
             dolly_change: reference_changes,
+            flicker: reference_flicker,
         },
         perceptual_measure: "FLIP mean (nv-flip, NVIDIA FLIP LDR, 67 pixels per degree)".into(),
         width: options.view.width,
@@ -455,6 +582,7 @@ pub fn evaluate(
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         needles,
         dolly_distances: dolly,
+        wind: wind.unwrap_or(0.0),
         bevy_lod_levels: scene.lod_levels().to_vec(),
         blank,
         files,

@@ -24,11 +24,12 @@ use crate::model::metric::{line_error, prism_sides};
 use crate::model::prism::{
     TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, wood_segment_error,
 };
+use crate::model::wind::{TreeWindPhase, WindClock, WindShape, wind_offset};
 use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
-    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, LineLighting,
-    LineOpacity, triangle_mesh,
+    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind,
+    LineLighting, LineOpacity, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
@@ -296,18 +297,73 @@ pub struct EvalScene {
     sampling: Option<SamplingState>,
     /// Texel side of the species' crown impostor (`ours` fades into it).
     impostor_texel: Option<f32>,
+    /// The wind the scene sways in (`None`: calm): the plugin's trees sway
+    /// on the GPU, every mesh (the reference, the peers) by the CPU
+    /// reference, [`crate::model::wind::wind_offset`].
+    wind: Option<ConiferWind>,
+    /// The tree as the wind sees it.
+    wind_shape: WindShape,
+    /// Each mesh in calm (kept only in wind).
+    wind_rest: std::collections::HashMap<AssetId<Mesh>, Mesh>,
+    /// The wind's clock, seconds.
+    wind_seconds: f64,
 }
 
 /// Background of every picture (alpha 0: the alpha channel is coverage).
 pub const BACKGROUND: [f32; 3] = [0.92, 0.93, 0.95];
 
+/// How far a lateral pan moves the picture of the crown a step, pixels: a
+/// slow pan, under a pixel a frame, where lines crawl the most.
+pub const PAN_PIXELS_PER_STEP: f32 = 0.37;
+
+/// A camera path of `conifer eval`'s shimmer measure.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraPath {
+    /// The camera circles the crown at a fixed distance, looking at it.
+    Orbit,
+    /// The camera moves sideways, looking straight ahead (−z), the crown
+    /// crossing the middle of the picture.
+    Pan,
+}
+
+impl CameraPath {
+    /// Its name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            CameraPath::Orbit => "orbit",
+            CameraPath::Pan => "pan",
+        }
+    }
+}
+
+/// The wind's clock between two pictures of the dolly, seconds (a 30 FPS
+/// game): in wind, the camera moves and the tree sways at once.
+pub const DOLLY_STEP_SECONDS: f64 = 1.0 / 30.0;
+
 impl EvalScene {
     /// Builds the scene for `record` with `methods` (the reference is always
     /// there), loads it and lets it reach the GPU.
     pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
+        Self::new_in_wind(record, methods, view, None)
+    }
+
+    /// [`EvalScene::new`] in `wind` (`None` or calm: calm), its clock set
+    /// by [`EvalScene::set_wind_time`]: the plugin's trees sway on the GPU,
+    /// every mesh (the reference, the peers) by the CPU reference of the
+    /// same field. The meshes' calm copies are kept for it (as much memory
+    /// again).
+    pub fn new_in_wind(
+        record: LodRecord,
+        methods: &[Method],
+        view: EvalView,
+        wind: Option<ConiferWind>,
+    ) -> Result<Self, EvalError> {
+        let wind = wind.filter(|w| !w.model().is_calm());
         let (mut renderer, species) = renderer_with_species(record, &view)?;
         let record = species.record.clone();
         let impostor_texel = species.impostor.as_ref().map(|i| i.texel);
+        let wind_shape = species.wind_shape();
         let mut methods: Vec<Method> = methods.to_vec();
         methods.sort();
         methods.dedup();
@@ -470,6 +526,18 @@ impl EvalScene {
         // needles a hundredth of a pixel wide need many samples per pixel
         // before the coverage converges (see `conifer eval`'s docs).
         let counter = CutCounter::new(&record);
+        // The meshes in calm, before the render world takes their data.
+        let mut wind_rest = std::collections::HashMap::new();
+        if wind.is_some() {
+            let world = renderer.world_mut();
+            let handles: Vec<Handle<Mesh>> = world.query::<&Mesh3d>().iter(world).map(|m| m.0.clone()).collect();
+            let meshes = world.resource::<Assets<Mesh>>();
+            for handle in handles {
+                if let Some(mesh) = meshes.get(&handle) {
+                    wind_rest.insert(handle.id(), mesh.clone());
+                }
+            }
+        }
         let mut scene = Self {
             renderer,
             record,
@@ -482,7 +550,12 @@ impl EvalScene {
             levels,
             sampling,
             impostor_texel,
+            wind,
+            wind_shape,
+            wind_rest,
+            wind_seconds: 0.0,
         };
+        scene.set_wind_time(0.0);
         scene.set_distance(10.0);
         // Let species, meshes and pipelines reach the GPU.
         for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
@@ -528,6 +601,49 @@ impl EvalScene {
         let distance = if distance.is_finite() { distance.max(1e-3) } else { 1.0 };
         let crown = self.record.crown_center();
         let transform = Transform::from_translation(self.eye(distance)).looking_at(crown, Vec3::Y);
+        self.set_camera(distance, transform);
+    }
+
+    /// The cameras' place at `step` of `steps` along `path`, `distance`
+    /// from the crown (the dolly's front view at step 0 of an orbit and
+    /// the middle step of a pan).
+    pub fn path_transform(&self, path: CameraPath, distance: f32, step: usize, steps: usize) -> Transform {
+        let crown = self.record.crown_center();
+        match path {
+            CameraPath::Orbit => {
+                let angle = std::f32::consts::TAU * step as f32 / steps.max(1) as f32;
+                let eye = crown + Vec3::new(angle.sin(), 0.0, angle.cos()) * distance;
+                Transform::from_translation(eye).looking_at(crown, Vec3::Y)
+            }
+            CameraPath::Pan => {
+                // PAN_PIXELS_PER_STEP pixels at the crown's distance a step.
+                let metres_per_pixel = 2.0 * distance * (self.view.fov_deg.to_radians() / 2.0).tan()
+                    / self.view.height.max(1) as f32;
+                let offset = (step as f32 - steps as f32 / 2.0) * PAN_PIXELS_PER_STEP * metres_per_pixel;
+                Transform::from_translation(self.eye(distance) + Vec3::X * offset)
+            }
+        }
+    }
+
+    /// The screen box of the tree seen by a camera at `transform`.
+    pub fn rect_from(&self, transform: &Transform) -> super::measure::PixelRect {
+        let (lo, hi) = self.record.bounds();
+        let target = transform.translation + transform.forward() * self.record.crown_center().distance(transform.translation).max(1e-3);
+        super::measure::screen_rect(
+            lo,
+            hi,
+            transform.translation,
+            target,
+            self.view.fov_deg.to_radians(),
+            self.view.width,
+            self.view.height,
+        )
+    }
+
+    /// Moves every camera to `transform`, with the sampled lines of a view
+    /// `distance` from the crown.
+    pub fn set_camera(&mut self, distance: f32, transform: Transform) {
+        let distance = if distance.is_finite() { distance.max(1e-3) } else { 1.0 };
         for camera in self.cameras() {
             if let Some(mut t) = self.renderer.world_mut().get_mut::<Transform>(camera) {
                 *t = transform;
@@ -546,9 +662,49 @@ impl EvalScene {
                 (&sampling.wood, triangle_mesh(&sampled.wood)),
                 (&sampling.lines, sampled.lines),
             ] {
+                if self.wind.is_some() {
+                    self.wind_rest.insert(handle.id(), mesh.clone());
+                }
                 if let Some(mut slot) = meshes.get_mut(handle) {
                     *slot = mesh;
                 }
+            }
+            self.set_wind_time(self.wind_seconds);
+        }
+    }
+
+    /// Sets the wind's clock to `seconds`: the plugin's trees take it, and
+    /// every mesh of the scene moves by the CPU reference of the same field
+    /// (the tree stands at the origin, as the plugin's do). Nothing in calm.
+    pub fn set_wind_time(&mut self, seconds: f64) {
+        let Some(mut wind) = self.wind else {
+            return;
+        };
+        self.wind_seconds = seconds;
+        wind.time = Some(seconds);
+        let model = wind.model();
+        let clock = WindClock::at(seconds, &self.wind_shape);
+        let phase = TreeWindPhase::of_root(Vec2::ZERO, &model);
+        let direction = model.unit_direction();
+        let shape = self.wind_shape;
+        let world = self.renderer.world_mut();
+        world.insert_resource(wind);
+        let mut meshes = world.resource_mut::<Assets<Mesh>>();
+        for (&id, rest) in &self.wind_rest {
+            let Some(positions) = rest.attribute(Mesh::ATTRIBUTE_POSITION).and_then(|a| a.as_float3()) else {
+                continue;
+            };
+            let moved: Vec<[f32; 3]> = positions
+                .iter()
+                .map(|&p| {
+                    let p = Vec3::from(p);
+                    (p + wind_offset(&model, &shape, &clock, &phase, p).world(direction, 1.0)).to_array()
+                })
+                .collect();
+            let mut mesh = rest.clone();
+            mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, moved);
+            if let Some(mut slot) = meshes.get_mut(id) {
+                *slot = mesh;
             }
         }
     }
@@ -707,6 +863,23 @@ impl EvalScene {
     pub fn capture_sequence(
         &mut self,
         distances: &[f32],
+        on_frame: impl FnMut(usize, EvalFrame),
+    ) -> Result<(), EvalError> {
+        let crown = self.record.crown_center();
+        let places: Vec<(f32, Transform)> = distances
+            .iter()
+            .map(|&d| (d, Transform::from_translation(self.eye(d)).looking_at(crown, Vec3::Y)))
+            .collect();
+        self.capture_path(&places, on_frame)
+    }
+
+    /// Pictures with the cameras at each of `places` (distance from the
+    /// crown for the sampled lines, transform) in turn, one frame each,
+    /// the wind's clock [`DOLLY_STEP_SECONDS`] on a step; `on_frame` gets
+    /// each step's index and pictures, in order.
+    pub fn capture_path(
+        &mut self,
+        places: &[(f32, Transform)],
         mut on_frame: impl FnMut(usize, EvalFrame),
     ) -> Result<(), EvalError> {
         self.set_active(None);
@@ -733,8 +906,9 @@ impl EvalScene {
                 }
                 Ok(())
             };
-        for (step, &distance) in distances.iter().enumerate() {
-            self.set_distance(distance);
+        for (step, &(distance, transform)) in places.iter().enumerate() {
+            self.set_camera(distance, transform);
+            self.set_wind_time(step as f64 * DOLLY_STEP_SECONDS);
             pending.push_back((step, self.renderer.request_screenshots(&targets)));
             self.renderer.update()?;
             deliver(self, &mut pending)?;

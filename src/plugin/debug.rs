@@ -20,7 +20,7 @@
 
 use super::{
     ConiferFoliage, ConiferLodCpuTime, ConiferLodOverride, ConiferLodSet, ConiferLodSettings, ConiferLodState,
-    ConiferSpecies, LineOpacity, view_error_slope,
+    ConiferSpecies, ConiferWind, LineOpacity, view_error_slope,
 };
 use crate::model::CutCounter;
 use bevy::camera::visibility::VisibilitySystems;
@@ -385,6 +385,7 @@ fn update_panel(
     mut commands: Commands,
     debug: Res<ConiferLodDebug>,
     stats: Res<ConiferLodStats>,
+    wind: Option<Res<ConiferWind>>,
     mut panels: Query<(Entity, &mut Text), With<StatsPanel>>,
 ) {
     let shown = debug.enabled && debug.panel;
@@ -400,7 +401,8 @@ fn update_panel(
          prisms {}   triangles {}\n\
          lines {} original + {} merged = {}\n\
          impostors {} (+{} fading)\n\
-         plugin CPU {:.3} ms   {:.0} FPS",
+         plugin CPU {:.3} ms   {:.0} FPS\n\
+         wind {:.1}",
         stats.pixel_error,
         stats.instances,
         stats.visible_instances,
@@ -413,6 +415,7 @@ fn update_panel(
         stats.fading,
         stats.plugin_cpu_ms,
         stats.fps,
+        wind.map_or(0.0, |w| w.strength),
     );
     if let Some((_, mut current)) = panels.iter_mut().next() {
         if current.0 != text {
@@ -442,13 +445,23 @@ fn update_panel(
 /// Keyboard control of the LOD, for examples and tools; add it to `Update`
 /// yourself (`app.add_systems(Update, conifer_lod_keys)`): `[`/`]` pixel
 /// error ε ÷/× 1.25 (0.05–64), `,`/`.` transition δ −/+ 0.1 (0.1–1), `L`
-/// LOD on/off, `P` the line opacity rule (area-preserving → coverage → paper), `F3` or `O` the
-/// debug overlay.
+/// LOD on/off, `P` the line opacity rule (area-preserving → coverage →
+/// paper), `-`/`=` wind strength −/+ 0.5 (0–4, [`ConiferWind`]), `F3` or
+/// `O` the debug overlay.
 pub fn conifer_lod_keys(
     keys: Res<ButtonInput<KeyCode>>,
     mut settings: ResMut<ConiferLodSettings>,
     mut debug: ResMut<ConiferLodDebug>,
+    wind: Option<ResMut<ConiferWind>>,
 ) {
+    if let Some(mut wind) = wind {
+        if keys.just_pressed(KeyCode::Equal) {
+            wind.strength = (wind.strength + 0.5).min(4.0);
+        }
+        if keys.just_pressed(KeyCode::Minus) {
+            wind.strength = (wind.strength - 0.5).max(0.0);
+        }
+    }
     if keys.just_pressed(KeyCode::BracketRight) {
         settings.pixel_error = (settings.pixel_error * 1.25).min(64.0);
     }
