@@ -37,6 +37,7 @@ fn every_method_renders_and_is_measured() {
             sun: Default::default(),
             line_lighting: Default::default(),
             ours_line_opacity: Default::default(),
+            ours_impostor: true,
         },
         dolly_steps: 4,
         timed_frames: 1,
@@ -73,7 +74,10 @@ fn every_method_renders_and_is_measured() {
         let paths: Vec<&str> = method.flicker.iter().map(|f| f.path.name()).collect();
         assert_eq!(paths, ["orbit", "pan"], "{name}");
         for f in &method.flicker {
-            assert!(f.flicker_mean.is_finite() && f.flicker_p99 >= f.flicker_mean - 1e-9, "{name}: {f:?}");
+            assert!(
+                f.flicker_mean.is_finite() && f.flicker_p99 >= f.flicker_mean - 1e-9,
+                "{name}: {f:?}"
+            );
             assert!((0.0..=255.0).contains(&f.mean_change), "{name}: {f:?}");
         }
     }
@@ -162,6 +166,7 @@ fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
         sun: Default::default(),
         line_lighting: Default::default(),
         ours_line_opacity: Default::default(),
+        ours_impostor: true,
     };
     let options = InsideOptions {
         from_trunk: 0.6,
@@ -210,6 +215,7 @@ fn in_wind_ours_sways_with_the_reference() {
                 sun: Default::default(),
                 line_lighting: Default::default(),
                 ours_line_opacity: Default::default(),
+                ours_impostor: true,
             },
             dolly_steps: 4,
             timed_frames: 1,
@@ -226,7 +232,12 @@ fn in_wind_ours_sways_with_the_reference() {
     assert_eq!((calm.wind, windy.wind), (0.0, 4.0));
     // The reference swayed: its dolly pictures change more step to step.
     let change = |r: &bevy_conifer_lod::eval::EvalReport| r.reference.dolly_change.iter().sum::<f64>();
-    assert!(change(&windy) > change(&calm) + 0.05, "{} vs {}", change(&windy), change(&calm));
+    assert!(
+        change(&windy) > change(&calm) + 0.05,
+        "{} vs {}",
+        change(&windy),
+        change(&calm)
+    );
     let ours = |r: &bevy_conifer_lod::eval::EvalReport| r.methods["ours"].distances.clone();
     for (c, w) in ours(&calm).iter().zip(ours(&windy)) {
         assert!(

@@ -130,6 +130,7 @@ fn the_plugin_covers_what_the_needles_cover() {
         sun: Default::default(),
         line_lighting: Default::default(),
         ours_line_opacity: Default::default(),
+        ours_impostor: true,
     };
     let mut scene = EvalScene::new(record, &[Method::Ours], view).unwrap();
     // Each representation of the line path (the impostor has its own test,

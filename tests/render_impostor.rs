@@ -158,6 +158,7 @@ fn the_impostor_covers_what_the_needles_cover() {
         sun: Default::default(),
         line_lighting: Default::default(),
         ours_line_opacity: Default::default(),
+        ours_impostor: true,
     };
     let mut scene = EvalScene::new(record, &[Method::Paper, Method::Ours], view).unwrap();
     let out = out_dir();

@@ -12,8 +12,11 @@ use std::time::Instant;
 /// How the forest's trees are drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum ForestMethod {
-    /// The plugin.
+    /// The plugin (in calm: the headless renderer's).
     Ours,
+    /// The plugin in a light breeze ([`crate::plugin::ConiferWind::default`]),
+    /// its clock running with the frames.
+    OursInWind,
     /// Every needle an `Lmax`-sided prism, no LOD.
     Raw,
     /// meshoptimizer LODs switched by `VisibilityRange` with crossfades.
@@ -80,11 +83,14 @@ pub fn forest_frame_ms(
         Handle<StandardMaterial>,
         Option<bevy::camera::visibility::VisibilityRange>,
     )>;
+    if method == ForestMethod::OursInWind {
+        world.insert_resource(crate::plugin::ConiferWind::default());
+    }
     let mut species_parts: Vec<Parts> = Vec::new();
     let mut species_handles: Vec<Handle<ConiferSpecies>> = Vec::new();
     for record in records {
         match method {
-            ForestMethod::Ours => {
+            ForestMethod::Ours | ForestMethod::OursInWind => {
                 let species = ConiferSpecies::from_record(record.clone())?;
                 species_handles.push(world.resource_mut::<Assets<ConiferSpecies>>().add(species));
             }
@@ -118,7 +124,7 @@ pub fn forest_frame_ms(
     for i in 0..instances {
         let transform = place(i, side);
         match method {
-            ForestMethod::Ours => {
+            ForestMethod::Ours | ForestMethod::OursInWind => {
                 world.spawn((
                     ConiferFoliage(species_handles[i % species_handles.len()].clone()),
                     transform,

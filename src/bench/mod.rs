@@ -249,6 +249,9 @@ pub struct RenderRatio {
     pub ours_no_msaa_ms: f64,
     /// `bevy-lod` without MSAA, ms.
     pub bevylod_no_msaa_ms: f64,
+    /// The plugin in a light breeze (`ConiferWind::default()`), ms: what
+    /// the wind costs the GPU (`ours_ms` is calm).
+    pub ours_in_wind_ms: f64,
     /// Trees.
     pub instances: usize,
     /// Needles per tree.
@@ -712,6 +715,7 @@ fn forest_figures(
         ("raw", ForestMethod::Raw, true),
         ("bevy-lod", ForestMethod::BevyLod, true),
         ("ours-no-msaa", ForestMethod::Ours, false),
+        ("ours-in-wind", ForestMethod::OursInWind, true),
         ("bevy-lod-no-msaa", ForestMethod::BevyLod, false),
     ] {
         progress(&format!("rendered forest, {name}, {} trees", options.forest_instances));
@@ -738,6 +742,7 @@ fn forest_figures(
         raw_ms: forest_ms["raw"],
         bevylod_ms: forest_ms["bevy-lod"],
         ours_no_msaa_ms: forest_ms["ours-no-msaa"],
+        ours_in_wind_ms: forest_ms["ours-in-wind"],
         bevylod_no_msaa_ms: forest_ms["bevy-lod-no-msaa"],
         instances: options.forest_instances,
         needles_per_tree: forest_records.iter().map(LodRecord::needle_count).sum::<usize>() / forest_records.len(),

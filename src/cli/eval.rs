@@ -49,6 +49,9 @@ pub struct EvalArgs {
     /// A CI-sized run: small pictures, two distances, a short dolly.
     #[arg(long)]
     pub quick: bool,
+    /// `ours` keeps its lines at every distance (no crown impostor).
+    #[arg(long)]
+    pub ours_no_impostor: bool,
     /// Shimmer under camera motion: an orbit (the camera circles the
     /// crown) and a lateral pan at each of these distances, metres (e.g.
     /// 12,56,250); reports each method's flicker_mean and flicker_p99.
@@ -147,6 +150,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         sun,
         line_lighting,
         ours_line_opacity,
+        ours_impostor: !args.ours_no_impostor,
     };
     if args.inside {
         let record = read_prototype_record(&args.file)

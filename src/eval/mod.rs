@@ -201,6 +201,8 @@ pub struct EvalReport {
     /// The merged-line opacity `ours` drew with (`AreaPreserving`,
     /// `Coverage`).
     pub ours_line_opacity: String,
+    /// Whether `ours` faded far trees into their crown impostor.
+    pub ours_impostor: bool,
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -580,6 +582,7 @@ pub fn evaluate(
         sun: options.view.sun.name().into(),
         line_lighting: format!("{:?}", options.view.line_lighting),
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
+        ours_impostor: options.view.ours_impostor,
         needles,
         dolly_distances: dolly,
         wind: wind.unwrap_or(0.0),

@@ -141,6 +141,9 @@ pub struct EvalView {
     pub line_lighting: LineLighting,
     /// The merged-line opacity `ours` draws with.
     pub ours_line_opacity: LineOpacity,
+    /// Whether `ours` fades far trees into the crown impostor (its
+    /// default); `false` keeps its lines at every distance.
+    pub ours_impostor: bool,
 }
 
 /// Where the sun of `conifer eval`'s scene stands (the camera looks at the
@@ -385,7 +388,7 @@ impl EvalScene {
                     ConiferLodOverride {
                         line_opacity: Some(opacity),
                         // The paper draws lines at every distance.
-                        far_impostor: Some(method == Method::Ours),
+                        far_impostor: Some(method == Method::Ours && view.ours_impostor),
                         ..default()
                     },
                     Transform::IDENTITY,
@@ -617,8 +620,8 @@ impl EvalScene {
             }
             CameraPath::Pan => {
                 // PAN_PIXELS_PER_STEP pixels at the crown's distance a step.
-                let metres_per_pixel = 2.0 * distance * (self.view.fov_deg.to_radians() / 2.0).tan()
-                    / self.view.height.max(1) as f32;
+                let metres_per_pixel =
+                    2.0 * distance * (self.view.fov_deg.to_radians() / 2.0).tan() / self.view.height.max(1) as f32;
                 let offset = (step as f32 - steps as f32 / 2.0) * PAN_PIXELS_PER_STEP * metres_per_pixel;
                 Transform::from_translation(self.eye(distance) + Vec3::X * offset)
             }
@@ -628,7 +631,8 @@ impl EvalScene {
     /// The screen box of the tree seen by a camera at `transform`.
     pub fn rect_from(&self, transform: &Transform) -> super::measure::PixelRect {
         let (lo, hi) = self.record.bounds();
-        let target = transform.translation + transform.forward() * self.record.crown_center().distance(transform.translation).max(1e-3);
+        let target = transform.translation
+            + transform.forward() * self.record.crown_center().distance(transform.translation).max(1e-3);
         super::measure::screen_rect(
             lo,
             hi,
@@ -737,7 +741,7 @@ impl EvalScene {
                 // drawn (the cull pass's rule, `impostor_fade`).
                 let fade = match (method, self.impostor_texel) {
                     // The camera looks at the crown level.
-                    (Method::Ours, Some(texel)) => impostor_fade(e, texel, 0.0),
+                    (Method::Ours, Some(texel)) if self.view.ours_impostor => impostor_fade(e, texel, 0.0),
                     _ => 0.0,
                 };
                 let impostor = if fade > 0.0 { 2 } else { 0 };

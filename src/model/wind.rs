@@ -40,7 +40,7 @@ pub struct Wind {
     /// Where the wind blows to, horizontal (world x, z); normalised where
     /// used; zero: no wind.
     pub direction: Vec2,
-    /// 0: calm; 1: a light breeze (a 20 m tree's top leans about 25 cm);
+    /// 0: calm; 1: a light breeze (a 20 m tree's top leans about 16 cm and sways ±10 cm);
     /// 3: a strong wind. Negative and NaN read as calm.
     pub strength: f32,
     /// How much gusts vary the strength, 0–1.

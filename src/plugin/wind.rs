@@ -18,7 +18,7 @@ use bevy::prelude::*;
 pub struct ConiferWind {
     /// Where the wind blows to (world x, z); normalised where used.
     pub direction: Vec2,
-    /// 0: calm; 1: a light breeze (a 20 m tree's top leans about 25 cm);
+    /// 0: calm; 1: a light breeze (a 20 m tree's top leans about 16 cm and sways ±10 cm);
     /// 3: a strong wind.
     pub strength: f32,
     /// How much gusts vary the strength, 0–1.
