@@ -10,34 +10,31 @@ use bevy_conifer_lod::eval::{EvalOptions, evaluate};
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake};
 
-#[test]
-fn every_method_renders_and_is_measured() {
-    let _turn = common::gpu_turn();
+/// A young tree of 6,000 needles, baked flat.
+fn young_record(species: Species, seed: u64) -> bevy_conifer_lod::model::LodRecord {
     let tree = generate(
-        Species::ScotsPine,
+        species,
         &GenerateOptions {
-            seed: 4,
+            seed,
             target_needles: Some(6000),
             age: bevy_conifer_lod::generate::Age::Young,
         },
     );
-    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    bake(&tree, &BakeOptions::default(), &()).unwrap()
+}
+
+#[test]
+fn every_method_renders_and_is_measured() {
+    let _turn = common::gpu_turn();
+    let record = young_record(Species::ScotsPine, 4);
     let needles = record.needle_count() as u64;
     let out = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/eval");
     let options = EvalOptions {
         methods: Method::ALL.to_vec(),
         distances: vec![20.0, 4.0],
         view: EvalView {
-            width: 96,
-            height: 96,
-            fov_deg: 45.0,
-            pixel_error: 1.0,
             transition: 0.5,
-            supersampling: 4,
-            sun: Default::default(),
-            line_lighting: Default::default(),
-            ours_line_opacity: Default::default(),
-            ours_impostor: true,
+            ..EvalView::square(96, 45.0)
         },
         dolly_steps: 4,
         timed_frames: 1,
@@ -156,18 +153,7 @@ fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
         .unwrap()
         .quantized()
         .unwrap();
-    let view = EvalView {
-        width: 96,
-        height: 96,
-        fov_deg: 60.0,
-        pixel_error: 1.0,
-        transition: 1.0,
-        supersampling: 4,
-        sun: Default::default(),
-        line_lighting: Default::default(),
-        ours_line_opacity: Default::default(),
-        ours_impostor: true,
-    };
+    let view = EvalView::square(96, 60.0);
     let options = InsideOptions {
         from_trunk: 0.6,
         ..InsideOptions::new(view)
@@ -192,30 +178,15 @@ fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
 #[test]
 fn in_wind_ours_sways_with_the_reference() {
     let _turn = common::gpu_turn();
-    let tree = generate(
-        Species::NorwaySpruce,
-        &GenerateOptions {
-            seed: 2,
-            target_needles: Some(6000),
-            age: bevy_conifer_lod::generate::Age::Young,
-        },
-    );
-    let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
+    let record = young_record(Species::NorwaySpruce, 2);
     let run = |wind: Option<f32>| {
         let options = EvalOptions {
             methods: vec![Method::Ours],
             distances: vec![3.0, 12.0],
+            // Lines: the impostor leans with the trunk only.
             view: EvalView {
-                width: 96,
-                height: 96,
-                fov_deg: 45.0,
-                pixel_error: 1.0,
-                transition: 1.0,
-                supersampling: 4,
-                sun: Default::default(),
-                line_lighting: Default::default(),
-                ours_line_opacity: Default::default(),
-                ours_impostor: true,
+                ours_impostor: false,
+                ..EvalView::square(96, 45.0)
             },
             dolly_steps: 4,
             timed_frames: 1,

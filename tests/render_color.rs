@@ -40,15 +40,7 @@ fn material() -> FoliageMaterial {
 /// A flat shoot of 20 needles 30 cm long side by side in the prototype's
 /// x–y plane, their upper side +z.
 fn flat_shoot() -> Vec<Needle> {
-    (0..20)
-        .map(|k| Needle {
-            base: Vec3::new(k as f32 * 0.018, 0.0, 0.0),
-            tip: Vec3::new(k as f32 * 0.018, 0.3, 0.0),
-            radius: 0.008,
-            normal: Vec3::Z,
-            group: 0,
-        })
-        .collect()
+    common::side_by_side_needles(20, 0.018, 0.3, 0.008)
 }
 
 /// Mean linear chroma (R/G, B/G) of the pixels of `image` that are not

@@ -120,18 +120,7 @@ fn the_plugin_covers_what_the_needles_cover() {
     use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
     use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
     let record = pine();
-    let view = EvalView {
-        width: SIZE,
-        height: SIZE,
-        fov_deg: 45.0,
-        pixel_error: 1.0,
-        transition: 1.0,
-        supersampling: 4,
-        sun: Default::default(),
-        line_lighting: Default::default(),
-        ours_line_opacity: Default::default(),
-        ours_impostor: true,
-    };
+    let view = EvalView::square(SIZE, 45.0);
     let mut scene = EvalScene::new(record, &[Method::Ours], view).unwrap();
     // Each representation of the line path (the impostor has its own test,
     // `tests/render_impostor.rs`).

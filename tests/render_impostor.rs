@@ -148,18 +148,7 @@ fn the_impostor_covers_what_the_needles_cover() {
         .impostor
         .expect("an impostor")
         .texel;
-    let view = EvalView {
-        width: SIZE,
-        height: SIZE,
-        fov_deg: FOV_DEG,
-        pixel_error: 1.0,
-        transition: 1.0,
-        supersampling: 4,
-        sun: Default::default(),
-        line_lighting: Default::default(),
-        ours_line_opacity: Default::default(),
-        ours_impostor: true,
-    };
+    let view = EvalView::square(SIZE, FOV_DEG);
     let mut scene = EvalScene::new(record, &[Method::Paper, Method::Ours], view).unwrap();
     let out = out_dir();
     // Ours is the impostor alone (3 texels a pixel error: the tree is ~64

@@ -23,15 +23,7 @@ const FOV_DEG: f32 = 50.0;
 /// A shoot of 12 needles 30 cm long side by side in the prototype's x–y
 /// plane.
 fn shoot() -> Vec<Needle> {
-    (0..12)
-        .map(|k| Needle {
-            base: Vec3::new(k as f32 * 0.03, 0.0, 0.0),
-            tip: Vec3::new(k as f32 * 0.03, 0.3, 0.0),
-            radius: 0.012,
-            normal: Vec3::Z,
-            group: 0,
-        })
-        .collect()
+    common::side_by_side_needles(12, 0.03, 0.3, 0.012)
 }
 
 /// A 10 m trunk with a shoot at its top and one at a branch's tip, 2.5 m

@@ -23,6 +23,54 @@ use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// Each method's picture change per step.
+type MethodChanges = BTreeMap<Method, Vec<f64>>;
+
+/// The picture changes step to step along a camera path: the reference's
+/// and each method's mean |ΔRGB| (0–255) over the tree's box of both steps.
+#[derive(Default)]
+struct StepChanges {
+    previous: Option<scene::EvalFrame>,
+    reference: Vec<f64>,
+    methods: BTreeMap<Method, Vec<f64>>,
+    failure: Option<measure::MeasureError>,
+}
+
+impl StepChanges {
+    /// Takes the next step's `frame`; `rect` gives the box both it and the
+    /// previous step's pictures are measured over (asked only from the
+    /// second step on).
+    fn add(&mut self, frame: scene::EvalFrame, rect: impl FnOnce() -> PixelRect) {
+        if let Some(before) = &self.previous {
+            let rect = rect();
+            let mut measure = || -> Result<(), measure::MeasureError> {
+                self.reference
+                    .push(measure::color_error(&before.reference, &frame.reference, &rect)?);
+                for ((method, now), (_, then)) in frame.methods.iter().zip(&before.methods) {
+                    self.methods
+                        .entry(*method)
+                        .or_default()
+                        .push(measure::color_error(then, now, &rect)?);
+                }
+                Ok(())
+            };
+            if let Err(e) = measure() {
+                self.failure.get_or_insert(e);
+            }
+        }
+        self.previous = Some(frame);
+    }
+
+    /// The reference's changes and each method's, or the first measure
+    /// that failed.
+    fn finish(self) -> Result<(Vec<f64>, MethodChanges), measure::MeasureError> {
+        match self.failure {
+            Some(e) => Err(e),
+            None => Ok((self.reference, self.methods)),
+        }
+    }
+}
+
 /// The wind's clock at the first still picture, seconds (later ones 1.7 s
 /// apart).
 const STILL_SECONDS: f64 = 2.0;
@@ -407,37 +455,16 @@ pub fn evaluate(
     // The dolly.
     let dolly = measure::dolly_distances(distances[0], distances[distances.len() - 1], options.dolly_steps);
     progress(&format!("dolly of {} steps", dolly.len()));
-    let mut previous: Option<scene::EvalFrame> = None;
-    let mut changes: BTreeMap<Method, Vec<f64>> = BTreeMap::new();
-    let mut reference_changes = Vec::new();
-    let mut failure: Option<measure::MeasureError> = None;
+    let mut dolly_changes = StepChanges::default();
     let rects: Vec<PixelRect> = dolly.iter().map(|&d| scene.screen_rect(d)).collect();
     scene.capture_sequence(&dolly, |step, frame| {
-        if let Some(before) = &previous {
-            // The nearer (previous) step's box holds both pictures of the tree.
-            let rect = rects[step - 1].union(&rects[step]);
-            let mut measure = || -> Result<(), measure::MeasureError> {
-                reference_changes.push(measure::color_error(&before.reference, &frame.reference, &rect)?);
-                for ((method, now), (_, then)) in frame.methods.iter().zip(&before.methods) {
-                    changes
-                        .entry(*method)
-                        .or_default()
-                        .push(measure::color_error(then, now, &rect)?);
-                }
-                Ok(())
-            };
-            if let Err(e) = measure() {
-                failure.get_or_insert(e);
-            }
-        }
-        previous = Some(frame);
+        // The nearer (previous) step's box holds both pictures of the tree.
+        dolly_changes.add(frame, || rects[step - 1].union(&rects[step]));
         if step % 25 == 24 {
             progress(&format!("dolly step {}/{}", step + 1, dolly.len()));
         }
     })?;
-    if let Some(e) = failure.take() {
-        return Err(e.into());
-    }
+    let (reference_changes, mut changes) = dolly_changes.finish()?;
 
     // Shimmer: orbits and pans.
     let mut flicker: BTreeMap<Method, Vec<FlickerReport>> = BTreeMap::new();
@@ -456,31 +483,11 @@ pub fn evaluate(
                 .map(|k| (distance, scene.path_transform(path, distance, k, steps)))
                 .collect();
             let rects: Vec<PixelRect> = places.iter().map(|(_, t)| scene.rect_from(t)).collect();
-            let mut previous: Option<scene::EvalFrame> = None;
-            let mut method_changes: BTreeMap<Method, Vec<f64>> = BTreeMap::new();
-            let mut reference_steps = Vec::new();
+            let mut path_changes = StepChanges::default();
             scene.capture_path(&places, |step, frame| {
-                if let Some(before) = &previous {
-                    let rect = rects[step - 1].union(&rects[step]);
-                    let mut measure = || -> Result<(), measure::MeasureError> {
-                        reference_steps.push(measure::color_error(&before.reference, &frame.reference, &rect)?);
-                        for ((method, now), (_, then)) in frame.methods.iter().zip(&before.methods) {
-                            method_changes
-                                .entry(*method)
-                                .or_default()
-                                .push(measure::color_error(then, now, &rect)?);
-                        }
-                        Ok(())
-                    };
-                    if let Err(e) = measure() {
-                        failure.get_or_insert(e);
-                    }
-                }
-                previous = Some(frame);
+                path_changes.add(frame, || rects[step - 1].union(&rects[step]));
             })?;
-            if let Some(e) = failure.take() {
-                return Err(e.into());
-            }
+            let (reference_steps, method_changes) = path_changes.finish()?;
             for (method, changes) in method_changes {
                 let excess: Vec<f64> = changes.iter().zip(&reference_steps).map(|(m, r)| m - r).collect();
                 let Popping { p99, .. } = measure::popping(&changes, &reference_steps);

@@ -188,6 +188,24 @@ impl EvalSun {
 }
 
 impl EvalView {
+    /// A `size × size` picture with a vertical field of view of
+    /// `fov_deg`: ε 1, δ 1, 4×4 reference samples, the front sun, and the
+    /// plugin's defaults for lines and the impostor (what the tests use).
+    pub fn square(size: u32, fov_deg: f32) -> Self {
+        Self {
+            width: size,
+            height: size,
+            fov_deg,
+            pixel_error: 1.0,
+            transition: 1.0,
+            supersampling: 4,
+            sun: EvalSun::default(),
+            line_lighting: LineLighting::default(),
+            ours_line_opacity: LineOpacity::default(),
+            ours_impostor: true,
+        }
+    }
+
     /// The LOD model's view parameters for this picture.
     pub fn params(&self) -> ViewParams {
         ViewParams {

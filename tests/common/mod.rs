@@ -100,3 +100,23 @@ pub fn spawn_ground(world: &mut World) -> Entity {
     });
     world.spawn((Mesh3d(mesh), MeshMaterial3d(material))).id()
 }
+
+/// `count` needles `length` long and `radius` thick, standing side by side
+/// along +x every `spacing` metres from the origin, along +y, facing +z:
+/// a flat shoot.
+pub fn side_by_side_needles(
+    count: usize,
+    spacing: f32,
+    length: f32,
+    radius: f32,
+) -> Vec<bevy_conifer_lod::model::Needle> {
+    (0..count)
+        .map(|k| bevy_conifer_lod::model::Needle {
+            base: Vec3::new(k as f32 * spacing, 0.0, 0.0),
+            tip: Vec3::new(k as f32 * spacing, length, 0.0),
+            radius,
+            normal: Vec3::Z,
+            group: 0,
+        })
+        .collect()
+}
