@@ -526,3 +526,61 @@ fn mature_presets_are_the_default_and_bad_ages_and_counts_are_refused() {
         assert_fails_naming(&conifer(&all), named);
     }
 }
+
+/// `conifer render --wind --frames`: an animated PNG whose frames sway
+/// (the wind's clock runs 1/fps a frame), and one still in calm.
+#[cfg(feature = "plugin")]
+#[test]
+fn render_in_wind_writes_an_animated_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = baked(dir.path(), "norway-spruce", "4000");
+    let apng = dir.path().join("sway.png");
+    let report = json(&conifer(&[
+        "render",
+        file.to_str().unwrap(),
+        "--distance",
+        "5",
+        "--size",
+        "96x96",
+        "--wind",
+        "4",
+        "--frames",
+        "3",
+        "--fps",
+        "2",
+        "-o",
+        apng.to_str().unwrap(),
+    ]));
+    assert_eq!(
+        (report["frames"].as_u64(), report["wind"].as_f64()),
+        (Some(3), Some(4.0))
+    );
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&apng).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    assert_eq!(reader.info().animation_control.map(|a| a.num_frames), Some(3));
+    let mut frames = Vec::new();
+    for _ in 0..3 {
+        let mut buffer = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut buffer).unwrap();
+        frames.push(buffer);
+    }
+    // Half a second apart in a strong wind: the tree moved.
+    for pair in frames.windows(2) {
+        let changed = pair[0].chunks(4).zip(pair[1].chunks(4)).filter(|(a, b)| a != b).count();
+        assert!(changed > 20, "{changed} pixels changed");
+    }
+    // A still: one frame, a plain PNG.
+    let still = dir.path().join("still.png");
+    json(&conifer(&[
+        "render",
+        file.to_str().unwrap(),
+        "--distance",
+        "5",
+        "--size",
+        "96x96",
+        "-o",
+        still.to_str().unwrap(),
+    ]));
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&still).unwrap()));
+    assert!(decoder.read_info().unwrap().info().animation_control.is_none());
+}
