@@ -17,10 +17,8 @@ use bevy_conifer_lod::model::color::{bark_color, needle_color};
 use bevy_conifer_lod::model::{
     BakeOptions, FoliageMaterial, Needle, Placement, PrototypeInput, WoodSegment, bake_prototypes,
 };
-use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
 use bevy_conifer_lod::preview::srgb_to_linear;
-use common::background_camera;
 use std::path::PathBuf;
 
 const SIZE: u32 = 160;
@@ -103,18 +101,8 @@ fn needles_take_their_age_and_side_and_bark_its_height() {
         .unwrap()
         .quantized()
         .unwrap();
-    let mut renderer = HeadlessRenderer::new(".");
     let species = ConiferSpecies::from_prototype_record(&record).unwrap();
-    let handle = renderer
-        .world_mut()
-        .resource_mut::<Assets<ConiferSpecies>>()
-        .add(species);
-    HeadlessRenderer::spawn_lights(renderer.world_mut());
-    renderer
-        .world_mut()
-        .spawn((ConiferFoliage(handle), Transform::IDENTITY));
-    let target = renderer.render_target(SIZE, SIZE);
-    let camera = background_camera(renderer.world_mut(), &target);
+    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
     renderer.world_mut().entity_mut(camera).insert((
         Tonemapping::None,
         Camera {

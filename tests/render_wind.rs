@@ -92,19 +92,9 @@ fn needles_and_wood_move_where_the_cpu_field_says() {
     let _turn = common::gpu_turn();
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
-    let mut renderer = HeadlessRenderer::new(".");
     let species = tree();
     let shape = species.wind_shape();
-    let handle = renderer
-        .world_mut()
-        .resource_mut::<Assets<ConiferSpecies>>()
-        .add(species);
-    HeadlessRenderer::spawn_lights(renderer.world_mut());
-    renderer
-        .world_mut()
-        .spawn((ConiferFoliage(handle), Transform::IDENTITY));
-    let target = renderer.render_target(SIZE, SIZE);
-    let camera = background_camera(renderer.world_mut(), &target);
+    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
     // 12 m in front of the tree's middle: a metre is 9.4 pixels, every
     // needle a prism.
     let look = Vec3::new(1.1, 5.2, 0.0);

@@ -120,3 +120,29 @@ pub fn side_by_side_needles(
         })
         .collect()
 }
+
+/// A headless renderer drawing `species` as one tree at the origin, lit
+/// by its sun, seen by a [`background_camera`] rendering into a `size ×
+/// size` target: the renderer, the target and the camera.
+pub fn one_tree_scene(
+    species: bevy_conifer_lod::plugin::ConiferSpecies,
+    size: u32,
+) -> (
+    bevy_conifer_lod::plugin::headless::HeadlessRenderer,
+    Handle<Image>,
+    Entity,
+) {
+    use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+    let mut renderer = HeadlessRenderer::new(".");
+    let handle = renderer
+        .world_mut()
+        .resource_mut::<Assets<bevy_conifer_lod::plugin::ConiferSpecies>>()
+        .add(species);
+    HeadlessRenderer::spawn_lights(renderer.world_mut());
+    renderer
+        .world_mut()
+        .spawn((bevy_conifer_lod::plugin::ConiferFoliage(handle), Transform::IDENTITY));
+    let target = renderer.render_target(size, size);
+    let camera = background_camera(renderer.world_mut(), &target);
+    (renderer, target, camera)
+}
