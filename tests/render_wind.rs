@@ -93,7 +93,7 @@ fn needles_and_wood_move_where_the_cpu_field_says() {
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
     let species = tree();
-    let shape = species.wind_shape();
+    let shape = species.wind_shape;
     let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
     // 12 m in front of the tree's middle: a metre is 9.4 pixels, every
     // needle a prism.
@@ -184,7 +184,7 @@ fn culling_and_errors_grow_by_the_winds_reach() {
     let _turn = common::gpu_turn();
     let mut renderer = HeadlessRenderer::new(".");
     let species = tree();
-    let shape = species.wind_shape();
+    let shape = species.wind_shape;
     let crown = species.crown_center;
     let crown_radius = {
         let (lo, hi) = (Vec3::from(species.aabb.min()), Vec3::from(species.aabb.max()));

@@ -251,12 +251,15 @@ pub struct Popping {
     pub max: f64,
     /// 99th percentile of the excess change, 0–255 scale.
     pub p99: f64,
+    /// Mean excess change over the steps, 0–255 scale (negative where the
+    /// method changes less than the reference).
+    pub mean: f64,
 }
 
 /// Popping statistics of `method_changes[i]` (mean absolute change of the
 /// method's picture at step `i` from step `i − 1`) against
 /// `reference_changes[i]` (the same for the reference): the excess
-/// `method − reference` per step, its maximum and 99th percentile. Steps
+/// `method − reference` per step, its maximum, 99th percentile and mean. Steps
 /// beyond the shorter list are ignored; no steps give zeros.
 pub fn popping(method_changes: &[f64], reference_changes: &[f64]) -> Popping {
     let mut excess: Vec<f64> = method_changes
@@ -272,7 +275,17 @@ pub fn popping(method_changes: &[f64], reference_changes: &[f64]) -> Popping {
     Popping {
         max: *excess.last().expect("not empty"),
         p99: percentile_sorted(&excess, 0.99),
+        mean: mean(&excess),
     }
+}
+
+/// The mean of the finite `values`; 0 for none.
+pub fn mean(values: &[f64]) -> f64 {
+    let (sum, n) = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((0.0, 0usize), |(sum, n), v| (sum + v, n + 1));
+    sum / n.max(1) as f64
 }
 
 /// The `q`-quantile of sorted `values` (nearest rank); 0 for none.
@@ -433,6 +446,9 @@ mod tests {
         let p = popping(&pops, &reference);
         assert_eq!(p.max, 8.0);
         assert_eq!(p.p99, 8.0);
+        assert_eq!(p.mean, 2.0);
+        assert_eq!(mean(&[1.0, f64::NAN, 3.0]), 2.0);
+        assert_eq!(mean(&[]), 0.0);
         assert_eq!(popping(&[], &[]), Popping::default());
         assert_eq!(percentile_sorted(&[1.0, 2.0, 3.0, 4.0], 0.5), 2.0);
         assert_eq!(median(&[3.0, 1.0, 2.0]), 2.0);

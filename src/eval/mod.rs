@@ -32,7 +32,7 @@ type MethodChanges = BTreeMap<Method, Vec<f64>>;
 struct StepChanges {
     previous: Option<scene::EvalFrame>,
     reference: Vec<f64>,
-    methods: BTreeMap<Method, Vec<f64>>,
+    methods: MethodChanges,
     failure: Option<measure::MeasureError>,
 }
 
@@ -474,10 +474,10 @@ pub fn evaluate(
             CameraPath::Orbit => options.orbit_steps,
             CameraPath::Pan => options.pan_steps,
         };
+        if steps < 2 {
+            continue;
+        }
         for &distance in options.flicker_distances.iter().filter(|d| d.is_finite() && **d > 0.0) {
-            if steps < 2 {
-                continue;
-            }
             progress(&format!("{} of {steps} steps at {distance} m", path.name()));
             let places: Vec<(f32, bevy::prelude::Transform)> = (0..steps)
                 .map(|k| (distance, scene.path_transform(path, distance, k, steps)))
@@ -489,20 +489,19 @@ pub fn evaluate(
             })?;
             let (reference_steps, method_changes) = path_changes.finish()?;
             for (method, changes) in method_changes {
-                let excess: Vec<f64> = changes.iter().zip(&reference_steps).map(|(m, r)| m - r).collect();
-                let Popping { p99, .. } = measure::popping(&changes, &reference_steps);
+                let excess = measure::popping(&changes, &reference_steps);
                 flicker.entry(method).or_default().push(FlickerReport {
                     path,
                     distance,
-                    flicker_mean: excess.iter().sum::<f64>() / excess.len().max(1) as f64,
-                    flicker_p99: p99,
-                    mean_change: changes.iter().sum::<f64>() / changes.len().max(1) as f64,
+                    flicker_mean: excess.mean,
+                    flicker_p99: excess.p99,
+                    mean_change: measure::mean(&changes),
                 });
             }
             reference_flicker.push(ReferenceFlicker {
                 path,
                 distance,
-                mean_change: reference_steps.iter().sum::<f64>() / reference_steps.len().max(1) as f64,
+                mean_change: measure::mean(&reference_steps),
             });
         }
     }
@@ -538,7 +537,7 @@ pub fn evaluate(
     let mut method_reports = BTreeMap::new();
     for &method in &methods {
         let dolly_change = changes.remove(&method).unwrap_or_default();
-        let Popping { max, p99 } = measure::popping(&dolly_change, &reference_changes);
+        let Popping { max, p99, .. } = measure::popping(&dolly_change, &reference_changes);
         method_reports.insert(
             method.name().to_string(),
             MethodReport {

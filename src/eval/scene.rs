@@ -384,7 +384,7 @@ impl EvalScene {
         let (mut renderer, species) = renderer_with_species(record, &view)?;
         let record = species.record.clone();
         let impostor_texel = species.impostor.as_ref().map(|i| i.texel);
-        let wind_shape = species.wind_shape();
+        let wind_shape = species.wind_shape;
         let mut methods: Vec<Method> = methods.to_vec();
         methods.sort();
         methods.dedup();
@@ -678,20 +678,29 @@ impl EvalScene {
         {
             sampling.built_for = Some(e);
             let sampled = sampled_meshes(&self.record, &sampling.order, keep, e, self.view.pixel_error);
-            let mut meshes = self.renderer.world_mut().resource_mut::<Assets<Mesh>>();
-            for (handle, mesh) in [
-                (&sampling.prisms, triangle_mesh(&sampled.prisms)),
-                (&sampling.wood, triangle_mesh(&sampled.wood)),
-                (&sampling.lines, sampled.lines),
-            ] {
-                if self.wind.is_some() {
-                    self.wind_rest.insert(handle.id(), mesh.clone());
+            let rebuilt = [
+                (sampling.prisms.id(), triangle_mesh(&sampled.prisms)),
+                (sampling.wood.id(), triangle_mesh(&sampled.wood)),
+                (sampling.lines.id(), sampled.lines),
+            ];
+            // In wind the new meshes sway at the clock's moment like the
+            // others, and are kept as they are for the next moments.
+            let mut shown = Vec::with_capacity(rebuilt.len());
+            for (id, mesh) in rebuilt {
+                match self.swayed(&mesh) {
+                    Some(swayed) => {
+                        self.wind_rest.insert(id, mesh);
+                        shown.push((id, swayed));
+                    }
+                    None => shown.push((id, mesh)),
                 }
-                if let Some(mut slot) = meshes.get_mut(handle) {
+            }
+            let mut meshes = self.renderer.world_mut().resource_mut::<Assets<Mesh>>();
+            for (id, mesh) in shown {
+                if let Some(mut slot) = meshes.get_mut(id) {
                     *slot = mesh;
                 }
             }
-            self.set_wind_time(self.wind_seconds);
         }
     }
 
@@ -704,31 +713,40 @@ impl EvalScene {
         };
         self.wind_seconds = seconds;
         wind.time = Some(seconds);
-        let model = wind.model();
-        let clock = WindClock::at(seconds, &self.wind_shape);
-        let phase = TreeWindPhase::of_root(Vec2::ZERO, &model);
-        let direction = model.unit_direction();
-        let shape = self.wind_shape;
-        let world = self.renderer.world_mut();
-        world.insert_resource(wind);
-        let mut meshes = world.resource_mut::<Assets<Mesh>>();
-        for (&id, rest) in &self.wind_rest {
-            let Some(positions) = rest.attribute(Mesh::ATTRIBUTE_POSITION).and_then(|a| a.as_float3()) else {
-                continue;
-            };
-            let moved: Vec<[f32; 3]> = positions
-                .iter()
-                .map(|&p| {
-                    let p = Vec3::from(p);
-                    (p + wind_offset(&model, &shape, &clock, &phase, p).world(direction, 1.0)).to_array()
-                })
-                .collect();
-            let mut mesh = rest.clone();
-            mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, moved);
+        self.renderer.world_mut().insert_resource(wind);
+        let shown: Vec<(AssetId<Mesh>, Mesh)> = self
+            .wind_rest
+            .iter()
+            .filter_map(|(&id, rest)| Some((id, self.swayed(rest)?)))
+            .collect();
+        let mut meshes = self.renderer.world_mut().resource_mut::<Assets<Mesh>>();
+        for (id, mesh) in shown {
             if let Some(mut slot) = meshes.get_mut(id) {
                 *slot = mesh;
             }
         }
+    }
+
+    /// `rest` moved by the CPU reference of the wind at the clock's moment
+    /// (the tree stands at the origin, as the plugin's do); `None` in calm
+    /// or for a mesh without positions.
+    fn swayed(&self, rest: &Mesh) -> Option<Mesh> {
+        let model = self.wind?.model();
+        let positions = rest.attribute(Mesh::ATTRIBUTE_POSITION)?.as_float3()?;
+        let shape = &self.wind_shape;
+        let clock = WindClock::at(self.wind_seconds, shape);
+        let phase = TreeWindPhase::of_root(Vec2::ZERO, &model);
+        let direction = model.unit_direction();
+        let moved: Vec<[f32; 3]> = positions
+            .iter()
+            .map(|&p| {
+                let p = Vec3::from(p);
+                (p + wind_offset(&model, shape, &clock, &phase, p).world(direction, 1.0)).to_array()
+            })
+            .collect();
+        let mut mesh = rest.clone();
+        mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, moved);
+        Some(mesh)
     }
 
     /// Needles the `sampling` method keeps at `distance`: the fraction of

@@ -3,6 +3,7 @@
 use crate::model::compact::{CompactError, CompactSpecies};
 use crate::model::impostor::{CrownImpostor, ImpostorOptions};
 use crate::model::prism::{TriangleMesh, append_wood_segment, wood_segment_error};
+use crate::model::wind::WindShape;
 use crate::model::{LodRecord, PrototypeRecord, RecordError, WoodSegment, decode_prototype_record};
 use bevy::asset::io::{AssetReaderError, Reader};
 use bevy::asset::{AssetLoadError, AssetLoadFailedEvent, AssetLoader, LoadContext, RenderAssetUsages};
@@ -36,6 +37,10 @@ pub struct ConiferSpecies {
     /// needles and wood when the record loads (`None` when they have no
     /// extent).
     pub impostor: Option<Arc<CrownImpostor>>,
+    /// The tree as the wind sees it ([`crate::model::wind::WindShape`]):
+    /// its box; its trunk stands where its lowest wood starts, or under the
+    /// crown centre for a tree without wood.
+    pub wind_shape: WindShape,
 }
 
 /// Why a `.conifer` file did not load as a [`ConiferSpecies`].
@@ -116,25 +121,6 @@ impl ConiferSpecies {
         Self::new(flat, Some(record))
     }
 
-    /// The tree as the wind sees it ([`crate::model::wind::WindShape`]):
-    /// its box; its trunk stands where its lowest wood starts, or under the
-    /// crown centre for a tree without wood.
-    pub fn wind_shape(&self) -> crate::model::wind::WindShape {
-        let foot = self
-            .record
-            .wood
-            .iter()
-            .map(|w| w.start)
-            .filter(|p| p.is_finite())
-            .min_by(|a, b| a.y.total_cmp(&b.y))
-            .unwrap_or(self.crown_center);
-        crate::model::wind::WindShape::from_bounds(
-            Vec3::from(self.aabb.min()),
-            Vec3::from(self.aabb.max()),
-            Vec2::new(foot.x, foot.z),
-        )
-    }
-
     fn new(record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();
@@ -143,10 +129,20 @@ impl ConiferSpecies {
             Some(prototypes) => CompactSpecies::build_placed(prototypes, &record)?,
             None => CompactSpecies::build(&record)?,
         };
+        let (lo, hi) = (lo - margin, hi + margin);
+        let crown_center = record.crown_center();
+        let foot = record
+            .wood
+            .iter()
+            .map(|w| w.start)
+            .filter(|p| p.is_finite())
+            .min_by(|a, b| a.y.total_cmp(&b.y))
+            .unwrap_or(crown_center);
         Ok(Self {
             max_wood_error: record.wood.iter().map(wood_segment_error).fold(0.0, f32::max),
-            aabb: Aabb::from_min_max(lo - margin, hi + margin),
-            crown_center: record.crown_center(),
+            aabb: Aabb::from_min_max(lo, hi),
+            crown_center,
+            wind_shape: WindShape::from_bounds(lo, hi, Vec2::new(foot.x, foot.z)),
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
             compact: Arc::new(compact),

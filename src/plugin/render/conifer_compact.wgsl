@@ -102,8 +102,9 @@ fn culled() -> VertexOutput {
     return out;
 }
 
-// The tree the vertex belongs to (its world_from_local), for the wind;
-// set first thing by `vertex`.
+// The world_from_local of the tree the vertex belongs to, set first thing
+// by `vertex`: the frame of the tree's own parts, of its placements, and
+// of the wind.
 var<private> wind_tree: mat4x4<f32>;
 // The impostor sways with the trunk only (its quad's corners stand off
 // the tree, where branch sway would wobble the picture).
@@ -458,7 +459,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let original_from_needles = (entry.x & ENTRY_FROM_NEEDLES) != 0u;
     let spatial_error = placement_error(lod, placement, prototypes[placement.prototype].sphere, species.wind_motion.y)
         / placement.translation_scale.w;
-    let world_from_local = instance_world_from_local(instances[tree]) * placement_matrix(placement);
+    let world_from_local = wind_tree * placement_matrix(placement);
     let grid = prototypes[placement.prototype].grid;
     // Shadow hash: the same per placement every frame.
     let hash_tree = tree ^ ((entry.y & ENTRY_PLACEMENT_MASK) << 9u);
@@ -470,7 +471,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let code = lod.code & LOD_CODE_MASK;
     let original_from_needles = (lod.code & LOD_ORIGINAL_FROM_NEEDLES) != 0u;
     let spatial_error = lod.spatial_error;
-    let world_from_local = instance_world_from_local(instances[tree]);
+    let world_from_local = wind_tree;
     let grid = species.grid;
     let hash_tree = tree;
     let needle_albedo = species.far_needle_color.rgb;

@@ -478,7 +478,7 @@ fn species_params(
         wood_heights: [material.upper_wood_heights[0], material.upper_wood_heights[1], 0.0, 0.0],
         ..SpeciesParams::default()
     };
-    params.set_wind(&wind.model(), &species.wind_shape(), wind.seconds(seconds));
+    params.set_wind(&wind.model(), &species.wind_shape, wind.seconds(seconds));
     params
 }
 
