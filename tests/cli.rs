@@ -447,7 +447,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     assert_eq!(flat_inspect["prototype_needles"], flat_inspect["needles"]);
     assert!(flat_inspect["bytes"].as_u64().unwrap() > 4 * inspect["bytes"].as_u64().unwrap());
 
-    // A format 2 record: read as it is, rewritten in format 5 with the same cuts.
+    // A format 2 record: read as it is, rewritten in format 6 with the same cuts.
     let old = dir.path().join("old.conifer");
     std::fs::copy(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/format2-scots-pine.conifer"),
@@ -468,10 +468,10 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     let before = cuts(path);
     let output = conifer(&["upgrade", path]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(String::from_utf8_lossy(&output.stderr).contains("format 2 → 5"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("format 2 → 6"));
     assert_eq!(
         json(&conifer(&["inspect", path, "--json"]))["format_version"].as_u64(),
-        Some(5)
+        Some(6)
     );
     // The same cuts; only the opacity moves with the radii's quantization,
     // and the lines the GPU processes with the band limits (which follow
@@ -492,7 +492,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         assert_eq!(after, then);
     }
     let output = conifer(&["upgrade", path]);
-    assert!(String::from_utf8_lossy(&output.stderr).contains("already format 5"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("already format 6"));
 
     // Not a record: an error naming the file, and the file is untouched.
     let junk = dir.path().join("junk.conifer");

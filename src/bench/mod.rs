@@ -195,7 +195,7 @@ pub struct PrototypeTreeFigures {
     pub prototypes: usize,
     /// Placements.
     pub placements: usize,
-    /// Record file bytes (format 4).
+    /// Record file bytes (the current format).
     pub file_bytes: u64,
     /// GPU buffer bytes of the species, summed from the `wgpu` buffers the
     /// render world created for it (`CompactGpuMemory::species_bytes`).

@@ -316,8 +316,8 @@ pub fn bake_prototypes(
         options.max_sides,
         info,
     )?;
-    // What the record file stores (format 4): writing and reading the
-    // bake's record is exact.
+    // What the record file stores (needles, errors and placements on their
+    // codes): writing and reading the bake's record is exact.
     record = record.quantized()?;
     record.bake.bake_seconds = Some(start.elapsed().as_secs_f64());
     Ok(record)

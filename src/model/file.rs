@@ -20,7 +20,10 @@
 //!   its own id), one byte saying which two of the children's four ends it
 //!   keeps, and its error (f32);
 //! * each placement as its prototype id (varint) and, unless it is the
-//!   identity, its rotation (4 f32), translation (3 f32) and scale (f32);
+//!   identity, its rotation (the three smaller quaternion components, 20
+//!   bits each), translation (24 bits an axis, 7.6 µm apart) and scale
+//!   (f32) ([`super::quantize::RotationCode`],
+//!   [`super::quantize::TranslationCode`]);
 //! * wood segments, material and bake information;
 //! * the wood mesh of imported trees: positions (f32), normals (4-byte
 //!   octahedral) and indices as zigzag varint differences from the previous
@@ -33,7 +36,8 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
-//! Version 5 added needle ages and the colours by age, side and height;
+//! Version 6 stores placements on codes (format 5 stored `f32`s: 34 bytes
+//! a placement, 23–24 now); version 5 added needle ages and the colours by age, side and height;
 //! version 4 files read as one colour per tree, every needle mature.
 //! Version 3 added prototypes and placements. Version 2 files (flat, with
 //! the wood mesh) are still read and converted; version 1 files are refused
@@ -49,7 +53,9 @@ use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
 use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeRecord};
-use super::quantize::{PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
+use super::quantize::{
+    PositionGrid, RotationCode, TranslationCode, log_decode, log_encode_at_least, log_encode_nearest,
+};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
@@ -60,7 +66,7 @@ use std::path::Path;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -466,11 +472,21 @@ enum StoredPlacement {
     NextIdentity,
     /// A prototype as it is.
     Identity(u32),
-    /// A prototype rotated, scaled and moved.
+    /// A prototype rotated, scaled and moved, every number an `f32` (format
+    /// 3–5; in format 6 a translation beyond
+    /// [`super::quantize::MAX_GRID_TRANSLATION`]).
     Similarity {
         prototype: u32,
         rotation: [f32; 4],
         translation: [f32; 3],
+        scale: f32,
+    },
+    /// A prototype rotated, scaled and moved, rotation and translation on
+    /// their codes (format 6): 23–24 bytes instead of 34–35.
+    Quantized {
+        prototype: u32,
+        rotation: [u8; 8],
+        translation: [u8; 9],
         scale: f32,
     },
 }
@@ -478,7 +494,16 @@ enum StoredPlacement {
 impl StoredPlacement {
     /// `previous`: the prototype of the placement before, if any.
     fn encode(p: &Placement, previous: Option<u32>) -> Self {
-        if !p.is_identity() {
+        let codes = RotationCode::encode(p.rotation).zip(TranslationCode::encode(p.translation));
+        let on_codes = codes.filter(|(r, t)| r.decode() == p.rotation && t.decode() == p.translation);
+        if let (false, Some((rotation, translation))) = (p.is_identity(), on_codes) {
+            Self::Quantized {
+                prototype: p.prototype,
+                rotation: rotation.to_bytes(),
+                translation: translation.to_bytes(),
+                scale: p.scale,
+            }
+        } else if !p.is_identity() {
             Self::Similarity {
                 prototype: p.prototype,
                 rotation: p.rotation.to_array(),
@@ -505,6 +530,18 @@ impl StoredPlacement {
                 prototype,
                 rotation: glam::Quat::from_array(rotation),
                 translation: Vec3::from(translation),
+                scale,
+                ..Placement::identity(prototype)
+            },
+            Self::Quantized {
+                prototype,
+                rotation,
+                translation,
+                scale,
+            } => Placement {
+                prototype,
+                rotation: RotationCode::from_bytes(rotation).decode(),
+                translation: TranslationCode::from_bytes(translation).decode(),
                 scale,
                 ..Placement::identity(prototype)
             },
@@ -856,6 +893,7 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, Option<S
     let malformed = |e: postcard::Error| RecordError::Malformed(e.to_string());
     if version == 3 {
         let p: PayloadV3 = postcard::from_bytes(body).map_err(malformed)?;
+        check_placement_codes(version, &p.placements)?;
         let decoded = p.convert(
             |stored| {
                 Ok(DecodedPrototypes {
@@ -870,6 +908,7 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, Option<S
         return Ok((decoded, None));
     }
     let (p, rest): (Payload, &[u8]) = postcard::take_from_bytes(body).map_err(malformed)?;
+    check_placement_codes(version, &p.placements)?;
     let (appearance, rest) = if version >= 5 {
         let (appearance, rest) = postcard::take_from_bytes::<StoredAppearance>(rest).map_err(malformed)?;
         (Some(appearance), rest)
@@ -888,6 +927,21 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, Option<S
         QuantizedMesh::decode,
     )?;
     Ok((decoded, appearance))
+}
+
+/// Placements on codes came with format 6: an older file holding one is
+/// malformed.
+fn check_placement_codes(version: u32, placements: &[StoredPlacement]) -> Result<(), RecordError> {
+    if version < 6
+        && placements
+            .iter()
+            .any(|s| matches!(s, StoredPlacement::Quantized { .. }))
+    {
+        return Err(RecordError::Malformed(format!(
+            "a placement on codes in a format {version} record (codes came with format 6)"
+        )));
+    }
+    Ok(())
 }
 
 impl QuantizedPrototypes {
@@ -1263,6 +1317,97 @@ mod tests {
         let error = edited_v4(|p| p.wood_mesh.grid.1 = -100).unwrap_err();
         assert!(
             matches!(error, RecordError::Invalid(RecordInvalid::BadWoodMesh)),
+            "{error}"
+        );
+    }
+
+    /// A baked prototype of two needles placed three times, rotated,
+    /// scaled and moved; the third placement 100 m away, beyond the grid of
+    /// translations.
+    fn rotated_placements() -> PrototypeRecord {
+        let needle = |k: f32| Needle {
+            base: Vec3::new(0.0, k * 0.01, 0.0),
+            tip: Vec3::new(0.02, k * 0.01 + 0.05, 0.0),
+            radius: 0.001,
+            normal: Vec3::Z,
+            group: 0,
+        };
+        let input = super::super::PrototypeInput {
+            name: "rotated".into(),
+            prototypes: vec![vec![needle(0.0), needle(1.0)]],
+            placements: (0..3)
+                .map(|i| Placement {
+                    rotation: glam::Quat::from_rotation_y(i as f32 * 0.7 + 0.1),
+                    translation: Vec3::new(i as f32 * 0.3, 1.0, if i == 2 { 100.0 } else { 0.0 }),
+                    scale: 1.0 + 0.1 * i as f32,
+                    ..Placement::identity(0)
+                })
+                .collect(),
+            ..Default::default()
+        };
+        super::super::bake_prototypes(&input, &Default::default(), &()).unwrap()
+    }
+
+    #[test]
+    fn placements_on_codes_round_trip_in_23_bytes_and_far_ones_as_floats() {
+        let record = rotated_placements();
+        let bytes = encode_prototype_record(&record).unwrap();
+        assert_eq!(decode_prototype_record(&bytes).unwrap(), record);
+        let (payload, _): (Payload, &[u8]) = postcard::take_from_bytes(&bytes[HEADER_BYTES..]).unwrap();
+        assert!(matches!(
+            payload.placements[..],
+            [
+                StoredPlacement::Quantized { .. },
+                StoredPlacement::Quantized { .. },
+                StoredPlacement::Similarity { .. }
+            ]
+        ));
+        assert_eq!(postcard::to_allocvec(&payload.placements[0]).unwrap().len(), 23);
+    }
+
+    #[test]
+    fn format_5_placements_read_as_floats_and_codes_need_format_6() {
+        let record = rotated_placements();
+        let bytes = encode_prototype_record(&record).unwrap();
+        let body = &bytes[HEADER_BYTES..];
+        let (mut payload, appearance): (Payload, &[u8]) = postcard::take_from_bytes(body).unwrap();
+        let edited = |payload: &Payload| {
+            let mut body = postcard::to_allocvec(payload).unwrap();
+            body.extend_from_slice(appearance);
+            body
+        };
+        // Format 5 with its codes: malformed.
+        let error = decode_prototype_record(&file_of_version(5, &edited(&payload))).unwrap_err();
+        assert!(error.to_string().contains("format 6"), "{error}");
+        // Format 5 as it was written: f32 placements, read as they are
+        // (not snapped to codes).
+        let rotation = glam::Quat::from_rotation_y(0.123_456_7);
+        payload.placements[0] = StoredPlacement::Similarity {
+            prototype: 0,
+            rotation: rotation.to_array(),
+            translation: [0.123_456_7, 1.0, 0.0],
+            scale: 1.0,
+        };
+        payload.placements[1] = StoredPlacement::Similarity {
+            prototype: 0,
+            rotation: record.placements[1].rotation.to_array(),
+            translation: record.placements[1].translation.to_array(),
+            scale: record.placements[1].scale,
+        };
+        let read = decode_prototype_record(&file_of_version(5, &edited(&payload))).unwrap();
+        assert_eq!(read.placements[0].rotation, rotation);
+        assert_eq!(read.placements[0].translation.x, 0.123_456_7);
+        assert_eq!(read.placements[1..], record.placements[1..]);
+        // A rotation code beyond unit length is a bad placement.
+        payload.placements[0] = StoredPlacement::Quantized {
+            prototype: 0,
+            rotation: (u64::MAX >> 2).to_le_bytes(),
+            translation: [0; 9],
+            scale: 1.0,
+        };
+        let error = decode_prototype_record(&file_of_version(6, &edited(&payload))).unwrap_err();
+        assert!(
+            matches!(error, RecordError::Invalid(RecordInvalid::BadPlacement(0))),
             "{error}"
         );
     }

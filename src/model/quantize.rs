@@ -1,4 +1,4 @@
-//! Quantization of what a record stores (format 4), so a needle costs
+//! Quantization of what a record stores (formats 4 and 6), so a needle costs
 //! 18 bytes on disk and the same codes can feed the GPU.
 //!
 //! * Needle ends: 16 bits an axis on a [`PositionGrid`] over the prototype's
@@ -11,6 +11,12 @@
 //! * Normals: the 4-byte octahedral code of [`super::file::snap_normal`].
 //! * The wood mesh of imported trees: positions on a grid over the mesh
 //!   ([`quantize_mesh`]; a tenth of a millimetre for a tree's trunk).
+//! * Placements (format 6): the rotation as its three smaller quaternion
+//!   components, 20 bits each ([`RotationCode`]); the translation on a
+//!   fixed grid of [`TRANSLATION_STEP`] (7.6 µm), 24 bits an axis
+//!   ([`TranslationCode`]); the scale as it is. A placement moved by `d`
+//!   raises the level-2 errors above it by `2d` (its lines and the ends of
+//!   the merged lines over it each move by at most `d`).
 //!
 //! The bake quantizes its output ([`PrototypeRecord::quantized`]), so writing
 //! and reading a baked record is exact, and quantizing twice changes
@@ -20,9 +26,9 @@ use super::file::snap_normal;
 use super::merge::MergedLine;
 use super::needle::{Needle, bounds};
 use super::prism::TriangleMesh;
-use super::prototype::{Prototype, PrototypeRecord};
+use super::prototype::{Placement, Prototype, PrototypeRecord};
 use super::record::RecordInvalid;
-use glam::Vec3;
+use glam::{Quat, Vec3};
 
 /// Codes a grid spans over the prototype's box, measured from the grid's
 /// origin; the codes up to `u16::MAX` are a margin, so that the box of
@@ -122,6 +128,183 @@ impl PositionGrid {
     pub fn snap(&self, point: Vec3) -> Vec3 {
         self.decode(self.encode(point))
     }
+}
+
+/// Codes on each side of zero of a rotation component: `2¹⁹ − 1`, so zero
+/// and ±1/√2 are exact.
+const ROTATION_HALF_CODES: i64 = (1 << 19) - 1;
+
+/// Largest magnitude of a unit quaternion's three smaller components.
+const ROTATION_COMPONENT_MAX: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+/// A unit quaternion in 8 bytes ("smallest three"): which component is the
+/// largest in magnitude (2 bits, made positive by negating the quaternion,
+/// which is the same rotation) and the other three in order, 20 bits each,
+/// `(code − (2¹⁹ − 1)) · (1/√2) / (2¹⁹ − 1)`; the largest is rebuilt as
+/// `√(1 − Σ others²)`. Components are 6.7 × 10⁻⁷ apart at most, so a
+/// rotation moves a point 1 m away by under 3 µm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RotationCode(pub u64);
+
+impl RotationCode {
+    /// The code of the nearest representable rotation (`None` for a
+    /// non-finite or zero quaternion). The encoded three components stay
+    /// strictly below the rebuilt largest, so decoding and encoding again
+    /// gives the same code.
+    pub fn encode(rotation: Quat) -> Option<Self> {
+        if !rotation.is_finite() || rotation.length_squared() == 0.0 {
+            return None;
+        }
+        let q = rotation.normalize().to_array().map(f64::from);
+        let largest = (0..4)
+            .max_by(|&a, &b| q[a].abs().total_cmp(&q[b].abs()).then(b.cmp(&a)))
+            .expect("four components");
+        let sign = if q[largest] < 0.0 { -1.0 } else { 1.0 };
+        let mut codes = [0i64; 3];
+        for (slot, i) in (0..4).filter(|&i| i != largest).enumerate() {
+            let scaled = (sign * q[i] / ROTATION_COMPONENT_MAX * ROTATION_HALF_CODES as f64).round() as i64;
+            codes[slot] = scaled.clamp(-ROTATION_HALF_CODES, ROTATION_HALF_CODES);
+        }
+        // Near ties, rounding may leave a small component at or above the
+        // rebuilt largest one: move it one code towards zero until not.
+        loop {
+            let code = Self::pack(largest, codes);
+            let decoded = code.decode().to_array();
+            let rebuilt = decoded[largest];
+            let offender = (0..4)
+                .filter(|&i| i != largest)
+                .position(|i| decoded[i].abs() >= rebuilt);
+            match offender {
+                None => return Some(code),
+                Some(slot) => codes[slot] -= codes[slot].signum(),
+            }
+        }
+    }
+
+    fn pack(largest: usize, codes: [i64; 3]) -> Self {
+        let mut bits = (largest as u64) << 60;
+        for (slot, code) in codes.iter().enumerate() {
+            bits |= ((code + ROTATION_HALF_CODES) as u64) << (40 - 20 * slot);
+        }
+        Self(bits)
+    }
+
+    /// The rotation of this code. A code whose three components exceed
+    /// unit length (only a corrupt file holds one) gives a quaternion that
+    /// is not unit, which [`Placement::is_valid`] refuses.
+    pub fn decode(self) -> Quat {
+        let largest = (self.0 >> 60 & 3) as usize;
+        let mut q = [0f64; 4];
+        let mut squares = 0.0;
+        for (slot, i) in (0..4).filter(|&i| i != largest).enumerate() {
+            let code = (self.0 >> (40 - 20 * slot) & 0xF_FFFF) as i64;
+            q[i] = (code - ROTATION_HALF_CODES) as f64 * ROTATION_COMPONENT_MAX / ROTATION_HALF_CODES as f64;
+            squares += q[i] * q[i];
+        }
+        q[largest] = (1.0 - squares).max(0.0).sqrt();
+        Quat::from_array(q.map(|c| c as f32))
+    }
+
+    /// The code as the record stores it (little-endian).
+    pub fn to_bytes(self) -> [u8; 8] {
+        self.0.to_le_bytes()
+    }
+
+    /// The code of [`RotationCode::to_bytes`]' output.
+    pub fn from_bytes(bytes: [u8; 8]) -> Self {
+        Self(u64::from_le_bytes(bytes))
+    }
+}
+
+/// Distance between neighbouring placement translations, metres
+/// (2⁻¹⁷ ≈ 7.6 µm: a translation moves by 3.8 µm an axis at most).
+pub const TRANSLATION_STEP: f32 = 1.0 / 131_072.0;
+
+/// Largest translation code magnitude (24-bit signed).
+const TRANSLATION_CODE_MAX: i32 = (1 << 23) - 1;
+
+/// Farthest a translation may reach on an axis to be stored on the grid
+/// (about 64 m); a placement beyond it is stored as `f32`s.
+pub const MAX_GRID_TRANSLATION: f32 = TRANSLATION_CODE_MAX as f32 * TRANSLATION_STEP;
+
+/// A translation as three 24-bit signed multiples of [`TRANSLATION_STEP`].
+/// Every code decodes to an exact `f32`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TranslationCode(pub [i32; 3]);
+
+impl TranslationCode {
+    /// The nearest grid point's code (`None` beyond
+    /// [`MAX_GRID_TRANSLATION`] or for a non-finite translation).
+    pub fn encode(translation: Vec3) -> Option<Self> {
+        let codes = (translation / TRANSLATION_STEP).round();
+        if !codes.is_finite() || codes.abs().max_element() > TRANSLATION_CODE_MAX as f32 {
+            return None;
+        }
+        Some(Self(codes.to_array().map(|c| c as i32)))
+    }
+
+    /// The grid point.
+    pub fn decode(self) -> Vec3 {
+        Vec3::from_array(self.0.map(|c| c as f32)) * TRANSLATION_STEP
+    }
+
+    /// The code as the record stores it: 3 bytes an axis, little-endian
+    /// two's complement.
+    pub fn to_bytes(self) -> [u8; 9] {
+        let mut bytes = [0u8; 9];
+        for (axis, code) in self.0.iter().enumerate() {
+            bytes[3 * axis..3 * axis + 3].copy_from_slice(&code.to_le_bytes()[..3]);
+        }
+        bytes
+    }
+
+    /// The code of [`TranslationCode::to_bytes`]' output.
+    pub fn from_bytes(bytes: [u8; 9]) -> Self {
+        Self(std::array::from_fn(|axis| {
+            let b = &bytes[3 * axis..3 * axis + 3];
+            // Sign-extend the 24-bit value.
+            i32::from_le_bytes([b[0], b[1], b[2], 0]) << 8 >> 8
+        }))
+    }
+}
+
+/// `placement` as format 6 stores it: rotation and translation snapped to
+/// their codes ([`RotationCode`], [`TranslationCode`]), scale and the rest
+/// as they are. The identity, and a placement whose translation lies beyond
+/// [`MAX_GRID_TRANSLATION`], stay as they are. Snapping twice changes nothing.
+pub fn quantize_placement(placement: &Placement) -> Placement {
+    if placement.is_identity() {
+        return *placement;
+    }
+    match (
+        RotationCode::encode(placement.rotation),
+        TranslationCode::encode(placement.translation),
+    ) {
+        (Some(rotation), Some(translation)) => Placement {
+            rotation: rotation.decode(),
+            translation: translation.decode(),
+            ..*placement
+        },
+        _ => *placement,
+    }
+}
+
+/// The farthest any point within `reach` of its prototype's origin moves
+/// when `from` becomes `to` (the same prototype and scale): the
+/// translation's move plus `2 |Δq| · scale · reach` (for unit quaternions
+/// aligned in sign, `‖R(q) − R(q′)‖ ≤ 2 |q − q′|`).
+pub fn placement_move(from: &Placement, to: &Placement, reach: f32) -> f32 {
+    let (a, b) = (from.rotation.to_array(), to.rotation.to_array());
+    let dot: f64 = a.iter().zip(&b).map(|(&x, &y)| f64::from(x) * f64::from(y)).sum();
+    let sign = if dot < 0.0 { -1.0 } else { 1.0 };
+    let chord: f64 = a
+        .iter()
+        .zip(&b)
+        .map(|(&x, &y)| (f64::from(x) - sign * f64::from(y)).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let shift = (from.translation.as_dvec3() - to.translation.as_dvec3()).length();
+    (shift + 2.0 * chord * f64::from(from.scale) * f64::from(reach)) as f32
 }
 
 /// The smallest power of two ≥ `x` (at least [`MIN_GRID_STEP`]).
@@ -317,11 +500,13 @@ pub(crate) struct QuantizedRecord {
 }
 
 impl PrototypeRecord {
-    /// The record as format 4 stores it: needles on their prototype's
+    /// The record as the file stores it: needles on their prototype's
     /// [`PositionGrid`], radii and errors on the logarithmic code (errors
     /// rounded up, never below a child's), normals on the octahedral code.
     /// The wood mesh's positions go on their grid ([`quantize_mesh`]);
-    /// placements and wood segments are kept as they are.
+    /// placements on their codes ([`quantize_placement`], level-2 errors
+    /// raised by twice how far each moved); wood segments are kept as they
+    /// are.
     /// Quantizing a quantized record returns it unchanged.
     pub fn quantized(&self) -> Result<PrototypeRecord, RecordInvalid> {
         Ok(self.quantized_on_grids()?.record)
@@ -367,17 +552,29 @@ impl PrototypeRecord {
             ));
             prototype_grids.push(grid);
         }
-        let placed = self.placements.len() as u32;
+        let placements: Vec<Placement> = self.placements.iter().map(quantize_placement).collect();
+        // How far each prototype's needle ends reach from its origin.
+        let reaches: Vec<f32> = prototypes
+            .iter()
+            .map(|(prototype, _)| {
+                prototype
+                    .needles
+                    .iter()
+                    .flat_map(|n| [n.base.length(), n.tip.length()])
+                    .fold(0.0, f32::max)
+            })
+            .collect();
+        let placed = placements.len() as u32;
         let placed_child = |p: u32| -> (f32, f32) {
-            let placement = &self.placements[p as usize];
-            prototypes
-                .get(placement.prototype as usize)
-                .map_or((0.0, 0.0), |(prototype, raise)| {
-                    (
-                        prototype.node_error(prototype.root()) * placement.scale,
-                        raise * placement.scale,
-                    )
-                })
+            let (baked, stored) = (&self.placements[p as usize], &placements[p as usize]);
+            let k = stored.prototype as usize;
+            prototypes.get(k).map_or((0.0, 0.0), |(prototype, raise)| {
+                let moved = placement_move(baked, stored, reaches[k]);
+                (
+                    prototype.node_error(prototype.root()) * stored.scale,
+                    raise * stored.scale + 2.0 * moved,
+                )
+            })
         };
         let tree = quantize_errors(&self.tree_merged, placed, |c, raised| {
             if c < placed {
@@ -392,7 +589,7 @@ impl PrototypeRecord {
         let record = PrototypeRecord::from_parts(
             self.name.clone(),
             prototypes,
-            self.placements.clone(),
+            placements,
             tree_merged,
             self.wood.clone(),
             wood_mesh,
@@ -451,7 +648,108 @@ mod tests {
         assert_eq!(power_of_two_at_least(f32::NAN), MIN_GRID_STEP);
     }
 
+    /// `|a − ±b|` (`b`'s sign aligned with `a`'s), in `f64`.
+    fn chord(a: Quat, b: Quat) -> f64 {
+        let (a, b) = (a.as_dquat(), b.as_dquat());
+        let b = if a.dot(b) < 0.0 { -b } else { b };
+        (a - b).length()
+    }
+
+    #[test]
+    fn rotation_codes_keep_exact_rotations_and_refuse_non_finite_ones() {
+        for q in [
+            Quat::IDENTITY,
+            Quat::from_rotation_y(std::f32::consts::PI),
+            Quat::from_xyzw(0.5, 0.5, 0.5, 0.5),
+            Quat::from_xyzw(
+                0.0,
+                std::f32::consts::FRAC_1_SQRT_2,
+                0.0,
+                std::f32::consts::FRAC_1_SQRT_2,
+            ),
+        ] {
+            let code = RotationCode::encode(q).unwrap();
+            let decoded = code.decode();
+            assert!(chord(decoded, q) < 2e-6, "{q} vs {decoded}");
+            assert_eq!(RotationCode::encode(decoded), Some(code));
+            assert_eq!(RotationCode::from_bytes(code.to_bytes()), code);
+        }
+        assert_eq!(RotationCode::encode(Quat::IDENTITY).unwrap().decode(), Quat::IDENTITY);
+        assert_eq!(RotationCode::encode(Quat::from_xyzw(f32::NAN, 0.0, 0.0, 1.0)), None);
+        assert_eq!(RotationCode::encode(Quat::from_xyzw(0.0, 0.0, 0.0, 0.0)), None);
+        // Three components at their largest code are beyond unit length: the
+        // rebuilt quaternion is not a unit one.
+        let corrupt = RotationCode(u64::MAX >> 2).decode();
+        assert!((corrupt.length() - 1.0).abs() > 0.1, "{corrupt}");
+    }
+
+    #[test]
+    fn translation_codes_are_24_bit_signed() {
+        for t in [
+            Vec3::ZERO,
+            Vec3::new(-0.001, 12.5, 63.9),
+            Vec3::splat(-MAX_GRID_TRANSLATION),
+            Vec3::splat(MAX_GRID_TRANSLATION),
+        ] {
+            let code = TranslationCode::encode(t).unwrap();
+            assert_eq!(TranslationCode::from_bytes(code.to_bytes()), code);
+            assert!((code.decode() - t).abs().max_element() <= TRANSLATION_STEP * 0.5);
+            assert_eq!(TranslationCode::encode(code.decode()), Some(code));
+        }
+        assert_eq!(TranslationCode::encode(Vec3::new(0.0, 64.1, 0.0)), None);
+        assert_eq!(TranslationCode::encode(Vec3::new(f32::INFINITY, 0.0, 0.0)), None);
+        // Beyond the grid a placement keeps its translation (and rotation).
+        let far = Placement {
+            translation: Vec3::new(100.0, 0.0, 0.0),
+            rotation: Quat::from_rotation_z(0.3),
+            ..Placement::identity(0)
+        };
+        assert_eq!(quantize_placement(&far), far);
+    }
+
     proptest! {
+        #[test]
+        fn rotation_codes_are_within_micro_radians_and_stable(q in prop::array::uniform4(-1.0f32..1.0)) {
+            let q = Quat::from_array(q);
+            prop_assume!(q.length() > 0.1);
+            let q = q.normalize();
+            let code = RotationCode::encode(q).unwrap();
+            let decoded = code.decode();
+            prop_assert!((decoded.length() - 1.0).abs() < 1e-6);
+            // The angle between them is about twice the chord.
+            prop_assert!(chord(decoded, q) < 2e-6, "{}", chord(decoded, q));
+            prop_assert_eq!(RotationCode::encode(decoded), Some(code));
+        }
+
+        #[test]
+        fn placement_moves_bound_how_far_points_move(
+            q in prop::array::uniform4(-1.0f32..1.0),
+            t in prop::array::uniform3(-60.0f32..60.0),
+            scale in 0.1f32..5.0,
+            points in prop::collection::vec(prop::array::uniform3(-1.0f32..1.0), 1..20),
+        ) {
+            let q = Quat::from_array(q);
+            prop_assume!(q.length() > 0.1);
+            let placement = Placement {
+                rotation: q.normalize(),
+                translation: Vec3::from(t),
+                scale,
+                ..Placement::identity(0)
+            };
+            let snapped = quantize_placement(&placement);
+            prop_assert_eq!(quantize_placement(&snapped), snapped);
+            let points: Vec<Vec3> = points.into_iter().map(Vec3::from).collect();
+            let reach = points.iter().map(|p| p.length()).fold(0.0, f32::max);
+            let bound = placement_move(&placement, &snapped, reach);
+            // A few micrometres, and f32 rounding of the placed points aside,
+            // no point moves further.
+            prop_assert!(bound < 2e-5 * (1.0 + scale), "{}", bound);
+            for p in points {
+                let moved = placement.place_point(p).distance(snapped.place_point(p));
+                prop_assert!(moved <= bound + 2e-5, "{} > {}", moved, bound);
+            }
+        }
+
         #[test]
         fn log_codes_bound_their_values(value in 1e-9f32..1e5) {
             let up = log_encode_at_least(value).unwrap();
