@@ -22,6 +22,9 @@
 //! [`bevy_conifer_lod::scatter::Scatter`] (blue noise, clearings from a
 //! density noise, no trees on slopes over 32°).
 
+use bevy::anti_alias::fxaa::Fxaa;
+use bevy::anti_alias::smaa::Smaa;
+use bevy::anti_alias::taa::TemporalAntiAliasing;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::RenderTarget;
 use bevy::input::mouse::AccumulatedMouseMotion;
@@ -107,6 +110,41 @@ struct Args {
     /// light breeze in a window, calm headless (repeatable pictures).
     #[arg(long)]
     wind: Option<f32>,
+    /// Anti-aliasing: Bevy's default 4× MSAA, none, or Bevy's FXAA, SMAA
+    /// or TAA (the last three with MSAA off, as Bevy requires).
+    #[arg(long, value_enum, default_value_t = AntiAliasing::Msaa)]
+    aa: AntiAliasing,
+    /// Headless: move the camera by `x,y,z` metres before each extra frame
+    /// (`--frames`), looking the same way (a pan: what TAA's history sees).
+    #[arg(long, value_parser = parse_vec3)]
+    camera_step: Option<Vec3>,
+}
+
+/// The camera's anti-aliasing (`--aa`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum AntiAliasing {
+    /// 4× multisampling, Bevy's default.
+    Msaa,
+    /// None: one sample a pixel.
+    None,
+    /// Bevy's `Fxaa` (post-process, one frame).
+    Fxaa,
+    /// Bevy's `Smaa` (post-process, one frame; its lookup tables).
+    Smaa,
+    /// Bevy's `TemporalAntiAliasing` (jittered frames blended over time).
+    Taa,
+}
+
+fn parse_vec3(s: &str) -> Result<Vec3, String> {
+    let v: Vec<f32> = s
+        .split(',')
+        .map(|x| x.trim().parse().ok())
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("{s}: expected x,y,z"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
+        _ => Err(format!("{s}: expected x,y,z")),
+    }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -141,6 +179,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Ok(());
     }
     let frames = args.frames;
+    let aa = args.aa;
+    let camera_step = args.camera_step;
     let screenshot = args.screenshot.clone();
     let assets = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
     let mut renderer = HeadlessRenderer::with_setup(assets, |app| {
@@ -164,10 +204,45 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .collect();
     renderer.load(&handles, 2000)?;
     let loaded_after = begin.elapsed();
-    for _ in 0..frames {
+    let mut frame_ms = Vec::with_capacity(frames as usize);
+    // The picture is of the last extra frame, taken while the camera still
+    // moves (TAA's history as a player sees it), not of a later still one.
+    let mut pending = None;
+    let step_camera = |renderer: &mut HeadlessRenderer| {
+        if let Some(step) = camera_step {
+            let world = renderer.world_mut();
+            let mut cameras = world.query_filtered::<&mut Transform, With<Camera3d>>();
+            for mut transform in cameras.iter_mut(world) {
+                transform.translation += step;
+            }
+        }
+    };
+    for frame in 0..frames {
+        step_camera(&mut renderer);
+        if frame + 1 == frames {
+            pending = Some(renderer.request_screenshots(std::slice::from_ref(&image)));
+        }
+        let start = std::time::Instant::now();
         renderer.update()?;
+        frame_ms.push(start.elapsed().as_secs_f64() * 1e3);
     }
-    let picture = renderer.capture(&image, 20)?;
+    frame_ms.sort_by(f64::total_cmp);
+    let median_frame_ms = frame_ms.get(frame_ms.len() / 2).copied().unwrap_or(f64::NAN);
+    let picture = match pending {
+        Some(pending) => {
+            let mut picture = None;
+            for _ in 0..20 {
+                if let Some(mut images) = pending.take()? {
+                    picture = Some(images.remove(0));
+                    break;
+                }
+                step_camera(&mut renderer);
+                renderer.update()?;
+            }
+            picture.ok_or("the last frame's picture did not arrive in 20 frames")?
+        }
+        None => renderer.capture(&image, 20)?,
+    };
     if let Some(dir) = screenshot.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
@@ -182,10 +257,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter(renderer.world())
         .count();
     println!(
-        "{{\"screenshot\": {:?}, \"load_s\": {:.2}, \"total_s\": {:.2}, \"trees\": {trees}, \"visible\": {}, \"impostors\": {}, \"fading\": {}, \"prisms\": {}, \"triangles\": {}, \"lines\": {}, \"plugin_cpu_ms\": {:.3}}}",
+        "{{\"screenshot\": {:?}, \"aa\": \"{:?}\", \"load_s\": {:.2}, \"total_s\": {:.2}, \"median_frame_ms\": {:.1}, \"trees\": {trees}, \"visible\": {}, \"impostors\": {}, \"fading\": {}, \"prisms\": {}, \"triangles\": {}, \"lines\": {}, \"plugin_cpu_ms\": {:.3}}}",
         screenshot.display().to_string(),
+        aa,
         loaded_after.as_secs_f64(),
         begin.elapsed().as_secs_f64(),
+        median_frame_ms,
         stats.visible_instances,
         stats.impostors,
         stats.fading,
@@ -463,6 +540,21 @@ fn setup(
     ));
     // The stats panel draws on this camera, also when it renders to an image.
     camera.insert(IsDefaultUiCamera);
+    match args.aa {
+        AntiAliasing::Msaa => {}
+        AntiAliasing::None => {
+            camera.insert(Msaa::Off);
+        }
+        AntiAliasing::Fxaa => {
+            camera.insert((Msaa::Off, Fxaa::default()));
+        }
+        AntiAliasing::Smaa => {
+            camera.insert((Msaa::Off, Smaa::default()));
+        }
+        AntiAliasing::Taa => {
+            camera.insert((Msaa::Off, TemporalAntiAliasing::default()));
+        }
+    }
     if let Some(target) = target {
         camera.insert(RenderTarget::from(target.0.clone()));
     }
