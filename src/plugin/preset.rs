@@ -161,19 +161,8 @@ impl ConiferPresets<'_> {
 }
 
 /// The species of `preset`: from `cache` if a valid bake is there, else
-/// baked (and written there). Blocks; runs on a background task. All of
-/// its work (reading, baking, building the species) runs on the bake pool
-/// (one thread fewer than the machine, at the lowest priority on Linux),
-/// so the task's own thread, at normal priority, only waits.
+/// baked (and written there). Blocks; runs on a background task.
 pub fn load_preset(preset: Preset, cache: Option<&Path>) -> Result<ConiferSpecies, PresetLoadError> {
-    match bake_pool() {
-        Some(pool) => pool.install(|| load_preset_here(preset, cache)),
-        None => load_preset_here(preset, cache),
-    }
-}
-
-/// [`load_preset`] on the calling thread.
-fn load_preset_here(preset: Preset, cache: Option<&Path>) -> Result<ConiferSpecies, PresetLoadError> {
     let species = |record: &PrototypeRecord| {
         ConiferSpecies::from_prototype_record(record).map_err(|source| PresetLoadError::Species { preset, source })
     };
@@ -194,7 +183,11 @@ fn load_preset_here(preset: Preset, cache: Option<&Path>) -> Result<ConiferSpeci
             ),
         }
     }
-    let record = preset.bake().map_err(|source| PresetLoadError::Bake { preset, source })?;
+    let record = match bake_pool() {
+        Some(pool) => pool.install(|| preset.bake()),
+        None => preset.bake(),
+    }
+    .map_err(|source| PresetLoadError::Bake { preset, source })?;
     if let Some(path) = &path {
         let written = std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))
             .map_err(crate::model::RecordError::from)
