@@ -1,6 +1,7 @@
 //! The `conifer` command line, run as a user runs it: outputs, JSON keys,
 //! and clear errors (non-zero exit, file named, no panic) on bad input.
 
+use bevy_conifer_lod::model::file::FORMAT_VERSION;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -421,7 +422,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     let inspect = json(&conifer(&["inspect", shoots.to_str().unwrap(), "--json"]));
     let needles = inspect["needles"].as_u64().unwrap();
     assert!((19_000..=21_000).contains(&needles), "{needles}");
-    assert_eq!(inspect["format_version"].as_u64(), Some(5));
+    assert_eq!(inspect["format_version"].as_u64(), Some(u64::from(FORMAT_VERSION)));
     let prototypes = inspect["prototypes"].as_u64().unwrap();
     assert!((10..=120).contains(&prototypes), "{prototypes} prototypes");
     assert!(inspect["prototype_needles"].as_u64().unwrap() * 5 < needles);
@@ -468,10 +469,10 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     let before = cuts(path);
     let output = conifer(&["upgrade", path]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    assert!(String::from_utf8_lossy(&output.stderr).contains("format 2 → 6"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains(&format!("format 2 → {FORMAT_VERSION}")));
     assert_eq!(
         json(&conifer(&["inspect", path, "--json"]))["format_version"].as_u64(),
-        Some(6)
+        Some(u64::from(FORMAT_VERSION))
     );
     // The same cuts; only the opacity moves with the radii's quantization,
     // and the lines the GPU processes with the band limits (which follow
@@ -492,7 +493,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         assert_eq!(after, then);
     }
     let output = conifer(&["upgrade", path]);
-    assert!(String::from_utf8_lossy(&output.stderr).contains("already format 6"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains(&format!("already format {FORMAT_VERSION}")));
 
     // Not a record: an error naming the file, and the file is untouched.
     let junk = dir.path().join("junk.conifer");

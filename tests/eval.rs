@@ -220,4 +220,16 @@ fn in_wind_ours_sways_with_the_reference() {
         );
     }
     assert!(windy.methods["ours"].popping_max <= 1.0 + calm.methods["ours"].popping_max);
+    // The shadow scene sways too (ours on the GPU, the exact shadow by the
+    // CPU field): ours' shadow error stays near its calm one.
+    for (c, w) in ours(&calm).iter().zip(ours(&windy)) {
+        let (Some(c_error), Some(w_error)) = (c.shadow_coverage_error, w.shadow_coverage_error) else {
+            panic!("at {} m: no shadow error", c.distance);
+        };
+        assert!(
+            w_error <= c_error + 0.02,
+            "at {} m: shadow error {w_error} in wind, {c_error} calm",
+            c.distance
+        );
+    }
 }

@@ -374,16 +374,12 @@ pub fn evaluate(
     let needles = record.needle_count();
     progress("building the scene (raw mesh, meshoptimizer LODs, plugin)");
     let wind = options.wind.filter(|s| *s > 0.0 && s.is_finite());
-    let mut scene = EvalScene::new_in_wind(
-        record,
-        &options.methods,
-        options.view,
-        wind.map(|strength| crate::plugin::ConiferWind {
-            direction: bevy::math::Vec2::X,
-            strength,
-            ..Default::default()
-        }),
-    )?;
+    let conifer_wind = wind.map(|strength| crate::plugin::ConiferWind {
+        direction: bevy::math::Vec2::X,
+        strength,
+        ..Default::default()
+    });
+    let mut scene = EvalScene::new_in_wind(record, &options.methods, options.view, conifer_wind)?;
     let methods = scene.methods().to_vec();
     let mut files = Vec::new();
     let mut blank = Vec::new();
@@ -508,7 +504,7 @@ pub fn evaluate(
 
     // Shadows, in a scene of their own.
     progress("shadows on the ground");
-    let mut shadow_scene = shadow::ShadowScene::new(scene.record().clone(), &methods, options.view)?;
+    let mut shadow_scene = shadow::ShadowScene::new(scene.record().clone(), &methods, options.view, conifer_wind)?;
     let mut shadow_rows: Vec<Vec<image::RgbaImage>> = Vec::new();
     for (k, &distance) in distances.iter().enumerate() {
         let frame = shadow_scene.capture(distance)?;

@@ -24,7 +24,7 @@ use crate::model::metric::{line_error, prism_sides};
 use crate::model::prism::{
     TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, wood_segment_error,
 };
-use crate::model::wind::{TreeWindPhase, WindClock, WindShape, wind_offset};
+use crate::model::wind::{TreeWindPhase, Wind, WindClock, WindShape, wind_offset};
 use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
@@ -731,19 +731,9 @@ impl EvalScene {
     /// (the tree stands at the origin, as the plugin's do); `None` in calm
     /// or for a mesh without positions.
     fn swayed(&self, rest: &Mesh) -> Option<Mesh> {
-        let model = self.wind?.model();
+        let sway = sway_at(&self.wind?.model(), &self.wind_shape, self.wind_seconds);
         let positions = rest.attribute(Mesh::ATTRIBUTE_POSITION)?.as_float3()?;
-        let shape = &self.wind_shape;
-        let clock = WindClock::at(self.wind_seconds, shape);
-        let phase = TreeWindPhase::of_root(Vec2::ZERO, &model);
-        let direction = model.unit_direction();
-        let moved: Vec<[f32; 3]> = positions
-            .iter()
-            .map(|&p| {
-                let p = Vec3::from(p);
-                (p + wind_offset(&model, shape, &clock, &phase, p).world(direction, 1.0)).to_array()
-            })
-            .collect();
+        let moved: Vec<[f32; 3]> = positions.iter().map(|&p| sway(Vec3::from(p)).to_array()).collect();
         let mut mesh = rest.clone();
         mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, moved);
         Some(mesh)
@@ -1244,4 +1234,15 @@ pub fn wood_counts_by(record: &LodRecord, error_of: impl Fn(&crate::model::WoodS
         }
     }
     (triangles, lines)
+}
+
+/// Where a point of a tree standing at the origin (its wind shape `shape`)
+/// is at `seconds` on the wind's clock: the CPU reference of the field the
+/// plugin's vertex shader applies ([`wind_offset`]).
+pub(crate) fn sway_at(model: &Wind, shape: &WindShape, seconds: f64) -> impl Fn(Vec3) -> Vec3 + use<> {
+    let clock = WindClock::at(seconds, shape);
+    let phase = TreeWindPhase::of_root(Vec2::ZERO, model);
+    let direction = model.unit_direction();
+    let (model, shape) = (*model, *shape);
+    move |p| p + wind_offset(&model, &shape, &clock, &phase, p).world(direction, 1.0)
 }

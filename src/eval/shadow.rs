@@ -24,10 +24,10 @@
 //! reference shadow's screen box.
 
 use super::measure::PixelRect;
-use super::scene::{EvalError, EvalView, Method, RawTree, raw_materials, renderer_with_species};
+use super::scene::{EvalError, EvalView, Method, RawTree, raw_materials, renderer_with_species, sway_at};
 use crate::model::LodRecord;
 use crate::plugin::headless::HeadlessRenderer;
-use crate::plugin::{ConiferFoliage, ConiferLodOverride, ConiferSpecies, triangle_mesh};
+use crate::plugin::{ConiferFoliage, ConiferLodOverride, ConiferSpecies, ConiferWind, triangle_mesh};
 use bevy::camera::CameraProjection;
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::tonemapping::Tonemapping;
@@ -59,6 +59,26 @@ pub const SHADOW_METHODS: [Method; 3] = [Method::Paper, Method::Ours, Method::Ra
 /// lit ground stays below white without tonemapping.
 const SUN_LUX: f32 = 3_000.0;
 const AMBIENT: f32 = 400.0;
+
+/// The moment on the wind's clock at which the shadow scene stands in
+/// wind, seconds.
+pub const SHADOW_WIND_SECONDS: f64 = 2.0;
+
+/// `record` with every needle end, wood segment end and wood mesh vertex
+/// moved by `sway` (radii, normals and the merge forest as they are).
+pub fn swayed_record(record: &LodRecord, sway: impl Fn(Vec3) -> Vec3) -> LodRecord {
+    let mut swayed = record.clone();
+    for needle in &mut swayed.needles {
+        (needle.base, needle.tip) = (sway(needle.base), sway(needle.tip));
+    }
+    for wood in &mut swayed.wood {
+        (wood.start, wood.end) = (sway(wood.start), sway(wood.end));
+    }
+    for position in &mut swayed.wood_mesh.positions {
+        *position = sway(*position);
+    }
+    swayed
+}
 
 /// One method's tree, ground, sun and camera.
 struct ShadowView {
@@ -92,10 +112,28 @@ pub struct ShadowScene {
 
 impl ShadowScene {
     /// Builds the scene for `record` and those of `methods` that
-    /// [`SHADOW_METHODS`] lists, and lets it reach the GPU.
-    pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
+    /// [`SHADOW_METHODS`] lists, and lets it reach the GPU. In `wind` (not
+    /// calm) the scene stands at [`SHADOW_WIND_SECONDS`] on the wind's
+    /// clock: the plugin's trees sway on the GPU, the raw tree and the
+    /// exact shadow by the CPU reference of the same field.
+    pub fn new(
+        record: LodRecord,
+        methods: &[Method],
+        view: EvalView,
+        wind: Option<ConiferWind>,
+    ) -> Result<Self, EvalError> {
         let (mut renderer, species) = renderer_with_species(record, &view)?;
-        let record = species.record.clone();
+        let record = match wind.filter(|w| !w.model().is_calm()) {
+            Some(wind) => {
+                renderer.world_mut().insert_resource(ConiferWind {
+                    time: Some(SHADOW_WIND_SECONDS),
+                    ..wind
+                });
+                let sway = sway_at(&wind.model(), &species.wind_shape, SHADOW_WIND_SECONDS);
+                Arc::new(swayed_record(&species.record, sway))
+            }
+            None => species.record.clone(),
+        };
         let world = renderer.world_mut();
         world.insert_resource(GlobalAmbientLight {
             brightness: AMBIENT,
@@ -537,6 +575,60 @@ pub fn darkening_picture(darkening: &[f32], width: u32) -> image::RgbaImage {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::wind::{Wind, WindShape};
+
+    #[test]
+    fn a_swayed_record_moves_every_end_by_the_field_and_its_shadow_downwind() {
+        // A 10 m pole of needles, one every metre, on a trunk.
+        let input = crate::model::TreeInput {
+            name: "pole".into(),
+            needles: (0..10)
+                .map(|k| crate::model::Needle {
+                    base: Vec3::new(0.0, k as f32 + 0.5, 0.0),
+                    tip: Vec3::new(0.3, k as f32 + 0.5, 0.0),
+                    radius: 0.01,
+                    normal: Vec3::Y,
+                    group: k,
+                })
+                .collect(),
+            wood: vec![crate::model::WoodSegment {
+                start: Vec3::ZERO,
+                end: Vec3::Y * 10.0,
+                start_radius: 0.1,
+                end_radius: 0.02,
+            }],
+            ..Default::default()
+        };
+        let record = crate::model::bake(&input, &Default::default(), &()).unwrap();
+        let shape = WindShape::from_bounds(Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 10.0, 0.5), Vec2::ZERO);
+        let wind = Wind {
+            strength: 4.0,
+            ..Wind::LIGHT_BREEZE
+        };
+        let sway = sway_at(&wind, &shape, SHADOW_WIND_SECONDS);
+        let swayed = swayed_record(&record, &sway);
+        for (calm, moved) in record.needles.iter().zip(&swayed.needles) {
+            assert_eq!(moved.base, sway(calm.base));
+            assert_eq!(moved.tip, sway(calm.tip));
+            assert_eq!((moved.radius, moved.normal), (calm.radius, calm.normal));
+        }
+        assert_eq!(swayed.wood[0].start, sway(record.wood[0].start));
+        assert_eq!(swayed.merged, record.merged);
+        // The top leans downwind (+x) by centimetres; the foot stays.
+        assert!(swayed.wood[0].end.x - record.wood[0].end.x > 0.05);
+        assert!(swayed.wood[0].start.distance(record.wood[0].start) < 1e-3);
+        // So does the exact shadow: its darkened mass moves.
+        let clip = Mat4::orthographic_rh(-20.0, 20.0, -20.0, 20.0, -100.0, 100.0)
+            * Mat4::look_at_rh(Vec3::Y * 50.0, Vec3::ZERO, Vec3::NEG_Z);
+        let centroid = |r: &LodRecord| {
+            let dark = reference_darkening(r, sun_direction(), clip, 128, 128, 2);
+            let total: f32 = dark.iter().sum();
+            let x: f32 = dark.iter().enumerate().map(|(i, d)| (i % 128) as f32 * d).sum();
+            x / total
+        };
+        let (calm, moved) = (centroid(&record), centroid(&swayed));
+        assert!((moved - calm).abs() > 0.05, "shadow centroid {calm} → {moved} px");
+    }
 
     #[test]
     fn a_square_covers_its_area() {
