@@ -475,20 +475,38 @@ enum StoredPlacement {
     /// A prototype rotated, scaled and moved, every number an `f32` (format
     /// 3–5; in format 6 a translation beyond
     /// [`super::quantize::MAX_GRID_TRANSLATION`]).
-    Similarity {
-        prototype: u32,
-        rotation: [f32; 4],
-        translation: [f32; 3],
-        scale: f32,
-    },
+    Similarity(StoredSimilarity<[f32; 4], [f32; 3]>),
     /// A prototype rotated, scaled and moved, rotation and translation on
     /// their codes (format 6): 23–24 bytes instead of 34–35.
-    Quantized {
-        prototype: u32,
-        rotation: [u8; 8],
-        translation: [u8; 9],
-        scale: f32,
-    },
+    Quantized(StoredSimilarity<[u8; 8], [u8; 9]>),
+}
+
+/// A placement's prototype and transform as stored, its rotation and
+/// translation as `Rotation` and `Translation` (a newtype variant of a
+/// struct encodes as the struct variant formats 3–5 wrote).
+#[derive(Serialize, Deserialize)]
+struct StoredSimilarity<Rotation, Translation> {
+    prototype: u32,
+    rotation: Rotation,
+    translation: Translation,
+    scale: f32,
+}
+
+impl<Rotation: Copy, Translation: Copy> StoredSimilarity<Rotation, Translation> {
+    /// The placement, its rotation and translation decoded by `rotation`
+    /// and `translation`.
+    fn placement(
+        &self,
+        rotation: impl Fn(Rotation) -> glam::Quat,
+        translation: impl Fn(Translation) -> Vec3,
+    ) -> Placement {
+        Placement {
+            rotation: rotation(self.rotation),
+            translation: translation(self.translation),
+            scale: self.scale,
+            ..Placement::identity(self.prototype)
+        }
+    }
 }
 
 impl StoredPlacement {
@@ -497,19 +515,19 @@ impl StoredPlacement {
         let codes = RotationCode::encode(p.rotation).zip(TranslationCode::encode(p.translation));
         let on_codes = codes.filter(|(r, t)| r.decode() == p.rotation && t.decode() == p.translation);
         if let (false, Some((rotation, translation))) = (p.is_identity(), on_codes) {
-            Self::Quantized {
+            Self::Quantized(StoredSimilarity {
                 prototype: p.prototype,
                 rotation: rotation.to_bytes(),
                 translation: translation.to_bytes(),
                 scale: p.scale,
-            }
+            })
         } else if !p.is_identity() {
-            Self::Similarity {
+            Self::Similarity(StoredSimilarity {
                 prototype: p.prototype,
                 rotation: p.rotation.to_array(),
                 translation: p.translation.to_array(),
                 scale: p.scale,
-            }
+            })
         } else if previous.map_or(0, |k| k.wrapping_add(1)) == p.prototype {
             Self::NextIdentity
         } else {
@@ -518,33 +536,14 @@ impl StoredPlacement {
     }
 
     fn decode(&self, previous: Option<u32>) -> Placement {
-        match *self {
+        match self {
             Self::NextIdentity => Placement::identity(previous.map_or(0, |k| k.wrapping_add(1))),
-            Self::Identity(prototype) => Placement::identity(prototype),
-            Self::Similarity {
-                prototype,
-                rotation,
-                translation,
-                scale,
-            } => Placement {
-                prototype,
-                rotation: glam::Quat::from_array(rotation),
-                translation: Vec3::from(translation),
-                scale,
-                ..Placement::identity(prototype)
-            },
-            Self::Quantized {
-                prototype,
-                rotation,
-                translation,
-                scale,
-            } => Placement {
-                prototype,
-                rotation: RotationCode::from_bytes(rotation).decode(),
-                translation: TranslationCode::from_bytes(translation).decode(),
-                scale,
-                ..Placement::identity(prototype)
-            },
+            Self::Identity(prototype) => Placement::identity(*prototype),
+            Self::Similarity(stored) => stored.placement(glam::Quat::from_array, Vec3::from),
+            Self::Quantized(stored) => stored.placement(
+                |r| RotationCode::from_bytes(r).decode(),
+                |t| TranslationCode::from_bytes(t).decode(),
+            ),
         }
     }
 }
@@ -932,11 +931,7 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, Option<S
 /// Placements on codes came with format 6: an older file holding one is
 /// malformed.
 fn check_placement_codes(version: u32, placements: &[StoredPlacement]) -> Result<(), RecordError> {
-    if version < 6
-        && placements
-            .iter()
-            .any(|s| matches!(s, StoredPlacement::Quantized { .. }))
-    {
+    if version < 6 && placements.iter().any(|s| matches!(s, StoredPlacement::Quantized(_))) {
         return Err(RecordError::Malformed(format!(
             "a placement on codes in a format {version} record (codes came with format 6)"
         )));
@@ -1357,9 +1352,9 @@ mod tests {
         assert!(matches!(
             payload.placements[..],
             [
-                StoredPlacement::Quantized { .. },
-                StoredPlacement::Quantized { .. },
-                StoredPlacement::Similarity { .. }
+                StoredPlacement::Quantized(_),
+                StoredPlacement::Quantized(_),
+                StoredPlacement::Similarity(_)
             ]
         ));
         assert_eq!(postcard::to_allocvec(&payload.placements[0]).unwrap().len(), 23);
@@ -1382,29 +1377,29 @@ mod tests {
         // Format 5 as it was written: f32 placements, read as they are
         // (not snapped to codes).
         let rotation = glam::Quat::from_rotation_y(0.123_456_7);
-        payload.placements[0] = StoredPlacement::Similarity {
+        payload.placements[0] = StoredPlacement::Similarity(StoredSimilarity {
             prototype: 0,
             rotation: rotation.to_array(),
             translation: [0.123_456_7, 1.0, 0.0],
             scale: 1.0,
-        };
-        payload.placements[1] = StoredPlacement::Similarity {
+        });
+        payload.placements[1] = StoredPlacement::Similarity(StoredSimilarity {
             prototype: 0,
             rotation: record.placements[1].rotation.to_array(),
             translation: record.placements[1].translation.to_array(),
             scale: record.placements[1].scale,
-        };
+        });
         let read = decode_prototype_record(&file_of_version(5, &edited(&payload))).unwrap();
         assert_eq!(read.placements[0].rotation, rotation);
         assert_eq!(read.placements[0].translation.x, 0.123_456_7);
         assert_eq!(read.placements[1..], record.placements[1..]);
         // A rotation code beyond unit length is a bad placement.
-        payload.placements[0] = StoredPlacement::Quantized {
+        payload.placements[0] = StoredPlacement::Quantized(StoredSimilarity {
             prototype: 0,
             rotation: (u64::MAX >> 2).to_le_bytes(),
             translation: [0; 9],
             scale: 1.0,
-        };
+        });
         let error = decode_prototype_record(&file_of_version(6, &edited(&payload))).unwrap_err();
         assert!(
             matches!(error, RecordError::Invalid(RecordInvalid::BadPlacement(0))),
@@ -1425,12 +1420,12 @@ mod tests {
             vec![StoredPlacement::Identity(0), StoredPlacement::Identity(u32::MAX)],
             vec![
                 StoredPlacement::NextIdentity,
-                StoredPlacement::Similarity {
+                StoredPlacement::Similarity(StoredSimilarity {
                     prototype: 7,
                     rotation: [0.0, 0.0, 0.0, 1.0],
                     translation: [0.0; 3],
                     scale: 1.0,
-                },
+                }),
             ],
         ] {
             assert!(matches!(
@@ -1448,12 +1443,12 @@ mod tests {
             ([0.0, 0.0, 0.0, 1.0], 0.0),
             ([0.0, 0.0, 0.0, 1.0], f32::INFINITY),
         ] {
-            let placement = StoredPlacement::Similarity {
+            let placement = StoredPlacement::Similarity(StoredSimilarity {
                 prototype: 0,
                 rotation,
                 translation: [0.0; 3],
                 scale,
-            };
+            });
             assert!(matches!(
                 decode(&payload(vec![placement])),
                 Err(RecordError::Invalid(RecordInvalid::BadPlacement(0)))
