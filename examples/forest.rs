@@ -208,7 +208,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The picture is of the last extra frame, taken while the camera still
     // moves (TAA's history as a player sees it), not of a later still one.
     let mut pending = None;
-    let step_camera = |renderer: &mut HeadlessRenderer| {
+    for frame in 0..frames {
         if let Some(step) = camera_step {
             let world = renderer.world_mut();
             let mut cameras = world.query_filtered::<&mut Transform, With<Camera3d>>();
@@ -216,9 +216,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 transform.translation += step;
             }
         }
-    };
-    for frame in 0..frames {
-        step_camera(&mut renderer);
         if frame + 1 == frames {
             pending = Some(renderer.request_screenshots(std::slice::from_ref(&image)));
         }
@@ -229,18 +226,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     frame_ms.sort_by(f64::total_cmp);
     let median_frame_ms = frame_ms.get(frame_ms.len() / 2).copied().unwrap_or(f64::NAN);
     let picture = match pending {
-        Some(pending) => {
-            let mut picture = None;
-            for _ in 0..20 {
-                if let Some(mut images) = pending.take()? {
-                    picture = Some(images.remove(0));
-                    break;
-                }
-                step_camera(&mut renderer);
-                renderer.update()?;
-            }
-            picture.ok_or("the last frame's picture did not arrive in 20 frames")?
-        }
+        Some(pending) => renderer.wait_for(&pending, 20)?.remove(0),
         None => renderer.capture(&image, 20)?,
     };
     if let Some(dir) = screenshot.parent().filter(|d| !d.as_os_str().is_empty()) {

@@ -37,8 +37,9 @@
 //! either view ([`decode_record`] flattens).
 //!
 //! Version 6 stores placements on codes (format 5 stored `f32`s: 34 bytes
-//! a placement, 23–24 now); version 5 added needle ages and the colours by age, side and height;
-//! version 4 files read as one colour per tree, every needle mature.
+//! a placement, 23–24 now); version 5 added needle ages and the colours by
+//! age, side and height; version 4 files read as one colour per tree,
+//! every needle mature.
 //! Version 3 added prototypes and placements. Version 2 files (flat, with
 //! the wood mesh) are still read and converted; version 1 files are refused
 //! with [`RecordError::UnsupportedVersion`] (re-bake them).
@@ -54,7 +55,7 @@ use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
 use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeRecord};
 use super::quantize::{
-    PositionGrid, RotationCode, TranslationCode, log_decode, log_encode_at_least, log_encode_nearest,
+    PositionGrid, RotationCode, TranslationCode, log_decode, log_encode_at_least, log_encode_nearest, placement_codes,
 };
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Vec3;
@@ -512,26 +513,29 @@ impl<Rotation: Copy, Translation: Copy> StoredSimilarity<Rotation, Translation> 
 impl StoredPlacement {
     /// `previous`: the prototype of the placement before, if any.
     fn encode(p: &Placement, previous: Option<u32>) -> Self {
-        let codes = RotationCode::encode(p.rotation).zip(TranslationCode::encode(p.translation));
-        let on_codes = codes.filter(|(r, t)| r.decode() == p.rotation && t.decode() == p.translation);
-        if let (false, Some((rotation, translation))) = (p.is_identity(), on_codes) {
-            Self::Quantized(StoredSimilarity {
+        if p.is_identity() {
+            return if previous.map_or(0, |k| k.wrapping_add(1)) == p.prototype {
+                Self::NextIdentity
+            } else {
+                Self::Identity(p.prototype)
+            };
+        }
+        // On codes when the placement is already snapped to them (a bake's
+        // is), so that writing and reading stays exact.
+        let on_codes = placement_codes(p).filter(|(r, t)| r.decode() == p.rotation && t.decode() == p.translation);
+        match on_codes {
+            Some((rotation, translation)) => Self::Quantized(StoredSimilarity {
                 prototype: p.prototype,
                 rotation: rotation.to_bytes(),
                 translation: translation.to_bytes(),
                 scale: p.scale,
-            })
-        } else if !p.is_identity() {
-            Self::Similarity(StoredSimilarity {
+            }),
+            None => Self::Similarity(StoredSimilarity {
                 prototype: p.prototype,
                 rotation: p.rotation.to_array(),
                 translation: p.translation.to_array(),
                 scale: p.scale,
-            })
-        } else if previous.map_or(0, |k| k.wrapping_add(1)) == p.prototype {
-            Self::NextIdentity
-        } else {
-            Self::Identity(p.prototype)
+            }),
         }
     }
 

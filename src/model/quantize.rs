@@ -268,41 +268,42 @@ impl TranslationCode {
     }
 }
 
-/// `placement` as format 6 stores it: rotation and translation snapped to
-/// their codes ([`RotationCode`], [`TranslationCode`]), scale and the rest
-/// as they are. The identity, and a placement whose translation lies beyond
-/// [`MAX_GRID_TRANSLATION`], stay as they are. Snapping twice changes nothing.
-pub fn quantize_placement(placement: &Placement) -> Placement {
+/// The codes format 6 stores `placement`'s rotation and translation on
+/// (the nearest ones); `None` for the identity (stored as a prototype id)
+/// and for a placement that keeps its `f32`s (a translation beyond
+/// [`MAX_GRID_TRANSLATION`], or a non-finite number).
+pub fn placement_codes(placement: &Placement) -> Option<(RotationCode, TranslationCode)> {
     if placement.is_identity() {
-        return *placement;
+        return None;
     }
-    match (
-        RotationCode::encode(placement.rotation),
-        TranslationCode::encode(placement.translation),
-    ) {
-        (Some(rotation), Some(translation)) => Placement {
-            rotation: rotation.decode(),
-            translation: translation.decode(),
-            ..*placement
-        },
-        _ => *placement,
-    }
+    RotationCode::encode(placement.rotation).zip(TranslationCode::encode(placement.translation))
+}
+
+/// `placement` as format 6 stores it: rotation and translation snapped to
+/// their codes ([`placement_codes`]), scale and the rest as they are; the
+/// placements without codes stay as they are. Snapping twice changes
+/// nothing.
+pub fn quantize_placement(placement: &Placement) -> Placement {
+    placement_codes(placement).map_or(*placement, |(rotation, translation)| Placement {
+        rotation: rotation.decode(),
+        translation: translation.decode(),
+        ..*placement
+    })
+}
+
+/// `|a − ±b|`, `b`'s sign aligned with `a`'s (the same rotation either
+/// way), in `f64`: for unit quaternions `‖R(a) − R(b)‖ ≤ 2 |a − ±b|`.
+pub fn quat_chord(a: Quat, b: Quat) -> f64 {
+    let (a, b) = (a.as_dquat(), b.as_dquat());
+    let b = if a.dot(b) < 0.0 { -b } else { b };
+    (a - b).length()
 }
 
 /// The farthest any point within `reach` of its prototype's origin moves
 /// when `from` becomes `to` (the same prototype and scale): the
-/// translation's move plus `2 |Δq| · scale · reach` (for unit quaternions
-/// aligned in sign, `‖R(q) − R(q′)‖ ≤ 2 |q − q′|`).
+/// translation's move plus `2 |Δq| · scale · reach` ([`quat_chord`]).
 pub fn placement_move(from: &Placement, to: &Placement, reach: f32) -> f32 {
-    let (a, b) = (from.rotation.to_array(), to.rotation.to_array());
-    let dot: f64 = a.iter().zip(&b).map(|(&x, &y)| f64::from(x) * f64::from(y)).sum();
-    let sign = if dot < 0.0 { -1.0 } else { 1.0 };
-    let chord: f64 = a
-        .iter()
-        .zip(&b)
-        .map(|(&x, &y)| (f64::from(x) - sign * f64::from(y)).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let chord = quat_chord(from.rotation, to.rotation);
     let shift = (from.translation.as_dvec3() - to.translation.as_dvec3()).length();
     (shift + 2.0 * chord * f64::from(from.scale) * f64::from(reach)) as f32
 }
@@ -648,13 +649,6 @@ mod tests {
         assert_eq!(power_of_two_at_least(f32::NAN), MIN_GRID_STEP);
     }
 
-    /// `|a − ±b|` (`b`'s sign aligned with `a`'s), in `f64`.
-    fn chord(a: Quat, b: Quat) -> f64 {
-        let (a, b) = (a.as_dquat(), b.as_dquat());
-        let b = if a.dot(b) < 0.0 { -b } else { b };
-        (a - b).length()
-    }
-
     #[test]
     fn rotation_codes_keep_exact_rotations_and_refuse_non_finite_ones() {
         for q in [
@@ -670,7 +664,7 @@ mod tests {
         ] {
             let code = RotationCode::encode(q).unwrap();
             let decoded = code.decode();
-            assert!(chord(decoded, q) < 2e-6, "{q} vs {decoded}");
+            assert!(quat_chord(decoded, q) < 2e-6, "{q} vs {decoded}");
             assert_eq!(RotationCode::encode(decoded), Some(code));
             assert_eq!(RotationCode::from_bytes(code.to_bytes()), code);
         }
@@ -717,7 +711,7 @@ mod tests {
             let decoded = code.decode();
             prop_assert!((decoded.length() - 1.0).abs() < 1e-6);
             // The angle between them is about twice the chord.
-            prop_assert!(chord(decoded, q) < 2e-6, "{}", chord(decoded, q));
+            prop_assert!(quat_chord(decoded, q) < 2e-6, "{}", quat_chord(decoded, q));
             prop_assert_eq!(RotationCode::encode(decoded), Some(code));
         }
 

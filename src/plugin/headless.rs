@@ -212,6 +212,18 @@ impl HeadlessRenderer {
         max_frames: u32,
     ) -> Result<Vec<image::RgbaImage>, HeadlessError> {
         let pending = self.request_screenshots(targets);
+        self.wait_for(&pending, max_frames)
+    }
+
+    /// Renders frames until `pending`'s pictures arrive (at most
+    /// `max_frames`) and returns them: a request made before some frame,
+    /// waited for after it (the world may change meanwhile; the pictures
+    /// are of the frame after the request).
+    pub fn wait_for(
+        &mut self,
+        pending: &PendingScreenshots,
+        max_frames: u32,
+    ) -> Result<Vec<image::RgbaImage>, HeadlessError> {
         for _ in 0..max_frames {
             self.update()?;
             if let Some(images) = pending.take()? {
