@@ -12,7 +12,7 @@ use bevy::prelude::*;
 use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
 use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
-use bevy_conifer_lod::model::impostor::{FADE_END, FADE_START, impostor_fade};
+use bevy_conifer_lod::model::impostor::{FADE_END, FADE_START, ImpostorMips, impostor_fade};
 use bevy_conifer_lod::model::{BakeOptions, LodRecord, bake};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
@@ -198,4 +198,102 @@ fn the_impostor_covers_what_the_needles_cover() {
             );
         }
     }
+}
+
+/// Where the ray through the centre of pixel `(x, y)` of a `size²`
+/// picture from a camera at `eye` looking along `-z` (vertical field of
+/// view `FOV_DEG`) meets the vertical plane through `origin` whose
+/// horizontal direction is `right`: its `(along right, height)`.
+fn on_quad(x: f32, y: f32, eye: Vec3, origin: Vec3, right: Vec3) -> Vec2 {
+    let half = (0.5 * FOV_DEG.to_radians()).tan();
+    let ndc = Vec2::new(2.0 * x / SIZE as f32 - 1.0, 1.0 - 2.0 * y / SIZE as f32);
+    let ray = Vec3::new(ndc.x * half, ndc.y * half, -1.0);
+    let normal = right.cross(Vec3::Y);
+    let t = (origin - eye).dot(normal) / ray.dot(normal);
+    let hit = eye + ray * t;
+    Vec2::new((hit - origin).dot(right), hit.y)
+}
+
+#[test]
+fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
+    let _turn = common::gpu_turn();
+    let species = ConiferSpecies::from_record(spruce()).unwrap();
+    let impostor = species.impostor.clone().expect("an impostor");
+    let crown = species.crown_center;
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(SIZE, SIZE);
+    let world = renderer.world_mut();
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+    world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
+    // Six texels a pixel error: the impostor alone, the tree ~32 pixels
+    // tall, where one trilinear sample would blur two pixels.
+    let distance = 6.0 * impostor.texel / error_per_metre();
+    let eye = crown + Vec3::Z * distance;
+    let camera = world
+        .spawn(HeadlessRenderer::camera_bundle(
+            &target,
+            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
+            FOV_DEG.to_radians(),
+        ))
+        .id();
+    world.entity_mut(camera).insert((
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::NONE),
+            ..default()
+        },
+        Msaa::Off,
+    ));
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        renderer.update().unwrap();
+    }
+    let picture = renderer.capture(&target, 8).unwrap();
+    picture.save(out_dir().join("impostor_footprint.png")).unwrap();
+    // The CPU reference: the quad turned toward the camera's azimuth, the
+    // two nearest views blended (as the vertex shader does), each pixel
+    // sampled over its footprint, and with one trilinear sample.
+    let mips = ImpostorMips::new(&impostor);
+    let origin = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+    let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
+    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
+    let views = impostor.views as f32;
+    let f = (phi / std::f32::consts::TAU + 1.0).fract() * views;
+    let (k0, k1, blend) = (f.floor() % views, (f.floor() + 1.0) % views, f.fract());
+    let height = impostor.top() - impostor.bottom;
+    let uv_of = |p: Vec2| Vec2::new((p.x / impostor.half_width + 1.0) / 2.0, (impostor.top() - p.y) / height);
+    let (mut footprint_error, mut trilinear_error, mut covered, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let at = |dx: f32, dy: f32| uv_of(on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right));
+            let uv = at(0.0, 0.0);
+            // A pixel's footprint: one pixel on, as the quad's derivatives.
+            let (du, dv) = (at(1.0, 0.0) - uv, at(0.0, 1.0) - uv);
+            let inside = (0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y);
+            let edge = (-0.02..1.02).contains(&uv.x) && (-0.02..1.02).contains(&uv.y);
+            if edge && !inside {
+                continue; // the quad's edge: partial pixels
+            }
+            let blended = |sample: &dyn Fn(u32) -> [f32; 4]| {
+                let (a, b) = (sample(k0 as u32)[0], sample(k1 as u32)[0]);
+                let c = a + (b - a) * blend;
+                if inside && c > 1.0 / 512.0 { c } else { 0.0 }
+            };
+            let expected = blended(&|view| mips.footprint(view, uv, du, dv));
+            let trilinear = blended(&|view| mips.sample_grad(view, uv, du, dv));
+            let drawn = f32::from(picture.get_pixel(x, y).0[3]) / 255.0;
+            footprint_error += f64::from((drawn - expected).abs());
+            trilinear_error += f64::from((drawn - trilinear).abs());
+            covered += f64::from(expected);
+            n += 1.0;
+        }
+    }
+    let (footprint_error, trilinear_error) = (footprint_error / n, trilinear_error / n);
+    println!(
+        "{distance:.1} m: |drawn − footprint| {footprint_error:.4}, |drawn − one trilinear sample| {trilinear_error:.4}, covered {covered:.1} px"
+    );
+    assert!(covered > 50.0, "the impostor shows: {covered} pixels covered");
+    assert!(footprint_error < 0.004, "drawn vs the CPU reference: {footprint_error}");
+    assert!(
+        footprint_error < 0.5 * trilinear_error,
+        "the footprint filter, not one trilinear sample: {footprint_error} vs {trilinear_error}"
+    );
 }

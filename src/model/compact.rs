@@ -21,9 +21,10 @@
 //!   side area over length, a 16-bit logarithmic code split over the
 //!   references' top bytes), and the error and parent error codes. Sorted by
 //!   parent error code descending.
-//! * **Wood**: segments as `f32` (32 bytes, sorted by `2·r_max`
-//!   descending) and an imported wood mesh on its own grid (12 bytes a
-//!   vertex, `u32` indices).
+//! * **Wood**, 16 bytes a segment: both ends as 16-bit codes on the
+//!   wood's own grid and both radii as 16-bit logarithmic codes rounded
+//!   up, sorted by the larger radius descending; an imported wood mesh on
+//!   the same grid (12 bytes a vertex, `u32` indices).
 //!
 //! ## The cut in code space
 //!
@@ -99,10 +100,13 @@ pub struct CompactSpecies {
     pub merged_lines: Vec<[u32; 3]>,
     /// The record's node id of each merged line.
     pub merged_source: Vec<u32>,
-    /// Wood segments `[start, r_start, end, r_end]`, sorted by `2·r_max`
-    /// descending.
-    pub wood_segments: Vec<[f32; 8]>,
-    /// The grid of the wood mesh's positions.
+    /// Wood segments, four words each: both ends on `wood_grid` (16 bits a
+    /// coordinate, `sx | sy << 16`, `sz | ex << 16`, `ey | ez << 16`) and
+    /// their radii as logarithmic codes rounded up (`start | end << 16`),
+    /// sorted by the larger radius descending
+    /// ([`CompactSpecies::wood_segment`] decodes one as the shaders do).
+    pub wood_segments: Vec<[u32; 4]>,
+    /// The grid of the wood's positions: segment ends and mesh vertices.
     pub wood_grid: PositionGrid,
     /// Wood mesh vertices: `x | y << 16`, `z`, octahedral normal.
     pub wood_vertices: Vec<[u32; 3]>,
@@ -427,35 +431,39 @@ fn merged_line_words(ends: [u32; 2], width: u16, own: u16, parent: u16) -> [u32;
     ]
 }
 
-/// Wood segments sorted by `2·r_max` descending, and the wood mesh on its grid.
-type WoodLayout = (Vec<[f32; 8]>, PositionGrid, Vec<[u32; 3]>);
+/// Wood segments sorted by their larger radius descending, their grid
+/// (shared with the mesh), and the wood mesh on it.
+type WoodLayout = (Vec<[u32; 4]>, PositionGrid, Vec<[u32; 3]>);
+
+/// The larger of a compact wood segment's two radius codes.
+fn wood_radius_code(w: &[u32; 4]) -> u32 {
+    (w[3] & 0xffff).max(w[3] >> 16)
+}
 
 fn wood_layout(wood: &[WoodSegment], mesh: &TriangleMesh) -> Result<WoodLayout, CompactError> {
-    let mut wood_segments: Vec<[f32; 8]> = wood
+    let valid: Vec<&WoodSegment> = wood.iter().filter(|w| w.is_valid()).collect();
+    let points = valid
         .iter()
-        .filter(|w| w.is_valid())
-        .map(|w| {
-            [
-                w.start.x,
-                w.start.y,
-                w.start.z,
-                w.start_radius,
-                w.end.x,
-                w.end.y,
-                w.end.z,
-                w.end_radius,
-            ]
-        })
-        .collect();
-    wood_segments.sort_by(|a, b| b[3].max(b[7]).total_cmp(&a[3].max(a[7])));
-    let wood_grid = if mesh.positions.is_empty() {
+        .flat_map(|w| [w.start, w.end])
+        .chain(mesh.positions.iter().copied());
+    let wood_grid = if valid.is_empty() && mesh.positions.is_empty() {
         PositionGrid {
             origin: Vec3::ZERO,
             step: 1.0,
         }
     } else {
-        PositionGrid::covering(mesh.positions.iter().copied()).ok_or(CompactError::OutOfRange("wood mesh"))?
+        PositionGrid::covering(points).ok_or(CompactError::OutOfRange("wood"))?
     };
+    let radius_code = |r: f32| log_encode_at_least(r).ok_or(CompactError::OutOfRange("wood radius"));
+    let mut wood_segments = Vec::with_capacity(valid.len());
+    for w in valid {
+        let [sx, sy, sz] = wood_grid.encode(w.start).map(u32::from);
+        let [ex, ey, ez] = wood_grid.encode(w.end).map(u32::from);
+        let radii = u32::from(radius_code(w.start_radius)?) | u32::from(radius_code(w.end_radius)?) << 16;
+        wood_segments.push([sx | sy << 16, sz | ex << 16, ey | ez << 16, radii]);
+    }
+    // Stable: segments of one radius keep the record's order.
+    wood_segments.sort_by_key(|w| std::cmp::Reverse(wood_radius_code(w)));
     let wood_vertices = mesh
         .positions
         .iter()
@@ -555,12 +563,28 @@ impl CompactSpecies {
             needles: 16 * self.needles.len() as u64,
             original_lines: 4 * self.original_lines.len() as u64,
             merged_lines: 12 * self.merged_lines.len() as u64,
-            wood: 32 * self.wood_segments.len() as u64
+            wood: 16 * self.wood_segments.len() as u64
                 + 12 * self.wood_vertices.len() as u64
                 + 4 * self.wood_indices.len() as u64,
             placements: 96 * self.prototypes.len() as u64 + 48 * self.placements.len() as u64,
             spheres: 16 * self.tree_spheres.len() as u64 + 4 * self.tree_line_parents.len() as u64,
         }
+    }
+
+    /// Compact wood segment `s` as the shaders decode it: its ends (tree
+    /// metres) and their radii.
+    pub fn wood_segment(&self, s: usize) -> ([Vec3; 2], [f32; 2]) {
+        let [w0, w1, w2, w3] = self.wood_segments[s];
+        let start = self
+            .wood_grid
+            .decode([w0 & 0xffff, w0 >> 16, w1 & 0xffff].map(|c| c as u16));
+        let end = self
+            .wood_grid
+            .decode([w1 >> 16, w2 & 0xffff, w2 >> 16].map(|c| c as u16));
+        (
+            [start, end],
+            [shader_log_decode(w3 & 0xffff), shader_log_decode(w3 >> 16)],
+        )
     }
 
     /// Line-error code (`2R`, rounded up) of compact needle `k`.
@@ -613,7 +637,7 @@ impl CompactSpecies {
     pub fn prefixes(&self, code: u16, e: f32) -> Prefixes {
         let [needles, original, merged] = self.tree_counts;
         let section = self.section_prefixes([0, needles], [0, original], [0, merged], code);
-        let wood_error = |w: &[f32; 8]| line_error(w[3].max(w[7]));
+        let wood_error = |w: &[u32; 4]| line_error(shader_log_decode(wood_radius_code(w)));
         Prefixes {
             prisms: section.prisms,
             original_lines: section.original_lines(),
@@ -1333,6 +1357,56 @@ mod tests {
             let [a, b] = compact.needle_ends(k);
             assert!(a.distance(needle.base) <= compact.grid.step && b.distance(needle.tip) <= compact.grid.step);
             assert!((compact.needle_radius(k) / needle.radius - 1.0).abs() < 2e-3);
+        }
+    }
+
+    #[test]
+    fn wood_segments_take_16_bytes_and_decode_near_the_records() {
+        let record = record(4000, 5);
+        assert!(record.wood.len() > 50, "{} segments", record.wood.len());
+        let compact = CompactSpecies::build(&record).unwrap();
+        assert_eq!(compact.wood_segments.len(), record.wood.len());
+        let bytes = compact.bytes();
+        assert_eq!(bytes.wood, 16 * record.wood.len() as u64);
+        // Each record segment is decoded once: ends within half a grid step
+        // a coordinate, radii rounded up by one code (0.049 %) and decoded
+        // in `f32` as the shaders do (0.1 %).
+        let mut matched = vec![false; record.wood.len()];
+        // (and f32 rounding of the sums).
+        let half = 0.5 * compact.wood_grid.step + 1e-6;
+        for s in 0..compact.wood_segments.len() {
+            let ([a, b], [ra, rb]) = compact.wood_segment(s);
+            let k = (0..record.wood.len())
+                .find(|&k| {
+                    let w = &record.wood[k];
+                    !matched[k]
+                        && (w.start - a).abs().max_element() <= half
+                        && (w.end - b).abs().max_element() <= half
+                        && (ra / w.start_radius - 1.0).abs() < 1.5e-3
+                        && (rb / w.end_radius - 1.0).abs() < 1.5e-3
+                })
+                .unwrap_or_else(|| panic!("segment {s} ({a} {b} {ra} {rb}) matches no record segment"));
+            matched[k] = true;
+        }
+        // Sorted by the larger radius, so the prism and line prefixes are
+        // exactly the segments the record's error rule keeps.
+        let larger = |s: usize| {
+            let (_, [ra, rb]) = compact.wood_segment(s);
+            ra.max(rb)
+        };
+        assert!((1..compact.wood_segments.len()).all(|s| larger(s - 1) >= larger(s)));
+        for e in [0.0005f32, 0.002, 0.01, 0.05, 0.3] {
+            let prefixes = compact.prefixes(MAX_THRESHOLD_CODE, e);
+            let prisms = (0..compact.wood_segments.len())
+                .filter(|&s| e < 2.0 * larger(s))
+                .count();
+            let lines = (0..compact.wood_segments.len())
+                .filter(|&s| e < WOOD_LINE_FADE * 2.0 * larger(s))
+                .count();
+            assert_eq!(
+                (prefixes.wood_prisms as usize, prefixes.wood_lines as usize),
+                (prisms, lines)
+            );
         }
     }
 

@@ -130,6 +130,128 @@ pub struct ImpostorTexel {
     pub axis: Vec3,
 }
 
+/// Most taps along each side the plugin's fragment shader takes of a
+/// pixel's footprint on the impostor (16 in all).
+pub const MAX_FOOTPRINT_TAPS: u32 = 4;
+
+/// Taps along each side for a pixel whose footprint is `texels` level-0
+/// texels across: one per texel, at least 1, at most
+/// [`MAX_FOOTPRINT_TAPS`] (a tap then reads the level whose texel is its
+/// share of the footprint). 1 for a footprint that is not finite.
+pub fn footprint_taps(texels: f32) -> u32 {
+    if !texels.is_finite() {
+        return 1;
+    }
+    texels.ceil().clamp(1.0, MAX_FOOTPRINT_TAPS as f32) as u32
+}
+
+/// An impostor's mip chain decoded for sampling as the GPU samples it:
+/// normalized coordinates, clamped to the edge, bilinear within a level
+/// and linear between levels. The CPU reference of the plugin's fragment
+/// shader (`impostor_footprint` in `conifer_compact.wgsl`).
+#[derive(Clone, Debug)]
+pub struct ImpostorMips {
+    views: u32,
+    /// Each level's `(columns, rows, texels)`, view-major.
+    levels: Vec<(u32, u32, Vec<[u8; 4]>)>,
+}
+
+impl ImpostorMips {
+    /// The mip chain of `impostor` ([`CrownImpostor::mip_chain`]).
+    pub fn new(impostor: &CrownImpostor) -> Self {
+        Self {
+            views: impostor.views,
+            levels: impostor.mip_chain(),
+        }
+    }
+
+    /// Mip levels (level 0 is the impostor's own texels).
+    pub fn level_count(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Level 0's `(columns, rows)`.
+    pub fn size(&self) -> (u32, u32) {
+        let (w, h, _) = &self.levels[0];
+        (*w, *h)
+    }
+
+    /// Texel `(x, y)` of `level` in `view`, clamped to the edge, as four
+    /// values in `[0, 1]` (coverage, wood, axis x and z encoded).
+    fn texel(&self, view: u32, level: usize, x: i64, y: i64) -> [f32; 4] {
+        let (w, h, texels) = &self.levels[level];
+        let x = x.clamp(0, i64::from(*w) - 1) as u32;
+        let y = y.clamp(0, i64::from(*h) - 1) as u32;
+        let view = view.min(self.views.saturating_sub(1));
+        texels[((view * h + y) * w + x) as usize].map(|b| f32::from(b) / 255.0)
+    }
+
+    /// Bilinear sample of `level` at normalized `uv` (`u` right, `v` down).
+    fn bilinear(&self, view: u32, level: usize, uv: Vec2) -> [f32; 4] {
+        let (w, h, _) = &self.levels[level];
+        let p = uv * Vec2::new(*w as f32, *h as f32) - 0.5;
+        let (x0, y0) = (p.x.floor(), p.y.floor());
+        let (fx, fy) = (p.x - x0, p.y - y0);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let corners = [
+            (self.texel(view, level, x0, y0), (1.0 - fx) * (1.0 - fy)),
+            (self.texel(view, level, x0 + 1, y0), fx * (1.0 - fy)),
+            (self.texel(view, level, x0, y0 + 1), (1.0 - fx) * fy),
+            (self.texel(view, level, x0 + 1, y0 + 1), fx * fy),
+        ];
+        let mut out = [0.0; 4];
+        for (texel, weight) in corners {
+            for (o, t) in out.iter_mut().zip(texel) {
+                *o += t * weight;
+            }
+        }
+        out
+    }
+
+    /// Trilinear sample at normalized `uv` with the screen derivatives
+    /// `du`, `dv` of `uv` (what WGSL's `textureSampleGrad` takes): the
+    /// level of detail is `log2` of the longer derivative in level-0
+    /// texels, clamped to the chain.
+    pub fn sample_grad(&self, view: u32, uv: Vec2, du: Vec2, dv: Vec2) -> [f32; 4] {
+        let (w, h) = self.size();
+        let texels = Vec2::new(w as f32, h as f32);
+        let rho = (du * texels).length().max((dv * texels).length());
+        let lod = if rho > 0.0 { rho.log2() } else { 0.0 };
+        let lod = lod.clamp(0.0, (self.levels.len() - 1) as f32);
+        let below = lod.floor() as usize;
+        let above = (below + 1).min(self.levels.len() - 1);
+        let t = lod - below as f32;
+        let (a, b) = (self.bilinear(view, below, uv), self.bilinear(view, above, uv));
+        std::array::from_fn(|c| a[c] * (1.0 - t) + b[c] * t)
+    }
+
+    /// The impostor over a pixel's footprint: the parallelogram `uv ±
+    /// du/2 ± dv/2` cut into `taps × taps` cells
+    /// ([`footprint_taps`] of its longer side in level-0 texels), each
+    /// sampled at its centre from the level of its own size, averaged. A
+    /// box filter of the pixel where one trilinear sample is a box
+    /// convolved with two tents (its error at 30 pixels a tree is a fifth
+    /// of trilinear's).
+    pub fn footprint(&self, view: u32, uv: Vec2, du: Vec2, dv: Vec2) -> [f32; 4] {
+        let (w, h) = self.size();
+        let texels = Vec2::new(w as f32, h as f32);
+        let taps = footprint_taps((du * texels).length().max((dv * texels).length()));
+        let n = taps as f32;
+        let (du_tap, dv_tap) = (du / n, dv / n);
+        let mut sum = [0.0; 4];
+        for a in 0..taps {
+            for b in 0..taps {
+                let offset = du * ((a as f32 + 0.5) / n - 0.5) + dv * ((b as f32 + 0.5) / n - 0.5);
+                let sample = self.sample_grad(view, uv + offset, du_tap, dv_tap);
+                for (s, v) in sum.iter_mut().zip(sample) {
+                    *s += v;
+                }
+            }
+        }
+        sum.map(|s| s / (n * n))
+    }
+}
+
 /// Accumulates one view at the fine resolution.
 struct ViewCanvas {
     right: Vec3,
@@ -579,5 +701,78 @@ mod tests {
         let bytes: u64 = chain.iter().map(|l| 4 * l.2.len() as u64).sum();
         assert_eq!(impostor.byte_size(), bytes);
         assert!(bytes < 4 * impostor.texels.len() as u64 * 4 / 3 + 64);
+    }
+
+    /// The exact mean of level 0's coverage over the square `[u0, u1) ×
+    /// [v0, v1)` (level-0 texel units), zero outside the picture.
+    fn box_coverage(impostor: &CrownImpostor, u0: f32, v0: f32, u1: f32, v1: f32) -> f32 {
+        let (mut sum, mut area) = (0.0, 0.0);
+        let mut y = v0.floor();
+        while y < v1 {
+            let wy = (v1.min(y + 1.0) - v0.max(y)).max(0.0);
+            let mut x = u0.floor();
+            while x < u1 {
+                let wx = (u1.min(x + 1.0) - u0.max(x)).max(0.0);
+                let c = if x >= 0.0 && y >= 0.0 {
+                    impostor.texel_at(0, x as u32, y as u32).map_or(0.0, |t| t.coverage)
+                } else {
+                    0.0
+                };
+                sum += c * wx * wy;
+                area += wx * wy;
+                x += 1.0;
+            }
+            y += 1.0;
+        }
+        sum / area
+    }
+
+    #[test]
+    fn the_footprint_filter_is_the_pixels_box_where_one_trilinear_sample_blurs() {
+        let impostor =
+            CrownImpostor::bake(&cone(40_000, 0.004), &[], ImpostorOptions { views: 1, rows: 96 }).expect("needles");
+        let mips = ImpostorMips::new(&impostor);
+        assert_eq!(mips.size(), (impostor.columns, impostor.rows));
+        let size = Vec2::new(impostor.columns as f32, impostor.rows as f32);
+        // Pixels of 1.5 to 8 texels over the whole picture, the grid
+        // shifted off the texels': mean |filtered − exact box| per pixel.
+        for texels in [1.5f32, 3.0, 5.0, 8.0] {
+            let (mut footprint_error, mut trilinear_error, mut n) = (0.0, 0.0, 0.0);
+            let offset = Vec2::new(0.37, 0.61) * texels;
+            let columns = (size.x / texels).ceil() as i32;
+            let rows = (size.y / texels).ceil() as i32;
+            for j in 0..rows {
+                for i in 0..columns {
+                    let corner = Vec2::new(i as f32, j as f32) * texels - offset;
+                    let centre = corner + 0.5 * texels;
+                    if centre.x < 0.0 || centre.y < 0.0 || centre.x > size.x || centre.y > size.y {
+                        continue;
+                    }
+                    let exact = box_coverage(&impostor, corner.x, corner.y, corner.x + texels, corner.y + texels);
+                    let (du, dv) = (Vec2::new(texels / size.x, 0.0), Vec2::new(0.0, texels / size.y));
+                    let uv = centre / size;
+                    footprint_error += (mips.footprint(0, uv, du, dv)[0] - exact).abs();
+                    trilinear_error += (mips.sample_grad(0, uv, du, dv)[0] - exact).abs();
+                    n += 1.0;
+                }
+            }
+            let (footprint_error, trilinear_error) = (footprint_error / n, trilinear_error / n);
+            println!("{texels} texels a pixel: footprint {footprint_error:.4}, trilinear {trilinear_error:.4}");
+            assert!(
+                footprint_error < 0.5 * trilinear_error,
+                "{footprint_error} vs {trilinear_error}"
+            );
+            assert!(footprint_error < 0.03, "{footprint_error}");
+        }
+        // One texel a pixel or less: one tap, level 0.
+        assert_eq!(footprint_taps(0.3), 1);
+        assert_eq!(footprint_taps(1.0), 1);
+        assert_eq!(footprint_taps(2.5), 3);
+        assert_eq!(footprint_taps(40.0), MAX_FOOTPRINT_TAPS);
+        assert_eq!(footprint_taps(f32::NAN), 1);
+        let uv = Vec2::new(0.5, 0.5);
+        let d = Vec2::new(0.5 / size.x, 0.0);
+        let e = Vec2::new(0.0, 0.5 / size.y);
+        assert_eq!(mips.footprint(0, uv, d, e), mips.sample_grad(0, uv, d, e));
     }
 }

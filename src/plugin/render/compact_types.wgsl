@@ -56,7 +56,7 @@ struct SpeciesParams {
     crown_center: vec4<f32>,
     // needle grid: origin (xyz), step (w)
     grid: vec4<f32>,
-    // wood mesh grid: origin (xyz), step (w)
+    // wood grid (segment ends and mesh vertices): origin (xyz), step (w)
     wood_grid: vec4<f32>,
     needle_color: vec4<f32>,
     wood_color: vec4<f32>,
@@ -320,4 +320,26 @@ fn log_decode(code: u32) -> f32 {
         return 0.0;
     }
     return exp(LOG_LN_MIN + f32(code - 1u) * LOG_LN_STEP);
+}
+
+// A compact wood segment's two ends as (tree-local centre, radius): ends
+// on the wood grid, radii as logarithmic codes
+// (`model::compact::CompactSpecies::wood_segment`).
+struct WoodEnds {
+    start: vec4<f32>,
+    end: vec4<f32>,
+}
+
+fn decode_wood_segment(w: vec4<u32>, grid: vec4<f32>) -> WoodEnds {
+    let start = grid.xyz + vec3<f32>(f32(w.x & 0xffffu), f32(w.x >> 16u), f32(w.y & 0xffffu)) * grid.w;
+    let end = grid.xyz + vec3<f32>(f32(w.y >> 16u), f32(w.z & 0xffffu), f32(w.z >> 16u)) * grid.w;
+    var ends: WoodEnds;
+    ends.start = vec4<f32>(start, log_decode(w.w & 0xffffu));
+    ends.end = vec4<f32>(end, log_decode(w.w >> 16u));
+    return ends;
+}
+
+// The larger radius of a compact wood segment (what its order sorts by).
+fn wood_segment_radius(w: vec4<u32>) -> f32 {
+    return log_decode(max(w.w & 0xffffu, w.w >> 16u));
 }

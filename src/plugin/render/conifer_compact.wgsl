@@ -39,7 +39,7 @@
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
     instance_world_from_local, log_decode, placement_matrix,
-    threshold_code, sphere_error, placement_error, tree_local_point,
+    threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment,
 }
 
 @group(2) @binding(0) var<uniform> species: SpeciesParams;
@@ -48,7 +48,7 @@
 @group(2) @binding(3) var<storage, read> needles: array<vec4<u32>>;
 @group(2) @binding(4) var<storage, read> original_lines: array<u32>;
 @group(2) @binding(5) var<storage, read> merged_lines: array<u32>;
-@group(2) @binding(6) var<storage, read> wood_segments: array<vec4<f32>>;
+@group(2) @binding(6) var<storage, read> wood_segments: array<vec4<u32>>;
 @group(2) @binding(7) var<storage, read> wood_mesh: array<u32>;
 @group(2) @binding(8) var<storage, read> placements: array<Placement>;
 @group(2) @binding(9) var<storage, read> prototypes: array<Prototype>;
@@ -493,8 +493,9 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 
 #ifdef CONIFER_WOOD_PRISMS
     let s = vertex_index / species.prism_vertices;
-    let start = wood_segments[2u * s];
-    let end = wood_segments[2u * s + 1u];
+    let ends = decode_wood_segment(wood_segments[s], species.wood_grid);
+    let start = ends.start;
+    let end = ends.end;
     let wood_error = wood_segment_error(lod, start, end, spatial_error);
     if lod.view.w > 0.0 && !(wood_error < 2.0 * max(start.w, end.w)) {
         return culled();
@@ -569,8 +570,9 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 
 #ifdef CONIFER_WOOD_LINES
     let s = vertex_index / 2u;
-    let start = wood_segments[2u * s];
-    let end = wood_segments[2u * s + 1u];
+    let ends = decode_wood_segment(wood_segments[s], species.wood_grid);
+    let start = ends.start;
+    let end = ends.end;
     let width = start.w + end.w;
     let wood_error = wood_segment_error(lod, start, end, spatial_error);
     let line_from = 2.0 * max(start.w, end.w);
@@ -785,15 +787,49 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
 #endif
 #endif
 
+#ifdef CONIFER_IMPOSTOR
+// `model::impostor::MAX_FOOTPRINT_TAPS`.
+const MAX_FOOTPRINT_TAPS: f32 = 4.0;
+
+// View `layer` of the impostor over the pixel's footprint `uv ± du/2 ±
+// dv/2`: cut into taps × taps cells (one a level-0 texel, at most
+// MAX_FOOTPRINT_TAPS a side), each read at its centre from the mip level
+// of its own size, averaged: a box filter of the pixel, where one
+// trilinear sample blurs the crown's gaps over two pixels (CPU reference:
+// `model::impostor::ImpostorMips::footprint`).
+fn impostor_footprint(uv: vec2<f32>, du: vec2<f32>, dv: vec2<f32>, layer: i32) -> vec4<f32> {
+    let size = vec2<f32>(textureDimensions(impostor_texture));
+    let texels = max(length(du * size), length(dv * size));
+    var taps = 1.0;
+    if texels == texels && texels < 1e30 {
+        taps = clamp(ceil(texels), 1.0, MAX_FOOTPRINT_TAPS);
+    }
+    let tap_du = du / taps;
+    let tap_dv = dv / taps;
+    var sum = vec4<f32>(0.0);
+    let n = u32(taps);
+    for (var a = 0u; a < n; a++) {
+        for (var b = 0u; b < n; b++) {
+            let offset = du * ((f32(a) + 0.5) / taps - 0.5) + dv * ((f32(b) + 0.5) / taps - 0.5);
+            sum += textureSampleGrad(impostor_texture, impostor_sampler, uv + offset, layer, tap_du, tap_dv);
+        }
+    }
+    return sum / (taps * taps);
+}
+#endif
+
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
     pbr_input.material.base_color = in.color;
     var axis = in.world_normal;
 #ifdef CONIFER_IMPOSTOR
-    // The two views' texels: coverage, wood, the mean axis (x, z).
-    let first = textureSample(impostor_texture, impostor_sampler, in.uv, i32(round(in.color.x)));
-    let second = textureSample(impostor_texture, impostor_sampler, in.uv, i32(round(in.color.y)));
+    // The two views' texels over the pixel's footprint: coverage, wood,
+    // the mean axis (x, z).
+    let du = dpdx(in.uv);
+    let dv = dpdy(in.uv);
+    let first = impostor_footprint(in.uv, du, dv, i32(round(in.color.x)));
+    let second = impostor_footprint(in.uv, du, dv, i32(round(in.color.y)));
     let texel = mix(first, second, in.color.z);
     if !(texel.r > 1.0 / 512.0) {
         discard;

@@ -22,6 +22,7 @@
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale, tree_local_point,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
+    wood_segment_radius,
 }
 
 @group(0) @binding(0) var<uniform> cull_view: CullView;
@@ -30,7 +31,7 @@
 @group(0) @binding(3) var<storage, read> needles: array<vec4<u32>>;
 @group(0) @binding(4) var<storage, read> original_lines: array<u32>;
 @group(0) @binding(5) var<storage, read> merged_lines: array<u32>;
-@group(0) @binding(6) var<storage, read> wood_segments: array<vec4<f32>>;
+@group(0) @binding(6) var<storage, read> wood_segments: array<vec4<u32>>;
 @group(0) @binding(7) var<storage, read_write> instance_lods: array<InstanceLod>;
 @group(0) @binding(8) var<storage, read_write> draw_args: array<DrawArgs>;
 
@@ -124,7 +125,7 @@ fn wood_prefix(e: f32, factor: f32) -> u32 {
     var hi = species.wood_segment_count;
     while lo < hi {
         let mid = (lo + hi) / 2u;
-        let r = max(wood_segments[2u * mid].w, wood_segments[2u * mid + 1u].w);
+        let r = wood_segment_radius(wood_segments[mid]);
         if e < factor * 2.0 * r {
             lo = mid + 1u;
         } else {

@@ -157,7 +157,7 @@ pub struct SpeciesParams {
     pub crown_center: [f32; 4],
     /// Needle grid: origin, step.
     pub grid: [f32; 4],
-    /// Wood mesh grid: origin, step.
+    /// Wood grid (segment ends and mesh vertices): origin, step.
     pub wood_grid: [f32; 4],
     /// Linear needle colour.
     pub needle_color: [f32; 4],
