@@ -268,9 +268,8 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
             // A pixel's footprint: one pixel on, as the quad's derivatives.
             let (du, dv) = (at(1.0, 0.0) - uv, at(0.0, 1.0) - uv);
             let inside = (0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y);
-            let edge = (-0.02..1.02).contains(&uv.x) && (-0.02..1.02).contains(&uv.y);
-            if edge && !inside {
-                continue; // the quad's edge: partial pixels
+            if !inside {
+                continue; // off the quad, or on its edge (partial pixels)
             }
             let blended = |sample: &dyn Fn(u32) -> [f32; 4]| {
                 let (a, b) = (sample(k0 as u32)[0], sample(k1 as u32)[0]);
@@ -288,10 +287,10 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
     }
     let (footprint_error, trilinear_error) = (footprint_error / n, trilinear_error / n);
     println!(
-        "{distance:.1} m: |drawn − footprint| {footprint_error:.4}, |drawn − one trilinear sample| {trilinear_error:.4}, covered {covered:.1} px"
+        "{distance:.1} m, {n} pixels on the quad: |drawn − footprint| {footprint_error:.4}, |drawn − one trilinear sample| {trilinear_error:.4}, covered {covered:.1} px"
     );
-    assert!(covered > 50.0, "the impostor shows: {covered} pixels covered");
-    assert!(footprint_error < 0.004, "drawn vs the CPU reference: {footprint_error}");
+    assert!(covered > 30.0, "the impostor shows: {covered} pixels covered");
+    assert!(footprint_error < 0.003, "drawn vs the CPU reference: {footprint_error}");
     assert!(
         footprint_error < 0.5 * trilinear_error,
         "the footprint filter, not one trilinear sample: {footprint_error} vs {trilinear_error}"

@@ -1,13 +1,14 @@
 //! Wind, rendered on Mesa's lavapipe and compared with the CPU reference
-//! (`model::wind`): each part of a tree moves where the field says, and
-//! culling and errors grow by the wind's reach.
+//! (`model::wind`): each part of a tree moves where the field says, its
+//! surfaces turn as it bends them, and culling and errors grow by the
+//! wind's reach.
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
 mod common;
 
 use bevy::prelude::*;
-use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, wind_offset, wind_reach};
+use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, turn_normal, wind_offset, wind_reach};
 use bevy_conifer_lod::model::{
     BakeOptions, FoliageMaterial, Needle, Placement, PrototypeInput, WoodSegment, bake_prototypes,
 };
@@ -177,6 +178,205 @@ fn needles_and_wood_move_where_the_cpu_field_says() {
     // The pictures did change: the top moved by pixels, not by nothing.
     assert!(moved > 3.0, "{moved}");
     assert_eq!(calm.get_pixel(0, 0).0[..3], BACKGROUND);
+}
+
+/// A thick 10 m trunk (radius 0.5 m, ten pieces) and a shoot 4 m out:
+/// the trunk fills 27 pixels across 8 m away.
+fn thick_trunk() -> ConiferSpecies {
+    let input = PrototypeInput {
+        name: "trunk".into(),
+        prototypes: vec![shoot()],
+        placements: vec![Placement {
+            translation: Vec3::new(4.0, 1.0, -3.0),
+            ..Placement::identity(0)
+        }],
+        wood: (0..10)
+            .map(|k| WoodSegment {
+                start: Vec3::new(0.0, 0.97 * k as f32, 0.0),
+                end: Vec3::new(0.0, 0.97 * (k + 1) as f32, 0.0),
+                start_radius: 0.5,
+                end_radius: 0.5,
+            })
+            .collect(),
+        wood_mesh: Default::default(),
+        material: FoliageMaterial::default(),
+    };
+    let record = bake_prototypes(&input, &BakeOptions::default(), &())
+        .unwrap()
+        .quantized()
+        .unwrap();
+    ConiferSpecies::from_prototype_record(&record).unwrap()
+}
+
+/// A pixel's linear brightness (the mean of its RGB channels, sRGB decoded).
+fn linear(p: &image::Rgba<u8>) -> f32 {
+    let decode = |c: u8| {
+        let c = f32::from(c) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    (decode(p[0]) + decode(p[1]) + decode(p[2])) / 3.0
+}
+
+#[test]
+fn the_trunk_turns_its_normals_toward_the_light_as_it_leans() {
+    let _turn = common::gpu_turn();
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    let species = thick_trunk();
+    let shape = species.wind_shape;
+    let mut renderer = HeadlessRenderer::new(".");
+    let handle = renderer
+        .world_mut()
+        .resource_mut::<Assets<ConiferSpecies>>()
+        .add(species);
+    renderer
+        .world_mut()
+        .spawn((ConiferFoliage(handle), Transform::IDENTITY));
+    // The trunk itself, not the crown impostor (a 10 m tree seen 8 m away
+    // in 200 pixels is past half a texel of it).
+    renderer.world_mut().resource_mut::<ConiferLodSettings>().far_impostor = false;
+    // The sun straight overhead and nothing else: in calm the trunk's
+    // sides face it edge on (N·L = 0) and stay black; leaning away from
+    // the wind, its upwind side turns up toward the sun and is lit, its
+    // downwind side turns away and stays black. Drawn with the calm
+    // normals, both sides would stay black.
+    renderer.world_mut().insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    renderer.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 40_000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::from_rotation(Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2)),
+    ));
+    let target = renderer.render_target(SIZE, SIZE);
+    let camera = background_camera(renderer.world_mut(), &target);
+    renderer
+        .world_mut()
+        .entity_mut(camera)
+        .insert(bevy::core_pipeline::tonemapping::Tonemapping::None);
+    let look = Vec3::new(0.0, 5.0, 0.0);
+    let distance = 8.0f32;
+    common::look_at_crown(renderer.world_mut(), camera, look, distance, FOV_DEG);
+    let pixels_per_metre = SIZE as f32 / (2.0 * distance * (FOV_DEG.to_radians() / 2.0).tan());
+    let row_of = |y: f32| (SIZE as f32 / 2.0 - (y - look.y) * pixels_per_metre) as u32;
+    let column_of = |x: f32| (SIZE as f32 / 2.0 + x * pixels_per_metre) as u32;
+    // No gusts or flutter: the trunk's bend alone, at the moment of the
+    // first three seconds it bends most (the sway adds to the lean).
+    let phase = TreeWindPhase::of_root(Vec2::ZERO, &ConiferWind::default().model());
+    let seconds = (0..30)
+        .map(|t| f64::from(t) * 0.1)
+        .max_by(|&a, &b| {
+            let bend = |t: f64| (WindClock::at(t, &shape).trunk + phase.sway).sin();
+            bend(a).total_cmp(&bend(b))
+        })
+        .unwrap();
+    let steady = |direction: Vec2, strength: f32| ConiferWind {
+        direction,
+        strength,
+        gustiness: 0.0,
+        turbulence: 0.0,
+        time: Some(seconds),
+    };
+    let mut shot = |wind: ConiferWind, name: &str| {
+        renderer.world_mut().insert_resource(wind);
+        for _ in 0..3 {
+            renderer.update().unwrap();
+        }
+        let image = renderer.capture(&target, 20).unwrap();
+        image.save(out.join(format!("wind_normals_{name}.png"))).unwrap();
+        image
+    };
+    let calm = shot(steady(Vec2::X, 0.0), "calm");
+    let right = [
+        shot(steady(Vec2::X, 2.0), "right_2"),
+        shot(steady(Vec2::X, 4.0), "right_4"),
+    ];
+    let left = shot(steady(-Vec2::X, 4.0), "left_4");
+    // Mean brightness of the trunk's left and right quarters over segment
+    // k's rows (a margin off its ends): of each row's covered run, three
+    // pixels in from its edges (which blend with the background).
+    let halves = |image: &image::RgbaImage, k: usize| {
+        let covered = covered(image);
+        let rows = row_of(0.97 * (k + 1) as f32 - 0.15)..row_of(0.97 * k as f32 + 0.15);
+        let (mut left, mut right) = (Vec::new(), Vec::new());
+        for y in rows {
+            let run: Vec<u32> = (column_of(-1.5)..column_of(1.5))
+                .filter(|&x| covered[(y * SIZE + x) as usize])
+                .collect();
+            let (Some(&first), Some(&last)) = (run.first(), run.last()) else {
+                continue;
+            };
+            let (first, last) = (first + 3, last.saturating_sub(3));
+            if last <= first + 8 {
+                continue;
+            }
+            let quarter = (last - first) / 4;
+            left.extend((first..first + quarter).map(|x| linear(image.get_pixel(x, y))));
+            right.extend((last - quarter..last).map(|x| linear(image.get_pixel(x, y))));
+        }
+        assert!(left.len() > 40, "segment {k}: {} pixels a side", left.len());
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        (mean(&left), mean(&right))
+    };
+    // The CPU reference: how far the upwind side's normal turns up as the
+    // wind turns the segment's chord (`turn_normal`, as the shader does).
+    let upwind_rise = |strength: f32, k: usize| {
+        let w = steady(Vec2::X, strength).model();
+        let clock = WindClock::at(seconds, &shape);
+        let phase = TreeWindPhase::of_root(Vec2::ZERO, &w);
+        let end = |y: f32| {
+            let at = Vec3::new(0.0, y, 0.0);
+            at + wind_offset(&w, &shape, &clock, &phase, at).world(Vec2::X, 1.0)
+        };
+        let (a, b) = (0.97 * k as f32, 0.97 * (k + 1) as f32);
+        turn_normal(-Vec3::X, Vec3::Y * (b - a), end(b) - end(a)).y
+    };
+    for k in 3..8 {
+        let (calm_left, calm_right) = halves(&calm, k);
+        let [(half_left, half_right), (full_left, full_right)] = [halves(&right[0], k), halves(&right[1], k)];
+        let (against_left, against_right) = halves(&left, k);
+        let (rise_half, rise_full) = (upwind_rise(2.0, k), upwind_rise(4.0, k));
+        println!(
+            "segment {k}: calm {calm_left:.4} | {calm_right:.4}; to +x, strength 2: {half_left:.4} | {half_right:.4}, 4: {full_left:.4} | {full_right:.4}; to −x, 4: {against_left:.4} | {against_right:.4} (CPU: upwind normal rises {rise_half:.4}, {rise_full:.4})"
+        );
+        assert!(
+            rise_full > rise_half && rise_half > 0.0,
+            "the CPU field bends the trunk downwind"
+        );
+        assert!(
+            calm_left.max(calm_right) < 0.002,
+            "segment {k} in calm: {calm_left} | {calm_right}"
+        );
+        // Blowing to +x the left (upwind) side is lit, more in a stronger
+        // wind; blowing to −x, the right side.
+        assert!(
+            full_left > 0.01 && full_left > 3.0 * full_right,
+            "segment {k}: {full_left} | {full_right}"
+        );
+        assert!(
+            full_left > half_left && half_left > 2.0 * half_right,
+            "segment {k}: {half_left} vs {full_left}"
+        );
+        assert!(
+            against_right > 0.01 && against_right > 3.0 * against_left,
+            "segment {k}: {against_left} | {against_right}"
+        );
+        // Lit in proportion to how far the normals rose (the faces, the
+        // bark's colour and the sun are the same in both pictures).
+        let (measured, expected) = (full_left / half_left, rise_full / rise_half);
+        assert!(
+            (measured / expected - 1.0).abs() < 0.1,
+            "segment {k}: brightness grew {measured}×, the normals' rise {expected}×"
+        );
+    }
 }
 
 #[test]

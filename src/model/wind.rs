@@ -129,6 +129,11 @@ pub const FLUTTER_WAVES: Vec3 = Vec3::new(4.1, 3.3, 4.7);
 /// and flutter stop growing.
 pub const MAX_REACH_RATIO: f32 = 1.5;
 
+/// Step, tree metres, of the differences from which a surface's normal is
+/// turned by the field ([`turned_surface_normal`]): a hundredth of the
+/// shortest flutter wavelength.
+pub const NORMAL_STEP: f32 = 0.01;
+
 /// What the field needs to know of a tree: its trunk axis and size, in the
 /// tree's frame (record metres).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -313,6 +318,52 @@ pub fn wind_offset(
     }
 }
 
+/// `normal` turned by the rotation that takes the direction of `calm` to
+/// that of `swayed` (Rodrigues' formula): a prism whose axis the wind
+/// turned from `calm` to `swayed` (the difference of its moved ends) keeps
+/// its side normals perpendicular to its axis and its caps along it. The
+/// vertex shader's `turn_normal`. `normal` unchanged when either direction
+/// is zero or they are (nearly) opposite.
+pub fn turn_normal(normal: Vec3, calm: Vec3, swayed: Vec3) -> Vec3 {
+    let (Some(a), Some(b)) = (calm.try_normalize(), swayed.try_normalize()) else {
+        return normal;
+    };
+    let c = a.dot(b);
+    if c <= -0.999 {
+        return normal;
+    }
+    let v = a.cross(b);
+    (normal * c + v.cross(normal) + v * (v.dot(normal) / (1.0 + c))).normalize_or(normal)
+}
+
+/// The normal of a surface at `point` (tree-local) once the field has
+/// moved it: `cof(J)·normal`, `J` the field's Jacobian from differences
+/// [`NORMAL_STEP`] apart (a surface's normals transform by the inverse
+/// transpose of the map that moves it, and the cofactor is that up to
+/// its determinant). The vertex shader's `swayed_surface_normal` (for an
+/// imported wood mesh). `normal` unchanged in calm.
+pub fn turned_surface_normal(
+    wind: &Wind,
+    shape: &WindShape,
+    clock: &WindClock,
+    phase: &TreeWindPhase,
+    point: Vec3,
+    normal: Vec3,
+) -> Vec3 {
+    let field = |p: Vec3| {
+        let o = wind_offset(wind, shape, clock, phase, p);
+        o.world(wind.unit_direction(), 1.0)
+    };
+    if wind.clamped().strength == 0.0 {
+        return normal;
+    }
+    let d = field(point);
+    let column = |axis: Vec3| axis + (field(point + axis * NORMAL_STEP) - d) / NORMAL_STEP;
+    let (j0, j1, j2) = (column(Vec3::X), column(Vec3::Y), column(Vec3::Z));
+    let turned = j1.cross(j2) * normal.x + j2.cross(j0) * normal.y + j0.cross(j1) * normal.z;
+    turned.try_normalize().unwrap_or(normal)
+}
+
 /// The largest displacement [`wind_offset`] can give in `shape` under
 /// `wind` (tree metres), whatever the time, phase and point: the sum of
 /// the three motions' largest.
@@ -490,5 +541,65 @@ mod tests {
             let d = WindOffset { along: oa.along - ob.along, across: oa.across - ob.across, up: oa.up - ob.up };
             proptest::prop_assert!(d.length() < 0.01, "{}", d.length());
         }
+    }
+
+    #[test]
+    fn a_turned_prism_keeps_its_normals_perpendicular_and_its_caps_along_its_axis() {
+        let calm = Vec3::Y;
+        for swayed in [
+            Vec3::new(0.1, 1.0, 0.0),
+            Vec3::new(-0.3, 0.9, 0.2),
+            Vec3::new(0.0, 2.0, 0.0),
+        ] {
+            let axis = swayed.normalize();
+            for k in 0..8 {
+                let angle = k as f32 * std::f32::consts::TAU / 8.0;
+                let side = Vec3::new(angle.cos(), 0.0, angle.sin());
+                let turned = turn_normal(side, calm, swayed);
+                assert!(turned.dot(axis).abs() < 1e-5, "{turned} vs {axis}");
+                assert!((turned.length() - 1.0).abs() < 1e-5);
+            }
+            assert!(turn_normal(Vec3::Y, calm, swayed).distance(axis) < 1e-5);
+            assert!(turn_normal(-Vec3::Y, calm, swayed).distance(-axis) < 1e-5);
+        }
+        // Calm, zero or opposite axes: unchanged.
+        assert_eq!(turn_normal(Vec3::X, Vec3::Y, Vec3::Y), Vec3::X);
+        assert_eq!(turn_normal(Vec3::X, Vec3::ZERO, Vec3::Y), Vec3::X);
+        assert_eq!(turn_normal(Vec3::X, Vec3::Y, -Vec3::Y), Vec3::X);
+    }
+
+    #[test]
+    fn a_leaning_trunks_upwind_side_turns_up_by_its_slope() {
+        // No gusts, no flutter; on the axis the branch sway is zero, so the
+        // trunk's side there turns by the lean's slope, 2·force·h·(lean +
+        // sway·sin) (the derivative of the cantilever's h² bend).
+        let wind = Wind {
+            direction: Vec2::X,
+            strength: 3.0,
+            gustiness: 0.0,
+            turbulence: 0.0,
+        };
+        let shape = WindShape {
+            axis: Vec2::ZERO,
+            base: 0.0,
+            height: 20.0,
+            crown_radius: 4.0,
+        };
+        let clock = WindClock::at(1.7, &shape);
+        let phase = TreeWindPhase::default();
+        for y in [5.0f32, 10.0, 18.0] {
+            let h = y / shape.height;
+            let slope = 2.0 * wind.strength * h * (TRUNK_LEAN + TRUNK_SWAY * clock.trunk.sin());
+            let upwind = turned_surface_normal(&wind, &shape, &clock, &phase, Vec3::new(0.0, y, 0.0), -Vec3::X);
+            let expected = slope / (1.0 + slope * slope).sqrt();
+            assert!((upwind.y - expected).abs() < 2e-3, "{y} m: {upwind} vs slope {slope}");
+            let downwind = turned_surface_normal(&wind, &shape, &clock, &phase, Vec3::new(0.0, y, 0.0), Vec3::X);
+            assert!((downwind.y + expected).abs() < 2e-3, "{y} m: {downwind}");
+            // A normal along the wind's axis of rotation (across) stays.
+            let across = turned_surface_normal(&wind, &shape, &clock, &phase, Vec3::new(0.0, y, 0.0), Vec3::Z);
+            assert!(across.distance(Vec3::Z) < 2e-3, "{across}");
+        }
+        let calm = turned_surface_normal(&Wind::CALM, &shape, &clock, &phase, Vec3::new(0.0, 9.0, 0.0), -Vec3::X);
+        assert_eq!(calm, -Vec3::X);
     }
 }

@@ -70,6 +70,7 @@ const WIND_GUST_WAVELENGTH: f32 = 60.0;
 const WIND_BRANCH_WAVES: vec3<f32> = vec3<f32>(0.7, 1.1, 0.9);
 const WIND_FLUTTER_WAVES: vec3<f32> = vec3<f32>(4.1, 3.3, 4.7);
 const WIND_MAX_REACH_RATIO: f32 = 1.5;
+const WIND_NORMAL_STEP: f32 = 0.01;
 
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
@@ -157,6 +158,75 @@ fn wind_displacement(world: vec3<f32>) -> vec3<f32> {
     let along_axis = vec3<f32>(direction.x, 0.0, direction.y);
     let across_axis = vec3<f32>(direction.y, 0.0, -direction.x);
     return (along_axis * along + across_axis * across + vec3<f32>(0.0, up, 0.0)) * scale;
+}
+
+// The world direction of the segment from `a` to `b` (in the frame of
+// `world_from_local`) once the wind has moved both ends: a line is drawn
+// between the moved ends and lit along this, and a prism's ring turns
+// with it.
+fn swayed_segment(a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>) -> vec3<f32> {
+    let wa = (world_from_local * vec4<f32>(a, 1.0)).xyz;
+    let wb = (world_from_local * vec4<f32>(b, 1.0)).xyz;
+    return (wb + wind_displacement(wb)) - (wa + wind_displacement(wa));
+}
+
+// `normal` turned by the rotation taking the direction of `calm` to that
+// of `swayed` (Rodrigues; CPU reference: `model::wind::turn_normal`).
+fn turn_normal(normal: vec3<f32>, calm: vec3<f32>, swayed: vec3<f32>) -> vec3<f32> {
+    if dot(calm, calm) < 1e-24 || dot(swayed, swayed) < 1e-24 {
+        return normal;
+    }
+    let a = normalize(calm);
+    let b = normalize(swayed);
+    let c = dot(a, b);
+    if c <= -0.999 {
+        return normal;
+    }
+    let v = cross(a, b);
+    return normalize(normal * c + cross(v, normal) + v * (dot(v, normal) / (1.0 + c)));
+}
+
+// `out` (a prism of the segment `a`–`b`) with its normal turned as the
+// wind turns the segment.
+fn swayed_prism(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>) -> VertexOutput {
+    var result = out;
+    if species.wind.z > 0.0 {
+        let calm = (world_from_local * vec4<f32>(b - a, 0.0)).xyz;
+        result.world_normal = turn_normal(out.world_normal, calm, swayed_segment(a, b, world_from_local));
+    }
+    return result;
+}
+
+// `out` (a line from `a` to `b`) lit along the segment the wind moved it to.
+fn swayed_line(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>) -> VertexOutput {
+    var result = out;
+    if species.wind.z > 0.0 {
+        let swayed = swayed_segment(a, b, world_from_local);
+        if dot(swayed, swayed) > 1e-24 {
+            result.world_normal = normalize(swayed);
+        }
+    }
+    return result;
+}
+
+// The world normal `normal` of a surface at (calm) world point `world`,
+// turned as the wind field bends the surface there: the cofactor of the
+// field's Jacobian, from differences a centimetre apart (CPU reference:
+// `model::wind::turned_surface_normal`).
+fn swayed_surface_normal(world: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
+    if !(species.wind.z > 0.0) {
+        return normal;
+    }
+    let h = WIND_NORMAL_STEP * length(wind_tree[0].xyz);
+    let d = wind_displacement(world);
+    let j0 = vec3<f32>(1.0, 0.0, 0.0) + (wind_displacement(world + vec3<f32>(h, 0.0, 0.0)) - d) / h;
+    let j1 = vec3<f32>(0.0, 1.0, 0.0) + (wind_displacement(world + vec3<f32>(0.0, h, 0.0)) - d) / h;
+    let j2 = vec3<f32>(0.0, 0.0, 1.0) + (wind_displacement(world + vec3<f32>(0.0, 0.0, h)) - d) / h;
+    let turned = cross(j1, j2) * normal.x + cross(j2, j0) * normal.y + cross(j0, j1) * normal.z;
+    if dot(turned, turned) < 1e-24 {
+        return normal;
+    }
+    return normalize(turned);
 }
 
 fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
@@ -488,7 +558,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let p = prism_vertex(base, tip, radius, radius, sides, corner, toward);
     let m = max(species.max_sides, 3u);
     let amount = f32(m - sides) / max(f32(m - 3u), 1.0);
-    return finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0, needle_albedo));
+    return swayed_prism(finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0, needle_albedo)), base, tip, world_from_local);
 #endif
 
 #ifdef CONIFER_WOOD_PRISMS
@@ -510,7 +580,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     if species.debug_colors != 0u {
         color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0, color.rgb);
     }
-    return with_height(finish(p.position, p.normal, world_from_local, color), p.position.y);
+    return with_height(swayed_prism(finish(p.position, p.normal, world_from_local, color), start.xyz, end.xyz, world_from_local), p.position.y);
 #endif
 
 #ifdef CONIFER_ORIGINAL_LINES
@@ -529,7 +599,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
+    return swayed_line(finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree)), base, tip, world_from_local);
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -565,7 +635,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = end_position(grid, a);
     let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
+    return swayed_line(finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree)), start, end, world_from_local);
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -583,7 +653,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
-    return with_height(finish(position, end.xyz - start.xyz, world_from_local, color), position.y);
+    return with_height(swayed_line(finish(position, end.xyz - start.xyz, world_from_local, color), start.xyz, end.xyz, world_from_local), position.y);
 #endif
 
 #ifdef CONIFER_IMPOSTOR
@@ -634,7 +704,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let normal = vec3<f32>(x + select(t, -t, x >= 0.0), y + select(t, -t, y >= 0.0), z);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = base_color(2, 0.0, 1.0, species.wood_color.rgb);
-    return with_height(finish(position, normalize(normal), world_from_local, color), position.y);
+    var out = finish(position, normalize(normal), world_from_local, color);
+    let calm_world = (world_from_local * vec4<f32>(position, 1.0)).xyz;
+    out.world_normal = swayed_surface_normal(calm_world, out.world_normal);
+    return with_height(out, position.y);
 #endif
 }
 

@@ -405,6 +405,7 @@ mod tests {
             ("WIND_FLUTTER", wind::FLUTTER),
             ("WIND_GUST_WAVELENGTH", wind::GUST_WAVELENGTH),
             ("WIND_MAX_REACH_RATIO", wind::MAX_REACH_RATIO),
+            ("WIND_NORMAL_STEP", wind::NORMAL_STEP),
         ];
         for (name, value) in scalars {
             let line = format!("const {name}: f32 = {value:?};");
