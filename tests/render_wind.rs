@@ -27,27 +27,26 @@ fn shoot() -> Vec<Needle> {
     common::side_by_side_needles(12, 0.03, 0.3, 0.012)
 }
 
-/// A 10 m trunk with a shoot at its top and one at a branch's tip, 2.5 m
-/// out at 5 m up.
-fn tree() -> ConiferSpecies {
-    let placement = |translation: Vec3| Placement {
-        translation,
-        ..Placement::identity(0)
-    };
+/// A 10 m trunk of ten pieces (as a grown trunk has: the wind bends it at
+/// their ends), piece `k` from radius `radius(k)` to `radius(k + 1)`, with
+/// a shoot at each of `shoots`.
+fn trunk_with_shoots(shoots: &[Vec3], radius: impl Fn(usize) -> f32) -> ConiferSpecies {
     let input = PrototypeInput {
         name: "wind".into(),
         prototypes: vec![shoot()],
-        placements: vec![
-            placement(Vec3::new(-0.17, 9.7, 0.0)),
-            placement(Vec3::new(2.3, 4.85, 0.0)),
-        ],
-        // Ten pieces, as a grown trunk has: the wind bends it at their ends.
+        placements: shoots
+            .iter()
+            .map(|&translation| Placement {
+                translation,
+                ..Placement::identity(0)
+            })
+            .collect(),
         wood: (0..10)
             .map(|k| WoodSegment {
                 start: Vec3::new(0.0, 0.97 * k as f32, 0.0),
                 end: Vec3::new(0.0, 0.97 * (k + 1) as f32, 0.0),
-                start_radius: 0.15 - 0.011 * k as f32,
-                end_radius: 0.15 - 0.011 * (k + 1) as f32,
+                start_radius: radius(k),
+                end_radius: radius(k + 1),
             })
             .collect(),
         wood_mesh: Default::default(),
@@ -58,6 +57,14 @@ fn tree() -> ConiferSpecies {
         .quantized()
         .unwrap();
     ConiferSpecies::from_prototype_record(&record).unwrap()
+}
+
+/// A 10 m trunk with a shoot at its top and one at a branch's tip, 2.5 m
+/// out at 5 m up.
+fn tree() -> ConiferSpecies {
+    trunk_with_shoots(&[Vec3::new(-0.17, 9.7, 0.0), Vec3::new(2.3, 4.85, 0.0)], |k| {
+        0.15 - 0.011 * k as f32
+    })
 }
 
 /// A strong wind blowing to +x (to the right of the pictures), its clock
@@ -180,32 +187,10 @@ fn needles_and_wood_move_where_the_cpu_field_says() {
     assert_eq!(calm.get_pixel(0, 0).0[..3], BACKGROUND);
 }
 
-/// A thick 10 m trunk (radius 0.5 m, ten pieces) and a shoot 4 m out:
-/// the trunk fills 27 pixels across 8 m away.
+/// A thick 10 m trunk (radius 0.5 m) and a shoot 4 m out: the trunk fills
+/// 27 pixels across 8 m away.
 fn thick_trunk() -> ConiferSpecies {
-    let input = PrototypeInput {
-        name: "trunk".into(),
-        prototypes: vec![shoot()],
-        placements: vec![Placement {
-            translation: Vec3::new(4.0, 1.0, -3.0),
-            ..Placement::identity(0)
-        }],
-        wood: (0..10)
-            .map(|k| WoodSegment {
-                start: Vec3::new(0.0, 0.97 * k as f32, 0.0),
-                end: Vec3::new(0.0, 0.97 * (k + 1) as f32, 0.0),
-                start_radius: 0.5,
-                end_radius: 0.5,
-            })
-            .collect(),
-        wood_mesh: Default::default(),
-        material: FoliageMaterial::default(),
-    };
-    let record = bake_prototypes(&input, &BakeOptions::default(), &())
-        .unwrap()
-        .quantized()
-        .unwrap();
-    ConiferSpecies::from_prototype_record(&record).unwrap()
+    trunk_with_shoots(&[Vec3::new(4.0, 1.0, -3.0)], |_| 0.5)
 }
 
 /// A pixel's linear brightness (the mean of its RGB channels, sRGB decoded).
