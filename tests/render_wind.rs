@@ -79,6 +79,20 @@ fn wind(seconds: f64) -> ConiferWind {
     }
 }
 
+/// The picture of `target` a few frames into `wind`, saved as
+/// `target/test-output/render/NAME.png`.
+fn shot_in(renderer: &mut HeadlessRenderer, target: &Handle<Image>, wind: ConiferWind, name: &str) -> image::RgbaImage {
+    renderer.world_mut().insert_resource(wind);
+    for _ in 0..3 {
+        renderer.update().unwrap();
+    }
+    let image = renderer.capture(target, 20).unwrap();
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    image.save(out.join(format!("{name}.png"))).unwrap();
+    image
+}
+
 /// The centroid (pixels) of the covered pixels of `image` in columns
 /// `columns` and rows `rows`, and how many there were.
 fn centroid(image: &image::RgbaImage, columns: std::ops::Range<u32>, rows: std::ops::Range<u32>) -> (Vec2, usize) {
@@ -98,8 +112,6 @@ fn centroid(image: &image::RgbaImage, columns: std::ops::Range<u32>, rows: std::
 #[test]
 fn needles_and_wood_move_where_the_cpu_field_says() {
     let _turn = common::gpu_turn();
-    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
-    std::fs::create_dir_all(&out).unwrap();
     let species = tree();
     let shape = species.wind_shape;
     let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
@@ -118,15 +130,7 @@ fn needles_and_wood_move_where_the_cpu_field_says() {
             SIZE as f32 / 2.0 - (p.y - look.y) * s,
         )
     };
-    let mut shot = |wind: ConiferWind, name: &str| {
-        renderer.world_mut().insert_resource(wind);
-        for _ in 0..3 {
-            renderer.update().unwrap();
-        }
-        let image = renderer.capture(&target, 20).unwrap();
-        image.save(out.join(format!("wind_{name}.png"))).unwrap();
-        image
-    };
+    let mut shot = |wind: ConiferWind, name: &str| shot_in(&mut renderer, &target, wind, &format!("wind_{name}"));
     let calm = shot(ConiferWind::CALM, "calm");
     // Regions: the top shoot, the branch shoot, the trunk at 3–4 m (its
     // foot barely moves; higher up the shoots hide it).
@@ -209,8 +213,6 @@ fn linear(p: &image::Rgba<u8>) -> f32 {
 #[test]
 fn the_trunk_turns_its_normals_toward_the_light_as_it_leans() {
     let _turn = common::gpu_turn();
-    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
-    std::fs::create_dir_all(&out).unwrap();
     let species = thick_trunk();
     let shape = species.wind_shape;
     let mut renderer = HeadlessRenderer::new(".");
@@ -270,15 +272,8 @@ fn the_trunk_turns_its_normals_toward_the_light_as_it_leans() {
         turbulence: 0.0,
         time: Some(seconds),
     };
-    let mut shot = |wind: ConiferWind, name: &str| {
-        renderer.world_mut().insert_resource(wind);
-        for _ in 0..3 {
-            renderer.update().unwrap();
-        }
-        let image = renderer.capture(&target, 20).unwrap();
-        image.save(out.join(format!("wind_normals_{name}.png"))).unwrap();
-        image
-    };
+    let mut shot =
+        |wind: ConiferWind, name: &str| shot_in(&mut renderer, &target, wind, &format!("wind_normals_{name}"));
     let calm = shot(steady(Vec2::X, 0.0), "calm");
     let right = [
         shot(steady(Vec2::X, 2.0), "right_2"),
