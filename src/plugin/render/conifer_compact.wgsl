@@ -190,22 +190,27 @@ fn turn_normal(normal: vec3<f32>, calm: vec3<f32>, swayed: vec3<f32>) -> vec3<f3
 // wind turns the segment.
 fn swayed_prism(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>) -> VertexOutput {
     var result = out;
+#ifndef CONIFER_SHADOW
+    // (Shadow passes light nothing: their normals go unused.)
     if species.wind.z > 0.0 {
         let calm = (world_from_local * vec4<f32>(b - a, 0.0)).xyz;
         result.world_normal = turn_normal(out.world_normal, calm, swayed_segment(a, b, world_from_local));
     }
+#endif
     return result;
 }
 
 // `out` (a line from `a` to `b`) lit along the segment the wind moved it to.
 fn swayed_line(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>) -> VertexOutput {
     var result = out;
+#ifndef CONIFER_SHADOW
     if species.wind.z > 0.0 {
         let swayed = swayed_segment(a, b, world_from_local);
         if dot(swayed, swayed) > 1e-24 {
             result.world_normal = normalize(swayed);
         }
     }
+#endif
     return result;
 }
 
@@ -705,8 +710,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = base_color(2, 0.0, 1.0, species.wood_color.rgb);
     var out = finish(position, normalize(normal), world_from_local, color);
+#ifndef CONIFER_SHADOW
     let calm_world = (world_from_local * vec4<f32>(position, 1.0)).xyz;
     out.world_normal = swayed_surface_normal(calm_world, out.world_normal);
+#endif
     return with_height(out, position.y);
 #endif
 }
