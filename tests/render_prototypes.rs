@@ -336,7 +336,7 @@ fn gpu_draws_equal_the_cpu_reference() {
             // holds the longest prefix they need.
             let mut expected = vec![PlacedDraw::default(); compact.prototypes.len() * PLACED_BANDS as usize];
             for &[tree, word] in &view.entries {
-                assert_eq!(tree & 0x7fff_ffff, 0);
+                assert_eq!(tree & 0x3fff_ffff, 0);
                 let j = (word & 0xffff) as usize;
                 let c = (word >> 16) as u16;
                 let placement = &compact.placements[j];
@@ -360,7 +360,17 @@ fn gpu_draws_equal_the_cpu_reference() {
                 assert_eq!(count(prisms).max(count(original)).max(count(merged)), placements);
                 assert_eq!(prisms[0], longest.prisms * prism_vertices);
                 assert_eq!(original[0], 2 * longest.original_lines());
-                assert_eq!(merged[0], 2 * longest.merged_lines);
+                assert_eq!(merged[0], 2 * longest.merged());
+            }
+            // Each entry says which order its draw takes lines from: the
+            // needles after the prisms (bit 31), merged lines by own code
+            // (bit 30).
+            for &[tree, word] in &view.entries {
+                let placement = &compact.placements[(word & 0xffff) as usize];
+                let longest =
+                    expected[compact.placed_draw_index(placement.prototype as usize, (word >> 16) as u16)].longest;
+                assert_eq!(tree >> 31 == 1, longest.original_from_needles());
+                assert_eq!(tree >> 30 & 1 == 1, longest.merged_from_own());
             }
             // What the vertex shaders process over what the cut holds.
             let cut = if compact.placements.is_empty() {

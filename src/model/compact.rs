@@ -100,6 +100,13 @@ pub struct CompactSpecies {
     pub merged_lines: Vec<[u32; 3]>,
     /// The record's node id of each merged line.
     pub merged_source: Vec<u32>,
+    /// Each prototype's merged lines again, as indices into
+    /// `merged_lines` sorted by their own error code ascending (empty for
+    /// a flat species): a view close to a placement draws the lines it
+    /// reaches from this order, a far one from the parent-sorted one
+    /// ([`CompactPrototype::merged_by_own`]). The GPU reads it after
+    /// `original_lines`, in the same buffer.
+    pub merged_by_own: Vec<u32>,
     /// Wood segments, four words each: both ends on `wood_grid` (16 bits a
     /// coordinate, `sx | sy << 16`, `sz | ex << 16`, `ey | ez << 16`) and
     /// their radii as logarithmic codes rounded up (`start | end << 16`),
@@ -163,10 +170,12 @@ pub struct CompactPrototype {
     /// First entry and length of its merged lines (end references into the
     /// whole needle array).
     pub merged_lines: [u32; 2],
-    /// Lower edges of bands 1… (ascending): where the primitives a
-    /// placement processes ([`SectionPrefixes::total`]) fall geometrically
-    /// from all of the prototype's to one, so the placements of a band
-    /// need prefixes within a ratio of about 1.6 of each other.
+    /// First entry of its merged lines in [`CompactSpecies::merged_by_own`]
+    /// (as many as `merged_lines[1]`).
+    pub merged_by_own: u32,
+    /// Lower edges of bands 1… (ascending; `u16::MAX` past the last
+    /// needed): chosen by [`band_edges`] so that no placement of a band
+    /// processes more than a bounded multiple of its own prefixes.
     pub band_edges: [u16; PLACED_BANDS as usize - 1],
     /// The upper side of its needles ([`super::color::upper_side`]): which
     /// way a placement's needles show their undersides.
@@ -208,7 +217,8 @@ pub const MAX_PLACEMENTS: usize = 1 << 16;
 pub struct CompactBytes {
     /// Needles (16 bytes each).
     pub needles: u64,
-    /// Original-line order (4 bytes each).
+    /// Original-line order and the prototypes' merged lines by own code
+    /// (4 bytes each).
     pub original_lines: u64,
     /// Merged lines (12 bytes each).
     pub merged_lines: u64,
@@ -262,6 +272,9 @@ pub struct SectionPrefixes {
     pub original_by_parent: u32,
     /// Merged lines whose parent code is above `c`.
     pub merged_lines: u32,
+    /// Merged lines whose own code is `≤ c` (from the own-code order; the
+    /// whole section where it has none, so it is never the shorter).
+    pub merged_by_own: u32,
 }
 
 impl SectionPrefixes {
@@ -276,9 +289,26 @@ impl SectionPrefixes {
         self.after_prisms.min(self.original_by_parent)
     }
 
+    /// Whether the merged lines are drawn from the own-code order rather
+    /// than from the parent-sorted one: the shorter range.
+    pub fn merged_from_own(&self) -> bool {
+        self.merged_by_own < self.merged_lines
+    }
+
+    /// Merged lines a draw of these prefixes processes (the shorter range).
+    pub fn merged(&self) -> u32 {
+        self.merged_by_own.min(self.merged_lines)
+    }
+
     /// Primitives a draw of these prefixes processes.
     pub fn total(&self) -> u32 {
-        self.prisms + self.original_lines() + self.merged_lines
+        self.prisms + self.original_lines() + self.merged()
+    }
+
+    /// Vertices a draw of these prefixes processes, a prism taking
+    /// `prism_vertices` and a line two.
+    pub fn vertices(&self, prism_vertices: u32) -> u64 {
+        u64::from(self.prisms) * u64::from(prism_vertices) + 2 * u64::from(self.original_lines() + self.merged())
     }
 
     /// Each prefix the longer of `self`'s and `other`'s (what one draw
@@ -289,6 +319,7 @@ impl SectionPrefixes {
             after_prisms: self.after_prisms.max(other.after_prisms),
             original_by_parent: self.original_by_parent.max(other.original_by_parent),
             merged_lines: self.merged_lines.max(other.merged_lines),
+            merged_by_own: self.merged_by_own.max(other.merged_by_own),
         }
     }
 }
@@ -542,6 +573,7 @@ impl CompactSpecies {
             original_lines: original.into_iter().map(|(_, k)| k).collect(),
             merged_source: merged.iter().map(|&(_, node, _)| node).collect(),
             merged_lines: merged.into_iter().map(|(_, _, words)| words).collect(),
+            merged_by_own: Vec::new(),
             wood_segments,
             wood_grid,
             wood_vertices,
@@ -561,7 +593,7 @@ impl CompactSpecies {
     pub fn bytes(&self) -> CompactBytes {
         CompactBytes {
             needles: 16 * self.needles.len() as u64,
-            original_lines: 4 * self.original_lines.len() as u64,
+            original_lines: 4 * (self.original_lines.len() + self.merged_by_own.len()) as u64,
             merged_lines: 12 * self.merged_lines.len() as u64,
             wood: 16 * self.wood_segments.len() as u64
                 + 12 * self.wood_vertices.len() as u64
@@ -636,7 +668,7 @@ impl CompactSpecies {
     /// pass does).
     pub fn prefixes(&self, code: u16, e: f32) -> Prefixes {
         let [needles, original, merged] = self.tree_counts;
-        let section = self.section_prefixes([0, needles], [0, original], [0, merged], code);
+        let section = self.section_prefixes([0, needles], [0, original], [0, merged], None, code);
         let wood_error = |w: &[u32; 4]| line_error(shader_log_decode(wood_radius_code(w)));
         Prefixes {
             prisms: section.prisms,
@@ -653,11 +685,20 @@ impl CompactSpecies {
     /// The prefixes of prototype `k`'s sections at threshold code `code`.
     pub fn prototype_prefixes(&self, k: usize, code: u16) -> SectionPrefixes {
         let p = &self.prototypes[k];
-        self.section_prefixes(p.needles, p.original_lines, p.merged_lines, code)
+        self.section_prefixes(p.needles, p.original_lines, p.merged_lines, Some(p.merged_by_own), code)
     }
 
-    /// Binary searches of one section (`[first, length]` of each array).
-    fn section_prefixes(&self, needles: [u32; 2], original: [u32; 2], merged: [u32; 2], code: u16) -> SectionPrefixes {
+    /// Binary searches of one section (`[first, length]` of each array;
+    /// `merged_by_own`, the section's first entry of
+    /// [`CompactSpecies::merged_by_own`], if it has that order).
+    fn section_prefixes(
+        &self,
+        needles: [u32; 2],
+        original: [u32; 2],
+        merged: [u32; 2],
+        merged_by_own: Option<u32>,
+        code: u16,
+    ) -> SectionPrefixes {
         let range = |[first, length]: [u32; 2]| first as usize..(first + length) as usize;
         let prisms = self.needles[range(needles)].partition_point(|w| (w[3] & 0xffff) as u16 > code) as u32;
         SectionPrefixes {
@@ -666,6 +707,12 @@ impl CompactSpecies {
             original_by_parent: self.original_lines[range(original)]
                 .partition_point(|&k| self.needle_parent_code(k) > code) as u32,
             merged_lines: self.merged_lines[range(merged)].partition_point(|w| (w[2] >> 16) as u16 > code) as u32,
+            merged_by_own: match merged_by_own {
+                Some(first) => self.merged_by_own[range([first, merged[1]])]
+                    .partition_point(|&m| self.merged_codes(m as usize).0 <= code)
+                    as u32,
+                None => merged[1],
+            },
         }
     }
 
@@ -698,6 +745,59 @@ impl CompactSpecies {
         }
         cut
     }
+}
+
+/// Lower edges of a prototype's [`PLACED_BANDS`] bands: where to split its
+/// threshold codes so that the instanced draw of a band, which processes
+/// the longest of each prefix its placements need, costs no placement
+/// more than `r` times its own prefixes, for the smallest `r` (within
+/// 0.1 %) that [`PLACED_BANDS`] bands allow.
+///
+/// `codes` are ascending, start at 0, and every prefix is constant from
+/// one to the next ([`CompactSpecies::prototype_codes`]); `prefixes[i]` is
+/// the section's at `codes[i]`; `cost` weighs a draw of prefixes (its
+/// vertices). Edges are codes of `codes`, ascending; the unused ones are
+/// `u16::MAX` (above every threshold code). A band is a run of codes, and
+/// a longer run never costs less, so greedily extending each band as far
+/// as `r` allows gives the fewest bands for that `r`; `r` is bisected.
+pub fn band_edges(
+    codes: &[u16],
+    prefixes: &[SectionPrefixes],
+    cost: impl Fn(&SectionPrefixes) -> u64,
+) -> [u16; PLACED_BANDS as usize - 1] {
+    let needs: Vec<f64> = prefixes.iter().map(|p| cost(p).max(1) as f64).collect();
+    let split = |ratio: f64| -> Vec<u16> {
+        let mut edges = Vec::new();
+        let Some(&first) = prefixes.first() else {
+            return edges;
+        };
+        let (mut longest, mut least) = (first, needs[0]);
+        for i in 1..prefixes.len().min(codes.len()) {
+            let (joined, need) = (longest.max(prefixes[i]), least.min(needs[i]));
+            if cost(&joined) as f64 > ratio * need {
+                edges.push(codes[i]);
+                (longest, least) = (prefixes[i], needs[i]);
+            } else {
+                (longest, least) = (joined, need);
+            }
+        }
+        edges
+    };
+    let fits = |ratio: f64| split(ratio).len() < PLACED_BANDS as usize;
+    let (mut lo, mut hi) = (1.0f64, needs.iter().fold(1.0f64, |a, &b| a.max(b)) + 1.0);
+    if !fits(lo) {
+        while hi / lo > 1.001 {
+            let mid = (lo * hi).sqrt();
+            if fits(mid) {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        lo = hi;
+    }
+    let edges = split(lo);
+    std::array::from_fn(|b| edges.get(b).copied().unwrap_or(u16::MAX))
 }
 
 /// One instanced draw of a placed species' view (per prototype and band):
@@ -788,6 +888,7 @@ impl CompactSpecies {
             original_lines: Vec::new(),
             merged_lines: Vec::new(),
             merged_source: Vec::new(),
+            merged_by_own: Vec::new(),
             wood_segments,
             wood_grid,
             wood_vertices,
@@ -865,16 +966,21 @@ impl CompactSpecies {
                 ));
             }
             let first = |len: usize, count: usize| [len as u32, count as u32];
-            let band_edges = section.band_edges();
+            let merged_first = species.merged_lines.len() as u32;
+            let mut by_own: Vec<u32> = (0..section.merged_lines.len() as u32).collect();
+            by_own.sort_by_key(|&m| (section.merged_codes(m as usize).0, m));
             species.prototypes.push(CompactPrototype {
                 grid: section.grid,
                 sphere: record.prototype_sphere(species.prototypes.len()),
                 needles: first(species.needles.len(), section.needles.len()),
                 original_lines: first(species.original_lines.len(), section.original_lines.len()),
                 merged_lines: first(species.merged_lines.len(), section.merged_lines.len()),
-                band_edges,
+                merged_by_own: species.merged_by_own.len() as u32,
+                // Filled in below, once the arrays hold the section.
+                band_edges: [u16::MAX; PLACED_BANDS as usize - 1],
                 upper_side: super::color::upper_side(&prototype.needles),
             });
+            species.merged_by_own.extend(by_own.iter().map(|m| m + merged_first));
             species.needles.extend(&section.needles);
             species.needle_source.extend(&section.needle_source);
             species
@@ -887,6 +993,13 @@ impl CompactSpecies {
                     [shift(a), shift(b), codes]
                 }));
             species.merged_source.extend(&section.merged_source);
+        }
+        let prism_vertices = 3 * super::prism::prism_triangle_count(species.max_sides);
+        for k in 0..species.prototypes.len() {
+            let codes = species.prototype_codes(k);
+            let prefixes: Vec<SectionPrefixes> = codes.iter().map(|&c| species.prototype_prefixes(k, c)).collect();
+            let edges = band_edges(&codes, &prefixes, |p| p.vertices(prism_vertices));
+            species.prototypes[k].band_edges = edges;
         }
         // Placements by their root's parent code, descending.
         for (p, placement) in record.placements.iter().enumerate() {
@@ -905,42 +1018,24 @@ impl CompactSpecies {
         Ok(species)
     }
 
-    /// A flat species' band edges as a prototype (see
-    /// [`CompactPrototype::band_edges`]): the first code at which the
-    /// processed primitives fall to each step of a geometric series.
-    fn band_edges(&self) -> [u16; PLACED_BANDS as usize - 1] {
-        let [needles, original, merged] = self.tree_counts;
-        let total = |code: u16| {
-            self.section_prefixes([0, needles], [0, original], [0, merged], code)
-                .total()
-        };
-        let mut codes: Vec<u16> = (0..needles)
-            .flat_map(|k| [self.needle_line_code(k), self.needle_parent_code(k)])
-            .chain((0..merged as usize).flat_map(|m| {
-                let (own, parent) = self.merged_codes(m);
+    /// The threshold codes at which one of prototype `k`'s prefixes
+    /// changes (its needles' and merged lines' own and parent codes, and
+    /// 0), ascending: every prefix is constant between two of them.
+    pub fn prototype_codes(&self, k: usize) -> Vec<u16> {
+        let p = &self.prototypes[k];
+        let needles = p.needles[0]..p.needles[0] + p.needles[1];
+        let merged = p.merged_lines[0]..p.merged_lines[0] + p.merged_lines[1];
+        let mut codes: Vec<u16> = std::iter::once(0)
+            .chain(needles.flat_map(|n| [self.needle_line_code(n), self.needle_parent_code(n)]))
+            .chain(merged.flat_map(|m| {
+                let (own, parent) = self.merged_codes(m as usize);
                 [own, parent]
             }))
             .filter(|&c| c <= MAX_THRESHOLD_CODE)
             .collect();
         codes.sort_unstable();
         codes.dedup();
-        let totals: Vec<u32> = codes.iter().map(|&c| total(c)).collect();
-        let most = f64::from(total(0).max(1));
-        // Half the edges where prisms turn into lines (quantiles of the
-        // needles' line codes), half geometric in the processed total.
-        let half = PLACED_BANDS as usize / 2;
-        let mut line_codes: Vec<u16> = (0..needles).map(|k| self.needle_line_code(k)).collect();
-        line_codes.sort_unstable();
-        let mut edges: Vec<u16> = (1..half)
-            .map(|b| line_codes[b * line_codes.len() / half])
-            .chain((1..=half).map(|b| {
-                let target = most.powf(1.0 - b as f64 / half as f64);
-                let at = totals.partition_point(|&t| f64::from(t) > target);
-                codes.get(at).copied().unwrap_or(MAX_THRESHOLD_CODE)
-            }))
-            .collect();
-        edges.sort_unstable();
-        std::array::from_fn(|b| edges[b])
+        codes
     }
 
     /// Placements a view at threshold code `code` expands (a prefix).
@@ -1087,8 +1182,17 @@ impl CompactSpecies {
                     cut.original_lines.push(name(self.needle_source[needle as usize]));
                 }
             }
-            let first_merged = prototype.merged_lines[0] as usize;
-            for m in first_merged..first_merged + draw.merged_lines as usize {
+            let merged: Vec<usize> = if draw.merged_from_own() {
+                let first = prototype.merged_by_own as usize;
+                self.merged_by_own[first..first + draw.merged_by_own as usize]
+                    .iter()
+                    .map(|&m| m as usize)
+                    .collect()
+            } else {
+                let first = prototype.merged_lines[0] as usize;
+                (first..first + draw.merged_lines as usize).collect()
+            };
+            for m in merged {
                 let (own, parent) = self.merged_codes(m);
                 if own <= c && c < parent {
                     cut.merged_lines.push(name(self.merged_source[m]));
@@ -1516,6 +1620,104 @@ mod tests {
             }
             assert!(expanded_at_some);
             assert!(worst <= 2.0, "{species:?}: processed / drawn = {worst}");
+        }
+    }
+
+    /// The worst band of `edges` over prototype `k`'s codes: the most a
+    /// placement of a band processes (in vertices) over its own prefixes.
+    fn worst_band(compact: &CompactSpecies, k: usize, edges: &[u16]) -> f64 {
+        let vertices = 3 * super::super::prism::prism_triangle_count(compact.max_sides);
+        let codes = compact.prototype_codes(k);
+        let band = |c: u16| edges.iter().filter(|&&edge| edge <= c).count();
+        let mut worst = 1.0f64;
+        for b in 0..PLACED_BANDS as usize {
+            let members: Vec<SectionPrefixes> = codes
+                .iter()
+                .filter(|&&c| band(c) == b)
+                .map(|&c| compact.prototype_prefixes(k, c))
+                .collect();
+            let Some(longest) = members.iter().copied().reduce(SectionPrefixes::max) else {
+                continue;
+            };
+            for member in &members {
+                worst = worst.max(longest.vertices(vertices) as f64 / member.vertices(vertices).max(1) as f64);
+            }
+        }
+        worst
+    }
+
+    #[test]
+    fn bands_bound_what_each_placement_processes() {
+        let (record, flat) = placed_record(Species::EasternWhitePine, 30_000);
+        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        let mut overall = 1.0f64;
+        for (k, prototype) in compact.prototypes.iter().enumerate() {
+            let codes = compact.prototype_codes(k);
+            // Edges: ascending codes of the prototype, then unused.
+            let used: Vec<u16> = prototype
+                .band_edges
+                .iter()
+                .copied()
+                .filter(|&e| e != u16::MAX)
+                .collect();
+            assert!(used.windows(2).all(|w| w[0] < w[1]), "prototype {k}");
+            assert!(used.iter().all(|e| codes.binary_search(e).is_ok()), "prototype {k}");
+            assert!(prototype.band_edges[used.len()..].iter().all(|&e| e == u16::MAX));
+            let ours = worst_band(&compact, k, &prototype.band_edges);
+            // No worse than edges at quantiles of the codes, or at every
+            // code where there are few.
+            let quantiles: Vec<u16> = (1..PLACED_BANDS as usize)
+                .map(|b| codes[b * codes.len() / PLACED_BANDS as usize])
+                .collect();
+            assert!(
+                ours <= worst_band(&compact, k, &quantiles) * 1.001 + 1e-9,
+                "prototype {k}"
+            );
+            if codes.len() <= PLACED_BANDS as usize {
+                assert_eq!(ours, 1.0, "prototype {k}: a band a code");
+            }
+            overall = overall.max(ours);
+        }
+        // 16 bands hold every placement of these prototypes within a
+        // small multiple of its own prefixes (1.56 when written).
+        assert!(overall < 2.0, "worst band {overall}");
+    }
+
+    #[test]
+    fn merged_lines_by_own_code_are_each_prototype_s_lines_once() {
+        let (record, flat) = placed_record(Species::NorwaySpruce, 30_000);
+        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        for (k, prototype) in compact.prototypes.iter().enumerate() {
+            let [first, count] = prototype.merged_lines;
+            let from = prototype.merged_by_own as usize;
+            let order = &compact.merged_by_own[from..from + count as usize];
+            let mut sorted = order.to_vec();
+            sorted.sort_unstable();
+            assert_eq!(sorted, (first..first + count).collect::<Vec<_>>(), "prototype {k}");
+            assert!(
+                order
+                    .windows(2)
+                    .all(|w| compact.merged_codes(w[0] as usize).0 <= compact.merged_codes(w[1] as usize).0)
+            );
+            // The two orders' prefixes hold the same drawn lines, and the
+            // shorter is taken.
+            for &c in &compact.prototype_codes(k) {
+                let p = compact.prototype_prefixes(k, c);
+                let drawn = |lines: &mut dyn Iterator<Item = u32>| -> Vec<u32> {
+                    let mut v: Vec<u32> = lines
+                        .filter(|&m| {
+                            let (own, parent) = compact.merged_codes(m as usize);
+                            own <= c && c < parent
+                        })
+                        .collect();
+                    v.sort_unstable();
+                    v
+                };
+                let by_parent = drawn(&mut (first..first + p.merged_lines));
+                let by_own = drawn(&mut order[..p.merged_by_own as usize].iter().copied());
+                assert_eq!(by_parent, by_own, "prototype {k}, code {c}");
+                assert_eq!(p.merged(), p.merged_lines.min(p.merged_by_own));
+            }
         }
     }
 

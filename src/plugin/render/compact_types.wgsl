@@ -167,7 +167,8 @@ struct Prototype {
     merged_count: u32,
     // its needles' upper side (`model::color::upper_side`), pack4x8snorm
     upper_side: u32,
-    padding_b: u32,
+    // first entry of its merged lines by own code in `line_orders`
+    merged_by_own_first: u32,
     // lower edges of bands 1…, two 16-bit codes a word
     band_edges: array<vec4<u32>, 2>,
     // bounding sphere, prototype metres (xyz centre, w radius)
@@ -200,10 +201,12 @@ const PLACED_KINDS: u32 = 3u;
 const PLACED_PRISMS: u32 = 0u;
 const PLACED_ORIGINAL_LINES: u32 = 1u;
 const PLACED_MERGED_LINES: u32 = 2u;
-// An expanded placement's entry: (tree | ENTRY_FROM_NEEDLES, placement | code << 16).
+// An expanded placement's entry: (tree | ENTRY_FROM_NEEDLES |
+// ENTRY_MERGED_BY_OWN, placement | code << 16).
 const ENTRY_PLACEMENT_MASK: u32 = 0xffffu;
-const ENTRY_TREE_MASK: u32 = 0x7fffffffu;
+const ENTRY_TREE_MASK: u32 = 0x3fffffffu;
 const ENTRY_FROM_NEEDLES: u32 = 0x80000000u;
+const ENTRY_MERGED_BY_OWN: u32 = 0x40000000u;
 const ENTRY_INVALID: u32 = 0xffffffffu;
 // The view's placement counters: a header, then per-draw arrays.
 const COUNTER_TOTAL: u32 = 0u;
@@ -217,6 +220,7 @@ const ARRAY_BY_PARENT: u32 = 4u;
 const ARRAY_MERGED: u32 = 5u;
 const ARRAY_OFFSET: u32 = 6u;
 const ARRAY_FLAGS: u32 = 7u;
+const ARRAY_MERGED_BY_OWN: u32 = 8u;
 
 // The band of `prototype` a placement at threshold code `code` is drawn in
 // (`model::compact::CompactSpecies::placement_band`).

@@ -37,7 +37,7 @@
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
-    ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, NO_SPHERE,
+    ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment,
 }
@@ -46,7 +46,8 @@
 @group(2) @binding(1) var<storage, read> instances: array<Instance>;
 @group(2) @binding(2) var<storage, read> instance_lods: array<InstanceLod>;
 @group(2) @binding(3) var<storage, read> needles: array<vec4<u32>>;
-@group(2) @binding(4) var<storage, read> original_lines: array<u32>;
+// The original-line order, then the prototypes' merged lines by own code.
+@group(2) @binding(4) var<storage, read> line_orders: array<u32>;
 @group(2) @binding(5) var<storage, read> merged_lines: array<u32>;
 @group(2) @binding(6) var<storage, read> wood_segments: array<vec4<u32>>;
 @group(2) @binding(7) var<storage, read> wood_mesh: array<u32>;
@@ -532,6 +533,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let lod = instance_lods[tree];
     let code = entry.y >> 16u;
     let original_from_needles = (entry.x & ENTRY_FROM_NEEDLES) != 0u;
+    let merged_by_own = (entry.x & ENTRY_MERGED_BY_OWN) != 0u;
     let spatial_error = placement_error(lod, placement, prototypes[placement.prototype].sphere, species.wind_motion.y)
         / placement.translation_scale.w;
     let world_from_local = wind_tree * placement_matrix(placement);
@@ -545,6 +547,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let lod = instance_lods[tree];
     let code = lod.code & LOD_CODE_MASK;
     let original_from_needles = (lod.code & LOD_ORIGINAL_FROM_NEEDLES) != 0u;
+    let merged_by_own = false;
     let spatial_error = lod.spatial_error;
     let world_from_local = wind_tree;
     let grid = species.grid;
@@ -592,7 +595,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let line = vertex_index / 2u;
     var k = line;
     if !original_from_needles {
-        k = original_lines[line];
+        k = line_orders[line];
     }
     let w = needles[k].w;
     let own = w & 0xffffu;
@@ -608,7 +611,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 
 #ifdef CONIFER_MERGED_LINES
-    let line = vertex_index / 2u;
+    var line = vertex_index / 2u;
+    if merged_by_own {
+        line = line_orders[line];
+    }
     let a = merged_lines[3u * line];
     let b = merged_lines[3u * line + 1u];
     let codes = merged_lines[3u * line + 2u];

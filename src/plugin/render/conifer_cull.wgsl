@@ -14,8 +14,9 @@
     Instance, InstanceLod, SpeciesParams, CullView, DrawArgs,
     LOG_LN_MIN, LOG_LN_STEP, MAX_THRESHOLD_CODE, KIND_COUNT,
     Prototype, Placement, PLACED_BANDS, PLACED_PRISMS, PLACED_ORIGINAL_LINES, PLACED_MERGED_LINES,
-    ENTRY_FROM_NEEDLES, ENTRY_INVALID, COUNTER_TOTAL, COUNTER_ENTRIES, COUNTER_HEADER,
+    ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, ENTRY_INVALID, COUNTER_TOTAL, COUNTER_ENTRIES, COUNTER_HEADER,
     ARRAY_COUNT, ARRAY_CURSOR, ARRAY_PRISMS, ARRAY_AFTER_PRISMS, ARRAY_BY_PARENT, ARRAY_MERGED, ARRAY_OFFSET, ARRAY_FLAGS,
+    ARRAY_MERGED_BY_OWN,
     placement_band,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
     LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA,
@@ -29,7 +30,8 @@
 @group(0) @binding(1) var<uniform> species: SpeciesParams;
 @group(0) @binding(2) var<storage, read> instances: array<Instance>;
 @group(0) @binding(3) var<storage, read> needles: array<vec4<u32>>;
-@group(0) @binding(4) var<storage, read> original_lines: array<u32>;
+// The original-line order, then the prototypes' merged lines by own code.
+@group(0) @binding(4) var<storage, read> line_orders: array<u32>;
 @group(0) @binding(5) var<storage, read> merged_lines: array<u32>;
 @group(0) @binding(6) var<storage, read> wood_segments: array<vec4<u32>>;
 @group(0) @binding(7) var<storage, read_write> instance_lods: array<InstanceLod>;
@@ -68,7 +70,7 @@ fn original_prefix_in(first: u32, count: u32, code: u32) -> u32 {
     var hi = first + count;
     while lo < hi {
         let mid = (lo + hi) / 2u;
-        if (needles[original_lines[mid]].w >> 16u) > code {
+        if (needles[line_orders[mid]].w >> 16u) > code {
             lo = mid + 1u;
         } else {
             hi = mid;
@@ -83,6 +85,22 @@ fn merged_prefix_in(first: u32, count: u32, code: u32) -> u32 {
     while lo < hi {
         let mid = (lo + hi) / 2u;
         if (merged_lines[3u * mid + 2u] >> 16u) > code {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo - first;
+}
+
+// Merged lines of a prototype whose own code is at most `code`: a binary
+// search of its own-code order (`first`: its entry in `line_orders`).
+fn merged_by_own_prefix_in(first: u32, count: u32, code: u32) -> u32 {
+    var lo = first;
+    var hi = first + count;
+    while lo < hi {
+        let mid = (lo + hi) / 2u;
+        if (merged_lines[3u * line_orders[mid] + 2u] & 0xffffu) <= code {
             lo = mid + 1u;
         } else {
             hi = mid;
@@ -383,6 +401,10 @@ fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
         &counters[counter_index(ARRAY_MERGED, draw)],
         merged_prefix_in(prototype.merged_first, prototype.merged_count, code),
     );
+    atomicMax(
+        &counters[counter_index(ARRAY_MERGED_BY_OWN, draw)],
+        merged_by_own_prefix_in(prototype.merged_by_own_first, prototype.merged_count, code),
+    );
     entries[i] = vec2<u32>(entry.x, entry.y | (code << 16u));
 }
 
@@ -397,7 +419,8 @@ fn write_placed(kind: u32, draw: u32, vertex_count: u32, instance_count: u32, fi
 
 // One thread: each draw's first entry (a running sum of the counts) and its
 // indirect arguments; original lines come from the needles after the
-// fewest prisms or from the parent-sorted order, whichever is shorter.
+// fewest prisms or from the parent-sorted order, merged lines from the
+// parent-sorted order or the own-code order, whichever is shorter.
 @compute @workgroup_size(1)
 fn scan_placements() {
     var offset = 0u;
@@ -409,19 +432,27 @@ fn scan_placements() {
         let after_prisms = atomicLoad(&counters[counter_index(ARRAY_AFTER_PRISMS, draw)]);
         let by_parent = atomicLoad(&counters[counter_index(ARRAY_BY_PARENT, draw)]);
         let merged = atomicLoad(&counters[counter_index(ARRAY_MERGED, draw)]);
+        let merged_by_own = atomicLoad(&counters[counter_index(ARRAY_MERGED_BY_OWN, draw)]);
         atomicStore(&counters[counter_index(ARRAY_OFFSET, draw)], offset);
+        var flags = 0u;
         write_placed(
             PLACED_PRISMS, draw, prisms * species.prism_vertices, count,
             prototype.needle_first * species.prism_vertices, offset,
         );
         if after_prisms < by_parent {
-            atomicStore(&counters[counter_index(ARRAY_FLAGS, draw)], ENTRY_FROM_NEEDLES);
+            flags |= ENTRY_FROM_NEEDLES;
             let first = prototype.needle_first + prototype.needle_count - after_prisms;
             write_placed(PLACED_ORIGINAL_LINES, draw, 2u * after_prisms, count, 2u * first, offset);
         } else {
             write_placed(PLACED_ORIGINAL_LINES, draw, 2u * by_parent, count, 2u * prototype.original_first, offset);
         }
-        write_placed(PLACED_MERGED_LINES, draw, 2u * merged, count, 2u * prototype.merged_first, offset);
+        if merged_by_own < merged {
+            flags |= ENTRY_MERGED_BY_OWN;
+            write_placed(PLACED_MERGED_LINES, draw, 2u * merged_by_own, count, 2u * prototype.merged_by_own_first, offset);
+        } else {
+            write_placed(PLACED_MERGED_LINES, draw, 2u * merged, count, 2u * prototype.merged_first, offset);
+        }
+        atomicStore(&counters[counter_index(ARRAY_FLAGS, draw)], flags);
         offset += count;
     }
 }

@@ -288,8 +288,7 @@ pub const DRAW_ARGS_BYTES: u64 = 16;
 /// Vertices of an `Lmax`-slot prism drawn without indices: `Lmax` side
 /// quads and two `(Lmax − 2)`-triangle caps.
 pub fn prism_vertices(max_sides: u8) -> u32 {
-    let m = u32::from(max_sides.max(3));
-    6 * m + 6 * (m - 2)
+    3 * crate::model::prism::prism_triangle_count(max_sides)
 }
 
 /// A prototype of a placed species (`Prototype` in WGSL), 96 bytes.
@@ -304,8 +303,10 @@ pub struct GpuPrototype {
     /// Its needles' upper side ([`crate::model::color::upper_side`]), x, y,
     /// z as signed normalized bytes (WGSL's `unpack4x8snorm`).
     pub upper_side: u32,
-    /// Padding.
-    pub padding: u32,
+    /// First entry of its merged lines by own code in the line-order
+    /// buffer (the original-line order, then
+    /// [`CompactSpecies::merged_by_own`]).
+    pub merged_by_own_first: u32,
     /// Band edges, two 16-bit codes a word (the last half-word unused).
     pub band_edges: [u32; PLACED_BANDS as usize / 2],
     /// Bounding sphere, prototype metres (centre, radius).
@@ -313,8 +314,8 @@ pub struct GpuPrototype {
 }
 
 impl GpuPrototype {
-    /// The GPU form of `prototype`.
-    pub fn new(prototype: &CompactPrototype) -> Self {
+    /// The GPU form of `prototype` of `species`.
+    pub fn new(species: &CompactSpecies, prototype: &CompactPrototype) -> Self {
         let mut band_edges = [u32::from(u16::MAX) << 16; PLACED_BANDS as usize / 2];
         for (b, &edge) in prototype.band_edges.iter().enumerate() {
             let word = &mut band_edges[b / 2];
@@ -328,7 +329,7 @@ impl GpuPrototype {
             grid: prototype.grid.origin.extend(prototype.grid.step).to_array(),
             sections: [n0, n1, o0, o1, m0, m1],
             upper_side: pack_snorm8(prototype.upper_side.extend(0.0).to_array()),
-            padding: 0,
+            merged_by_own_first: species.original_lines.len() as u32 + prototype.merged_by_own,
             band_edges,
             sphere: prototype.sphere.to_array(),
         }
@@ -379,7 +380,8 @@ pub fn pack_snorm8(values: [f32; 4]) -> u32 {
 }
 
 /// One expanded placement of one view (`vec2<u32>` in WGSL), 8 bytes: its
-/// tree (31 bits) and the original-lines-from-needles flag (bit 31), then
+/// tree (30 bits), the merged-lines-by-own-code flag (bit 30) and the
+/// original-lines-from-needles flag (bit 31), then
 /// the placement index (16 bits) and its threshold code (16 bits).
 pub const PLACED_ENTRY_BYTES: u64 = 8;
 
@@ -387,8 +389,8 @@ pub const PLACED_ENTRY_BYTES: u64 = 8;
 pub const PLACED_COUNTER_HEADER: u64 = 4;
 
 /// Per-draw arrays of a view's placement counters (count, cursor, four
-/// longest prefixes, offset, flags).
-pub const PLACED_COUNTER_ARRAYS: u64 = 8;
+/// longest prefixes, offset, flags, longest merged prefix by own code).
+pub const PLACED_COUNTER_ARRAYS: u64 = 9;
 
 #[cfg(test)]
 mod tests {

@@ -314,7 +314,8 @@ struct SpeciesBuffers {
     instances: Buffer,
     instance_capacity: usize,
     needles: Buffer,
-    original_lines: Buffer,
+    /// The original-line order, then the prototypes' merged lines by own code.
+    line_orders: Buffer,
     merged_lines: Buffer,
     wood_segments: Buffer,
     wood_mesh: Buffer,
@@ -334,7 +335,7 @@ impl SpeciesBuffers {
     fn arrays(&self) -> [&Buffer; 9] {
         [
             &self.needles,
-            &self.original_lines,
+            &self.line_orders,
             &self.merged_lines,
             &self.wood_segments,
             &self.wood_mesh,
@@ -619,10 +620,10 @@ fn prepare_species(
                 instances: instance_buffer(&device, capacity),
                 instance_capacity: capacity,
                 needles: storage_buffer(&device, "conifer needles", bytemuck::cast_slice(&c.needles)),
-                original_lines: storage_buffer(
+                line_orders: storage_buffer(
                     &device,
-                    "conifer original lines",
-                    bytemuck::cast_slice(&c.original_lines),
+                    "conifer line orders",
+                    bytemuck::cast_slice(&[c.original_lines.as_slice(), &c.merged_by_own].concat()),
                 ),
                 merged_lines: storage_buffer(&device, "conifer merged lines", bytemuck::cast_slice(&c.merged_lines)),
                 wood_segments: storage_buffer(&device, "conifer wood segments", bytemuck::cast_slice(&c.wood_segments)),
@@ -635,7 +636,7 @@ fn prepare_species(
                 prototypes: storage_buffer(
                     &device,
                     "conifer prototypes",
-                    bytemuck::cast_slice(&c.prototypes.iter().map(GpuPrototype::new).collect::<Vec<_>>()),
+                    bytemuck::cast_slice(&c.prototypes.iter().map(|p| GpuPrototype::new(c, p)).collect::<Vec<_>>()),
                 ),
                 tree_spheres: storage_buffer(
                     &device,
@@ -1254,7 +1255,7 @@ fn prepare_views(
                         gpu.params.as_entire_binding(),
                         gpu.instances.as_entire_binding(),
                         gpu.needles.as_entire_binding(),
-                        gpu.original_lines.as_entire_binding(),
+                        gpu.line_orders.as_entire_binding(),
                         gpu.merged_lines.as_entire_binding(),
                         gpu.wood_segments.as_entire_binding(),
                         lods.as_entire_binding(),
@@ -1287,7 +1288,7 @@ fn prepare_views(
                         gpu.instances.as_entire_binding(),
                         lods.as_entire_binding(),
                         gpu.needles.as_entire_binding(),
-                        gpu.original_lines.as_entire_binding(),
+                        gpu.line_orders.as_entire_binding(),
                         gpu.merged_lines.as_entire_binding(),
                         gpu.wood_segments.as_entire_binding(),
                         gpu.wood_mesh.as_entire_binding(),
