@@ -182,6 +182,11 @@ pub struct RecordFigures {
     pub decode_ms: f64,
     /// Median time to build the compact GPU arrays from the record, ms.
     pub build_ms: f64,
+    /// Camera distances of `processed_over_cut`, metres (64 px, 0.8 rad).
+    pub distances: Vec<f32>,
+    /// Lines and prisms the vertex shaders processed (the compute pass's
+    /// draw arguments, read back) over those in the cut, per distance.
+    pub processed_over_cut: Vec<f64>,
 }
 
 /// A procedural tree of shared shoot prototypes, drawn.
@@ -438,7 +443,18 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
     let build_ms = time_us(|| {
         std::hint::black_box(crate::model::compact::CompactSpecies::build(&record).ok());
     }) / 1e3;
-    let gpu = compact_gpu_bytes(&record)?;
+    let species = crate::plugin::ConiferSpecies::from_record(record.clone())
+        .map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
+    let compact = species.compact.clone();
+    let distances = vec![2.0f32, 5.0, 20.0, 80.0, 400.0];
+    let mut processed_over_cut = Vec::new();
+    let gpu = compact_memory(species, &distances, |view| {
+        let (code, e) = view.tree_lod(0);
+        let cut = compact.drawn(code, e);
+        let in_cut = (cut.prisms.len() + cut.original_lines.len() + cut.merged_lines.len()).max(1);
+        processed_over_cut.push(view.processed_primitives(record.max_sides) as f64 / in_cut as f64);
+    })?
+    .species;
     let needles = record.needle_count().max(1);
     Ok(RecordFigures {
         needles: record.needle_count(),
@@ -449,15 +465,9 @@ fn record_figures(path: &Path) -> Result<RecordFigures, BenchError> {
         gpu_bytes_measured: true,
         decode_ms,
         build_ms,
+        distances,
+        processed_over_cut,
     })
-}
-
-/// Bytes of the buffers the render path allocates for `record`'s
-/// species: one tree drawn headless, then `CompactGpuMemory` read back.
-fn compact_gpu_bytes(record: &LodRecord) -> Result<u64, BenchError> {
-    let species = crate::plugin::ConiferSpecies::from_record(record.clone())
-        .map_err(|e| BenchError::Record(record.name.clone().into(), e.to_string()))?;
-    Ok(compact_memory(species, &[], |_| {})?.species)
 }
 
 /// A 1,000,000-needle (by default) procedural tree of `species` as shoot

@@ -79,6 +79,10 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             "{name}: {:.1} B/needle on disk, {:.1} B/needle on the GPU, decode {:.1} ms, build {:.1} ms",
             r.disk_bytes_per_needle, r.gpu_bytes_per_needle, r.decode_ms, r.build_ms
         );
+        println!(
+            "  processed / cut {}",
+            processed_over_cut(&r.distances, &r.processed_over_cut)
+        );
     }
     for (name, t) in &report.prototype_trees {
         println!(
@@ -89,6 +93,10 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             t.placements,
             t.file_bytes as f64 / 1e6,
             t.gpu_bytes as f64 / 1e6
+        );
+        println!(
+            "  processed / cut {}",
+            processed_over_cut(&t.distances, &t.processed_over_cut)
         );
     }
     for r in &report.runtime {
@@ -139,4 +147,14 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `at 5 m 1.27, at 20 m 1.37, …`.
+fn processed_over_cut(distances: &[f32], ratios: &[f64]) -> String {
+    distances
+        .iter()
+        .zip(ratios)
+        .map(|(d, r)| format!("at {d} m {r:.2}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
