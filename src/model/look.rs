@@ -203,6 +203,76 @@ pub struct SidePicture {
     pub samples: u32,
 }
 
+/// Binary samples over a picture, one bit each: sample `(i, j)` has its
+/// centre at `(i + ½, j + ½)` in sample units (`x` right, `y` down).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SampleBits {
+    /// Samples across.
+    pub width: u32,
+    /// Samples down.
+    pub height: u32,
+    bits: Vec<u64>,
+}
+
+impl SampleBits {
+    /// `width × height` samples, none set.
+    pub fn new(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            bits: vec![0; (width as usize * height as usize).div_ceil(64)],
+        }
+    }
+
+    /// Whether sample `(i, j)` is set (`false` outside).
+    pub fn get(&self, i: u32, j: u32) -> bool {
+        if i >= self.width || j >= self.height {
+            return false;
+        }
+        let index = j as usize * self.width as usize + i as usize;
+        self.bits[index / 64] & (1 << (index % 64)) != 0
+    }
+
+    /// Sets every sample whose centre lies in the piece from `a` to `b`
+    /// (sample units) whose half width runs from `ra` at `a` to `rb` at
+    /// `b`: within that half width of the axis between its ends, and with
+    /// `round_ends` also within it of the nearer end (a needle drawn as a
+    /// prism has flat ends; wood segments meet their neighbours). Samples
+    /// outside the picture and non-finite pieces are skipped.
+    pub fn stamp(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, round_ends: bool) {
+        let r = ra.max(rb);
+        let (min, max) = (a.min(b) - r, a.max(b) + r);
+        if !(min.is_finite() && max.is_finite()) || self.width == 0 || self.height == 0 {
+            return;
+        }
+        let i0 = ((min.x - 0.5).ceil() as i64).max(0);
+        let i1 = ((max.x - 0.5).floor() as i64).min(i64::from(self.width) - 1);
+        let j0 = ((min.y - 0.5).ceil() as i64).max(0);
+        let j1 = ((max.y - 0.5).floor() as i64).min(i64::from(self.height) - 1);
+        let axis = b - a;
+        let length_sq = axis.length_squared();
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let p = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+                let t = if length_sq > 0.0 {
+                    (p - a).dot(axis) / length_sq
+                } else {
+                    0.0
+                };
+                if !round_ends && !(0.0..=1.0).contains(&t) && length_sq > 0.0 {
+                    continue;
+                }
+                let t = t.clamp(0.0, 1.0);
+                let half_width = ra + (rb - ra) * t;
+                if p.distance_squared(a + axis * t) <= half_width * half_width {
+                    let index = j as usize * self.width as usize + i as usize;
+                    self.bits[index / 64] |= 1 << (index % 64);
+                }
+            }
+        }
+    }
+}
+
 /// Largest side of the sample grid: pictures above it take fewer samples.
 const MAX_SAMPLE_SIDE: u64 = 40_000;
 
@@ -252,47 +322,27 @@ pub fn side_coverage(needles: &[Needle], wood: &[WoodSegment], view: SideView) -
     let step = view.pixel / samples as f32;
     // Sample (i, j) has its centre at lo + ((i + ½), (top − j − ½))·step.
     let top = lo.y + height as f32 * view.pixel;
-    let mut bits = vec![0u64; (sw as usize * sh as usize).div_ceil(64)];
-    let mut stamp = |a: Vec2, b: Vec2, ra: f32, rb: f32| {
-        let r = ra.max(rb);
-        let (min, max) = (a.min(b) - r, a.max(b) + r);
-        let last_i = i64::from(sw) - 1;
-        let last_j = i64::from(sh) - 1;
-        let i0 = (((min.x - lo.x) / step - 0.5).ceil() as i64).max(0);
-        let i1 = (((max.x - lo.x) / step - 0.5).floor() as i64).min(last_i);
-        let j0 = (((top - max.y) / step - 0.5).ceil() as i64).max(0);
-        let j1 = (((top - min.y) / step - 0.5).floor() as i64).min(last_j);
-        let axis = b - a;
-        let length_sq = axis.length_squared();
-        for j in j0..=j1 {
-            let y = top - (j as f32 + 0.5) * step;
-            for i in i0..=i1 {
-                let p = Vec2::new(lo.x + (i as f32 + 0.5) * step, y);
-                let t = if length_sq > 0.0 {
-                    ((p - a).dot(axis) / length_sq).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let half_width = ra + (rb - ra) * t;
-                if p.distance_squared(a + axis * t) <= half_width * half_width {
-                    let index = j as usize * sw as usize + i as usize;
-                    bits[index / 64] |= 1 << (index % 64);
-                }
-            }
-        }
-    };
+    let mut bits = SampleBits::new(sw, sh);
+    // Picture metres to sample units (x right, y down from the top).
+    let at = |p: Vec2| Vec2::new((p.x - lo.x) / step, (top - p.y) / step);
     for n in &valid {
-        stamp(project(n.base), project(n.tip), n.radius, n.radius);
+        bits.stamp(
+            at(project(n.base)),
+            at(project(n.tip)),
+            n.radius / step,
+            n.radius / step,
+            true,
+        );
     }
     for w in wood.iter().filter(|w| w.is_valid()) {
-        stamp(project(w.start), project(w.end), w.start_radius, w.end_radius);
+        let (a, b) = (at(project(w.start)), at(project(w.end)));
+        bits.stamp(a, b, w.start_radius / step, w.end_radius / step, true);
     }
     let mut grid = CoverageGrid::new(width, height);
     let per_pixel = (samples * samples) as f32;
     for j in 0..sh {
         for i in 0..sw {
-            let index = j as usize * sw as usize + i as usize;
-            if bits[index / 64] & (1 << (index % 64)) != 0 {
+            if bits.get(i, j) {
                 grid.coverage[((j / samples) * width + i / samples) as usize] += 1.0 / per_pixel;
             }
         }
