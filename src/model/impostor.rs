@@ -19,8 +19,8 @@
 //! [`CrownImpostor::texel`] metres. A texel stores four bytes:
 //!
 //! * **coverage**: the fraction of the texel the needles and wood hide;
-//! * **wood**: the fraction hidden by wood and seen (wood stands amid
-//!   its needles: half of them, in depth, hide it), drawn with the wood's
+//! * **wood**: the fraction where wood is what the camera sees (no needle
+//!   lies in front of the wood's near side there), drawn with the wood's
 //!   colour;
 //! * **axis x, z**: the mean direction of what covers it (its `y` is
 //!   positive and follows from the unit length), lit as the cylinders the
@@ -261,10 +261,17 @@ impl ImpostorMips {
 /// Accumulates one view at the fine resolution.
 struct ViewCanvas {
     right: Vec3,
+    /// Horizontal, toward the view's camera.
+    toward: Vec3,
     /// Samples the needles cover.
     needles: SampleBits,
     /// Samples the wood covers.
     wood: SampleBits,
+    /// Samples where a needle lies in front of the wood.
+    wood_hidden: SampleBits,
+    /// How near the camera the wood's front is at each sample (metres
+    /// along `toward`; only meaningful where `wood` is set).
+    wood_front: Vec<f32>,
     /// Area-weighted axis sum per texel.
     axis: Vec<Vec3>,
 }
@@ -319,6 +326,9 @@ impl CrownImpostor {
         let mut canvases: Vec<ViewCanvas> = (0..options.views)
             .map(|k| ViewCanvas {
                 right: impostor.view_right(k),
+                toward: Vec3::new(impostor.view_azimuth(k).sin(), 0.0, impostor.view_azimuth(k).cos()),
+                wood_hidden: SampleBits::new(0, 0),
+                wood_front: Vec::new(),
                 needles: SampleBits::new(columns * SAMPLES_PER_TEXEL, options.rows * SAMPLES_PER_TEXEL),
                 wood: SampleBits::new(columns * SAMPLES_PER_TEXEL, options.rows * SAMPLES_PER_TEXEL),
                 axis: vec![Vec3::ZERO; (columns * options.rows) as usize],
@@ -329,13 +339,20 @@ impl CrownImpostor {
         let texels: Vec<Vec<[u8; 4]>> = canvases
             .par_iter_mut()
             .map(|canvas| {
-                for needle in &needles {
-                    impostor.splat_needle(canvas, needle);
-                }
+                // Wood first, so that each needle sample can tell whether
+                // it lies in front of the wood there.
+                let samples = (canvas.wood.width, canvas.wood.height);
+                canvas.wood_hidden = SampleBits::new(samples.0, samples.1);
+                canvas.wood_front = vec![f32::NEG_INFINITY; samples.0 as usize * samples.1 as usize];
                 for segment in &wood {
                     impostor.stamp_wood(canvas, segment);
                 }
-                impostor.resolve(canvas)
+                for needle in &needles {
+                    impostor.splat_needle(canvas, needle);
+                }
+                let texels = impostor.resolve(canvas);
+                canvas.wood_front = Vec::new();
+                texels
             })
             .collect();
         impostor.texels = texels.concat();
@@ -461,7 +478,19 @@ impl CrownImpostor {
             self.sample_point(canvas, needle.tip),
         );
         let half_width = needle.radius * SAMPLES_PER_TEXEL as f32 / self.texel;
-        canvas.needles.stamp(a, b, half_width, half_width, false);
+        let centre = Vec3::new(self.axis.x, 0.0, self.axis.y);
+        let (near_a, near_b) = (
+            (needle.base - centre).dot(canvas.toward),
+            (needle.tip - centre).dot(canvas.toward),
+        );
+        let (wood, wood_front, wood_hidden) = (&canvas.wood, &canvas.wood_front, &mut canvas.wood_hidden);
+        canvas
+            .needles
+            .stamp_each(a, b, half_width, half_width, false, |index, t| {
+                if wood.is_set(index) && near_a + (near_b - near_a) * t > wood_front[index] {
+                    wood_hidden.set(index);
+                }
+            });
         let mut direction = (needle.tip - needle.base).normalize_or(Vec3::Y);
         if direction.y < 0.0 {
             direction = -direction;
@@ -477,7 +506,17 @@ impl CrownImpostor {
         );
         let scale = SAMPLES_PER_TEXEL as f32 / self.texel;
         let (ra, rb) = (segment.start_radius * scale, segment.end_radius * scale);
-        canvas.wood.stamp(a, b, ra, rb, true);
+        let centre = Vec3::new(self.axis.x, 0.0, self.axis.y);
+        // The front of the segment: its axis' nearness plus its radius.
+        let (near_a, near_b) = (
+            (segment.start - centre).dot(canvas.toward) + segment.start_radius,
+            (segment.end - centre).dot(canvas.toward) + segment.end_radius,
+        );
+        let front = &mut canvas.wood_front;
+        canvas.wood.stamp_each(a, b, ra, rb, true, |index, t| {
+            let near = near_a + (near_b - near_a) * t;
+            front[index] = front[index].max(near);
+        });
         let mut direction = (segment.end - segment.start).normalize_or(Vec3::Y);
         if direction.y < 0.0 {
             direction = -direction;
@@ -486,8 +525,8 @@ impl CrownImpostor {
     }
 
     /// The view's texels from its samples: coverage is the samples the
-    /// needles or the wood cover; wood is seen where no needle covers it,
-    /// and behind half of the needles that do (it stands amid them).
+    /// needles or the wood cover; wood is seen where no needle lies in
+    /// front of it.
     fn resolve(&self, canvas: &ViewCanvas) -> Vec<[u8; 4]> {
         let n = SAMPLES_PER_TEXEL;
         let per_texel = (n * n) as f32;
@@ -496,22 +535,18 @@ impl CrownImpostor {
         let mut texels = Vec::with_capacity((self.columns * self.rows) as usize);
         for row in 0..self.rows {
             for column in 0..self.columns {
-                let (mut covered, mut wood) = (0u32, 0.0f32);
+                let (mut covered, mut wood) = (0u32, 0u32);
                 for j in row * n..(row + 1) * n {
                     for i in column * n..(column + 1) * n {
                         let (needle, bark) = (canvas.needles.get(i, j), canvas.wood.get(i, j));
                         covered += u32::from(needle || bark);
-                        wood += match (bark, needle) {
-                            (true, false) => 1.0,
-                            (true, true) => 0.5,
-                            _ => 0.0,
-                        };
+                        wood += u32::from(bark && !canvas.wood_hidden.get(i, j));
                     }
                 }
                 let axis = canvas.axis[(row * self.columns + column) as usize].normalize_or(Vec3::Y);
                 texels.push([
                     byte(covered as f32 / per_texel),
-                    byte(wood / per_texel),
+                    byte(wood as f32 / per_texel),
                     signed(axis.x),
                     signed(axis.z),
                 ]);
@@ -614,6 +649,48 @@ mod tests {
             (filled / one - 2.0).abs() < 0.04,
             "shifted comb: {filled} against {one}"
         );
+    }
+
+    #[test]
+    fn wood_shows_only_where_no_needle_lies_in_front_of_it() {
+        // A trunk 2 m tall on the axis; a sheet of horizontal needles in
+        // front of its upper half (toward view 0's camera, +z) and one
+        // behind its lower half. View 0 sees needles over the upper trunk
+        // and the trunk over the lower sheet.
+        let sheet = |z: f32, y0: f32| -> Vec<Needle> {
+            (0..50)
+                .map(|k| {
+                    let y = y0 + 0.01 + 0.02 * k as f32;
+                    needle(Vec3::new(-0.5, y, z), Vec3::new(0.5, y, z), 0.0105)
+                })
+                .collect()
+        };
+        let needles = [sheet(0.5, 1.0), sheet(-0.5, 0.0)].concat();
+        let trunk = WoodSegment {
+            start: Vec3::ZERO,
+            end: Vec3::new(0.0, 2.0, 0.0),
+            start_radius: 0.1,
+            end_radius: 0.1,
+        };
+        let options = ImpostorOptions { views: 4, rows: 40 };
+        let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
+        let texel = |y: f32| {
+            let (column, row) = impostor.project(0, Vec3::new(0.0, y, 0.0));
+            impostor.texel_at(0, column as u32, row as u32).expect("inside")
+        };
+        let (upper, lower) = (texel(1.5), texel(0.5));
+        assert!(
+            upper.coverage > 0.99 && upper.wood < 0.01,
+            "behind the sheet: {upper:?}"
+        );
+        assert!(
+            lower.coverage > 0.99 && lower.wood > 0.99,
+            "before the sheet: {lower:?}"
+        );
+        // From the opposite side (view 2) the roles swap.
+        let (column, row) = impostor.project(2, Vec3::new(0.0, 0.5, 0.0));
+        let back = impostor.texel_at(2, column as u32, row as u32).expect("inside");
+        assert!(back.wood < 0.01, "seen from behind: {back:?}");
     }
 
     #[test]

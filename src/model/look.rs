@@ -229,45 +229,79 @@ impl SampleBits {
         if i >= self.width || j >= self.height {
             return false;
         }
-        let index = j as usize * self.width as usize + i as usize;
+        self.is_set(j as usize * self.width as usize + i as usize)
+    }
+
+    /// Sets every sample whose centre lies in the piece from `a` to `b`
+    /// (see [`SampleBits::stamp_each`]).
+    pub fn stamp(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, round_ends: bool) {
+        self.stamp_each(a, b, ra, rb, round_ends, |_, _| {});
+    }
+
+    /// Sets sample `index` (row-major).
+    pub fn set(&mut self, index: usize) {
+        self.bits[index / 64] |= 1 << (index % 64);
+    }
+
+    /// Whether sample `index` (row-major) is set.
+    pub fn is_set(&self, index: usize) -> bool {
         self.bits[index / 64] & (1 << (index % 64)) != 0
     }
 
     /// Sets every sample whose centre lies in the piece from `a` to `b`
     /// (sample units) whose half width runs from `ra` at `a` to `rb` at
-    /// `b`: within that half width of the axis between its ends, and with
-    /// `round_ends` also within it of the nearer end (a needle drawn as a
-    /// prism has flat ends; wood segments meet their neighbours). Samples
-    /// outside the picture and non-finite pieces are skipped.
-    pub fn stamp(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, round_ends: bool) {
-        let r = ra.max(rb);
-        let (min, max) = (a.min(b) - r, a.max(b) + r);
-        if !(min.is_finite() && max.is_finite()) || self.width == 0 || self.height == 0 {
-            return;
-        }
-        let i0 = ((min.x - 0.5).ceil() as i64).max(0);
-        let i1 = ((max.x - 0.5).floor() as i64).min(i64::from(self.width) - 1);
-        let j0 = ((min.y - 0.5).ceil() as i64).max(0);
-        let j1 = ((max.y - 0.5).floor() as i64).min(i64::from(self.height) - 1);
-        let axis = b - a;
-        let length_sq = axis.length_squared();
-        for j in j0..=j1 {
-            for i in i0..=i1 {
-                let p = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
-                let t = if length_sq > 0.0 {
-                    (p - a).dot(axis) / length_sq
-                } else {
-                    0.0
-                };
-                if !round_ends && !(0.0..=1.0).contains(&t) && length_sq > 0.0 {
-                    continue;
-                }
-                let t = t.clamp(0.0, 1.0);
-                let half_width = ra + (rb - ra) * t;
-                if p.distance_squared(a + axis * t) <= half_width * half_width {
-                    let index = j as usize * self.width as usize + i as usize;
-                    self.bits[index / 64] |= 1 << (index % 64);
-                }
+    /// `b`, and calls `f(index, t)` for each (`index` row-major, `t` in
+    /// `[0, 1]` where along the axis it lies): within that half width of
+    /// the axis between its ends, and with `round_ends` also within it of
+    /// the nearer end (a needle drawn as a prism has flat ends; wood
+    /// segments meet their neighbours). Samples outside the picture and
+    /// non-finite pieces are skipped.
+    pub fn stamp_each(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, round_ends: bool, mut f: impl FnMut(usize, f32)) {
+        let bits = &mut self.bits;
+        each_sample_in([self.width, self.height], a, b, ra, rb, round_ends, |index, t| {
+            bits[index / 64] |= 1 << (index % 64);
+            f(index, t);
+        });
+    }
+}
+
+/// The samples of a `[width, height]` grid in a piece (see
+/// [`SampleBits::stamp_each`]).
+fn each_sample_in(
+    [width, height]: [u32; 2],
+    a: Vec2,
+    b: Vec2,
+    ra: f32,
+    rb: f32,
+    round_ends: bool,
+    mut f: impl FnMut(usize, f32),
+) {
+    let r = ra.max(rb);
+    let (min, max) = (a.min(b) - r, a.max(b) + r);
+    if !(min.is_finite() && max.is_finite()) || width == 0 || height == 0 {
+        return;
+    }
+    let i0 = ((min.x - 0.5).ceil() as i64).max(0);
+    let i1 = ((max.x - 0.5).floor() as i64).min(i64::from(width) - 1);
+    let j0 = ((min.y - 0.5).ceil() as i64).max(0);
+    let j1 = ((max.y - 0.5).floor() as i64).min(i64::from(height) - 1);
+    let axis = b - a;
+    let length_sq = axis.length_squared();
+    for j in j0..=j1 {
+        for i in i0..=i1 {
+            let p = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+            let t = if length_sq > 0.0 {
+                (p - a).dot(axis) / length_sq
+            } else {
+                0.0
+            };
+            if !round_ends && !(0.0..=1.0).contains(&t) && length_sq > 0.0 {
+                continue;
+            }
+            let t = t.clamp(0.0, 1.0);
+            let half_width = ra + (rb - ra) * t;
+            if p.distance_squared(a + axis * t) <= half_width * half_width {
+                f(j as usize * width as usize + i as usize, t);
             }
         }
     }
