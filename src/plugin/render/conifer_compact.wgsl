@@ -202,11 +202,15 @@ fn swayed_prism(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local:
 }
 
 // `out` (a line from `a` to `b`) lit along the segment the wind moved it to.
-fn swayed_line(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>) -> VertexOutput {
+fn swayed_line(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>, at_b: bool) -> VertexOutput {
     var result = out;
 #ifndef CONIFER_SHADOW
     if species.wind.z > 0.0 {
-        let swayed = swayed_segment(a, b, world_from_local);
+        // `finish` has moved this vertex's end; only the other end's
+        // displacement is left to evaluate.
+        let other = (world_from_local * vec4<f32>(select(b, a, at_b), 1.0)).xyz;
+        let moved = other + wind_displacement(other);
+        let swayed = select(moved - out.world_position.xyz, out.world_position.xyz - moved, at_b);
         if dot(swayed, swayed) > 1e-24 {
             result.world_normal = normalize(swayed);
         }
@@ -607,7 +611,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return swayed_line(finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree)), base, tip, world_from_local);
+    return swayed_line(finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree)), base, tip, world_from_local, (vertex_index & 1u) != 0u);
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -646,7 +650,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let start = end_position(grid, a);
     let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return swayed_line(finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree)), start, end, world_from_local);
+    return swayed_line(finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree)), start, end, world_from_local, (vertex_index & 1u) != 0u);
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -664,7 +668,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
-    return with_height(swayed_line(finish(position, end.xyz - start.xyz, world_from_local, color), start.xyz, end.xyz, world_from_local), position.y);
+    return with_height(swayed_line(finish(position, end.xyz - start.xyz, world_from_local, color), start.xyz, end.xyz, world_from_local, (vertex_index & 1u) != 0u), position.y);
 #endif
 
 #ifdef CONIFER_IMPOSTOR
