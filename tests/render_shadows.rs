@@ -128,6 +128,12 @@ impl ShadowScene {
                 .unwrap();
             image
         };
+        // The camera and the lights may be new: let their views cull a
+        // few frames first (a CI run once saw the lines cast no shadow in
+        // the first frame; never reproduced locally).
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+            self.renderer.update().unwrap();
+        }
         let lines = shot(self, "lines");
         self.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
         let prisms = shot(self, "prisms");
