@@ -994,7 +994,7 @@ impl CompactSpecies {
                 }));
             species.merged_source.extend(&section.merged_source);
         }
-        let prism_vertices = 3 * super::prism::prism_triangle_count(species.max_sides);
+        let prism_vertices = super::prism::prism_slot_vertices(species.max_sides);
         for k in 0..species.prototypes.len() {
             let codes = species.prototype_codes(k);
             let prefixes: Vec<SectionPrefixes> = codes.iter().map(|&c| species.prototype_prefixes(k, c)).collect();
@@ -1626,7 +1626,7 @@ mod tests {
     /// The worst band of `edges` over prototype `k`'s codes: the most a
     /// placement of a band processes (in vertices) over its own prefixes.
     fn worst_band(compact: &CompactSpecies, k: usize, edges: &[u16]) -> f64 {
-        let vertices = 3 * super::super::prism::prism_triangle_count(compact.max_sides);
+        let vertices = super::super::prism::prism_slot_vertices(compact.max_sides);
         let codes = compact.prototype_codes(k);
         let band = |c: u16| edges.iter().filter(|&&edge| edge <= c).count();
         let mut worst = 1.0f64;

@@ -276,6 +276,23 @@ struct ViewCanvas {
     axis: Vec<Vec3>,
 }
 
+impl ViewCanvas {
+    /// View `k` of `impostor`, nothing drawn yet.
+    fn new(impostor: &CrownImpostor, k: u32) -> Self {
+        let (width, height) = (impostor.columns * SAMPLES_PER_TEXEL, impostor.rows * SAMPLES_PER_TEXEL);
+        let phi = impostor.view_azimuth(k);
+        Self {
+            right: impostor.view_right(k),
+            toward: Vec3::new(phi.sin(), 0.0, phi.cos()),
+            needles: SampleBits::new(width, height),
+            wood: SampleBits::new(width, height),
+            wood_hidden: SampleBits::new(width, height),
+            wood_front: vec![f32::NEG_INFINITY; width as usize * height as usize],
+            axis: vec![Vec3::ZERO; (impostor.columns * impostor.rows) as usize],
+        }
+    }
+}
+
 impl CrownImpostor {
     /// Bakes the impostor of `needles` and `wood` (tree-local metres; the
     /// tree stands along `+y`). `None` when nothing is valid or the
@@ -323,36 +340,20 @@ impl CrownImpostor {
             texel,
             texels: Vec::new(),
         };
-        let mut canvases: Vec<ViewCanvas> = (0..options.views)
-            .map(|k| ViewCanvas {
-                right: impostor.view_right(k),
-                toward: Vec3::new(impostor.view_azimuth(k).sin(), 0.0, impostor.view_azimuth(k).cos()),
-                wood_hidden: SampleBits::new(0, 0),
-                wood_front: Vec::new(),
-                needles: SampleBits::new(columns * SAMPLES_PER_TEXEL, options.rows * SAMPLES_PER_TEXEL),
-                wood: SampleBits::new(columns * SAMPLES_PER_TEXEL, options.rows * SAMPLES_PER_TEXEL),
-                axis: vec![Vec3::ZERO; (columns * options.rows) as usize],
-            })
-            .collect();
         // Views are independent: each rasterizes every piece (in parallel,
-        // on the caller's rayon pool).
-        let texels: Vec<Vec<[u8; 4]>> = canvases
-            .par_iter_mut()
-            .map(|canvas| {
-                // Wood first, so that each needle sample can tell whether
-                // it lies in front of the wood there.
-                let samples = (canvas.wood.width, canvas.wood.height);
-                canvas.wood_hidden = SampleBits::new(samples.0, samples.1);
-                canvas.wood_front = vec![f32::NEG_INFINITY; samples.0 as usize * samples.1 as usize];
+        // on the caller's rayon pool), wood first, so that each needle
+        // sample can tell whether it lies in front of the wood there.
+        let texels: Vec<Vec<[u8; 4]>> = (0..options.views)
+            .into_par_iter()
+            .map(|k| {
+                let mut canvas = ViewCanvas::new(&impostor, k);
                 for segment in &wood {
-                    impostor.stamp_wood(canvas, segment);
+                    impostor.stamp_wood(&mut canvas, segment);
                 }
                 for needle in &needles {
-                    impostor.splat_needle(canvas, needle);
+                    impostor.splat_needle(&mut canvas, needle);
                 }
-                let texels = impostor.resolve(canvas);
-                canvas.wood_front = Vec::new();
-                texels
+                impostor.resolve(&canvas)
             })
             .collect();
         impostor.texels = texels.concat();
@@ -392,7 +393,7 @@ impl CrownImpostor {
 
     /// The texel of view `k` a tree-local point projects to.
     pub fn project(&self, view: u32, point: Vec3) -> (f32, f32) {
-        let along = (point - Vec3::new(self.axis.x, 0.0, self.axis.y)).dot(self.view_right(view));
+        let along = (point - self.axis_point()).dot(self.view_right(view));
         let column = (along + self.half_width) / self.texel;
         let row = (self.top() - point.y) / self.texel;
         (column, row)
@@ -452,9 +453,15 @@ impl CrownImpostor {
         self.mip_chain().iter().map(|(_, _, t)| 4 * t.len() as u64).sum()
     }
 
+    /// The tree-local point at the foot of the vertical axis the views
+    /// turn around.
+    fn axis_point(&self) -> Vec3 {
+        Vec3::new(self.axis.x, 0.0, self.axis.y)
+    }
+
     /// Sample coordinates of a tree-local point in a view.
     fn sample_point(&self, canvas: &ViewCanvas, p: Vec3) -> Vec2 {
-        let along = (p - Vec3::new(self.axis.x, 0.0, self.axis.y)).dot(canvas.right);
+        let along = (p - self.axis_point()).dot(canvas.right);
         let sample = self.texel / SAMPLES_PER_TEXEL as f32;
         Vec2::new((along + self.half_width) / sample, (self.top() - p.y) / sample)
     }
@@ -478,7 +485,7 @@ impl CrownImpostor {
             self.sample_point(canvas, needle.tip),
         );
         let half_width = needle.radius * SAMPLES_PER_TEXEL as f32 / self.texel;
-        let centre = Vec3::new(self.axis.x, 0.0, self.axis.y);
+        let centre = self.axis_point();
         let (near_a, near_b) = (
             (needle.base - centre).dot(canvas.toward),
             (needle.tip - centre).dot(canvas.toward),
@@ -506,7 +513,7 @@ impl CrownImpostor {
         );
         let scale = SAMPLES_PER_TEXEL as f32 / self.texel;
         let (ra, rb) = (segment.start_radius * scale, segment.end_radius * scale);
-        let centre = Vec3::new(self.axis.x, 0.0, self.axis.y);
+        let centre = self.axis_point();
         // The front of the segment: its axis' nearness plus its radius.
         let (near_a, near_b) = (
             (segment.start - centre).dot(canvas.toward) + segment.start_radius,

@@ -26,6 +26,13 @@ pub fn prism_triangle_count(sides: u8) -> u32 {
     2 * m + 2 * (m - 2)
 }
 
+/// Vertices of an `Lmax`-slot prism as the plugin's vertex shader draws it,
+/// without indices: three a triangle of [`prism_triangle_count`]
+/// (`Lmax` side quads and two `(Lmax − 2)`-triangle caps).
+pub fn prism_slot_vertices(max_sides: u8) -> u32 {
+    3 * prism_triangle_count(max_sides)
+}
+
 /// Vertices of one capped prism: the sides use smooth radial normals (two
 /// rings of `m`), each cap has its own flat ring of `m`.
 pub fn prism_vertex_count(sides: u8) -> u32 {

@@ -285,12 +285,6 @@ pub const INSTANCE_LOD_BYTES: u64 = 32;
 /// One indirect draw (`DrawArgs`), 16 bytes.
 pub const DRAW_ARGS_BYTES: u64 = 16;
 
-/// Vertices of an `Lmax`-slot prism drawn without indices: `Lmax` side
-/// quads and two `(Lmax − 2)`-triangle caps.
-pub fn prism_vertices(max_sides: u8) -> u32 {
-    3 * crate::model::prism::prism_triangle_count(max_sides)
-}
-
 /// A prototype of a placed species (`Prototype` in WGSL), 96 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]

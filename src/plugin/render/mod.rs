@@ -31,7 +31,7 @@ use self::gpu::{
     CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE,
     FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES,
     OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES,
-    PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, prism_vertices,
+    PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA,
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
@@ -446,7 +446,7 @@ fn species_params(
         wood_index_count: compact.wood_indices.len() as u32,
         instance_count: 0,
         max_sides: u32::from(compact.max_sides),
-        prism_vertices: prism_vertices(compact.max_sides),
+        prism_vertices: crate::model::prism::prism_slot_vertices(compact.max_sides),
         merged_code_min: u32::from(compact.merged_code_range[0]),
         merged_code_max: u32::from(compact.merged_code_range[1]),
         lod_enabled: u32::from(settings.enabled),

@@ -75,7 +75,7 @@ impl ViewReadback {
     /// per-tree draws of prisms, original and merged lines, and every
     /// placed draw (vertices over vertices a primitive, times instances).
     pub fn processed_primitives(&self, max_sides: u8) -> u64 {
-        let prism_vertices = u64::from(super::gpu::prism_vertices(max_sides));
+        let prism_vertices = u64::from(crate::model::prism::prism_slot_vertices(max_sides));
         let per_primitive = |part: usize| if part == 0 { prism_vertices } else { 2 };
         let count = |draw: &[u32; 4], part: usize| u64::from(draw[0]) / per_primitive(part) * u64::from(draw[1]);
         // The first three blocks (prisms, original lines, merged lines) of
