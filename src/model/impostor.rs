@@ -5,11 +5,18 @@
 //! Merged lines hold their error bound at any distance, but a dense crown
 //! stacks them in depth: a 30 m spruce still needs ~380,000 lines at 1 km
 //! (`conifer cut --distance 1000`), where it is ~40 pixels tall. Past the
-//! distance where two of its texels are smaller than the pixel error, the
-//! plugin draws the tree as one camera-facing quad textured with the two
-//! views nearest the camera's azimuth instead, cross-faded with the lines
-//! over a band of distances ([`FADE_START`], [`FADE_END`]): from where
-//! the tree is ~384·ε pixels tall to where it is ~192·ε.
+//! distance where its texel is a fraction of the pixel error, the plugin
+//! draws the tree as one camera-facing quad textured with the two views
+//! nearest the camera's azimuth instead, cross-faded with the lines over
+//! a band of distances ([`FADE_START`], [`FADE_END`]).
+//!
+//! The texel has one size for every tree ([`ImpostorOptions::texel`],
+//! 10 cm), so every tree turns into its impostor at the same pixel error
+//! whatever its height: with the default options, the fade runs while the
+//! pixel error grows from 8 to 16 cm, which at ε = 1 in a 1080-pixel-tall
+//! 45° view is from ~104 m to ~208 m. (Texels of a fixed share of the
+//! height made a 50 m fir an impostor only past 250 m and a 3 m sapling
+//! one from ~20 m.)
 //!
 //! ## What a texel holds
 //!
@@ -53,12 +60,14 @@ pub const SAMPLES_PER_TEXEL: u32 = 16;
 
 /// Spatial error, in texels, from which the plugin starts fading the
 /// lines into the impostor (a texel projects to `1 / FADE_START` of the
-/// pixel error: the impostor starts magnified twice).
-pub const FADE_START: f32 = 0.5;
+/// pixel error: the impostor starts magnified 1.25 times).
+pub const FADE_START: f32 = 0.8;
 
 /// Spatial error, in texels, from which the plugin draws only the impostor
-/// (a texel is the pixel error: the impostor at its own resolution).
-pub const FADE_END: f32 = 1.0;
+/// (a pixel error spans 1.6 texels, so each pixel is the mean of a few
+/// texels: at the default texel, the mean of 16 × 16 binary samples over
+/// 16 cm).
+pub const FADE_END: f32 = 1.6;
 
 /// Tangent of the camera's elevation over the crown centre up to which
 /// the impostor is drawn in full (30°): its pictures are side views.
@@ -85,20 +94,37 @@ pub fn impostor_fade(spatial_error: f32, texel: f32, elevation: f32) -> f32 {
     (t * (1.0 - steep) * 255.0).round() / 255.0
 }
 
+/// Fewest texels over a tree's height: a smaller tree gets texels smaller
+/// than [`ImpostorOptions::texel`].
+pub const MIN_ROWS: u32 = 8;
+
+/// Most texels over a tree's height: a taller tree gets texels larger than
+/// [`ImpostorOptions::texel`] (at the default 10 cm, trees over 51 m), which
+/// bounds the bake's memory (16² samples a texel, two views at a time on
+/// two threads).
+pub const MAX_ROWS: u32 = 512;
+
 /// How a [`CrownImpostor`] is baked.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ImpostorOptions {
     /// Views around the vertical axis (at least 1).
     pub views: u32,
-    /// Texels over the tree's height (at least 4).
-    pub rows: u32,
+    /// Side of a texel, tree-local metres (positive): the tree's height is
+    /// cut into `ceil(height / texel)` rows, clamped to [`MIN_ROWS`] ..=
+    /// [`MAX_ROWS`], and the texel is then the height over the rows.
+    pub texel: f32,
 }
 
 impl Default for ImpostorOptions {
-    /// Eight views, 192 texels tall: a 30 m spruce's texel is 16 cm, so the
-    /// impostor takes over where the tree is ~190 pixels tall at ε = 1.
+    /// Eight views, texels of 10 cm. Measured on the six mature records
+    /// (one view, footprint-filtered to 19 cm pixels, the pixel at 250 m
+    /// in a 1080-pixel 45° view, against a bake at a fifth of the pixel):
+    /// the coverage error over the crown's box is 0.0043–0.0068 at 10 cm
+    /// and 0.0104–0.0161 at 16 cm (the texel 192 rows gave a 30 m tree).
+    /// With 8 views the bake takes 1.5–3.9 s on two threads and the mip
+    /// chain is 0.73–2.24 MB.
     fn default() -> Self {
-        Self { views: 8, rows: 192 }
+        Self { views: 8, texel: 0.10 }
     }
 }
 
@@ -298,7 +324,7 @@ impl CrownImpostor {
     /// tree stands along `+y`). `None` when nothing is valid or the
     /// options are out of range.
     pub fn bake(needles: &[Needle], wood: &[WoodSegment], options: ImpostorOptions) -> Option<Self> {
-        if options.views == 0 || options.rows < 4 {
+        if options.views == 0 || !(options.texel > 0.0 && options.texel.is_finite()) {
             return None;
         }
         let needles: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
@@ -328,12 +354,13 @@ impl CrownImpostor {
         if !(height > 0.0 && height.is_finite() && half_width > 0.0 && half_width.is_finite()) {
             return None;
         }
-        let texel = height / options.rows as f32;
-        let columns = ((2.0 * half_width / texel).ceil() as u32).clamp(1, 4 * options.rows);
+        let rows = (height / options.texel).ceil().clamp(MIN_ROWS as f32, MAX_ROWS as f32) as u32;
+        let texel = height / rows as f32;
+        let columns = ((2.0 * half_width / texel).ceil() as u32).clamp(1, 4 * rows);
         let mut impostor = Self {
             views: options.views,
             columns,
-            rows: options.rows,
+            rows,
             axis,
             half_width: 0.5 * columns as f32 * texel,
             bottom: lo.y,
@@ -596,17 +623,51 @@ mod tests {
         assert!(CrownImpostor::bake(&[], &[], ImpostorOptions::default()).is_none());
         let nan = needle(Vec3::NAN, Vec3::Y, 0.01);
         assert!(CrownImpostor::bake(&[nan], &[], ImpostorOptions::default()).is_none());
-        let no_views = ImpostorOptions { views: 0, rows: 64 };
+        let no_views = ImpostorOptions { views: 0, texel: 0.1 };
         assert!(CrownImpostor::bake(&[n], &[], no_views).is_none());
+        for texel in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            let options = ImpostorOptions { views: 8, texel };
+            assert!(CrownImpostor::bake(&[n], &[], options).is_none(), "texel {texel}");
+        }
         let flat = needle(Vec3::ZERO, Vec3::X, 0.0);
         assert!(CrownImpostor::bake(&[flat], &[], ImpostorOptions::default()).is_none());
+    }
+
+    #[test]
+    fn every_tree_gets_the_same_texel_within_the_row_limits() {
+        let options = ImpostorOptions::default();
+        // Cones 10 m tall and half that: the same texel (the height over
+        // whole rows), so both turn into impostors at the same pixel error.
+        let tall = CrownImpostor::bake(&cone(2_000, 0.001), &[], options).expect("needles");
+        let short: Vec<Needle> = cone(2_000, 0.001)
+            .iter()
+            .map(|n| needle(n.base * 0.5, n.tip * 0.5, n.radius))
+            .collect();
+        let short = CrownImpostor::bake(&short, &[], options).expect("needles");
+        for impostor in [&tall, &short] {
+            assert!(
+                impostor.texel <= options.texel && impostor.texel > 0.98 * options.texel,
+                "texel {} rows {}",
+                impostor.texel,
+                impostor.rows
+            );
+            assert!((impostor.top() - impostor.bottom - impostor.rows as f32 * impostor.texel).abs() < 1e-4);
+        }
+        assert!(tall.rows as f32 > 1.9 * short.rows as f32, "{} and {} rows", tall.rows, short.rows);
+        // A 20 cm tree keeps MIN_ROWS rows, a 100 m one MAX_ROWS.
+        let tiny = [needle(Vec3::ZERO, Vec3::Y * 0.2, 0.01)];
+        assert_eq!(CrownImpostor::bake(&tiny, &[], options).expect("needle").rows, MIN_ROWS);
+        let giant = [needle(Vec3::ZERO, Vec3::Y * 100.0, 0.01)];
+        let giant = CrownImpostor::bake(&giant, &[], options).expect("needle");
+        assert_eq!(giant.rows, MAX_ROWS);
+        assert!(giant.texel > options.texel);
     }
 
     #[test]
     fn a_sparse_crown_keeps_its_needles_area_and_a_dense_one_saturates() {
         // Few thin needles: coverage adds up to their area (no overlap).
         let sparse = cone(2_000, 0.0005);
-        let options = ImpostorOptions { views: 4, rows: 64 };
+        let options = ImpostorOptions { views: 4, texel: 10.0 / 64.0 };
         let impostor = CrownImpostor::bake(&sparse, &[], options).expect("needles");
         let area: f32 = sparse.iter().map(|n| 2.0 * n.radius * (n.tip - n.base).length()).sum();
         for view in 0..4 {
@@ -642,7 +703,7 @@ mod tests {
                 })
                 .collect()
         };
-        let options = ImpostorOptions { views: 4, rows: 64 };
+        let options = ImpostorOptions { views: 4, texel: 10.0 / 64.0 };
         let covered = |needles: &[Needle]| {
             let impostor = CrownImpostor::bake(needles, &[], options).expect("needles");
             impostor.coverage_grid(0).coverage.iter().sum::<f32>() * impostor.texel.powi(2)
@@ -679,7 +740,7 @@ mod tests {
             start_radius: 0.1,
             end_radius: 0.1,
         };
-        let options = ImpostorOptions { views: 4, rows: 40 };
+        let options = ImpostorOptions { views: 4, texel: 0.05 };
         let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
         let texel = |y: f32| {
             let (column, row) = impostor.project(0, Vec3::new(0.0, y, 0.0));
@@ -712,7 +773,7 @@ mod tests {
             start_radius: 0.2,
             end_radius: 0.03,
         };
-        let options = ImpostorOptions { views: 8, rows: 48 };
+        let options = ImpostorOptions { views: 8, texel: 12.1 / 48.0 };
         let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
         let exact = side_coverage(
             &needles,
@@ -770,7 +831,7 @@ mod tests {
     #[test]
     fn mips_keep_the_mean_coverage() {
         let impostor =
-            CrownImpostor::bake(&cone(20_000, 0.003), &[], ImpostorOptions { views: 2, rows: 40 }).expect("needles");
+            CrownImpostor::bake(&cone(20_000, 0.003), &[], ImpostorOptions { views: 2, texel: 0.25 }).expect("needles");
         let chain = impostor.mip_chain();
         assert_eq!(chain.last().map(|l| (l.0, l.1)), Some((1, 1)));
         let mean = |(w, h, t): &(u32, u32, Vec<[u8; 4]>)| {
@@ -817,7 +878,7 @@ mod tests {
     #[test]
     fn the_footprint_filter_is_the_pixels_box_where_one_trilinear_sample_blurs() {
         let impostor =
-            CrownImpostor::bake(&cone(40_000, 0.004), &[], ImpostorOptions { views: 1, rows: 96 }).expect("needles");
+            CrownImpostor::bake(&cone(40_000, 0.004), &[], ImpostorOptions { views: 1, texel: 10.0 / 96.0 }).expect("needles");
         let mips = ImpostorMips::new(&impostor);
         assert_eq!(mips.size(), (impostor.columns, impostor.rows));
         let size = Vec2::new(impostor.columns as f32, impostor.rows as f32);

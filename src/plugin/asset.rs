@@ -121,6 +121,17 @@ impl ConiferSpecies {
         Self::new(flat, Some(record))
     }
 
+    /// The species with its crown impostor baked again with `options`
+    /// (the constructors bake [`ImpostorOptions::default`]: 8 views, 10 cm
+    /// texels): finer texels for a tree seen large from far away, coarser
+    /// ones to save memory, or a tree that turns into its impostor at
+    /// another pixel error (the fade follows the texel,
+    /// [`crate::model::impostor::FADE_START`]).
+    pub fn with_impostor(mut self, options: ImpostorOptions) -> Self {
+        self.impostor = CrownImpostor::bake(&self.record.needles, &self.record.wood, options).map(Arc::new);
+        self
+    }
+
     fn new(record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();

@@ -39,8 +39,8 @@ const LOD_OPACITY_SHIFT: u32 = 20u;
 const LOD_FADE_SHIFT: u32 = 24u;
 // `model::impostor::FADE_START`, `FADE_END`: spatial errors, in texels,
 // where the fade into the impostor starts and ends.
-const IMPOSTOR_FADE_START: f32 = 0.5;
-const IMPOSTOR_FADE_END: f32 = 1.0;
+const IMPOSTOR_FADE_START: f32 = 0.8;
+const IMPOSTOR_FADE_END: f32 = 1.6;
 // `model::impostor::STEEP_START`, `STEEP_END`: tangents of the camera's
 // elevation over the crown where the impostor starts giving way to lines
 // and where it is gone.
