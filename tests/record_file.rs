@@ -295,8 +295,23 @@ fn shipped_mature_records_are_the_presets_current_bakes() {
         let flat = shipped.flatten().unwrap();
         let (lo, hi) = flat.bounds();
         assert!((15.0..=50.0).contains(&(hi.y - lo.y)), "{species}: {} m", hi.y - lo.y);
+        // The shipped impostor is baked with the default options (its
+        // texels are the bake's own function of the needles, tested in
+        // `model::impostor`; baking six here would take minutes in debug).
+        let impostor = shipped.impostor.as_deref().expect("the record holds its impostor");
+        let options = bevy_conifer_lod::model::impostor::ImpostorOptions::default();
+        assert_eq!(impostor.views, options.views, "{species}");
+        assert!(
+            impostor.texel <= options.texel && impostor.texel > 0.98 * options.texel,
+            "{species}: texel {}",
+            impostor.texel
+        );
         let input = generate_prototypes(species, &GenerateOptions::default());
-        let baked = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+        let without_impostor = BakeOptions {
+            impostor: None,
+            ..BakeOptions::default()
+        };
+        let baked = bake_prototypes(&input, &without_impostor, &()).unwrap();
         assert!(
             baked.prototypes == shipped.prototypes
                 && baked.placements == shipped.placements

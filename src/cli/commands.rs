@@ -26,6 +26,7 @@ use std::time::{Duration, Instant};
 struct BakeBars {
     groups: ProgressBar,
     tree: ProgressBar,
+    impostor: ProgressBar,
 }
 
 impl BakeBars {
@@ -39,9 +40,19 @@ impl BakeBars {
             bar.enable_steady_tick(Duration::from_millis(200));
             bar
         };
+        let impostor = multi.add(
+            ProgressBar::new(1)
+                .with_style(
+                    ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} impostor ({elapsed})")
+                        .expect("valid template")
+                        .progress_chars("=> "),
+                )
+                .with_prefix("far"),
+        );
         Self {
             groups: bar("groups"),
             tree: bar("whole tree"),
+            impostor,
         }
     }
 }
@@ -51,6 +62,7 @@ impl BakeProgress for BakeBars {
         let bar = match stage {
             BakeStage::MergeGroups => &self.groups,
             BakeStage::MergeTree => &self.tree,
+            BakeStage::Impostor => &self.impostor,
         };
         bar.set_length(total as u64);
         bar.set_position(done as u64);
@@ -135,8 +147,15 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let [direction, distance, needle_count] = args.weights[..] else {
         bail!("--weights takes three numbers k1,k2,k3");
     };
+    if !args.no_impostor && !(args.impostor_texel > 0.0 && args.impostor_texel.is_finite() && args.impostor_views > 0) {
+        bail!("--impostor-texel takes a positive number of metres and --impostor-views a positive count");
+    }
     let mut options = BakeOptions {
         max_sides: args.max_sides,
+        impostor: (!args.no_impostor).then_some(crate::model::impostor::ImpostorOptions {
+            views: args.impostor_views,
+            texel: args.impostor_texel,
+        }),
         ..Default::default()
     };
     options.merge.weights = MergeWeights {
@@ -159,6 +178,7 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let stages = timer.seconds(bake_started.elapsed().as_secs_f64());
     bars.groups.finish_and_clear();
     bars.tree.finish_and_clear();
+    bars.impostor.finish_and_clear();
     record.bake.source = match (&args.preset, &args.input) {
         (Some(name), _) => format!("preset {name} seed {}", args.seed),
         (None, Some(path)) => path.display().to_string(),
@@ -267,11 +287,15 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         let version = bytes
             .get(8..12)
             .map(|v| u32::from_le_bytes(v.try_into().expect("4 bytes")));
-        let record: PrototypeRecord = crate::model::decode_prototype_record(&bytes)
+        let mut record: PrototypeRecord = crate::model::decode_prototype_record(&bytes)
             .with_context(|| format!("{}: cannot load record", path.display()))?;
         if version == Some(FORMAT_VERSION) {
             eprintln!("{}: already format {FORMAT_VERSION}", path.display());
             continue;
+        }
+        if record.impostor.is_none() && !args.no_impostor {
+            record.impostor = crate::model::bake_impostor(&record, Default::default())
+                .with_context(|| format!("{}: cannot bake its impostor", path.display()))?;
         }
         let written = write_prototype_record(&record, path)
             .with_context(|| format!("{}: cannot write record", path.display()))?;
@@ -335,6 +359,23 @@ pub struct InspectReport {
     pub bake_seconds: Option<f64>,
     /// Merge weights k1, k2, k3.
     pub weights: [f32; 3],
+    /// The crown impostor stored in the record, if any.
+    pub impostor: Option<ImpostorSummary>,
+}
+
+/// A record's crown impostor in `conifer inspect`.
+#[derive(Debug, Serialize)]
+pub struct ImpostorSummary {
+    /// Views around the trunk.
+    pub views: u32,
+    /// Texels across.
+    pub columns: u32,
+    /// Texels up.
+    pub rows: u32,
+    /// Side of a texel, metres.
+    pub texel: f32,
+    /// Bytes of its texels and mip levels on the GPU.
+    pub gpu_bytes: u64,
 }
 
 pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
@@ -383,6 +424,13 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
         bytes_per_needle: bytes as f64 / record.needle_count() as f64,
         bake_seconds: record.bake.bake_seconds,
         weights: [w.direction, w.distance, w.needle_count],
+        impostor: prototypes.impostor.as_deref().map(|i| ImpostorSummary {
+            views: i.views,
+            columns: i.columns,
+            rows: i.rows,
+            texel: i.texel,
+            gpu_bytes: i.byte_size(),
+        }),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -400,6 +448,13 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
         println!("  format version {}", report.format_version);
         for (part, [min, max]) in &report.error_ranges {
             println!("  {part:>15}: error {min:.6} .. {max:.6} m");
+        }
+        match &report.impostor {
+            Some(i) => println!(
+                "  crown impostor: {} views of {} × {} texels of {:.3} m ({} bytes on the GPU)",
+                i.views, i.columns, i.rows, i.texel, i.gpu_bytes
+            ),
+            None => println!("  no crown impostor (the plugin bakes one at load)"),
         }
         println!("  {} bytes ({:.1} per needle)", report.bytes, report.bytes_per_needle);
     }

@@ -34,7 +34,8 @@ pub enum Command {
     /// Print what a record holds.
     Inspect(InspectArgs),
     /// Rewrite records of an older format version in the current one, in place
-    /// (older versions are read and converted; nothing else changes).
+    /// (older versions are read and converted; a record gains its crown impostor,
+    /// baked with the default options, unless --no-impostor; nothing else changes).
     Upgrade(UpgradeArgs),
     /// Print the cut (what is drawn) of a record at a viewing distance.
     Cut(CutArgs),
@@ -105,6 +106,16 @@ pub struct BakeArgs {
     /// Search every live line for the whole-tree merge (exact, quadratic: small trees only).
     #[arg(long)]
     pub exhaustive: bool,
+    /// Side of a crown impostor texel, metres: the far representation baked into the
+    /// record (the tree turns into it where the pixel error spans 0.8–1.6 texels).
+    #[arg(long, default_value_t = 0.10, value_name = "METRES")]
+    pub impostor_texel: f32,
+    /// Views of the crown impostor around the trunk.
+    #[arg(long, default_value_t = 8)]
+    pub impostor_views: u32,
+    /// Bake no crown impostor into the record (the plugin then bakes one each time it loads it).
+    #[arg(long)]
+    pub no_impostor: bool,
     /// Print a JSON summary of the bake on stdout.
     #[arg(long)]
     pub json: bool,
@@ -126,6 +137,10 @@ pub struct UpgradeArgs {
     /// The records to rewrite.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
+    /// Leave a record without a crown impostor as it is (by default, one older than
+    /// format 7 gains its impostor, baked with the default options).
+    #[arg(long)]
+    pub no_impostor: bool,
 }
 
 /// How a view is described on the command line.

@@ -1,5 +1,6 @@
 //! The bake: from a [`TreeInput`] to a [`LodRecord`] (paper, §4–5.1).
 
+use super::impostor::{CrownImpostor, ImpostorOptions};
 use super::merge::{CostContext, GroupLine, MergeOptions, merge_group_lines, merge_nested_group};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
@@ -9,6 +10,7 @@ use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Quat;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -19,6 +21,15 @@ pub struct BakeOptions {
     pub max_sides: u8,
     /// Line-merging options.
     pub merge: MergeOptions,
+    /// The crown impostor baked into the record (the far representation,
+    /// [`super::impostor`]), or `None` for none (the plugin then bakes one
+    /// each time it loads the record).
+    #[serde(default = "default_impostor")]
+    pub impostor: Option<ImpostorOptions>,
+}
+
+fn default_impostor() -> Option<ImpostorOptions> {
+    Some(ImpostorOptions::default())
 }
 
 impl Default for BakeOptions {
@@ -26,6 +37,7 @@ impl Default for BakeOptions {
         Self {
             max_sides: 8,
             merge: MergeOptions::default(),
+            impostor: default_impostor(),
         }
     }
 }
@@ -82,6 +94,8 @@ pub enum BakeStage {
     MergeGroups,
     /// Merging across the tree.
     MergeTree,
+    /// Baking the crown impostor (`done` 0 when it starts, 1 when it ends).
+    Impostor,
 }
 
 /// Receives progress of a bake.
@@ -101,6 +115,8 @@ pub struct StageTimer<'a> {
     inner: &'a dyn BakeProgress,
     start: Instant,
     last: std::sync::Mutex<[Option<f64>; 2]>,
+    /// When the impostor's bake started and ended.
+    impostor: std::sync::Mutex<[Option<f64>; 2]>,
 }
 
 /// Seconds of a bake's stages, from a [`StageTimer`].
@@ -112,6 +128,9 @@ pub struct StageSeconds {
     pub merge_tree: f64,
     /// The rest of the bake: validation and building the record.
     pub record: f64,
+    /// Baking the crown impostor.
+    #[serde(default)]
+    pub impostor: f64,
 }
 
 impl<'a> StageTimer<'a> {
@@ -121,6 +140,7 @@ impl<'a> StageTimer<'a> {
             inner,
             start: Instant::now(),
             last: std::sync::Mutex::new([None, None]),
+            impostor: std::sync::Mutex::new([None, None]),
         }
     }
 
@@ -131,10 +151,15 @@ impl<'a> StageTimer<'a> {
         let last = *self.last.lock().unwrap_or_else(|e| e.into_inner());
         let groups_end = last[0].unwrap_or(0.0);
         let tree_end = last[1].unwrap_or(groups_end).max(groups_end);
+        let impostor = match *self.impostor.lock().unwrap_or_else(|e| e.into_inner()) {
+            [Some(start), Some(end)] => (end - start).max(0.0),
+            _ => 0.0,
+        };
         StageSeconds {
             merge_groups: groups_end,
             merge_tree: tree_end - groups_end,
-            record: (total - tree_end).max(0.0),
+            record: (total - tree_end - impostor).max(0.0),
+            impostor,
         }
     }
 }
@@ -145,6 +170,13 @@ impl BakeProgress for StageTimer<'_> {
         let slot = match stage {
             BakeStage::MergeGroups => 0,
             BakeStage::MergeTree => 1,
+            BakeStage::Impostor => {
+                if let Ok(mut span) = self.impostor.lock() {
+                    span[done.min(1)] = Some(now);
+                }
+                self.inner.progress(stage, done, total);
+                return;
+            }
         };
         if let Ok(mut last) = self.last.lock() {
             last[slot] = Some(last[slot].map_or(now, |t: f64| t.max(now)));
@@ -319,8 +351,21 @@ pub fn bake_prototypes(
     // What the record file stores (needles, errors and placements on their
     // codes): writing and reading the bake's record is exact.
     record = record.quantized()?;
+    if let Some(impostor) = options.impostor {
+        progress.progress(BakeStage::Impostor, 0, 1);
+        record.impostor = bake_impostor(&record, impostor)?;
+        progress.progress(BakeStage::Impostor, 1, 1);
+    }
     record.bake.bake_seconds = Some(start.elapsed().as_secs_f64());
     Ok(record)
+}
+
+/// The crown impostor of `record`'s placed needles and wood, baked with
+/// `options` (`None` where [`CrownImpostor::bake`] gives none: options out
+/// of range).
+pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Result<Option<Arc<CrownImpostor>>, RecordInvalid> {
+    let flat = record.flatten()?;
+    Ok(CrownImpostor::bake(&flat.needles, &flat.wood, options).map(Arc::new))
 }
 
 #[cfg(test)]
@@ -343,8 +388,12 @@ mod tests {
         let total = timer.start.elapsed().as_secs_f64();
         let s = timer.seconds(total);
         assert!(!record.merged.is_empty());
-        assert!(s.merge_groups > 0.0 && s.merge_tree > 0.0 && s.record >= 0.0, "{s:?}");
-        assert!((s.merge_groups + s.merge_tree + s.record - total).abs() < 1e-9);
+        assert!(record.impostor.is_some(), "the default bake holds the impostor");
+        assert!(
+            s.merge_groups > 0.0 && s.merge_tree > 0.0 && s.record >= 0.0 && s.impostor > 0.0,
+            "{s:?}"
+        );
+        assert!((s.merge_groups + s.merge_tree + s.record + s.impostor - total).abs() < 1e-9);
         // Nothing reported: everything is the record stage.
         let idle = StageTimer::new(&());
         assert_eq!(
@@ -352,7 +401,8 @@ mod tests {
             StageSeconds {
                 merge_groups: 0.0,
                 merge_tree: 0.0,
-                record: 2.0
+                record: 2.0,
+                impostor: 0.0,
             }
         );
     }

@@ -104,14 +104,19 @@ pub const MIN_ROWS: u32 = 8;
 /// two threads).
 pub const MAX_ROWS: u32 = 512;
 
+/// Texels both sides of an impostor are whole multiples of: its first
+/// four mip levels halve exactly.
+pub const MIP_ALIGN: u32 = 16;
+
 /// How a [`CrownImpostor`] is baked.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ImpostorOptions {
     /// Views around the vertical axis (at least 1).
     pub views: u32,
     /// Side of a texel, tree-local metres (positive): the tree's height is
     /// cut into `ceil(height / texel)` rows, clamped to [`MIN_ROWS`] ..=
-    /// [`MAX_ROWS`], and the texel is then the height over the rows.
+    /// [`MAX_ROWS`], and the texel is then the height over the rows (the
+    /// picture then grows to whole multiples of [`MIP_ALIGN`] texels).
     pub texel: f32,
 }
 
@@ -354,9 +359,16 @@ impl CrownImpostor {
         if !(height > 0.0 && height.is_finite() && half_width > 0.0 && half_width.is_finite()) {
             return None;
         }
-        let rows = (height / options.texel).ceil().clamp(MIN_ROWS as f32, MAX_ROWS as f32) as u32;
-        let texel = height / rows as f32;
-        let columns = ((2.0 * half_width / texel).ceil() as u32).clamp(1, 4 * rows);
+        let tree_rows = (height / options.texel).ceil().clamp(MIN_ROWS as f32, MAX_ROWS as f32) as u32;
+        let texel = height / tree_rows as f32;
+        // Both sides are whole multiples of MIP_ALIGN texels (the box grows
+        // up and sideways with empty texels), so the first mip levels
+        // halve exactly: a level of odd size drops its last row or column
+        // and its texels no longer sit where the level below has them.
+        let rows = tree_rows.next_multiple_of(MIP_ALIGN);
+        let columns = ((2.0 * half_width / texel).ceil() as u32)
+            .clamp(1, 4 * tree_rows)
+            .next_multiple_of(MIP_ALIGN);
         let mut impostor = Self {
             views: options.views,
             columns,
@@ -644,23 +656,34 @@ mod tests {
             .map(|n| needle(n.base * 0.5, n.tip * 0.5, n.radius))
             .collect();
         let short = CrownImpostor::bake(&short, &[], options).expect("needles");
-        for impostor in [&tall, &short] {
+        // Rows over the tree itself: a whole number (the tree's height is
+        // cut into whole texels).
+        let tree_rows = |impostor: &CrownImpostor, height: f32| height / impostor.texel;
+        let heights = [tall.bottom, short.bottom].map(|bottom| -bottom);
+        for (impostor, top) in [(&tall, 10.0 + 0.05), (&short, 5.0 + 0.025)] {
             assert!(
                 impostor.texel <= options.texel && impostor.texel > 0.98 * options.texel,
                 "texel {} rows {}",
                 impostor.texel,
                 impostor.rows
             );
+            assert_eq!((impostor.rows % MIP_ALIGN, impostor.columns % MIP_ALIGN), (0, 0));
             assert!((impostor.top() - impostor.bottom - impostor.rows as f32 * impostor.texel).abs() < 1e-4);
+            // The picture holds the tree, with at most MIP_ALIGN empty
+            // rows above it.
+            let above = (impostor.top() - top) / impostor.texel;
+            assert!((-0.5..MIP_ALIGN as f32 + 0.5).contains(&above), "{above} rows above the tree");
         }
-        assert!(tall.rows as f32 > 1.9 * short.rows as f32, "{} and {} rows", tall.rows, short.rows);
-        // A 20 cm tree keeps MIN_ROWS rows, a 100 m one MAX_ROWS.
+        let (tall_rows, short_rows) = (tree_rows(&tall, 10.05 + heights[0]), tree_rows(&short, 5.025 + heights[1]));
+        assert!(tall_rows > 1.9 * short_rows, "{tall_rows} and {short_rows} rows");
+        // A 20 cm tree gets MIN_ROWS rows over it, a 100 m one MAX_ROWS.
         let tiny = [needle(Vec3::ZERO, Vec3::Y * 0.2, 0.01)];
-        assert_eq!(CrownImpostor::bake(&tiny, &[], options).expect("needle").rows, MIN_ROWS);
+        let tiny = CrownImpostor::bake(&tiny, &[], options).expect("needle");
+        assert!((tiny.texel - 0.22 / MIN_ROWS as f32).abs() < 1e-5, "{}", tiny.texel);
         let giant = [needle(Vec3::ZERO, Vec3::Y * 100.0, 0.01)];
         let giant = CrownImpostor::bake(&giant, &[], options).expect("needle");
         assert_eq!(giant.rows, MAX_ROWS);
-        assert!(giant.texel > options.texel);
+        assert!((giant.texel - 100.02 / MAX_ROWS as f32).abs() < 1e-4, "{}", giant.texel);
     }
 
     #[test]
@@ -793,14 +816,20 @@ mod tests {
             (ours / reference - 1.0).abs() < 0.05,
             "summed coverage {ours} vs exact {reference}"
         );
-        // The trunk below the crown is opaque wood in the impostor.
-        let (column, row) = impostor.project(0, Vec3::new(0.0, -1.0, 0.0));
-        let trunk_texel = impostor.texel_at(0, column as u32, row as u32).expect("inside");
-        assert!(
-            trunk_texel.coverage > 0.95 && trunk_texel.wood > 0.95,
-            "{trunk_texel:?}"
-        );
-        assert!(trunk_texel.axis.y > 0.99, "{trunk_texel:?}");
+        // The trunk below the crown is wood in the impostor: across the row
+        // 1 m below the crown, texels cover its width (0.369 m there) and
+        // what covers them is upright wood.
+        let (_, row) = impostor.project(0, Vec3::new(0.0, -1.0, 0.0));
+        let texels: Vec<ImpostorTexel> = (0..impostor.columns)
+            .filter_map(|column| impostor.texel_at(0, column, row as u32))
+            .filter(|t| t.coverage > 0.0)
+            .collect();
+        let width: f32 = texels.iter().map(|t| t.coverage).sum::<f32>() * impostor.texel;
+        assert!((width / 0.369 - 1.0).abs() < 0.1, "trunk {width} m wide");
+        for texel in &texels {
+            assert!((texel.wood - texel.coverage).abs() < 0.01, "{texel:?}");
+            assert!(texel.axis.y > 0.99, "{texel:?}");
+        }
     }
 
     #[test]

@@ -35,7 +35,9 @@ pub mod shading;
 pub mod view;
 pub mod wind;
 
-pub use bake::{BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_prototypes};
+pub use bake::{
+    BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_impostor, bake_prototypes,
+};
 pub use cut_count::{CutCounter, CutCounts};
 pub use file::{
     RecordError, decode_prototype_record, decode_record, encode_prototype_record, encode_record, read_prototype_record,

@@ -284,6 +284,10 @@ pub struct PrototypeRecord {
     pub max_sides: u8,
     /// How the record was made.
     pub bake: BakeInfo,
+    /// The crown impostor baked with the record
+    /// ([`super::impostor::CrownImpostor`], the far representation), if
+    /// any: the plugin bakes one at load where it is `None`.
+    pub impostor: Option<std::sync::Arc<super::impostor::CrownImpostor>>,
     // Derived by `from_parts`, never stored.
     /// Placed needles before placement `p` (`placements + 1` entries).
     needle_offset: Vec<u64>,
@@ -373,6 +377,7 @@ impl PrototypeRecord {
             material,
             max_sides,
             bake,
+            impostor: None,
             needle_offset,
             merged_offset,
             tree_parent: Vec::new(),
@@ -550,6 +555,10 @@ impl PrototypeRecord {
             self.max_sides,
             self.bake.clone(),
         )
+        .map(|mut flat| {
+            flat.impostor = self.impostor.clone();
+            flat
+        })
     }
 
     /// The cut at spatial error `e` (tree metres), walked down the level-2
@@ -728,6 +737,10 @@ impl PrototypeRecord {
             record.max_sides,
             record.bake.clone(),
         )
+        .map(|mut prototypes| {
+            prototypes.impostor = record.impostor.clone();
+            prototypes
+        })
     }
 }
 

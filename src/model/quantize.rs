@@ -587,7 +587,7 @@ impl PrototypeRecord {
         let prototypes: Vec<Prototype> = prototypes.into_iter().map(|(p, _)| p).collect();
         let tree_merged = tree.lines;
         let (wood_mesh, mesh_grid) = quantize_mesh_on_grid(&self.wood_mesh).ok_or(RecordInvalid::BadWoodMesh)?;
-        let record = PrototypeRecord::from_parts(
+        let mut record = PrototypeRecord::from_parts(
             self.name.clone(),
             prototypes,
             placements,
@@ -598,6 +598,8 @@ impl PrototypeRecord {
             self.max_sides,
             self.bake.clone(),
         )?;
+        // Baked from the needles as stored: quantizing keeps it.
+        record.impostor = self.impostor.clone();
         Ok(QuantizedRecord {
             record,
             prototype_grids,

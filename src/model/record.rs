@@ -95,6 +95,10 @@ pub struct LodRecord {
     pub max_sides: u8,
     /// How the record was made.
     pub bake: BakeInfo,
+    /// The crown impostor baked with the record
+    /// ([`super::impostor::CrownImpostor`], the far representation), if
+    /// any: the plugin bakes one at load where it is `None`.
+    pub impostor: Option<std::sync::Arc<super::impostor::CrownImpostor>>,
     // Derived from the above by `from_parts`, never stored.
     parent: Vec<u32>,
     merged_needles: Vec<u32>,
@@ -319,6 +323,7 @@ impl LodRecord {
             material,
             max_sides,
             bake,
+            impostor: None,
             parent,
             merged_needles,
             merged_area,

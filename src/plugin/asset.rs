@@ -33,9 +33,10 @@ pub struct ConiferSpecies {
     /// ([`crate::model::compact`]); a tree of shared prototypes keeps them
     /// shared.
     pub compact: Arc<CompactSpecies>,
-    /// The far representation ([`crate::model::impostor`]), baked from the
-    /// needles and wood when the record loads (`None` when they have no
-    /// extent).
+    /// The far representation ([`crate::model::impostor`]): the one the
+    /// record was baked with ([`crate::model::BakeOptions::impostor`]),
+    /// else baked from the needles and wood when the record loads (`None`
+    /// when they have no extent). The record's own is moved here.
     pub impostor: Option<Arc<CrownImpostor>>,
     /// The tree as the wind sees it ([`crate::model::wind::WindShape`]):
     /// its box; its trunk stands where its lowest wood starts, or under the
@@ -106,7 +107,8 @@ impl AssetLoader for ConiferRecordLoader {
 impl ConiferSpecies {
     /// A species from a record made in code (e.g. baked at build time or
     /// at startup). Add it to `Assets<ConiferSpecies>` and spawn
-    /// [`super::ConiferFoliage`] with the handle.
+    /// [`super::ConiferFoliage`] with the handle. A record without an
+    /// impostor gets one baked here (seconds for a mature tree).
     pub fn from_record(record: LodRecord) -> Result<Self, ConiferLoadError> {
         Self::new(record, None)
     }
@@ -132,7 +134,11 @@ impl ConiferSpecies {
         self
     }
 
-    fn new(record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
+    fn new(mut record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
+        // The record's own impostor (baked with it), else one baked now.
+        let impostor = record.impostor.take().or_else(|| {
+            CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new)
+        });
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();
         let margin = Vec3::splat(ranges.original_lines.max * 0.5);
@@ -157,7 +163,7 @@ impl ConiferSpecies {
             max_line_error: ranges.original_lines.max,
             min_line_error: ranges.original_lines.min,
             compact: Arc::new(compact),
-            impostor: CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new),
+            impostor,
             record: Arc::new(record),
         })
     }
