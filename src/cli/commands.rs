@@ -147,7 +147,8 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let [direction, distance, needle_count] = args.weights[..] else {
         bail!("--weights takes three numbers k1,k2,k3");
     };
-    if !args.no_impostor && !(args.impostor_texel > 0.0 && args.impostor_texel.is_finite() && args.impostor_views > 0) {
+    let impostor_valid = args.impostor_texel > 0.0 && args.impostor_texel.is_finite() && args.impostor_views > 0;
+    if !(args.no_impostor || impostor_valid) {
         bail!("--impostor-texel takes a positive number of metres and --impostor-views a positive count");
     }
     let mut options = BakeOptions {

@@ -363,7 +363,10 @@ pub fn bake_prototypes(
 /// The crown impostor of `record`'s placed needles and wood, baked with
 /// `options` (`None` where [`CrownImpostor::bake`] gives none: options out
 /// of range).
-pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Result<Option<Arc<CrownImpostor>>, RecordInvalid> {
+pub fn bake_impostor(
+    record: &PrototypeRecord,
+    options: ImpostorOptions,
+) -> Result<Option<Arc<CrownImpostor>>, RecordInvalid> {
     let flat = record.flatten()?;
     Ok(CrownImpostor::bake(&flat.needles, &flat.wood, options).map(Arc::new))
 }

@@ -57,6 +57,7 @@
 //! never a panic or an allocation beyond the file's own size (plus the
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
+use super::impostor::CrownImpostor;
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
@@ -67,10 +68,9 @@ use super::quantize::{
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use super::impostor::CrownImpostor;
 use std::io::{Read, Write};
-use std::sync::Arc;
 use std::path::Path;
+use std::sync::Arc;
 
 /// First eight bytes of every record file.
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
@@ -314,7 +314,8 @@ impl StoredImpostor {
             .filter(|&bytes| bytes <= MAX_STORED_IMPOSTOR_BYTES)
             .ok_or_else(|| malformed("too many texels"))?;
         let frame = [self.axis[0], self.axis[1], self.half_width, self.bottom, self.texel];
-        if !frame.iter().all(|v| v.is_finite()) || !(self.texel > 0.0 && self.half_width > 0.0) {
+        let positive = self.texel > 0.0 && self.half_width > 0.0;
+        if !(positive && frame.iter().all(|v| v.is_finite())) {
             return Err(malformed("its frame is not finite and positive"));
         }
         let mut planes = Vec::with_capacity(texel_bytes as usize);
@@ -1415,7 +1416,10 @@ mod tests {
         // Without one, format 7 stores a single byte for it.
         let mut bare = record.clone();
         bare.impostor = None;
-        assert_eq!(encode_prototype_record(&bare).unwrap().len(), HEADER_BYTES + v6.len() + 1);
+        assert_eq!(
+            encode_prototype_record(&bare).unwrap().len(),
+            HEADER_BYTES + v6.len() + 1
+        );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
         let with = |edit: &dyn Fn(&mut StoredImpostor)| {
@@ -1426,7 +1430,8 @@ mod tests {
             decode_prototype_record(&file_of_version(7, &body))
         };
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
-        let edits: [(&str, &dyn Fn(&mut StoredImpostor)); 6] = [
+        type Edit<'a> = (&'a str, &'a dyn Fn(&mut StoredImpostor));
+        let edits: [Edit; 6] = [
             ("no views", &|s| s.views = 0),
             ("a texel more", &|s| s.columns += 1),
             ("a huge frame", &|s| (s.rows, s.columns) = (u32::MAX, u32::MAX)),

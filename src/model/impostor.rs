@@ -672,9 +672,15 @@ mod tests {
             // The picture holds the tree, with at most MIP_ALIGN empty
             // rows above it.
             let above = (impostor.top() - top) / impostor.texel;
-            assert!((-0.5..MIP_ALIGN as f32 + 0.5).contains(&above), "{above} rows above the tree");
+            assert!(
+                (-0.5..MIP_ALIGN as f32 + 0.5).contains(&above),
+                "{above} rows above the tree"
+            );
         }
-        let (tall_rows, short_rows) = (tree_rows(&tall, 10.05 + heights[0]), tree_rows(&short, 5.025 + heights[1]));
+        let (tall_rows, short_rows) = (
+            tree_rows(&tall, 10.05 + heights[0]),
+            tree_rows(&short, 5.025 + heights[1]),
+        );
         assert!(tall_rows > 1.9 * short_rows, "{tall_rows} and {short_rows} rows");
         // A 20 cm tree gets MIN_ROWS rows over it, a 100 m one MAX_ROWS.
         let tiny = [needle(Vec3::ZERO, Vec3::Y * 0.2, 0.01)];
@@ -690,7 +696,10 @@ mod tests {
     fn a_sparse_crown_keeps_its_needles_area_and_a_dense_one_saturates() {
         // Few thin needles: coverage adds up to their area (no overlap).
         let sparse = cone(2_000, 0.0005);
-        let options = ImpostorOptions { views: 4, texel: 10.0 / 64.0 };
+        let options = ImpostorOptions {
+            views: 4,
+            texel: 10.0 / 64.0,
+        };
         let impostor = CrownImpostor::bake(&sparse, &[], options).expect("needles");
         let area: f32 = sparse.iter().map(|n| 2.0 * n.radius * (n.tip - n.base).length()).sum();
         for view in 0..4 {
@@ -726,7 +735,10 @@ mod tests {
                 })
                 .collect()
         };
-        let options = ImpostorOptions { views: 4, texel: 10.0 / 64.0 };
+        let options = ImpostorOptions {
+            views: 4,
+            texel: 10.0 / 64.0,
+        };
         let covered = |needles: &[Needle]| {
             let impostor = CrownImpostor::bake(needles, &[], options).expect("needles");
             impostor.coverage_grid(0).coverage.iter().sum::<f32>() * impostor.texel.powi(2)
@@ -796,7 +808,10 @@ mod tests {
             start_radius: 0.2,
             end_radius: 0.03,
         };
-        let options = ImpostorOptions { views: 8, texel: 12.1 / 48.0 };
+        let options = ImpostorOptions {
+            views: 8,
+            texel: 12.1 / 48.0,
+        };
         let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
         let exact = side_coverage(
             &needles,
@@ -906,8 +921,15 @@ mod tests {
 
     #[test]
     fn the_footprint_filter_is_the_pixels_box_where_one_trilinear_sample_blurs() {
-        let impostor =
-            CrownImpostor::bake(&cone(40_000, 0.004), &[], ImpostorOptions { views: 1, texel: 10.0 / 96.0 }).expect("needles");
+        let impostor = CrownImpostor::bake(
+            &cone(40_000, 0.004),
+            &[],
+            ImpostorOptions {
+                views: 1,
+                texel: 10.0 / 96.0,
+            },
+        )
+        .expect("needles");
         let mips = ImpostorMips::new(&impostor);
         assert_eq!(mips.size(), (impostor.columns, impostor.rows));
         let size = Vec2::new(impostor.columns as f32, impostor.rows as f32);

@@ -314,14 +314,12 @@ fn each_sample_in(
                 }
                 continue;
             }
-            let (u, v) = (
-                a.x + (low - offset) / direction.x,
-                a.x + (high - offset) / direction.x,
-            );
+            let (u, v) = (a.x + (low - offset) / direction.x, a.x + (high - offset) / direction.x);
             x0 = x0.max(u.min(v));
             x1 = x1.min(u.max(v));
         }
-        if !(x0 <= x1) {
+        // Empty (or NaN) span: nothing on this row.
+        if x0.partial_cmp(&x1).is_none_or(|order| order.is_gt()) {
             continue;
         }
         let (first, last) = (((x0 - 0.5).ceil() as i64).max(i0), ((x1 - 0.5).floor() as i64).min(i1));

@@ -136,9 +136,10 @@ impl ConiferSpecies {
 
     fn new(mut record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
         // The record's own impostor (baked with it), else one baked now.
-        let impostor = record.impostor.take().or_else(|| {
-            CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new)
-        });
+        let impostor = record
+            .impostor
+            .take()
+            .or_else(|| CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new));
         let ranges = record.part_ranges();
         let (lo, hi) = record.bounds();
         let margin = Vec3::splat(ranges.original_lines.max * 0.5);
