@@ -135,6 +135,9 @@ pub struct BakeStages {
     pub merge_tree: f64,
     /// Validation and record assembly.
     pub record: f64,
+    /// Baking the crown impostor into the record.
+    #[serde(default)]
+    pub impostor: f64,
     /// Encoding and writing the file.
     pub write: f64,
 }
@@ -428,6 +431,7 @@ fn bake_child(conifer: &Path, needles: usize, flat: bool, dir: &Path) -> Result<
             merge_groups: stage("merge_groups"),
             merge_tree: stage("merge_tree"),
             record: stage("record"),
+            impostor: stage("impostor"),
             write: number("write_seconds"),
         },
         file_bytes: number("bytes") as u64,
@@ -792,6 +796,7 @@ fn write_plots(
             prototypes,
             series("merge level 1 (groups)", &|b| b.stages.merge_groups),
             series("merge level 2 (tree)", &|b| b.stages.merge_tree),
+            series("crown impostor", &|b| b.stages.impostor),
             series("generate", &|b| b.stages.generate),
             series("write", &|b| b.stages.write),
         ],
