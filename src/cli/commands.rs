@@ -295,8 +295,7 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
             continue;
         }
         if record.impostor.is_none() && !args.no_impostor {
-            record.impostor = crate::model::bake_impostor(&record, Default::default())
-                .with_context(|| format!("{}: cannot bake its impostor", path.display()))?;
+            record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
         let written = write_prototype_record(&record, path)
             .with_context(|| format!("{}: cannot write record", path.display()))?;

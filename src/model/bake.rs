@@ -353,7 +353,7 @@ pub fn bake_prototypes(
     record = record.quantized()?;
     if let Some(impostor) = options.impostor {
         progress.progress(BakeStage::Impostor, 0, 1);
-        record.impostor = bake_impostor(&record, impostor)?;
+        record.impostor = bake_impostor(&record, impostor);
         progress.progress(BakeStage::Impostor, 1, 1);
     }
     record.bake.bake_seconds = Some(start.elapsed().as_secs_f64());
@@ -363,12 +363,8 @@ pub fn bake_prototypes(
 /// The crown impostor of `record`'s placed needles and wood, baked with
 /// `options` (`None` where [`CrownImpostor::bake`] gives none: options out
 /// of range).
-pub fn bake_impostor(
-    record: &PrototypeRecord,
-    options: ImpostorOptions,
-) -> Result<Option<Arc<CrownImpostor>>, RecordInvalid> {
-    let flat = record.flatten()?;
-    Ok(CrownImpostor::bake(&flat.needles, &flat.wood, options).map(Arc::new))
+pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Option<Arc<CrownImpostor>> {
+    CrownImpostor::bake(&record.placed_needles(), &record.wood, options).map(Arc::new)
 }
 
 #[cfg(test)]

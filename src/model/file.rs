@@ -973,10 +973,7 @@ pub fn decode_prototype_record(bytes: &[u8]) -> Result<PrototypeRecord, RecordEr
     if version == 2 {
         return Ok(PrototypeRecord::from_flat(&decode_v2(body)?)?);
     }
-    let (payload, appearance, impostor) = decode_payload(version, body)?;
-    let mut record = payload_to_prototype_record(payload, appearance)?;
-    record.impostor = impostor.map(Arc::new);
-    Ok(record)
+    decode_prototypes(version, body)
 }
 
 /// Decodes the bytes of a record file as a flat record (placements expanded).
@@ -985,10 +982,16 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
     if version == 2 {
         return decode_v2(body);
     }
+    Ok(decode_prototypes(version, body)?.flatten()?)
+}
+
+/// The tree of prototypes a format 3–7 payload holds, with what formats 5
+/// and 7 store after it.
+fn decode_prototypes(version: u32, body: &[u8]) -> Result<PrototypeRecord, RecordError> {
     let (payload, appearance, impostor) = decode_payload(version, body)?;
     let mut record = payload_to_prototype_record(payload, appearance)?;
     record.impostor = impostor.map(Arc::new);
-    Ok(record.flatten()?)
+    Ok(record)
 }
 
 /// A format 3–7 payload, and what formats 5 and 7 store after it (the

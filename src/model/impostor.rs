@@ -650,17 +650,14 @@ mod tests {
         let options = ImpostorOptions::default();
         // Cones 10 m tall and half that: the same texel (the height over
         // whole rows), so both turn into impostors at the same pixel error.
-        let tall = CrownImpostor::bake(&cone(2_000, 0.001), &[], options).expect("needles");
-        let short: Vec<Needle> = cone(2_000, 0.001)
+        let tall: Vec<Needle> = cone(2_000, 0.001);
+        let short: Vec<Needle> = tall
             .iter()
             .map(|n| needle(n.base * 0.5, n.tip * 0.5, n.radius))
             .collect();
-        let short = CrownImpostor::bake(&short, &[], options).expect("needles");
-        // Rows over the tree itself: a whole number (the tree's height is
-        // cut into whole texels).
-        let tree_rows = |impostor: &CrownImpostor, height: f32| height / impostor.texel;
-        let heights = [tall.bottom, short.bottom].map(|bottom| -bottom);
-        for (impostor, top) in [(&tall, 10.0 + 0.05), (&short, 5.0 + 0.025)] {
+        let mut tree_rows = Vec::new();
+        for needles in [&tall, &short] {
+            let impostor = CrownImpostor::bake(needles, &[], options).expect("needles");
             assert!(
                 impostor.texel <= options.texel && impostor.texel > 0.98 * options.texel,
                 "texel {} rows {}",
@@ -669,19 +666,22 @@ mod tests {
             );
             assert_eq!((impostor.rows % MIP_ALIGN, impostor.columns % MIP_ALIGN), (0, 0));
             assert!((impostor.top() - impostor.bottom - impostor.rows as f32 * impostor.texel).abs() < 1e-4);
-            // The picture holds the tree, with at most MIP_ALIGN empty
-            // rows above it.
-            let above = (impostor.top() - top) / impostor.texel;
+            // The tree's height is cut into whole texels, and the picture
+            // holds it with at most MIP_ALIGN empty rows above it.
+            let tree_top = needles
+                .iter()
+                .flat_map(|n| [n.base.y + n.radius, n.tip.y + n.radius])
+                .fold(f32::NEG_INFINITY, f32::max);
+            let rows = (tree_top - impostor.bottom) / impostor.texel;
+            assert!((rows - rows.round()).abs() < 1e-2, "{rows} rows over the tree");
+            let above = impostor.rows as f32 - rows;
             assert!(
                 (-0.5..MIP_ALIGN as f32 + 0.5).contains(&above),
                 "{above} rows above the tree"
             );
+            tree_rows.push(rows);
         }
-        let (tall_rows, short_rows) = (
-            tree_rows(&tall, 10.05 + heights[0]),
-            tree_rows(&short, 5.025 + heights[1]),
-        );
-        assert!(tall_rows > 1.9 * short_rows, "{tall_rows} and {short_rows} rows");
+        assert!(tree_rows[0] > 1.9 * tree_rows[1], "{tree_rows:?} rows");
         // A 20 cm tree gets MIN_ROWS rows over it, a 100 m one MAX_ROWS.
         let tiny = [needle(Vec3::ZERO, Vec3::Y * 0.2, 0.01)];
         let tiny = CrownImpostor::bake(&tiny, &[], options).expect("needle");

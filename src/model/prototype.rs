@@ -520,15 +520,23 @@ impl PrototypeRecord {
         }
     }
 
-    /// The flat record of the same tree: every placement expanded (see the
-    /// module docs for its numbering). Its cut at any error equals
-    /// [`PrototypeRecord::cut`]'s.
-    pub fn flatten(&self) -> Result<LodRecord, RecordInvalid> {
+    /// Every placement's needles placed, in placement order, each in the
+    /// group of its placement: the needles of [`PrototypeRecord::flatten`]
+    /// without its lines.
+    pub fn placed_needles(&self) -> Vec<Needle> {
         let mut needles = Vec::with_capacity(self.needle_count() as usize);
         for (p, placement) in self.placements.iter().enumerate() {
             let prototype = &self.prototypes[placement.prototype as usize];
             needles.extend(prototype.needles.iter().map(|n| placement.place_needle(n, p as u32)));
         }
+        needles
+    }
+
+    /// The flat record of the same tree: every placement expanded (see the
+    /// module docs for its numbering). Its cut at any error equals
+    /// [`PrototypeRecord::cut`]'s.
+    pub fn flatten(&self) -> Result<LodRecord, RecordInvalid> {
+        let needles = self.placed_needles();
         let level1 = *self.merged_offset.last().unwrap_or(&0) as usize;
         let mut merged = Vec::with_capacity(level1 + self.tree_merged.len());
         for (p, placement) in self.placements.iter().enumerate() {

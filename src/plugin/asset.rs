@@ -124,8 +124,8 @@ impl ConiferSpecies {
     }
 
     /// The species with its crown impostor baked again with `options`
-    /// (the constructors bake [`ImpostorOptions::default`]: 8 views, 10 cm
-    /// texels): finer texels for a tree seen large from far away, coarser
+    /// (the constructors take the record's own, else bake
+    /// [`ImpostorOptions::default`]: 8 views, 10 cm texels): finer texels for a tree seen large from far away, coarser
     /// ones to save memory, or a tree that turns into its impostor at
     /// another pixel error (the fade follows the texel,
     /// [`crate::model::impostor::FADE_START`]).
