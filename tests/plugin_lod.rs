@@ -508,8 +508,8 @@ fn debug_overlay_switches_colours_and_counts_the_cut() {
     let species = loaded_species(&app, &handle);
     let mut expected = (0, 0, 0, 0);
     for entity in [tree, far] {
-        let cut = species.record.cut(state(&app, entity).min_spatial_error);
-        let s = species.record.cut_stats(&cut);
+        let cut = species.record().cut(state(&app, entity).min_spatial_error);
+        let s = species.record().cut_stats(&cut);
         expected.0 += s.prisms;
         expected.1 += s.triangles;
         expected.2 += s.lines_original;
@@ -925,7 +925,7 @@ fn presets_load_without_files_and_come_back_from_the_cache() {
     wait_for(&mut run, &handle).unwrap();
     let baked = preset.bake().unwrap().flatten().unwrap();
     let species = loaded_species(&run, &handle);
-    assert_eq!(species.record.needles, baked.needles, "the preset's own tree");
+    assert_eq!(species.record().needles, baked.needles, "the preset's own tree");
     let tree = run
         .world_mut()
         .spawn((ConiferFoliage(handle), Transform::default()))
@@ -949,7 +949,7 @@ fn presets_load_without_files_and_come_back_from_the_cache() {
     wait_for(&mut run, &handle).unwrap();
     let species = loaded_species(&run, &handle);
     assert_eq!(
-        species.record.needles,
+        species.record().needles,
         other.flatten().unwrap().needles,
         "read from the cache"
     );
@@ -960,7 +960,7 @@ fn presets_load_without_files_and_come_back_from_the_cache() {
     let handle = load_preset(&mut run, &preset.to_string());
     wait_for(&mut run, &handle).unwrap();
     let species = loaded_species(&run, &handle);
-    assert_eq!(species.record.needles, baked.needles);
+    assert_eq!(species.record().needles, baked.needles);
     let on_disk = bevy_conifer_lod::model::read_prototype_record(&cached).unwrap();
     assert_eq!(
         on_disk.flatten().unwrap().needles,

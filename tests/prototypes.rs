@@ -123,7 +123,7 @@ proptest! {
         // interval ends within 0.2 % of the error (code rounding).
         let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap().quantized().unwrap();
         let flat = record.flatten().unwrap();
-        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        let compact = CompactSpecies::build_placed(&record).unwrap();
         for e in probe_errors(&flat) {
             for threshold in [threshold_code as fn(f32) -> u16, shader_threshold_code] {
                 let (drawn, _) = compact.placed_drawn(&record, threshold(e), e, threshold, None);
@@ -153,7 +153,7 @@ proptest! {
         // ancestors'), one at the tree sphere's centre, one beyond range.
         let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap().quantized().unwrap();
         let flat = record.flatten().unwrap();
-        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        let compact = CompactSpecies::build_placed(&record).unwrap();
         let level2 = (record.placements.len() + record.tree_merged.len()) as u32;
         // Each sphere holds its children's (with room to spare for
         // rounding), and the tree's holds them all.

@@ -193,7 +193,7 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
         .resource::<Assets<ConiferSpecies>>()
         .get(id)
         .unwrap()
-        .record
+        .record()
         .clone();
     let compact = CompactSpecies::build(&record).unwrap();
     let per_needle = species_bytes as f64 / scene.needles as f64;
@@ -477,7 +477,7 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
         let species = scene.renderer.world().resource::<Assets<ConiferSpecies>>();
         if species
             .get(&scene.species)
-            .is_some_and(|s| s.record.needle_count() == record.needle_count())
+            .is_some_and(|s| s.needle_count == record.needle_count() as u64)
         {
             reloaded = Some(());
             break;

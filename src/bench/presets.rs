@@ -138,7 +138,7 @@ pub fn preset_figures(needles: Option<usize>, trees: usize, cache: &Path) -> Pre
     let needles_loaded = handles
         .iter()
         .filter_map(|h| species.get(h))
-        .map(|s| s.record.needles.len())
+        .map(|s| s.needle_count as usize)
         .sum();
     let idle: Vec<f64> = (0..baking.len().max(10))
         .map(|_| {

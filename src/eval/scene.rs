@@ -382,7 +382,7 @@ impl EvalScene {
     ) -> Result<Self, EvalError> {
         let wind = wind.filter(|w| !w.model().is_calm());
         let (mut renderer, species) = renderer_with_species(record, &view)?;
-        let record = species.record.clone();
+        let record = species.record().clone();
         let impostor_texel = species.impostor.as_ref().map(|i| i.texel);
         let wind_shape = species.wind_shape;
         let mut methods: Vec<Method> = methods.to_vec();

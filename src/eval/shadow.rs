@@ -130,9 +130,9 @@ impl ShadowScene {
                     ..wind
                 });
                 let sway = sway_at(&wind.model(), &species.wind_shape, SHADOW_WIND_SECONDS);
-                Arc::new(swayed_record(&species.record, sway))
+                Arc::new(swayed_record(species.record(), sway))
             }
-            None => species.record.clone(),
+            None => species.record().clone(),
         };
         let world = renderer.world_mut();
         world.insert_resource(GlobalAmbientLight {

@@ -79,6 +79,10 @@ pub enum CompactError {
     /// covers (beyond 65 km, or not finite).
     #[error("the record's {0} are out of the GPU layout's range")]
     OutOfRange(&'static str),
+    /// A prototype record whose prototypes are not shared did not flatten
+    /// for the flat layout.
+    #[error("the record does not flatten: {0}")]
+    Flatten(#[from] super::record::RecordInvalid),
 }
 
 /// A species' compact GPU arrays (see the module documentation).
@@ -447,9 +451,13 @@ fn merged_line_codes(record: &LodRecord, node: u32) -> Result<(u16, u16), Compac
 /// summed side area over its length.
 fn merged_line_width(record: &LodRecord, node: u32) -> Result<u16, CompactError> {
     let [(a, _), (b, _)] = record.node_ends(node);
-    let length = a.distance(b).max(1e-9);
-    log_encode_nearest((record.node_needle_area(node) / length).min(LOG_CODE_MAX))
-        .ok_or(CompactError::OutOfRange("line widths"))
+    line_width_code(record.node_needle_area(node), a.distance(b))
+}
+
+/// Equivalent width code of a line of `length` standing for needles of
+/// summed side area `area`.
+fn line_width_code(area: f32, length: f32) -> Result<u16, CompactError> {
+    log_encode_nearest((area / length.max(1e-9)).min(LOG_CODE_MAX)).ok_or(CompactError::OutOfRange("line widths"))
 }
 
 /// The three words of a merged line: its two end references with the width
@@ -837,20 +845,34 @@ impl CompactSpecies {
     /// section holds its level-2 merged lines (each with its two ends as a
     /// needle that is never drawn) and wood; each prototype's needles and
     /// level-1 lines are stored once, in its own frame, and placed by the
-    /// GPU. `flat` is `record.flatten()` (the level-2 lines' ends and areas
-    /// come from it).
+    /// GPU. The tree is never flattened: the level-2 lines' ends are placed
+    /// from their prototypes and their areas are the placements' scaled
+    /// ([`PrototypeRecord::tree_node_areas`]); node ids are those of
+    /// [`PrototypeRecord::flatten`].
     ///
     /// A record whose prototypes are not shared (every placement its own
     /// prototype) or that has more than [`MAX_PLACED_PROTOTYPES`]
     /// prototypes or [`MAX_PLACEMENTS`] placements gets the flat layout
-    /// ([`CompactSpecies::build`]) of `flat`.
-    pub fn build_placed(record: &PrototypeRecord, flat: &LodRecord) -> Result<Self, CompactError> {
+    /// ([`CompactSpecies::build`]) of its flattened tree.
+    pub fn build_placed(record: &PrototypeRecord) -> Result<Self, CompactError> {
         let k_count = record.prototypes.len();
         let p_count = record.placements.len();
         if k_count >= p_count || k_count > MAX_PLACED_PROTOTYPES || p_count > MAX_PLACEMENTS {
-            return Self::build(flat);
+            return Self::build(&record.flatten()?);
         }
-        let level2_first = (flat.node_count() - record.tree_merged.len()) as u32;
+        let level2_first = record.flat_tree_node(p_count as u32);
+        let areas = record.tree_node_areas();
+        // Code of level-2 node `node`'s parent, as `parent_code` gives the
+        // flattened node's.
+        let tree_parent_code = |node: u32| -> Result<u16, CompactError> {
+            match record.tree_parent(node) {
+                NO_PARENT => Ok(ROOT_PARENT_CODE),
+                parent => Ok(
+                    code_at_least(record.tree_merged[parent as usize - p_count].error, "errors")?
+                        .min(MAX_THRESHOLD_CODE),
+                ),
+            }
+        };
         // The tree's section: a pseudo-needle per drawable level-2 line,
         // holding its ends, with line-error code 0 (never a prism or an
         // original line).
@@ -858,8 +880,9 @@ impl CompactSpecies {
         let mut lines = Vec::new();
         let mut merged_code_range = [u16::MAX, 0];
         for k in 0..record.tree_merged.len() as u32 {
-            let node = level2_first + k;
-            let (own, parent) = merged_line_codes(flat, node)?;
+            let node = p_count as u32 + k;
+            let own = code_at_least(record.tree_merged[k as usize].error, "errors")?.min(MAX_THRESHOLD_CODE);
+            let parent = tree_parent_code(node)?;
             merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
             // A line whose error code equals its parent's is never in a cut
             // at one code; seen from a camera, its children test its
@@ -867,10 +890,13 @@ impl CompactSpecies {
             if parent <= own {
                 continue;
             }
-            let width = merged_line_width(flat, node)?;
-            let [(a, _), (b, _)] = flat.node_ends(node);
+            let [a, b] = record.tree_merged[k as usize]
+                .ends
+                .map(|e| record.endpoint_position(e).ok_or(CompactError::OutOfRange("line ends")));
+            let (a, b) = (a?, b?);
+            let width = line_width_code(areas[node as usize], a.distance(b))?;
             ends.push([a, b]);
-            lines.push((parent, own, width, node));
+            lines.push((parent, own, width, level2_first + k));
         }
         if merged_code_range[0] > merged_code_range[1] {
             merged_code_range = [0, 0];
@@ -1003,11 +1029,10 @@ impl CompactSpecies {
         }
         // Placements by their root's parent code, descending.
         for (p, placement) in record.placements.iter().enumerate() {
-            let root = record.flat_tree_node(p as u32);
             species.placements.push(CompactPlacement {
                 prototype: placement.prototype,
                 transform: *placement,
-                parent_code: parent_code(flat, root)?,
+                parent_code: tree_parent_code(p as u32)?,
                 parent_sphere: parent_sphere(p as u32),
                 source: p as u32,
             });
@@ -1571,11 +1596,82 @@ mod tests {
             .collect()
     }
 
+    /// The placed layout is built without flattening the tree: its level-2
+    /// lines, their codes and ends, and the placements' parent codes are
+    /// those the flattened tree gives; widths agree to a code (the areas
+    /// are summed in another order); the prototype record's bounds and
+    /// radii are the flattened tree's exactly.
+    #[test]
+    fn placed_layout_from_the_prototypes_matches_the_flattened_tree() {
+        for species in [Species::ScotsPine, Species::NorwaySpruce, Species::LawsonCypress] {
+            let (record, flat) = placed_record(species, 30_000);
+            let compact = CompactSpecies::build_placed(&record).unwrap();
+            let tree_lines = compact.tree_counts[2] as usize;
+            let drawable = (flat.node_count() - record.tree_merged.len()..flat.node_count())
+                .filter(|&node| {
+                    let (own, parent) = merged_line_codes(&flat, node as u32).unwrap();
+                    own < parent
+                })
+                .count();
+            assert!(
+                tree_lines > 0 && tree_lines == drawable,
+                "{species:?}: {tree_lines} of {drawable}"
+            );
+            for slot in 0..tree_lines {
+                let node = compact.merged_source[slot];
+                let [a, b, codes] = compact.merged_lines[slot];
+                let (own, parent) = merged_line_codes(&flat, node).unwrap();
+                assert_eq!(
+                    codes,
+                    u32::from(own) | u32::from(parent) << 16,
+                    "{species:?} node {node}"
+                );
+                let width = (a >> 24 | (b >> 24) << 8) as i32;
+                let flat_width = i32::from(merged_line_width(&flat, node).unwrap());
+                assert!(
+                    (width - flat_width).abs() <= 1,
+                    "{species:?} node {node}: {width} vs {flat_width}"
+                );
+                let [w0, w1, w2, _] = compact.needles[slot];
+                let stored = [[w0 & 0xffff, w0 >> 16, w1 & 0xffff], [w1 >> 16, w2 & 0xffff, w2 >> 16]]
+                    .map(|c| c.map(|v| v as u16));
+                let ends = flat.node_ends(node).map(|(p, _)| compact.grid.encode(p));
+                assert_eq!(stored, ends, "{species:?} node {node}");
+            }
+            for placement in &compact.placements {
+                let root = record.flat_tree_node(placement.source);
+                assert_eq!(placement.parent_code, parent_code(&flat, root).unwrap());
+            }
+            // Placed through a matrix, not the quaternion: equal to float
+            // rounding of the tree's size.
+            let (lo, hi) = flat.bounds();
+            let tolerance = 1e-6 * (hi - lo).max_element();
+            let (record_lo, record_hi) = record.bounds();
+            assert!(
+                record_lo.abs_diff_eq(lo, tolerance) && record_hi.abs_diff_eq(hi, tolerance),
+                "{species:?}"
+            );
+            assert!(record.crown_center().abs_diff_eq(flat.crown_center(), tolerance));
+            let ranges = flat.part_ranges().original_lines;
+            let (lo, hi) = record.radius_range();
+            assert_eq!((line_error(lo), line_error(hi)), (ranges.min, ranges.max));
+            // The flattened tree measures each needle's length between its
+            // placed ends, metres from the origin, which loses bits a
+            // needle a few millimetres long keeps in its prototype's frame.
+            let mut worst = 0.0f32;
+            for (node, area) in record.tree_node_areas().iter().enumerate() {
+                let flat_area = flat.node_needle_area(record.flat_tree_node(node as u32));
+                worst = worst.max((area - flat_area).abs() / flat_area);
+            }
+            assert!(worst <= 1e-4, "{species:?}: {worst}");
+        }
+    }
+
     #[test]
     fn placed_layout_stores_prototypes_once_and_draws_the_prototype_cut() {
         for species in [Species::ScotsPine, Species::NorwaySpruce] {
             let (record, flat) = placed_record(species, 30_000);
-            let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+            let compact = CompactSpecies::build_placed(&record).unwrap();
             assert_eq!(compact.prototypes.len(), record.prototypes.len(), "{species:?}");
             assert_eq!(compact.placements.len(), record.placements.len());
             let stored = compact.needles.len() - compact.tree_counts[0] as usize;
@@ -1648,8 +1744,8 @@ mod tests {
 
     #[test]
     fn bands_bound_what_each_placement_processes() {
-        let (record, flat) = placed_record(Species::EasternWhitePine, 30_000);
-        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        let (record, _) = placed_record(Species::EasternWhitePine, 30_000);
+        let compact = CompactSpecies::build_placed(&record).unwrap();
         let mut overall = 1.0f64;
         for (k, prototype) in compact.prototypes.iter().enumerate() {
             let codes = compact.prototype_codes(k);
@@ -1685,8 +1781,8 @@ mod tests {
 
     #[test]
     fn merged_lines_by_own_code_are_each_prototype_s_lines_once() {
-        let (record, flat) = placed_record(Species::NorwaySpruce, 30_000);
-        let compact = CompactSpecies::build_placed(&record, &flat).unwrap();
+        let (record, _) = placed_record(Species::NorwaySpruce, 30_000);
+        let compact = CompactSpecies::build_placed(&record).unwrap();
         for (k, prototype) in compact.prototypes.iter().enumerate() {
             let [first, count] = prototype.merged_lines;
             let from = prototype.merged_by_own as usize;
@@ -1725,7 +1821,7 @@ mod tests {
     fn unshared_prototypes_get_the_flat_layout() {
         let flat = record(500, 3);
         let prototypes = PrototypeRecord::from_flat(&flat).unwrap();
-        let compact = CompactSpecies::build_placed(&prototypes, &flat).unwrap();
+        let compact = CompactSpecies::build_placed(&prototypes).unwrap();
         assert_eq!(compact, CompactSpecies::build(&flat).unwrap());
         assert!(compact.prototypes.is_empty() && compact.placements.is_empty());
     }

@@ -262,6 +262,81 @@ impl PrototypeInput {
     }
 }
 
+/// What decides, without placing its needles, whether a placement of a
+/// prototype keeps every needle valid.
+struct PrototypeExtent {
+    /// Largest coordinate magnitude of a needle end.
+    max_coordinate: f32,
+    /// Shortest needle.
+    min_length: f32,
+    /// Smallest and largest radius.
+    radii: (f32, f32),
+}
+
+impl PrototypeExtent {
+    fn of(prototype: &Prototype) -> Self {
+        let mut extent = Self {
+            max_coordinate: 0.0,
+            min_length: f32::INFINITY,
+            radii: (f32::INFINITY, 0.0),
+        };
+        for n in &prototype.needles {
+            extent.max_coordinate = extent
+                .max_coordinate
+                .max(n.base.abs().max_element())
+                .max(n.tip.abs().max_element());
+            extent.min_length = extent.min_length.min(n.length());
+            extent.radii = (extent.radii.0.min(n.radius), extent.radii.1.max(n.radius));
+        }
+        extent
+    }
+
+    /// `true` when every needle of the prototype stays valid under
+    /// `placement` (a valid placement of a valid prototype) for sure:
+    /// radii scaled stay positive and finite, and the shortest needle
+    /// scaled is far longer than the rounding of a placed end. A placed
+    /// end `q·(s·p) + t` has coordinates at most `m = √3·s·max|p| + |t|`
+    /// (a unit rotation keeps the length; to 1e-4) and is rounded by a
+    /// few ulps of `m` — 32 of them here, far more than glam's rotation
+    /// and sum take; two ends that far apart in every coordinate cannot
+    /// round to the same point, and a needle of length `L` has one
+    /// coordinate at least `L/√3` long; and lengths and reach between
+    /// 1e-18 and 1e18 m keep the squares a length is measured from clear
+    /// of underflow and overflow. `false` says nothing: the needles are
+    /// then placed and checked one by one.
+    fn places_validly(&self, placement: &Placement) -> bool {
+        const SQUARES_SAFE: f32 = 1e18;
+        let s = placement.scale;
+        let (lo, hi) = (self.radii.0 * s, self.radii.1 * s);
+        let reach = 3f32.sqrt() * 1.0001 * s * self.max_coordinate + placement.translation.abs().max_element();
+        let rounding = 32.0 * f32::EPSILON * reach;
+        let shortest = s * 0.9998 * self.min_length / 3f32.sqrt();
+        lo > 0.0 && hi.is_finite() && reach < SQUARES_SAFE && shortest > 1.0 / SQUARES_SAFE && shortest > 2.0 * rounding
+    }
+}
+
+/// Bounds of `needles`' ends placed by `placement`, through the placement
+/// as a scaled matrix (the flattened tree places them through the
+/// quaternion: the two differ by float rounding, a few ulps of the tree's
+/// size).
+fn placed_point_bounds(needles: &[Needle], placement: &Placement) -> (Vec3, Vec3) {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    if placement.is_identity() {
+        for n in needles {
+            lo = lo.min(n.base).min(n.tip);
+            hi = hi.max(n.base).max(n.tip);
+        }
+        return (lo, hi);
+    }
+    let matrix = glam::Mat3::from_quat(placement.rotation) * placement.scale;
+    for n in needles {
+        let (a, b) = (matrix * n.base, matrix * n.tip);
+        lo = lo.min(a).min(b);
+        hi = hi.max(a).max(b);
+    }
+    (lo + placement.translation, hi + placement.translation)
+}
+
 /// The LOD record of a tree made of prototypes and placements (format 3).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PrototypeRecord {
@@ -293,6 +368,8 @@ pub struct PrototypeRecord {
     needle_offset: Vec<u64>,
     /// Level-1 merged lines of the placements before `p` (`placements + 1` entries).
     merged_offset: Vec<u64>,
+    /// `(min, max)` of the placed needles' ends, tree metres.
+    needle_bounds: (Vec3, Vec3),
     /// Parent of each level-2 node (placements, then `tree_merged`).
     tree_parent: Vec<u32>,
     /// Bounding sphere of each prototype, prototype metres.
@@ -338,6 +415,8 @@ impl PrototypeRecord {
         let mut needle_offset = Vec::with_capacity(placements.len() + 1);
         let mut merged_offset = Vec::with_capacity(placements.len() + 1);
         let (mut needles, mut merged) = (0u64, 0u64);
+        let extents: Vec<PrototypeExtent> = prototypes.iter().map(PrototypeExtent::of).collect();
+        let mut needle_bounds = (Vec3::INFINITY, Vec3::NEG_INFINITY);
         for (p, placement) in placements.iter().enumerate() {
             let Some(prototype) = prototypes.get(placement.prototype as usize) else {
                 return Err(RecordInvalid::BadPlacement(p));
@@ -348,13 +427,16 @@ impl PrototypeRecord {
             // Errors are monotone, so the root's is the largest one scaled.
             if !placement.is_valid()
                 || !placed_error(prototype, prototype.root(), placement.scale).is_finite()
-                || !prototype
-                    .needles
-                    .iter()
-                    .all(|n| placement.place_needle(n, 0).is_valid())
+                || !(extents[placement.prototype as usize].places_validly(placement)
+                    || prototype
+                        .needles
+                        .iter()
+                        .all(|n| placement.place_needle(n, 0).is_valid()))
             {
                 return Err(RecordInvalid::BadPlacement(p));
             }
+            let (lo, hi) = placed_point_bounds(&prototype.needles, placement);
+            needle_bounds = (needle_bounds.0.min(lo), needle_bounds.1.max(hi));
             needle_offset.push(needles);
             merged_offset.push(merged);
             needles += prototype.needles.len() as u64;
@@ -380,6 +462,7 @@ impl PrototypeRecord {
             impostor: None,
             needle_offset,
             merged_offset,
+            needle_bounds,
             tree_parent: Vec::new(),
             prototype_spheres: Vec::new(),
             node_spheres: Vec::new(),
@@ -457,6 +540,88 @@ impl PrototypeRecord {
     /// A sphere holding every node's sphere and the wood, tree metres.
     pub fn tree_sphere(&self) -> Sphere {
         self.tree_sphere
+    }
+
+    /// Axis-aligned bounds of the placed needles' ends, `(min, max)`:
+    /// [`LodRecord::crown_center`]'s box of the flattened tree (to float
+    /// rounding), known without flattening it.
+    pub fn needle_bounds(&self) -> (Vec3, Vec3) {
+        self.needle_bounds
+    }
+
+    /// Centre of [`PrototypeRecord::needle_bounds`]: the flattened tree's
+    /// [`LodRecord::crown_center`] (to float rounding).
+    pub fn crown_center(&self) -> Vec3 {
+        (self.needle_bounds.0 + self.needle_bounds.1) * 0.5
+    }
+
+    /// Axis-aligned bounds of the placed needles and the wood, `(min,
+    /// max)`: the flattened tree's [`LodRecord::bounds`] (to float
+    /// rounding).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let wood = self.wood.iter().flat_map(|w| [w.start, w.end]);
+        let mesh = self.wood_mesh.positions.iter().copied();
+        let (lo, hi) = self.needle_bounds;
+        super::needle::bounds([lo, hi].into_iter().chain(wood).chain(mesh)).unwrap_or((lo, hi))
+    }
+
+    /// Smallest and largest placed needle radius, tree metres (a placement
+    /// scales its prototype's radii): the flattened tree's original-line
+    /// error range is `2R` of these ([`LodRecord::part_ranges`]).
+    pub fn radius_range(&self) -> (f32, f32) {
+        let mut per_prototype = vec![None; self.prototypes.len()];
+        let mut range = (f32::INFINITY, 0.0f32);
+        for placement in &self.placements {
+            let (lo, hi) = *per_prototype[placement.prototype as usize].get_or_insert_with(|| {
+                let radii = self.prototypes[placement.prototype as usize]
+                    .needles
+                    .iter()
+                    .map(|n| n.radius);
+                (radii.clone().fold(f32::INFINITY, f32::min), radii.fold(0.0, f32::max))
+            });
+            // Scaling by a positive factor keeps the order of floats, so the
+            // placed extremes are the prototype's scaled.
+            range = (range.0.min(lo * placement.scale), range.1.max(hi * placement.scale));
+        }
+        range
+    }
+
+    /// Position of flattened endpoint `end` (`2 · needle + tip`, needles
+    /// numbered as [`PrototypeRecord::flatten`] numbers them), tree metres:
+    /// the flattened tree's [`crate::model::merge::endpoint_position`].
+    /// `None` past the last needle.
+    pub fn endpoint_position(&self, end: u32) -> Option<Vec3> {
+        let needle = u64::from(end / 2);
+        if needle >= self.needle_count() {
+            return None;
+        }
+        let placement = self.needle_offset.partition_point(|&first| first <= needle) - 1;
+        let pl = &self.placements[placement];
+        let local = &self.prototypes[pl.prototype as usize].needles[(needle - self.needle_offset[placement]) as usize];
+        Some(pl.place_point(if end.is_multiple_of(2) { local.base } else { local.tip }))
+    }
+
+    /// Summed side area `2rℓ` of the needles under level-2 node `node`
+    /// (placements, then merged lines), tree metres²; one entry per node.
+    /// A placement's is its prototype's summed in `f64` and scaled by the
+    /// square of its scale, so it may differ from the flattened tree's
+    /// [`LodRecord::node_needle_area`] in the last bits.
+    pub fn tree_node_areas(&self) -> Vec<f32> {
+        let prototype_area: Vec<f64> = self
+            .prototypes
+            .iter()
+            .map(|p| p.needles.iter().map(|n| f64::from(n.side_area())).sum())
+            .collect();
+        let mut areas: Vec<f32> = self
+            .placements
+            .iter()
+            .map(|pl| (prototype_area[pl.prototype as usize] * f64::from(pl.scale) * f64::from(pl.scale)) as f32)
+            .collect();
+        for line in &self.tree_merged {
+            let area = line.children.iter().map(|&c| areas[c as usize]).sum();
+            areas.push(area);
+        }
+        areas
     }
 
     /// The spatial error `view` gives level-2 node `node`: its own
@@ -757,4 +922,108 @@ impl PrototypeRecord {
 /// and the prototype cut compare the very same numbers.
 fn placed_error(prototype: &Prototype, node: u32, scale: f32) -> f32 {
     prototype.node_error(node) * scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// The quick check never passes a placement under which a needle
+        /// degenerates: short needles far from the origin, scales from
+        /// underflow to overflow, any rotation.
+        #[test]
+        fn quick_placement_check_implies_every_needle_placed_is_valid(
+            q in prop::array::uniform4(-1.0f32..1.0),
+            log_scale in -45.0f32..40.0,
+            log_translation in -3.0f32..9.0,
+            direction in prop::array::uniform3(-1.0f32..1.0),
+            log_length in -7.0f32..0.0,
+            offset in prop::array::uniform3(-30.0f32..30.0),
+        ) {
+            let q = Quat::from_array(q);
+            prop_assume!(q.length() > 0.1);
+            let placement = Placement {
+                rotation: q.normalize(),
+                translation: Vec3::from_array(direction) * 10f32.powf(log_translation),
+                scale: 10f32.powf(log_scale),
+                ..Placement::identity(0)
+            };
+            prop_assume!(placement.is_valid());
+            let base = Vec3::from_array(offset);
+            let length = 10f32.powf(log_length);
+            let needles: Vec<Needle> = [Vec3::X, Vec3::new(0.3, 0.9, 0.1).normalize(), Vec3::Z]
+                .iter()
+                .map(|&axis| Needle { base, tip: base + axis * length, radius: 1e-4, normal: Vec3::Y, group: 0 })
+                .filter(Needle::is_valid)
+                .collect();
+            prop_assume!(!needles.is_empty());
+            let prototype = Prototype { needles: needles.clone(), merged: Vec::new() };
+            if PrototypeExtent::of(&prototype).places_validly(&placement) {
+                for needle in &needles {
+                    prop_assert!(placement.place_needle(needle, 0).is_valid(), "{needle:?} under {placement:?}");
+                }
+            }
+        }
+    }
+
+    /// Bounds through the matrix are the quaternion's to rounding; the
+    /// quick check passes an ordinary placement and leaves underflowing and
+    /// far-away ones to the needle-by-needle check.
+    #[test]
+    fn matrix_bounds_are_the_placed_needles_bounds() {
+        let needles: Vec<Needle> = (0..50)
+            .map(|i| {
+                let base = Vec3::new(i as f32 * 0.013, (i % 7) as f32 * 0.05, -(i as f32) * 0.021);
+                Needle {
+                    base,
+                    tip: base + Vec3::new(0.01, 0.02, -0.005),
+                    radius: 5e-4,
+                    normal: Vec3::Y,
+                    group: 0,
+                }
+            })
+            .collect();
+        let placement = Placement {
+            rotation: Quat::from_euler(glam::EulerRot::YXZ, 0.7, -0.4, 1.9),
+            translation: Vec3::new(3.0, 17.0, -2.0),
+            scale: 1.3,
+            ..Placement::identity(0)
+        };
+        let (lo, hi) = placed_point_bounds(&needles, &placement);
+        let (exact_lo, exact_hi) = super::super::needle::bounds(
+            needles
+                .iter()
+                .map(|n| placement.place_needle(n, 0))
+                .flat_map(|n| [n.base, n.tip]),
+        )
+        .unwrap();
+        assert!(
+            lo.abs_diff_eq(exact_lo, 1e-5) && hi.abs_diff_eq(exact_hi, 1e-5),
+            "{lo} {hi} vs {exact_lo} {exact_hi}"
+        );
+        assert_eq!(
+            placed_point_bounds(&needles, &Placement::identity(0)).0,
+            super::super::needle::bounds(needles.iter().flat_map(|n| [n.base, n.tip]))
+                .unwrap()
+                .0
+        );
+        let extent = PrototypeExtent::of(&Prototype {
+            needles: needles.clone(),
+            merged: Vec::new(),
+        });
+        assert!(extent.places_validly(&placement));
+        for scale in [1e-40, 1e-20] {
+            assert!(!extent.places_validly(&Placement { scale, ..placement }));
+        }
+        let far = Placement {
+            translation: Vec3::X * 1e6,
+            ..placement
+        };
+        assert!(
+            !extent.places_validly(&far),
+            "0.5 mm ulps swallow 2 cm needles' coordinates"
+        );
+    }
 }

@@ -336,6 +336,14 @@ fn log_step() -> f64 {
 /// `LOG_CODE_MIN · r^(code − 1)` with `r = (LOG_CODE_MAX/LOG_CODE_MIN)^(1/65534)`
 /// (neighbouring codes 0.049 % apart). Strictly increasing in `code`.
 pub fn log_decode(code: u16) -> f32 {
+    // Every code's value, computed once (256 KiB): decoding is in the
+    // inner loops of the compact layout's build.
+    static VALUES: std::sync::OnceLock<Box<[f32]>> = std::sync::OnceLock::new();
+    VALUES.get_or_init(|| (0..=u16::MAX).map(log_value).collect())[usize::from(code)]
+}
+
+/// [`log_decode`] computed.
+fn log_value(code: u16) -> f32 {
     if code == 0 {
         return 0.0;
     }

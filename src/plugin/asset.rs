@@ -2,22 +2,36 @@
 
 use crate::model::compact::{CompactError, CompactSpecies};
 use crate::model::impostor::{CrownImpostor, ImpostorOptions};
+use crate::model::metric::line_error;
 use crate::model::prism::{TriangleMesh, append_wood_segment, wood_segment_error};
 use crate::model::wind::WindShape;
-use crate::model::{LodRecord, PrototypeRecord, RecordError, WoodSegment, decode_prototype_record};
+use crate::model::{
+    FoliageMaterial, LodRecord, PrototypeRecord, RecordError, WoodSegment, bake_impostor, decode_prototype_record,
+};
 use bevy::asset::io::{AssetReaderError, Reader};
 use bevy::asset::{AssetLoadError, AssetLoadFailedEvent, AssetLoader, LoadContext, RenderAssetUsages};
 use bevy::camera::primitives::Aabb;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// One tree species, loaded from a `.conifer` record: the record itself
 /// and its compact GPU layout, which every tree of the species shares.
+///
+/// A tree of shared prototypes is kept as prototypes: drawing it never
+/// needs the flattened tree (millions of needles), which
+/// [`ConiferSpecies::record`] builds on first use only.
 #[derive(Asset, TypePath, Debug, Clone)]
 pub struct ConiferSpecies {
-    /// The LOD record (merge forest, needles, errors), flattened.
-    pub record: Arc<LodRecord>,
+    /// The tree of shared prototypes it was loaded from, if any.
+    prototypes: Option<Arc<PrototypeRecord>>,
+    /// The flattened record: set at load for a flat record, on first use
+    /// for prototypes (shared by clones).
+    flat: Arc<OnceLock<Arc<LodRecord>>>,
+    /// Appearance of the needles and wood.
+    pub material: FoliageMaterial,
+    /// Needles of the tree (placed, for prototypes).
+    pub needle_count: u64,
     /// Largest wood segment error `2·r_max`: no wood prism is drawn at or
     /// above it.
     pub max_wood_error: f32,
@@ -36,7 +50,7 @@ pub struct ConiferSpecies {
     /// The far representation ([`crate::model::impostor`]): the one the
     /// record was baked with ([`crate::model::BakeOptions::impostor`]),
     /// else baked from the needles and wood when the record loads (`None`
-    /// when they have no extent). The record's own is moved here.
+    /// when they have no extent).
     pub impostor: Option<Arc<CrownImpostor>>,
     /// The tree as the wind sees it ([`crate::model::wind::WindShape`]):
     /// its box; its trunk stands where its lowest wood starts, or under the
@@ -93,8 +107,7 @@ impl AssetLoader for ConiferRecordLoader {
     ) -> Result<ConiferSpecies, ConiferLoadError> {
         let mut bytes = Vec::new();
         reader.read_to_end(&mut bytes).await?;
-        // Shared prototypes stay shared on the GPU; the CPU-side cut uses
-        // the flattened tree.
+        // Shared prototypes stay shared on the GPU and are not flattened.
         let prototypes = decode_prototype_record(&bytes)?;
         ConiferSpecies::from_prototype_record(&prototypes)
     }
@@ -110,17 +123,58 @@ impl ConiferSpecies {
     /// [`super::ConiferFoliage`] with the handle. A record without an
     /// impostor gets one baked here (seconds for a mature tree).
     pub fn from_record(record: LodRecord) -> Result<Self, ConiferLoadError> {
-        Self::new(record, None)
+        Self::from_flat(record)
     }
 
     /// A species from a tree of shared prototypes made in code (e.g.
     /// [`crate::model::bake_prototypes`] of
     /// [`crate::generate::generate_prototypes`]), as
     /// [`ConiferSpecies::from_record`]; the GPU layout keeps its prototypes
-    /// shared.
+    /// shared, and nothing here flattens the tree.
     pub fn from_prototype_record(record: &PrototypeRecord) -> Result<Self, ConiferLoadError> {
-        let flat = record.flatten().map_err(RecordError::from)?;
-        Self::new(flat, Some(record))
+        let (min_radius, max_radius) = record.radius_range();
+        let impostor = record
+            .impostor
+            .clone()
+            .or_else(|| bake_impostor(record, ImpostorOptions::default()));
+        Self::new(
+            SpeciesParts {
+                material: record.material,
+                needle_count: record.needle_count(),
+                wood: &record.wood,
+                bounds: record.bounds(),
+                crown_center: record.crown_center(),
+                line_errors: (line_error(min_radius), line_error(max_radius)),
+                compact: CompactSpecies::build_placed(record)?,
+                impostor,
+            },
+            Some(Arc::new(record.clone())),
+            OnceLock::new(),
+        )
+    }
+
+    /// The flattened record (merge forest, needles, errors) the CPU-side
+    /// cuts, the overlay's counts and `conifer eval` use. A tree of shared
+    /// prototypes is flattened on the first call (a fraction of a second
+    /// for millions of needles), then kept.
+    pub fn record(&self) -> &Arc<LodRecord> {
+        self.flat.get_or_init(|| {
+            let prototypes = self
+                .prototypes
+                .as_ref()
+                .expect("a species without prototypes has its flat record from the start");
+            // `PrototypeRecord::from_parts` checks every invariant of the
+            // flattened tree (placed needles valid, their count bounded,
+            // the level-2 forest monotone); the `record_decode` fuzz target
+            // asserts that every decoded record flattens.
+            Arc::new(prototypes.flatten().expect("a valid tree of prototypes flattens"))
+        })
+    }
+
+    /// The tree of shared prototypes the species was loaded from (`None`
+    /// for a flat record).
+    pub fn prototypes(&self) -> Option<&Arc<PrototypeRecord>> {
+        self.prototypes.as_ref()
     }
 
     /// The species with its crown impostor baked again with `options`
@@ -130,26 +184,48 @@ impl ConiferSpecies {
     /// another pixel error (the fade follows the texel,
     /// [`crate::model::impostor::FADE_START`]).
     pub fn with_impostor(mut self, options: ImpostorOptions) -> Self {
-        self.impostor = CrownImpostor::bake(&self.record.needles, &self.record.wood, options).map(Arc::new);
+        self.impostor = match &self.prototypes {
+            Some(prototypes) => bake_impostor(prototypes, options),
+            None => {
+                let record = self.record();
+                CrownImpostor::bake(&record.needles, &record.wood, options).map(Arc::new)
+            }
+        };
         self
     }
 
-    fn new(mut record: LodRecord, prototypes: Option<&PrototypeRecord>) -> Result<Self, ConiferLoadError> {
+    fn from_flat(mut record: LodRecord) -> Result<Self, ConiferLoadError> {
         // The record's own impostor (baked with it), else one baked now.
         let impostor = record
             .impostor
             .take()
             .or_else(|| CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new));
         let ranges = record.part_ranges();
-        let (lo, hi) = record.bounds();
-        let margin = Vec3::splat(ranges.original_lines.max * 0.5);
-        let compact = match prototypes {
-            Some(prototypes) => CompactSpecies::build_placed(prototypes, &record)?,
-            None => CompactSpecies::build(&record)?,
+        let parts = SpeciesParts {
+            material: record.material,
+            needle_count: record.needle_count() as u64,
+            wood: &record.wood,
+            bounds: record.bounds(),
+            crown_center: record.crown_center(),
+            line_errors: (ranges.original_lines.min, ranges.original_lines.max),
+            compact: CompactSpecies::build(&record)?,
+            impostor,
         };
+        let species = Self::new(parts, None, OnceLock::new())?;
+        let _ = species.flat.set(Arc::new(record));
+        Ok(species)
+    }
+
+    fn new(
+        parts: SpeciesParts<'_>,
+        prototypes: Option<Arc<PrototypeRecord>>,
+        flat: OnceLock<Arc<LodRecord>>,
+    ) -> Result<Self, ConiferLoadError> {
+        let (lo, hi) = parts.bounds;
+        let margin = Vec3::splat(parts.line_errors.1 * 0.5);
         let (lo, hi) = (lo - margin, hi + margin);
-        let crown_center = record.crown_center();
-        let foot = record
+        let crown_center = parts.crown_center;
+        let foot = parts
             .wood
             .iter()
             .map(|w| w.start)
@@ -157,17 +233,34 @@ impl ConiferSpecies {
             .min_by(|a, b| a.y.total_cmp(&b.y))
             .unwrap_or(crown_center);
         Ok(Self {
-            max_wood_error: record.wood.iter().map(wood_segment_error).fold(0.0, f32::max),
+            prototypes,
+            flat: Arc::new(flat),
+            material: parts.material,
+            needle_count: parts.needle_count,
+            max_wood_error: parts.wood.iter().map(wood_segment_error).fold(0.0, f32::max),
             aabb: Aabb::from_min_max(lo, hi),
             crown_center,
             wind_shape: WindShape::from_bounds(lo, hi, Vec2::new(foot.x, foot.z)),
-            max_line_error: ranges.original_lines.max,
-            min_line_error: ranges.original_lines.min,
-            compact: Arc::new(compact),
-            impostor,
-            record: Arc::new(record),
+            max_line_error: parts.line_errors.1,
+            min_line_error: parts.line_errors.0,
+            compact: Arc::new(parts.compact),
+            impostor: parts.impostor,
         })
     }
+}
+
+/// What a species needs of its record, flat or of prototypes.
+struct SpeciesParts<'a> {
+    material: FoliageMaterial,
+    needle_count: u64,
+    wood: &'a [WoodSegment],
+    /// Bounds of needles and wood.
+    bounds: (Vec3, Vec3),
+    crown_center: Vec3,
+    /// Smallest and largest original-line error `2R`.
+    line_errors: (f32, f32),
+    compact: CompactSpecies,
+    impostor: Option<Arc<CrownImpostor>>,
 }
 
 /// Trunk and branches as one ordinary mesh: the wood segments as open

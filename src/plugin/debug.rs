@@ -164,7 +164,7 @@ struct SpeciesDistances {
 
 impl SpeciesDistances {
     fn new(species: &ConiferSpecies) -> Self {
-        let record = &species.record;
+        let record = species.record();
         let counter = CutCounter::new(record);
         let ranges = record.part_ranges();
         let merging_starts = ranges.merged_lines.map_or(f32::INFINITY, |r| r.min);

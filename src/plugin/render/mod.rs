@@ -429,7 +429,7 @@ fn species_params(
         ),
         None => ([0.0; 4], [0.0; 4]),
     };
-    let material = &species.record.material;
+    let material = &species.material;
     let center = species.crown_center;
     let (lo, hi) = (Vec3::from(species.aabb.min()), Vec3::from(species.aabb.max()));
     let radius = (lo - center).abs().max((hi - center).abs()).length();

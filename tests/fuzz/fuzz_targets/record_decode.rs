@@ -43,7 +43,7 @@ fuzz_target!(|data: &[u8]| {
             assert_eq!(cut, flat.cut(e).sorted());
             assert!(flat.coverage(&cut).iter().all(|&c| c == 1));
         }
-        if let Ok(compact) = CompactSpecies::build_placed(&prototypes, &flat) {
+        if let Ok(compact) = CompactSpecies::build_placed(&prototypes) {
             if !compact.placements.is_empty() {
                 for e in PROBES {
                     let (drawn, _) = compact.placed_drawn(&prototypes, threshold_code(e), e, threshold_code);
