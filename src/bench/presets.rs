@@ -2,6 +2,7 @@
 //! while several presets bake in the background, against the same app with
 //! nothing baking, and how fast the next start reads them from the cache.
 
+use crate::cli::heap::live_bytes;
 use crate::generate::{Preset, Species};
 use crate::plugin::PresetCache;
 use crate::prelude::*;
@@ -39,6 +40,12 @@ pub struct PresetFigures {
     pub idle_frame_ms_p99: f64,
     /// Median of those idle frames, ms.
     pub idle_frame_ms_median: f64,
+    /// Baking frames longer than the idle median by more than 2 ms: frames
+    /// a bake may have blocked (this machine's own hiccups included).
+    pub baking_frames_over_2ms: usize,
+    /// Idle frames longer than the idle median by more than 2 ms (as many
+    /// frames as baked): the hiccups with nothing baking.
+    pub idle_frames_over_2ms: usize,
     /// Wall time from the load call until every species had arrived, s.
     pub bake_seconds: f64,
     /// The same presets in a new app reading the cache the first wrote:
@@ -46,6 +53,14 @@ pub struct PresetFigures {
     pub cached_load_ms: f64,
     /// Needles of the presets' trees, summed.
     pub needles: usize,
+    /// Heap the second app (the cached load) holds once every species has
+    /// arrived, bytes: its species, their trees and the app itself
+    /// (`None` outside the `conifer` tool, whose allocator counts it).
+    pub cached_app_heap_bytes: Option<u64>,
+    /// Heap the flattened records of those species take once asked for
+    /// ([`ConiferSpecies::record`], which the overlay and `conifer eval`
+    /// use; drawing never does), bytes.
+    pub flattened_heap_bytes: Option<u64>,
 }
 
 /// The six presets timed: the six species (mature), each aiming at
@@ -148,14 +163,26 @@ pub fn preset_figures(needles: Option<usize>, trees: usize, cache: &Path) -> Pre
         })
         .collect();
 
+    drop(first);
+    let heap_before = live_bytes();
     let mut second = app(cache);
     second.update();
     let start = Instant::now();
-    load_all(&mut second, &presets, trees);
+    let (_, cached) = load_all(&mut second, &presets, trees);
     let cached_load_ms = start.elapsed().as_secs_f64() * 1e3;
+    let heap_loaded = live_bytes();
+    let species = second.world().resource::<Assets<ConiferSpecies>>();
+    for handle in &cached {
+        if let Some(species) = species.get(handle) {
+            species.record();
+        }
+    }
+    let heap_flattened = live_bytes();
+    let difference = |a: Option<u64>, b: Option<u64>| Some(b?.saturating_sub(a?));
 
     let (baking_frame_ms_max, baking_frame_ms_p99, baking_frame_ms_median) = spread(baking);
     let (idle_frame_ms_max, idle_frame_ms_p99, idle_frame_ms_median) = spread(&idle);
+    let over_2ms = |frames: &[f64]| frames.iter().filter(|&&ms| ms > idle_frame_ms_median + 2.0).count();
     PresetFigures {
         presets: presets.iter().map(ToString::to_string).collect(),
         trees,
@@ -167,8 +194,12 @@ pub fn preset_figures(needles: Option<usize>, trees: usize, cache: &Path) -> Pre
         idle_frame_ms_max,
         idle_frame_ms_p99,
         idle_frame_ms_median,
+        baking_frames_over_2ms: over_2ms(baking),
+        idle_frames_over_2ms: over_2ms(&idle),
         bake_seconds,
         cached_load_ms,
         needles: needles_loaded,
+        cached_app_heap_bytes: difference(heap_before, heap_loaded),
+        flattened_heap_bytes: difference(heap_loaded, heap_flattened),
     }
 }

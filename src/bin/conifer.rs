@@ -12,6 +12,10 @@
 
 use std::process::ExitCode;
 
+/// Counts the heap, for the memory figures of `conifer bench`.
+#[global_allocator]
+static HEAP: bevy_conifer_lod::cli::heap::CountingAllocator = bevy_conifer_lod::cli::heap::CountingAllocator;
+
 fn main() -> ExitCode {
     match bevy_conifer_lod::cli::run(std::env::args_os()) {
         Ok(()) => ExitCode::SUCCESS,

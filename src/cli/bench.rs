@@ -122,6 +122,17 @@ pub(super) fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             p.bake_seconds,
             p.cached_load_ms
         );
+        println!(
+            "  frames over the idle median + 2 ms: {} baking, {} idle",
+            p.baking_frames_over_2ms, p.idle_frames_over_2ms
+        );
+        if let (Some(app), Some(flat)) = (p.cached_app_heap_bytes, p.flattened_heap_bytes) {
+            println!(
+                "  the cached app holds {:.0} MB of heap; the species' flattened records, once asked for, {:.0} MB more",
+                app as f64 / 1e6,
+                flat as f64 / 1e6
+            );
+        }
     }
     if let Some(c) = &report.cut_us {
         for (k, d) in c.distances.iter().enumerate() {

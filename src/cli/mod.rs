@@ -8,6 +8,7 @@ mod bench;
 mod commands;
 #[cfg(feature = "eval")]
 mod eval;
+pub mod heap;
 #[cfg(feature = "plugin")]
 mod render;
 
