@@ -364,7 +364,7 @@ pub fn bake_prototypes(
 /// `options` (`None` where [`CrownImpostor::bake`] gives none: options out
 /// of range).
 pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Option<Arc<CrownImpostor>> {
-    CrownImpostor::bake(&record.placed_needles(), &record.wood, options).map(Arc::new)
+    CrownImpostor::bake(&record.placed_needles(), &record.wood, &record.wood_mesh, options).map(Arc::new)
 }
 
 #[cfg(test)]

@@ -52,6 +52,7 @@
 
 use super::look::SampleBits;
 use super::needle::{Needle, WoodSegment};
+use super::prism::TriangleMesh;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -328,12 +329,26 @@ impl CrownImpostor {
     /// Bakes the impostor of `needles` and `wood` (tree-local metres; the
     /// tree stands along `+y`). `None` when nothing is valid or the
     /// options are out of range.
-    pub fn bake(needles: &[Needle], wood: &[WoodSegment], options: ImpostorOptions) -> Option<Self> {
+    pub fn bake(
+        needles: &[Needle],
+        wood: &[WoodSegment],
+        wood_mesh: &TriangleMesh,
+        options: ImpostorOptions,
+    ) -> Option<Self> {
         if options.views == 0 || !(options.texel > 0.0 && options.texel.is_finite()) {
             return None;
         }
         let needles: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
         let wood: Vec<&WoodSegment> = wood.iter().filter(|w| w.is_valid()).collect();
+        // An imported tree's bark comes as triangles.
+        let triangles: Vec<[Vec3; 3]> = wood_mesh
+            .indices
+            .chunks_exact(3)
+            .filter_map(|t| {
+                let corner = |k: u32| wood_mesh.positions.get(k as usize).copied().filter(|p| p.is_finite());
+                Some([corner(t[0])?, corner(t[1])?, corner(t[2])?])
+            })
+            .collect();
         if needles.is_empty() {
             return None;
         }
@@ -346,7 +361,8 @@ impl CrownImpostor {
             .chain(
                 wood.iter()
                     .flat_map(|w| [(w.start, w.start_radius), (w.end, w.end_radius)]),
-            );
+            )
+            .chain(triangles.iter().flatten().map(|&p| (p, 0.0)));
         for (p, r) in pieces.clone() {
             lo = lo.min(p - r);
             hi = hi.max(p + r);
@@ -388,6 +404,9 @@ impl CrownImpostor {
                 let mut canvas = ViewCanvas::new(&impostor, k);
                 for segment in &wood {
                     impostor.stamp_wood(&mut canvas, segment);
+                }
+                for triangle in &triangles {
+                    impostor.stamp_wood_triangle(&mut canvas, triangle);
                 }
                 for needle in &needles {
                     impostor.splat_needle(&mut canvas, needle);
@@ -570,6 +589,35 @@ impl CrownImpostor {
         self.add_axis(canvas, a, b, direction, ((ra + rb) * a.distance(b)).max(1e-6));
     }
 
+    /// Stamps one bark triangle of an imported wood mesh: its samples are
+    /// wood, with its front interpolated across it; its axis (for the
+    /// lighting) is its longest side's, as a branch's faces run along the
+    /// branch.
+    fn stamp_wood_triangle(&self, canvas: &mut ViewCanvas, corners: &[Vec3; 3]) {
+        let projected = corners.map(|p| self.sample_point(canvas, p));
+        let centre = self.axis_point();
+        let near = corners.map(|p| (p - centre).dot(canvas.toward));
+        let front = &mut canvas.wood_front;
+        canvas.wood.stamp_triangle_each(projected, |index, w| {
+            let nearness = w[0] * near[0] + w[1] * near[1] + w[2] * near[2];
+            front[index] = front[index].max(nearness);
+        });
+        let sides = [(0, 1), (1, 2), (2, 0)];
+        let (a, b) = sides
+            .into_iter()
+            .map(|(i, j)| (corners[i], corners[j]))
+            .max_by(|x, y| x.0.distance_squared(x.1).total_cmp(&y.0.distance_squared(y.1)))
+            .unwrap_or((corners[0], corners[1]));
+        let mut direction = (b - a).normalize_or(Vec3::Y);
+        if direction.y < 0.0 {
+            direction = -direction;
+        }
+        let [p0, p1, p2] = projected;
+        let area = 0.5 * (p1 - p0).perp_dot(p2 - p0).abs();
+        let (from, to) = (self.sample_point(canvas, a), self.sample_point(canvas, b));
+        self.add_axis(canvas, from, to, direction, area.max(1e-6));
+    }
+
     /// The view's texels from its samples: coverage is the samples the
     /// needles or the wood cover; wood is seen where no needle lies in
     /// front of it.
@@ -632,17 +680,20 @@ mod tests {
     #[test]
     fn bad_input_gives_none() {
         let n = needle(Vec3::ZERO, Vec3::Y, 0.01);
-        assert!(CrownImpostor::bake(&[], &[], ImpostorOptions::default()).is_none());
+        assert!(CrownImpostor::bake(&[], &[], &TriangleMesh::default(), ImpostorOptions::default()).is_none());
         let nan = needle(Vec3::NAN, Vec3::Y, 0.01);
-        assert!(CrownImpostor::bake(&[nan], &[], ImpostorOptions::default()).is_none());
+        assert!(CrownImpostor::bake(&[nan], &[], &TriangleMesh::default(), ImpostorOptions::default()).is_none());
         let no_views = ImpostorOptions { views: 0, texel: 0.1 };
-        assert!(CrownImpostor::bake(&[n], &[], no_views).is_none());
+        assert!(CrownImpostor::bake(&[n], &[], &TriangleMesh::default(), no_views).is_none());
         for texel in [0.0, -1.0, f32::NAN, f32::INFINITY] {
             let options = ImpostorOptions { views: 8, texel };
-            assert!(CrownImpostor::bake(&[n], &[], options).is_none(), "texel {texel}");
+            assert!(
+                CrownImpostor::bake(&[n], &[], &TriangleMesh::default(), options).is_none(),
+                "texel {texel}"
+            );
         }
         let flat = needle(Vec3::ZERO, Vec3::X, 0.0);
-        assert!(CrownImpostor::bake(&[flat], &[], ImpostorOptions::default()).is_none());
+        assert!(CrownImpostor::bake(&[flat], &[], &TriangleMesh::default(), ImpostorOptions::default()).is_none());
     }
 
     #[test]
@@ -657,7 +708,7 @@ mod tests {
             .collect();
         let mut tree_rows = Vec::new();
         for needles in [&tall, &short] {
-            let impostor = CrownImpostor::bake(needles, &[], options).expect("needles");
+            let impostor = CrownImpostor::bake(needles, &[], &TriangleMesh::default(), options).expect("needles");
             assert!(
                 impostor.texel <= options.texel && impostor.texel > 0.98 * options.texel,
                 "texel {} rows {}",
@@ -684,10 +735,10 @@ mod tests {
         assert!(tree_rows[0] > 1.9 * tree_rows[1], "{tree_rows:?} rows");
         // A 20 cm tree gets MIN_ROWS rows over it, a 100 m one MAX_ROWS.
         let tiny = [needle(Vec3::ZERO, Vec3::Y * 0.2, 0.01)];
-        let tiny = CrownImpostor::bake(&tiny, &[], options).expect("needle");
+        let tiny = CrownImpostor::bake(&tiny, &[], &TriangleMesh::default(), options).expect("needle");
         assert!((tiny.texel - 0.22 / MIN_ROWS as f32).abs() < 1e-5, "{}", tiny.texel);
         let giant = [needle(Vec3::ZERO, Vec3::Y * 100.0, 0.01)];
-        let giant = CrownImpostor::bake(&giant, &[], options).expect("needle");
+        let giant = CrownImpostor::bake(&giant, &[], &TriangleMesh::default(), options).expect("needle");
         assert_eq!(giant.rows, MAX_ROWS);
         assert!((giant.texel - 100.02 / MAX_ROWS as f32).abs() < 1e-4, "{}", giant.texel);
     }
@@ -700,7 +751,7 @@ mod tests {
             views: 4,
             texel: 10.0 / 64.0,
         };
-        let impostor = CrownImpostor::bake(&sparse, &[], options).expect("needles");
+        let impostor = CrownImpostor::bake(&sparse, &[], &TriangleMesh::default(), options).expect("needles");
         let area: f32 = sparse.iter().map(|n| 2.0 * n.radius * (n.tip - n.base).length()).sum();
         for view in 0..4 {
             let summed: f32 = impostor.coverage_grid(view).coverage.iter().sum::<f32>() * impostor.texel.powi(2);
@@ -713,7 +764,7 @@ mod tests {
         }
         // Many thick needles: no texel covers more than all of itself.
         let dense = cone(200_000, 0.01);
-        let impostor = CrownImpostor::bake(&dense, &[], options).expect("needles");
+        let impostor = CrownImpostor::bake(&dense, &[], &TriangleMesh::default(), options).expect("needles");
         let grid = impostor.coverage_grid(0);
         assert!(grid.coverage.iter().all(|&c| (0.0..=1.0).contains(&c)));
         assert!(grid.coverage.iter().any(|&c| c > 0.99));
@@ -740,7 +791,7 @@ mod tests {
             texel: 10.0 / 64.0,
         };
         let covered = |needles: &[Needle]| {
-            let impostor = CrownImpostor::bake(needles, &[], options).expect("needles");
+            let impostor = CrownImpostor::bake(needles, &[], &TriangleMesh::default(), options).expect("needles");
             impostor.coverage_grid(0).coverage.iter().sum::<f32>() * impostor.texel.powi(2)
         };
         let one = covered(&comb(0.0, 0.0));
@@ -776,7 +827,7 @@ mod tests {
             end_radius: 0.1,
         };
         let options = ImpostorOptions { views: 4, texel: 0.05 };
-        let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
+        let impostor = CrownImpostor::bake(&needles, &[trunk], &TriangleMesh::default(), options).expect("needles");
         let texel = |y: f32| {
             let (column, row) = impostor.project(0, Vec3::new(0.0, y, 0.0));
             impostor.texel_at(0, column as u32, row as u32).expect("inside")
@@ -796,6 +847,63 @@ mod tests {
         assert!(back.wood < 0.01, "seen from behind: {back:?}");
     }
 
+    /// An imported tree's bark comes as a triangle mesh: the same trunk as a
+    /// mesh covers what it covers as a wood segment (to the polygon's
+    /// narrower width), is wood where no needle is in front of it, and
+    /// widens the box.
+    #[test]
+    fn a_wood_mesh_is_baked_like_the_wood_it_stands_for() {
+        let needles = cone(5_000, 0.002);
+        let trunk = WoodSegment {
+            start: Vec3::new(0.0, -3.0, 0.0),
+            end: Vec3::new(0.0, 9.0, 0.0),
+            start_radius: 0.3,
+            end_radius: 0.05,
+        };
+        let mut mesh = TriangleMesh::default();
+        super::super::prism::append_wood_segment(&mut mesh, &trunk, 16);
+        let options = ImpostorOptions { views: 4, texel: 0.05 };
+        let as_segment = CrownImpostor::bake(&needles, &[trunk], &TriangleMesh::default(), options).expect("needles");
+        let as_mesh = CrownImpostor::bake(&needles, &[], &mesh, options).expect("needles");
+        let bare = CrownImpostor::bake(&needles, &[], &TriangleMesh::default(), options).expect("needles");
+        assert!(
+            bare.bottom > -0.1 && (as_mesh.bottom + 3.0).abs() < 0.01,
+            "{} {}",
+            bare.bottom,
+            as_mesh.bottom
+        );
+        let sums = |impostor: &CrownImpostor, view: u32| {
+            let (mut coverage, mut wood) = (0.0f32, 0.0f32);
+            for row in 0..impostor.rows {
+                for column in 0..impostor.columns {
+                    let t = impostor.texel_at(view, column, row).expect("inside");
+                    coverage += t.coverage;
+                    wood += t.wood;
+                }
+            }
+            (
+                coverage * impostor.texel * impostor.texel,
+                wood * impostor.texel * impostor.texel,
+            )
+        };
+        for view in 0..4 {
+            let (segment_coverage, segment_wood) = sums(&as_segment, view);
+            let (mesh_coverage, mesh_wood) = sums(&as_mesh, view);
+            // A 16-gon seen across is cos(π/16) to 1 of the circle's width,
+            // and the segment has round ends (a half disc of 0.14 m² at the
+            // foot) where the open mesh has none.
+            assert!(segment_wood > 1.0, "the trunk below the crown shows: {segment_wood} m²");
+            assert!(
+                mesh_wood >= 0.94 * segment_wood && mesh_wood <= segment_wood,
+                "view {view}: wood {mesh_wood} against {segment_wood} m²"
+            );
+            assert!(
+                mesh_coverage <= segment_coverage && mesh_coverage >= segment_coverage - 0.2,
+                "view {view}: coverage {mesh_coverage} against {segment_coverage} m²"
+            );
+        }
+    }
+
     #[test]
     fn coverage_is_near_the_exact_side_view() {
         // The exact binary rasterization (`look::side_coverage`) at the
@@ -812,7 +920,7 @@ mod tests {
             views: 8,
             texel: 12.1 / 48.0,
         };
-        let impostor = CrownImpostor::bake(&needles, &[trunk], options).expect("needles");
+        let impostor = CrownImpostor::bake(&needles, &[trunk], &TriangleMesh::default(), options).expect("needles");
         let exact = side_coverage(
             &needles,
             &[trunk],
@@ -874,8 +982,13 @@ mod tests {
 
     #[test]
     fn mips_keep_the_mean_coverage() {
-        let impostor =
-            CrownImpostor::bake(&cone(20_000, 0.003), &[], ImpostorOptions { views: 2, texel: 0.25 }).expect("needles");
+        let impostor = CrownImpostor::bake(
+            &cone(20_000, 0.003),
+            &[],
+            &TriangleMesh::default(),
+            ImpostorOptions { views: 2, texel: 0.25 },
+        )
+        .expect("needles");
         let chain = impostor.mip_chain();
         assert_eq!(chain.last().map(|l| (l.0, l.1)), Some((1, 1)));
         let mean = |(w, h, t): &(u32, u32, Vec<[u8; 4]>)| {
@@ -924,6 +1037,7 @@ mod tests {
         let impostor = CrownImpostor::bake(
             &cone(40_000, 0.004),
             &[],
+            &TriangleMesh::default(),
             ImpostorOptions {
                 views: 1,
                 texel: 10.0 / 96.0,

@@ -265,6 +265,46 @@ impl SampleBits {
     }
 }
 
+impl SampleBits {
+    /// Sets every sample whose centre lies in the triangle `corners`
+    /// (sample units, either winding; on an edge counts as inside) and
+    /// calls `f(index, weights)` for each, `weights` its barycentric
+    /// weights of the three corners. Samples outside the picture,
+    /// non-finite and zero-area triangles are skipped.
+    pub fn stamp_triangle_each(&mut self, corners: [Vec2; 3], mut f: impl FnMut(usize, [f32; 3])) {
+        let [a, b, c] = corners;
+        let area = (b - a).perp_dot(c - a);
+        let (min, max) = (a.min(b).min(c), a.max(b).max(c));
+        if !(area != 0.0 && area.is_finite() && min.is_finite() && max.is_finite())
+            || self.width == 0
+            || self.height == 0
+        {
+            return;
+        }
+        let i0 = ((min.x - 0.5).ceil() as i64).max(0);
+        let i1 = ((max.x - 0.5).floor() as i64).min(i64::from(self.width) - 1);
+        let j0 = ((min.y - 0.5).ceil() as i64).max(0);
+        let j1 = ((max.y - 0.5).floor() as i64).min(i64::from(self.height) - 1);
+        for j in j0..=j1 {
+            for i in i0..=i1 {
+                let p = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+                // Each corner's weight: the sub-triangle opposite it over
+                // the whole, all ≥ 0 inside whatever the winding.
+                let weights = [
+                    (c - b).perp_dot(p - b) / area,
+                    (a - c).perp_dot(p - c) / area,
+                    (b - a).perp_dot(p - a) / area,
+                ];
+                if weights.iter().all(|&w| w >= 0.0) {
+                    let index = j as usize * self.width as usize + i as usize;
+                    self.set(index);
+                    f(index, weights);
+                }
+            }
+        }
+    }
+}
+
 /// The samples of a `[width, height]` grid in a piece (see
 /// [`SampleBits::stamp_each`]).
 fn each_sample_in(
@@ -512,6 +552,31 @@ pub(crate) mod tests {
         let measured = crown_see_through(&grid, crown(40, 32)).expect("a silhouette");
         assert!((measured.see_through - 0.5).abs() < 1e-6, "{measured:?}");
         assert_eq!(measured.outline_pixels, 32 * 20 - 8 * 6);
+    }
+
+    /// A triangle sets the samples of its area whatever its winding, each
+    /// with weights that sum to one and place the sample.
+    #[test]
+    fn a_triangle_sets_its_area_with_its_weights() {
+        let corners = [Vec2::new(10.0, 10.0), Vec2::new(110.0, 10.0), Vec2::new(10.0, 70.0)];
+        for winding in [corners, [corners[0], corners[2], corners[1]]] {
+            let mut bits = SampleBits::new(128, 128);
+            let mut count = 0usize;
+            bits.stamp_triangle_each(winding, |index, w| {
+                count += 1;
+                assert!((w.iter().sum::<f32>() - 1.0).abs() < 1e-5);
+                let p = winding[0] * w[0] + winding[1] * w[1] + winding[2] * w[2];
+                let sample = Vec2::new((index % 128) as f32 + 0.5, (index / 128) as f32 + 0.5);
+                assert!(p.distance(sample) < 1e-3, "{p} {sample}");
+            });
+            // 100 × 60 / 2 samples, give or take the edges.
+            assert!((count as f32 - 3000.0).abs() < 100.0, "{count}");
+            let set = (0..128 * 128).filter(|&k| bits.is_set(k)).count();
+            assert_eq!(set, count);
+        }
+        let mut bits = SampleBits::new(8, 8);
+        bits.stamp_triangle_each([Vec2::ZERO, Vec2::ONE, Vec2::splat(2.0)], |_, _| panic!("no area"));
+        bits.stamp_triangle_each([Vec2::NAN, Vec2::ONE, Vec2::X], |_, _| panic!("not finite"));
     }
 
     #[test]

@@ -188,7 +188,7 @@ impl ConiferSpecies {
             Some(prototypes) => bake_impostor(prototypes, options),
             None => {
                 let record = self.record();
-                CrownImpostor::bake(&record.needles, &record.wood, options).map(Arc::new)
+                CrownImpostor::bake(&record.needles, &record.wood, &record.wood_mesh, options).map(Arc::new)
             }
         };
         self
@@ -196,10 +196,15 @@ impl ConiferSpecies {
 
     fn from_flat(mut record: LodRecord) -> Result<Self, ConiferLoadError> {
         // The record's own impostor (baked with it), else one baked now.
-        let impostor = record
-            .impostor
-            .take()
-            .or_else(|| CrownImpostor::bake(&record.needles, &record.wood, ImpostorOptions::default()).map(Arc::new));
+        let impostor = record.impostor.take().or_else(|| {
+            CrownImpostor::bake(
+                &record.needles,
+                &record.wood,
+                &record.wood_mesh,
+                ImpostorOptions::default(),
+            )
+            .map(Arc::new)
+        });
         let ranges = record.part_ranges();
         let parts = SpeciesParts {
             material: record.material,
