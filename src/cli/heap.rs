@@ -17,22 +17,12 @@ pub struct CountingAllocator;
 unsafe impl GlobalAlloc for CountingAllocator {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller's contract, forwarded.
-        let pointer = unsafe { System.alloc(layout) };
-        if !pointer.is_null() {
-            LIVE.fetch_add(layout.size(), Ordering::Relaxed);
-            INSTALLED.store(true, Ordering::Relaxed);
-        }
-        pointer
+        counted(unsafe { System.alloc(layout) }, layout)
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
         // SAFETY: the caller's contract, forwarded.
-        let pointer = unsafe { System.alloc_zeroed(layout) };
-        if !pointer.is_null() {
-            LIVE.fetch_add(layout.size(), Ordering::Relaxed);
-            INSTALLED.store(true, Ordering::Relaxed);
-        }
-        pointer
+        counted(unsafe { System.alloc_zeroed(layout) }, layout)
     }
 
     unsafe fn dealloc(&self, pointer: *mut u8, layout: Layout) {
@@ -50,6 +40,15 @@ unsafe impl GlobalAlloc for CountingAllocator {
         }
         moved
     }
+}
+
+/// Counts a new allocation of `layout` at `pointer` (none when null).
+fn counted(pointer: *mut u8, layout: Layout) -> *mut u8 {
+    if !pointer.is_null() {
+        LIVE.fetch_add(layout.size(), Ordering::Relaxed);
+        INSTALLED.store(true, Ordering::Relaxed);
+    }
+    pointer
 }
 
 /// Bytes allocated and not yet freed, or `None` where [`CountingAllocator`]
