@@ -11,7 +11,8 @@
 
 use super::metric::{line_error, prism_sides, relative_error};
 use super::prism::prism_triangle_count;
-use super::record::{CutStats, LodRecord};
+use super::prototype::PrototypeRecord;
+use super::record::{CutStats, LodRecord, NO_PARENT};
 
 /// Primitive counts of a cut.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -85,6 +86,82 @@ impl CutCounter {
         }
     }
 
+    /// The counter of the flattened `record`, equal to
+    /// [`CutCounter::new`] of [`PrototypeRecord::flatten`], built without
+    /// flattening it: each placement's errors are its prototype's scaled,
+    /// the very products the flattened tree stores.
+    pub fn from_prototypes(record: &PrototypeRecord) -> Self {
+        // Each prototype's local parents (its root has none here).
+        let parents: Vec<Vec<u32>> = record
+            .prototypes
+            .iter()
+            .map(|prototype| {
+                let mut parent = vec![NO_PARENT; prototype.needles.len() + prototype.merged.len()];
+                let n = prototype.needles.len() as u32;
+                for (k, line) in prototype.merged.iter().enumerate() {
+                    for &c in &line.children {
+                        parent[c as usize] = n + k as u32;
+                    }
+                }
+                parent
+            })
+            .collect();
+        let needles = record.needle_count() as usize;
+        let mut radii = Vec::with_capacity(needles);
+        let mut original = (Vec::with_capacity(needles), Vec::with_capacity(needles));
+        let mut merged = (Vec::new(), Vec::new());
+        let p_count = record.placements.len() as u32;
+        let tree_error = |node: u32| match node {
+            NO_PARENT => f32::INFINITY,
+            node => record.tree_merged[(node - p_count) as usize].error,
+        };
+        for (p, placement) in record.placements.iter().enumerate() {
+            let prototype = &record.prototypes[placement.prototype as usize];
+            let parent = &parents[placement.prototype as usize];
+            let n = prototype.needles.len() as u32;
+            let root_parent = tree_error(record.tree_parent(p as u32));
+            let error = |node: u32| prototype.node_error(node) * placement.scale;
+            let parent_error = |node: u32| match parent[node as usize] {
+                NO_PARENT => root_parent,
+                up => error(up),
+            };
+            for (k, needle) in prototype.needles.iter().enumerate() {
+                radii.push(needle.radius * placement.scale);
+                original.0.push(error(k as u32));
+                original.1.push(parent_error(k as u32));
+            }
+            for node in n..n + prototype.merged.len() as u32 {
+                merged.0.push(error(node));
+                merged.1.push(parent_error(node));
+            }
+        }
+        for (k, line) in record.tree_merged.iter().enumerate() {
+            merged.0.push(line.error);
+            merged.1.push(tree_error(record.tree_parent(p_count + k as u32)));
+        }
+        for values in [
+            &mut radii,
+            &mut original.0,
+            &mut original.1,
+            &mut merged.0,
+            &mut merged.1,
+        ] {
+            values.sort_by(f32::total_cmp);
+        }
+        Self {
+            radii,
+            original,
+            merged,
+            max_sides: record.max_sides,
+        }
+    }
+
+    /// The smallest merged-line error, where the first merged line can
+    /// enter a cut (`None` without merged lines).
+    pub fn min_merged_error(&self) -> Option<f32> {
+        self.merged.0.first().copied()
+    }
+
     /// The counts of the cut at spatial error `e` (equal to
     /// [`LodRecord::cut_stats`] of [`LodRecord::cut`]). A NaN or negative
     /// `e` counts as 0.
@@ -122,6 +199,29 @@ mod tests {
     use super::*;
     use crate::generate::{GenerateOptions, Species, generate};
     use crate::model::{BakeOptions, bake};
+
+    /// Built from the prototypes, the counter holds the flattened tree's
+    /// sorted errors, bit for bit.
+    #[test]
+    fn the_prototypes_counter_is_the_flattened_tree_s() {
+        for species in [Species::ScotsPine, Species::NorwaySpruce] {
+            let input = crate::generate::generate_prototypes(
+                species,
+                &GenerateOptions {
+                    seed: 4,
+                    target_needles: Some(20_000),
+                    age: crate::generate::Age::Mature,
+                },
+            );
+            let record = crate::model::bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+            let flat = CutCounter::new(&record.flatten().unwrap());
+            let placed = CutCounter::from_prototypes(&record);
+            assert!(placed.merged.0.len() > 1000, "{species:?}");
+            assert_eq!(placed.radii, flat.radii, "{species:?}");
+            assert_eq!(placed.original, flat.original, "{species:?}");
+            assert_eq!(placed.merged, flat.merged, "{species:?}");
+        }
+    }
 
     #[test]
     fn counts_equal_the_traversal() {

@@ -164,16 +164,15 @@ struct SpeciesDistances {
 
 impl SpeciesDistances {
     fn new(species: &ConiferSpecies) -> Self {
-        let record = species.record();
-        let counter = CutCounter::new(record);
-        let ranges = record.part_ranges();
-        let merging_starts = ranges.merged_lines.map_or(f32::INFINITY, |r| r.min);
+        // A tree of prototypes is counted without flattening it.
+        let counter = match species.prototypes() {
+            Some(prototypes) => CutCounter::from_prototypes(prototypes),
+            None => CutCounter::new(species.record()),
+        };
+        let merging_starts = counter.min_merged_error().unwrap_or(f32::INFINITY);
         // Bisection on a log scale: the cut's size falls as the error grows.
-        let target = (record.needle_count() as u64 / 10).max(1);
-        let (mut lo, mut hi) = (
-            ranges.original_lines.min.max(1e-6),
-            ranges.original_lines.max.max(1e-6) * 1e4,
-        );
+        let target = (species.needle_count / 10).max(1);
+        let (mut lo, mut hi) = (species.min_line_error.max(1e-6), species.max_line_error.max(1e-6) * 1e4);
         for _ in 0..40 {
             let mid = (lo * hi).sqrt();
             if counter.count(mid).primitives() > target {
