@@ -432,19 +432,24 @@ fn code_at_least(value: f32, what: &'static str) -> Result<u16, CompactError> {
     log_encode_at_least(value.max(0.0)).ok_or(CompactError::OutOfRange(what))
 }
 
+/// Threshold code of a node's error, rounded up and capped at
+/// [`MAX_THRESHOLD_CODE`].
+fn error_code(error: f32) -> Result<u16, CompactError> {
+    Ok(code_at_least(error, "errors")?.min(MAX_THRESHOLD_CODE))
+}
+
 fn parent_code(record: &LodRecord, node: u32) -> Result<u16, CompactError> {
     if record.parent(node) == NO_PARENT {
         return Ok(ROOT_PARENT_CODE);
     }
-    Ok(code_at_least(record.parent_error(node), "errors")?.min(MAX_THRESHOLD_CODE))
+    error_code(record.parent_error(node))
 }
 
 /// Error code and parent error code of merged node `node` of `record`,
 /// rounded up (the parent's is [`ROOT_PARENT_CODE`] for a root): the line
 /// can be in a cut iff the parent's is above its own.
 fn merged_line_codes(record: &LodRecord, node: u32) -> Result<(u16, u16), CompactError> {
-    let own = code_at_least(record.node_error(node), "errors")?.min(MAX_THRESHOLD_CODE);
-    Ok((own, parent_code(record, node)?))
+    Ok((error_code(record.node_error(node))?, parent_code(record, node)?))
 }
 
 /// Equivalent width code of merged node `node` of `record`: its needles'
@@ -867,10 +872,7 @@ impl CompactSpecies {
         let tree_parent_code = |node: u32| -> Result<u16, CompactError> {
             match record.tree_parent(node) {
                 NO_PARENT => Ok(ROOT_PARENT_CODE),
-                parent => Ok(
-                    code_at_least(record.tree_merged[parent as usize - p_count].error, "errors")?
-                        .min(MAX_THRESHOLD_CODE),
-                ),
+                parent => error_code(record.tree_merged[parent as usize - p_count].error),
             }
         };
         // The tree's section: a pseudo-needle per drawable level-2 line,
@@ -881,7 +883,7 @@ impl CompactSpecies {
         let mut merged_code_range = [u16::MAX, 0];
         for k in 0..record.tree_merged.len() as u32 {
             let node = p_count as u32 + k;
-            let own = code_at_least(record.tree_merged[k as usize].error, "errors")?.min(MAX_THRESHOLD_CODE);
+            let own = error_code(record.tree_merged[k as usize].error)?;
             let parent = tree_parent_code(node)?;
             merged_code_range = [merged_code_range[0].min(own), merged_code_range[1].max(own)];
             // A line whose error code equals its parent's is never in a cut
