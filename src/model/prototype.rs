@@ -370,6 +370,8 @@ pub struct PrototypeRecord {
     merged_offset: Vec<u64>,
     /// `(min, max)` of the placed needles' ends, tree metres.
     needle_bounds: (Vec3, Vec3),
+    /// `(min, max)` of the placed needles' radii, tree metres.
+    radius_range: (f32, f32),
     /// Parent of each level-2 node (placements, then `tree_merged`).
     tree_parent: Vec<u32>,
     /// Bounding sphere of each prototype, prototype metres.
@@ -417,8 +419,12 @@ impl PrototypeRecord {
         let (mut needles, mut merged) = (0u64, 0u64);
         let extents: Vec<PrototypeExtent> = prototypes.iter().map(PrototypeExtent::of).collect();
         let mut needle_bounds = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        let mut radius_range = (f32::INFINITY, 0.0f32);
         for (p, placement) in placements.iter().enumerate() {
-            let Some(prototype) = prototypes.get(placement.prototype as usize) else {
+            let (Some(prototype), Some(extent)) = (
+                prototypes.get(placement.prototype as usize),
+                extents.get(placement.prototype as usize),
+            ) else {
                 return Err(RecordInvalid::BadPlacement(p));
             };
             // A valid prototype can still degenerate once placed (a scale
@@ -427,7 +433,7 @@ impl PrototypeRecord {
             // Errors are monotone, so the root's is the largest one scaled.
             if !placement.is_valid()
                 || !placed_error(prototype, prototype.root(), placement.scale).is_finite()
-                || !(extents[placement.prototype as usize].places_validly(placement)
+                || !(extent.places_validly(placement)
                     || prototype
                         .needles
                         .iter()
@@ -437,6 +443,13 @@ impl PrototypeRecord {
             }
             let (lo, hi) = placed_point_bounds(&prototype.needles, placement);
             needle_bounds = (needle_bounds.0.min(lo), needle_bounds.1.max(hi));
+            // Scaling by a positive factor keeps the order of floats, so the
+            // placed extremes are the prototype's scaled.
+            let (thinnest, widest) = extent.radii;
+            radius_range = (
+                radius_range.0.min(thinnest * placement.scale),
+                radius_range.1.max(widest * placement.scale),
+            );
             needle_offset.push(needles);
             merged_offset.push(merged);
             needles += prototype.needles.len() as u64;
@@ -463,6 +476,7 @@ impl PrototypeRecord {
             needle_offset,
             merged_offset,
             needle_bounds,
+            radius_range,
             tree_parent: Vec::new(),
             prototype_spheres: Vec::new(),
             node_spheres: Vec::new(),
@@ -569,21 +583,7 @@ impl PrototypeRecord {
     /// scales its prototype's radii): the flattened tree's original-line
     /// error range is `2R` of these ([`LodRecord::part_ranges`]).
     pub fn radius_range(&self) -> (f32, f32) {
-        let mut per_prototype = vec![None; self.prototypes.len()];
-        let mut range = (f32::INFINITY, 0.0f32);
-        for placement in &self.placements {
-            let (lo, hi) = *per_prototype[placement.prototype as usize].get_or_insert_with(|| {
-                let radii = self.prototypes[placement.prototype as usize]
-                    .needles
-                    .iter()
-                    .map(|n| n.radius);
-                (radii.clone().fold(f32::INFINITY, f32::min), radii.fold(0.0, f32::max))
-            });
-            // Scaling by a positive factor keeps the order of floats, so the
-            // placed extremes are the prototype's scaled.
-            range = (range.0.min(lo * placement.scale), range.1.max(hi * placement.scale));
-        }
-        range
+        self.radius_range
     }
 
     /// Position of flattened endpoint `end` (`2 · needle + tip`, needles
