@@ -325,6 +325,14 @@ impl ViewCanvas {
     }
 }
 
+/// The unit direction of `along`, turned to point up (`+y`): a needle's or
+/// a branch's axis has no sign, and texels sum them (vertical for a
+/// degenerate one).
+fn upward(along: Vec3) -> Vec3 {
+    let direction = along.normalize_or(Vec3::Y);
+    if direction.y < 0.0 { -direction } else { direction }
+}
+
 impl CrownImpostor {
     /// Bakes the impostor of `needles` and `wood` (tree-local metres; the
     /// tree stands along `+y`). `None` when nothing is valid or the
@@ -556,10 +564,7 @@ impl CrownImpostor {
                     wood_hidden.set(index);
                 }
             });
-        let mut direction = (needle.tip - needle.base).normalize_or(Vec3::Y);
-        if direction.y < 0.0 {
-            direction = -direction;
-        }
+        let direction = upward(needle.tip - needle.base);
         // Weighted by the projected area.
         self.add_axis(canvas, a, b, direction, (2.0 * half_width * a.distance(b)).max(1e-6));
     }
@@ -582,10 +587,7 @@ impl CrownImpostor {
             let near = near_a + (near_b - near_a) * t;
             front[index] = front[index].max(near);
         });
-        let mut direction = (segment.end - segment.start).normalize_or(Vec3::Y);
-        if direction.y < 0.0 {
-            direction = -direction;
-        }
+        let direction = upward(segment.end - segment.start);
         self.add_axis(canvas, a, b, direction, ((ra + rb) * a.distance(b)).max(1e-6));
     }
 
@@ -602,20 +604,23 @@ impl CrownImpostor {
             let nearness = w[0] * near[0] + w[1] * near[1] + w[2] * near[2];
             front[index] = front[index].max(nearness);
         });
-        let sides = [(0, 1), (1, 2), (2, 0)];
-        let (a, b) = sides
+        let (i, j) = [(0, 1), (1, 2), (2, 0)]
             .into_iter()
-            .map(|(i, j)| (corners[i], corners[j]))
-            .max_by(|x, y| x.0.distance_squared(x.1).total_cmp(&y.0.distance_squared(y.1)))
-            .unwrap_or((corners[0], corners[1]));
-        let mut direction = (b - a).normalize_or(Vec3::Y);
-        if direction.y < 0.0 {
-            direction = -direction;
-        }
+            .max_by(|&(a, b), &(c, d)| {
+                corners[a]
+                    .distance_squared(corners[b])
+                    .total_cmp(&corners[c].distance_squared(corners[d]))
+            })
+            .unwrap_or((0, 1));
         let [p0, p1, p2] = projected;
         let area = 0.5 * (p1 - p0).perp_dot(p2 - p0).abs();
-        let (from, to) = (self.sample_point(canvas, a), self.sample_point(canvas, b));
-        self.add_axis(canvas, from, to, direction, area.max(1e-6));
+        self.add_axis(
+            canvas,
+            projected[i],
+            projected[j],
+            upward(corners[j] - corners[i]),
+            area.max(1e-6),
+        );
     }
 
     /// The view's texels from its samples: coverage is the samples the
