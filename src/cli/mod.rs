@@ -139,7 +139,8 @@ pub struct UpgradeArgs {
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// Leave a record without a crown impostor as it is (by default, one older than
-    /// format 7 gains its impostor, baked with the default options).
+    /// format 8 gains its impostor, baked with the default options; format 7's
+    /// lit its texels along one mean axis, and is baked again).
     #[arg(long)]
     pub no_impostor: bool,
 }

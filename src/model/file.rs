@@ -33,7 +33,8 @@
 //!   length; neighbouring shoots are mostly of an age);
 //! * after those (format 7), the crown impostor the record was baked with,
 //!   if any ([`super::impostor::CrownImpostor`]): its frame, and its texels
-//!   as four planes (coverage, wood, axis x, axis z), deflated (a quarter
+//!   as four planes (coverage, wood, and the two lighting shares times
+//!   coverage), deflated (a quarter
 //!   of their size on the mature records; the plugin no longer bakes it at
 //!   load).
 //!
@@ -41,6 +42,9 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 8 stores each impostor texel's lighting as shares of two
+//! cylinders and a sphere where version 7 stored one mean needle axis: a
+//! version 7 file reads without its impostor, as a version 6 file does.
 //! Version 7 adds the crown impostor (version 6 files read without one:
 //! the plugin bakes it at load, `conifer upgrade` bakes it into the file).
 //! Version 6 stores placements on codes (format 5 stored `f32`s: 34 bytes
@@ -76,7 +80,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -1028,7 +1032,10 @@ fn decode_payload(
     };
     let (impostor, rest) = if version >= 7 {
         let (stored, rest) = postcard::take_from_bytes::<Option<StoredImpostor>>(rest).map_err(malformed)?;
-        (stored.map(StoredImpostor::decode).transpose()?, rest)
+        // Format 7's last two planes are mean axes, not shares: checked,
+        // then dropped (the plugin bakes the impostor at load).
+        let impostor = stored.map(StoredImpostor::decode).transpose()?;
+        (impostor.filter(|_| version >= 8), rest)
     } else {
         (None, rest)
     };
@@ -1401,7 +1408,7 @@ mod tests {
     }
 
     #[test]
-    fn the_impostor_round_trips_and_a_format_6_file_has_none() {
+    fn the_impostor_round_trips_and_format_6_and_7_files_have_none() {
         let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         let impostor = record.impostor.clone().expect("the default bake holds an impostor");
         let bytes = encode_prototype_record(&record).unwrap();
@@ -1416,7 +1423,7 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one, format 7 stores a single byte for it.
+        // Without one, format 8 stores a single byte for it.
         let mut bare = record.clone();
         bare.impostor = None;
         assert_eq!(
@@ -1430,9 +1437,15 @@ mod tests {
             edit(&mut s);
             let mut body = v6.to_vec();
             body.extend(postcard::to_allocvec(&Some(s)).unwrap());
-            decode_prototype_record(&file_of_version(7, &body))
+            decode_prototype_record(&file_of_version(8, &body))
         };
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
+        // Format 7 stored mean axes in the last two planes: read without it.
+        let mut v7 = v6.to_vec();
+        v7.extend(postcard::to_allocvec(&Some(StoredImpostor::encode(&impostor).unwrap())).unwrap());
+        let old = decode_prototype_record(&file_of_version(7, &v7)).unwrap();
+        assert!(old.impostor.is_none());
+        assert_eq!(old.placements, record.placements);
         type Edit<'a> = (&'a str, &'a dyn Fn(&mut StoredImpostor));
         let edits: [Edit; 6] = [
             ("no views", &|s| s.views = 0),

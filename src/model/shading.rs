@@ -9,9 +9,25 @@
 //! made perpendicular to the axis and `b = axis × t`; a uniform measure in
 //! `s` is the pixel's average. The shader evaluates Bevy's BRDF at the
 //! four Gauss–Legendre nodes of `s` ([`ACROSS_NODES`]).
+//!
+//! ## A texel of many needles
+//!
+//! Far away one impostor texel stands for hundreds of needles pointing
+//! every way, and no single cylinder is lit like them: lighting their mean
+//! axis (sign-folded up, as the first impostors did) gave a silver fir's
+//! flat two-rowed shoots a random axis, and the crown bands of light and
+//! dark. A population of cylinders whose axes are spread evenly over the
+//! sphere shows, weighted by projected area, the normals of a sphere
+//! ([`sphere_lambert`]); a real texel lies between that and cylinders along
+//! the crown's main directions. [`texel_shares`] fits each needle's
+//! lighting, over suns above the horizon, as shares of a vertical
+//! cylinder, a cylinder across the view and the sphere; the fit is linear,
+//! so a texel's shares are its needles' area-weighted means and a mip
+//! level's shares its texels' means.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
+use std::sync::OnceLock;
 
 /// The four-point Gauss–Legendre rule on `[−1, 1]`: offsets across a
 /// cylinder's projected width and their weights (summing to 2), as the
@@ -69,6 +85,219 @@ pub fn cylinder_lambert(axis: Vec3, to_viewer: Vec3, to_light: Vec3) -> f32 {
     length * (phi.sin() + (PI - phi) * phi.cos()) / 4.0
 }
 
+/// The exact average over a sphere's projected disk of the Lambert factor
+/// `max(n·L, 0)`, for unit `to_viewer` and `to_light`: the Lambert
+/// sphere's phase function `2 (sin α + (π − α) cos α) / 3π`, where `α` is
+/// the angle between the viewer and the light. 2/3 lit from the viewer, 0
+/// from behind the sphere.
+pub fn sphere_lambert(to_viewer: Vec3, to_light: Vec3) -> f32 {
+    let alpha = to_viewer.dot(to_light).clamp(-1.0, 1.0).acos();
+    2.0 * (alpha.sin() + (PI - alpha) * alpha.cos()) / (3.0 * PI)
+}
+
+/// A seven-point rule on the unit disk, exact for polynomials of degree 5
+/// (Stroud's S2 5-1): points `(x, y)` on the sphere's projected disk and
+/// their weights (summing to 1), as the shader's `disk_point` and
+/// `disk_weight`. A uniform measure on the projected disk is the
+/// average a pixel sees.
+pub const DISK_NODES: [(f32, f32, f32); 7] = [
+    (0.0, 0.0, 0.25),
+    (0.816_496_6, 0.0, 0.125),
+    (0.408_248_3, 0.707_106_77, 0.125),
+    (-0.408_248_3, 0.707_106_77, 0.125),
+    (-0.816_496_6, 0.0, 0.125),
+    (-0.408_248_3, -0.707_106_77, 0.125),
+    (0.408_248_3, -0.707_106_77, 0.125),
+];
+
+/// The average over a sphere's projected disk of `radiance(n)`, the
+/// radiance leaving it where the normal is `n`, by the shader's seven-point
+/// rule ([`DISK_NODES`]; the disk's frame is [`super::compact::ring_basis`]
+/// of `to_viewer`).
+pub fn disk_average(to_viewer: Vec3, radiance: impl Fn(Vec3) -> f32) -> f32 {
+    let to_viewer = to_viewer.try_normalize().unwrap_or(Vec3::Z);
+    let (u, v) = super::compact::ring_basis(to_viewer);
+    DISK_NODES
+        .iter()
+        .map(|&(x, y, w)| {
+            let out = (1.0 - x * x - y * y).max(0.0).sqrt();
+            w * radiance(out * to_viewer + x * u + y * v)
+        })
+        .sum()
+}
+
+/// How a texel's needles are lit, as shares (in `[0, 1]`, summing to at
+/// most 1) of two cylinders and a sphere: `vertical` along the tree's
+/// axis, `across` along the view's right; the rest is lit as a sphere
+/// (needles spread every way).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TexelShares {
+    /// Share lit as a vertical cylinder.
+    pub vertical: f32,
+    /// Share lit as a horizontal cylinder across the view.
+    pub across: f32,
+}
+
+impl TexelShares {
+    /// The shares clamped to be non-negative and sum to at most 1 (a
+    /// needle's own fit may lie outside; a texel's mean is clamped). A NaN
+    /// share is 0.
+    pub fn clamped(self) -> Self {
+        let (vertical, across) = (self.vertical.max(0.0), self.across.max(0.0));
+        let sum = vertical + across;
+        if sum > 1.0 {
+            Self {
+                vertical: vertical / sum,
+                across: across / sum,
+            }
+        } else {
+            Self { vertical, across }
+        }
+    }
+
+    /// Share lit as a sphere: `1 − vertical − across`.
+    pub fn sphere(self) -> f32 {
+        (1.0 - self.vertical - self.across).max(0.0)
+    }
+
+    /// The Lambert factor the shares give, seen from unit `to_viewer` lit
+    /// from unit `to_light`, with the frame's unit `up` and `right` (the
+    /// CPU reference of the impostor's fragment, which takes Bevy's BRDF
+    /// at the same normals).
+    pub fn lambert(self, up: Vec3, right: Vec3, to_viewer: Vec3, to_light: Vec3) -> f32 {
+        self.vertical * cylinder_lambert(up, to_viewer, to_light)
+            + self.across * cylinder_lambert(right, to_viewer, to_light)
+            + self.sphere() * sphere_lambert(to_viewer, to_light)
+    }
+}
+
+/// Suns the shares are fitted over: directions above the horizon of a view
+/// looking along `−z` (a Fibonacci spiral on the upper hemisphere).
+pub const FIT_SUNS: usize = 64;
+
+/// Directions a side of the fitted table holds ([`texel_shares`]).
+const SHARE_TABLE_SIDE: usize = 64;
+
+/// The least-squares fit of a cylinder's lighting by the shares' basis
+/// over [`FIT_SUNS`] suns (module docs).
+struct ShareFit {
+    suns: Vec<Vec3>,
+    sphere: Vec<f32>,
+    /// The vertical and the across cylinders' Lambert factors minus the
+    /// sphere's, per sun.
+    basis: [Vec<f64>; 2],
+    /// The inverse of the basis' Gram matrix, row-major.
+    inverse: [f64; 4],
+}
+
+impl ShareFit {
+    fn new() -> Self {
+        let suns: Vec<Vec3> = (0..FIT_SUNS)
+            .map(|i| {
+                let y = 1.0 - (i as f32 + 0.5) / FIT_SUNS as f32;
+                let r = (1.0 - y * y).max(0.0).sqrt();
+                let phi = i as f32 * 2.399_963_3;
+                Vec3::new(r * phi.cos(), y, r * phi.sin())
+            })
+            .collect();
+        let sphere: Vec<f32> = suns.iter().map(|&l| sphere_lambert(Vec3::Z, l)).collect();
+        let mut fit = Self {
+            suns,
+            sphere,
+            basis: [Vec::new(), Vec::new()],
+            inverse: [0.0; 4],
+        };
+        fit.basis = [fit.residual(Vec3::Y), fit.residual(Vec3::X)];
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let (a11, a12, a22) = (
+            dot(&fit.basis[0], &fit.basis[0]),
+            dot(&fit.basis[0], &fit.basis[1]),
+            dot(&fit.basis[1], &fit.basis[1]),
+        );
+        let det = a11 * a22 - a12 * a12;
+        fit.inverse = [a22 / det, -a12 / det, -a12 / det, a11 / det];
+        fit
+    }
+
+    /// A cylinder's Lambert factor minus the sphere's, per sun.
+    fn residual(&self, axis: Vec3) -> Vec<f64> {
+        self.suns
+            .iter()
+            .zip(&self.sphere)
+            .map(|(&l, &s)| f64::from(cylinder_lambert(axis, Vec3::Z, l) - s))
+            .collect()
+    }
+
+    /// The shares of a needle along unit `direction` (view frame).
+    fn shares(&self, direction: Vec3) -> [f32; 2] {
+        let r = self.residual(direction);
+        let dot = |a: &[f64]| a.iter().zip(&r).map(|(x, y)| x * y).sum::<f64>();
+        let (r1, r2) = (dot(&self.basis[0]), dot(&self.basis[1]));
+        let [i11, i12, i21, i22] = self.inverse;
+        [(i11 * r1 + i12 * r2) as f32, (i21 * r1 + i22 * r2) as f32]
+    }
+}
+
+/// The fit's table: for directions on the upper hemisphere, mapped to a
+/// square (hemi-octahedral), each one's least-squares shares.
+fn share_table() -> &'static Vec<[f32; 2]> {
+    static TABLE: OnceLock<Vec<[f32; 2]>> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let fit = ShareFit::new();
+        let side = SHARE_TABLE_SIDE;
+        (0..side * side)
+            .map(|k| {
+                let cell = Vec2::new((k % side) as f32, (k / side) as f32) / (side - 1) as f32 * 2.0 - 1.0;
+                fit.shares(hemi_octahedral_direction(cell))
+            })
+            .collect()
+    })
+}
+
+/// The unit direction on the upper hemisphere (`y ≥ 0`) at `cell` of the
+/// square `[−1, 1]²` (hemi-octahedral map, Cigolle et al., JCGT 2014).
+fn hemi_octahedral_direction(cell: Vec2) -> Vec3 {
+    let (x, z) = (0.5 * (cell.x + cell.y), 0.5 * (cell.x - cell.y));
+    Vec3::new(x, 1.0 - x.abs() - z.abs(), z).normalize()
+}
+
+/// The cell of the square `[−1, 1]²` of unit `direction` folded onto the
+/// upper hemisphere (a cylinder's axis has no sign).
+fn hemi_octahedral_cell(direction: Vec3) -> Vec2 {
+    let d = if direction.y < 0.0 { -direction } else { direction };
+    let p = Vec2::new(d.x, d.z) / (d.x.abs() + d.y.abs() + d.z.abs());
+    Vec2::new(p.x + p.y, p.x - p.y)
+}
+
+/// A needle's shares (not clamped), for its unit `direction` in a view's
+/// frame (`x` the view's right, `y` up, `z` toward the viewer): the
+/// least-squares fit over [`FIT_SUNS`] suns above the horizon of its
+/// cylinder's Lambert factor minus the sphere's, by the vertical and the
+/// across cylinders' minus the sphere's (read from a 64 × 64 table,
+/// bilinear; built on first use).
+pub fn texel_shares(direction: Vec3) -> TexelShares {
+    let table = share_table();
+    let side = SHARE_TABLE_SIDE;
+    let cell = (hemi_octahedral_cell(direction.try_normalize().unwrap_or(Vec3::Y)) + 1.0) * 0.5 * (side - 1) as f32;
+    let cell = if cell.is_finite() {
+        cell.clamp(Vec2::ZERO, Vec2::splat((side - 1) as f32))
+    } else {
+        Vec2::ZERO
+    };
+    let (x0, y0) = ((cell.x as usize).min(side - 2), (cell.y as usize).min(side - 2));
+    let (fx, fy) = (cell.x - x0 as f32, cell.y - y0 as f32);
+    let at = |x: usize, y: usize, i: usize| table[y * side + x][i];
+    let lerp = |i: usize| {
+        let top = at(x0, y0, i) + (at(x0 + 1, y0, i) - at(x0, y0, i)) * fx;
+        let bottom = at(x0, y0 + 1, i) + (at(x0 + 1, y0 + 1, i) - at(x0, y0 + 1, i)) * fx;
+        top + (bottom - top) * fy
+    };
+    TexelShares {
+        vertical: lerp(0),
+        across: lerp(1),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -102,6 +331,112 @@ mod tests {
             prop_assert!((quadrature - exact).abs() < 0.03, "{quadrature} vs {exact}");
             let (toward, _) = visible_frame(axis, viewer);
             prop_assert!(toward.dot(light).max(0.0) <= exact * 4.0 / PI + 0.03);
+        }
+    }
+
+    #[test]
+    fn sphere_lambert_has_the_known_values() {
+        assert!((sphere_lambert(Vec3::Z, Vec3::Z) - 2.0 / 3.0).abs() < 1e-6);
+        assert!(sphere_lambert(Vec3::Z, -Vec3::Z).abs() < 1e-6);
+        // Half moon: 2 / 3π.
+        assert!((sphere_lambert(Vec3::Z, Vec3::X) - 2.0 / (3.0 * PI)).abs() < 1e-6);
+    }
+
+    /// Cylinders with axes spread evenly over the sphere, weighted by their
+    /// projected length, are lit as a sphere (to the spiral's precision).
+    #[test]
+    fn evenly_spread_cylinders_are_lit_as_a_sphere() {
+        let n = 8192;
+        let axes: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - y * y).sqrt();
+                let phi = i as f32 * 2.399_963_3;
+                Vec3::new(r * phi.cos(), y, r * phi.sin())
+            })
+            .collect();
+        let viewer = Vec3::Z;
+        for light in [
+            Vec3::Z,
+            Vec3::new(1.0, 1.0, 1.0).normalize(),
+            Vec3::X,
+            Vec3::new(0.0, 0.3, -1.0).normalize(),
+        ] {
+            let (mut sum, mut weight) = (0.0, 0.0);
+            for &axis in &axes {
+                let w = (1.0 - axis.dot(viewer).powi(2)).max(0.0).sqrt();
+                sum += w * cylinder_lambert(axis, viewer, light);
+                weight += w;
+            }
+            let sphere = sphere_lambert(viewer, light);
+            assert!(
+                (sum / weight - sphere).abs() < 0.003,
+                "{light}: {} vs {sphere}",
+                sum / weight
+            );
+        }
+    }
+
+    #[test]
+    fn a_vertical_needle_is_the_vertical_share_and_one_across_the_across_share() {
+        let up = texel_shares(Vec3::Y);
+        assert!((up.vertical - 1.0).abs() < 1e-3 && up.across.abs() < 1e-3, "{up:?}");
+        for across in [Vec3::X, -Vec3::X] {
+            let shares = texel_shares(across);
+            assert!(
+                shares.vertical.abs() < 1e-3 && (shares.across - 1.0).abs() < 1e-3,
+                "{shares:?}"
+            );
+        }
+        assert_eq!(texel_shares(Vec3::Y), texel_shares(-Vec3::Y));
+        let shares = texel_shares(Vec3::NAN);
+        assert!(shares.vertical.is_finite() && shares.across.is_finite());
+        assert_eq!(
+            TexelShares {
+                vertical: f32::NAN,
+                across: 0.0
+            }
+            .clamped(),
+            TexelShares {
+                vertical: 0.0,
+                across: 0.0
+            }
+        );
+        assert_eq!(
+            TexelShares {
+                vertical: 3.0,
+                across: 1.0
+            }
+            .clamped(),
+            TexelShares {
+                vertical: 0.75,
+                across: 0.25
+            }
+        );
+    }
+
+    proptest! {
+        /// The disk's seven normals average the sphere's Lambert factor to
+        /// within 0.04 of the exact phase function.
+        #[test]
+        fn seven_normals_average_the_sphere(viewer in direction(), light in direction()) {
+            let exact = sphere_lambert(viewer, light);
+            let quadrature = disk_average(viewer, |n| n.dot(light).max(0.0));
+            prop_assert!((quadrature - exact).abs() < 0.04, "{quadrature} vs {exact}");
+        }
+
+        /// The table's bilinear shares are the direct fit's to 0.02, but
+        /// within 16° of the view axis: a needle pointing nearly at the
+        /// viewer shows its upper or its lower side as it tips, and its
+        /// fit jumps there (its projected area, its weight in a texel, is
+        /// under a quarter of a needle seen side on).
+        #[test]
+        fn the_table_is_the_fit(axis in direction()) {
+            prop_assume!(axis.z.abs() < 0.96);
+            let [vertical, across] = ShareFit::new().shares(axis);
+            let table = texel_shares(axis);
+            prop_assert!((table.vertical - vertical).abs() < 0.02 && (table.across - across).abs() < 0.02,
+                "{table:?} vs {vertical} {across}");
         }
     }
 }

@@ -757,11 +757,48 @@ fn across_weight(k: u32) -> f32 {
     return select(0.65214515486, 0.34785484514, (k & 1u) != 0u);
 }
 
-// The lighting input of the cylinder's surface point at offset `s` across
-// its projected width (`s` in [−1, 1]; the normal turns from `toward`,
-// facing the viewer, to `side`).
-fn across(input: ptr<function, lighting::LightingInput>, toward: vec3<f32>, side: vec3<f32>, s: f32) {
-    let n = sqrt(max(1.0 - s * s, 0.0)) * toward + s * side;
+// Seven points on the unit disk and their weights (summing to 1), exact
+// for polynomials of degree 5 (Stroud's S2 5-1; `model::shading::DISK_NODES`).
+fn disk_point(k: u32) -> vec2<f32> {
+    if k == 0u {
+        return vec2<f32>(0.0);
+    }
+    let angle = f32(k - 1u) * 1.0471975512;
+    return 0.81649658093 * vec2<f32>(cos(angle), sin(angle));
+}
+
+fn disk_weight(k: u32) -> f32 {
+    return select(0.125, 0.25, k == 0u);
+}
+
+// What a pixel of lines or of the impostor sees: a cylinder's visible half
+// (four normals across its projected width, `toward` facing the viewer
+// turning to `side`) or a sphere's (seven normals over its projected disk
+// round `toward`, `side` and `up` spanning the disk).
+struct Surface {
+    toward: vec3<f32>,
+    side: vec3<f32>,
+    up: vec3<f32>,
+    is_sphere: bool,
+}
+
+fn surface_count(surface: Surface) -> u32 {
+    return select(4u, 7u, surface.is_sphere);
+}
+
+// Normal `k` of the surface and its weight (the weights sum to 1).
+fn surface_normal(surface: Surface, k: u32) -> vec4<f32> {
+    if surface.is_sphere {
+        let p = disk_point(k);
+        let out = sqrt(max(1.0 - dot(p, p), 0.0));
+        return vec4<f32>(out * surface.toward + p.x * surface.side + p.y * surface.up, disk_weight(k));
+    }
+    let s = across_offset(k);
+    return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * across_weight(k));
+}
+
+// Sets the lighting input's normal to unit `n`.
+fn set_normal(input: ptr<function, lighting::LightingInput>, n: vec3<f32>) {
     let NdotV = max(dot(n, (*input).V), 0.0001);
     (*input).layers[lighting::LAYER_BASE].N = n;
     (*input).layers[lighting::LAYER_BASE].NdotV = NdotV;
@@ -777,14 +814,41 @@ fn across(input: ptr<function, lighting::LightingInput>, toward: vec3<f32>, side
 // sees) rather than at one normal facing the viewer, which lights every
 // line from the front. Each light's shadow is fetched once, at the axis.
 fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
-    let V = in.V;
     var T = axis;
     if dot(T, T) < 1e-24 {
         T = vec3<f32>(0.0, 1.0, 0.0);
     }
     T = normalize(T);
-    let toward = facing_axis(T, V);
-    let side = cross(T, toward);
+    let toward = facing_axis(T, in.V);
+    var surface: Surface;
+    surface.toward = toward;
+    surface.side = cross(T, toward);
+    surface.up = T;
+    surface.is_sphere = false;
+    return surface_lighting(in, surface);
+}
+
+// Needles spread every way are lit as a sphere (`model::shading::sphere_lambert`):
+// Bevy's BRDF at seven normals over its projected disk.
+fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
+    var surface: Surface;
+    surface.toward = in.V;
+    // The disk's frame, as `model::compact::ring_basis` builds it.
+    let sign = select(-1.0, 1.0, in.V.z >= 0.0);
+    let a = -1.0 / (sign + in.V.z);
+    let b = in.V.x * in.V.y * a;
+    surface.side = vec3<f32>(1.0 + sign * in.V.x * in.V.x * a, sign * b, -sign * in.V.x);
+    surface.up = vec3<f32>(b, sign + in.V.y * in.V.y * a, -in.V.y);
+    surface.is_sphere = true;
+    return surface_lighting(in, surface);
+}
+
+// The surface's radiance averaged over what the pixel sees of it; each
+// light's shadow is fetched once, at the normal facing the viewer.
+fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
+    let V = in.V;
+    let toward = surface.toward;
+    let count = surface_count(surface);
 
     let base = in.material.base_color.rgb;
     let perceptual_roughness = in.material.perceptual_roughness;
@@ -816,11 +880,12 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
             shadow = shadows::fetch_point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
         var sum = vec3<f32>(0.0);
-        for (var k = 0u; k < 4u; k = k + 1u) {
-            across(&input, toward, side, across_offset(k));
-            sum += across_weight(k) * lighting::point_light(light_id, &input, true, true);
+        for (var k = 0u; k < count; k = k + 1u) {
+            let normal = surface_normal(surface, k);
+            set_normal(&input, normal.xyz);
+            sum += normal.w * lighting::point_light(light_id, &input, true, true);
         }
-        direct += 0.5 * sum * shadow;
+        direct += sum * shadow;
     }
     for (var i: u32 = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i = i + 1u) {
         let light_id = clustering::get_clusterable_object_id(i);
@@ -835,11 +900,12 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
             );
         }
         var sum = vec3<f32>(0.0);
-        for (var k = 0u; k < 4u; k = k + 1u) {
-            across(&input, toward, side, across_offset(k));
-            sum += across_weight(k) * lighting::spot_light(light_id, &input, true);
+        for (var k = 0u; k < count; k = k + 1u) {
+            let normal = surface_normal(surface, k);
+            set_normal(&input, normal.xyz);
+            sum += normal.w * lighting::spot_light(light_id, &input, true);
         }
-        direct += 0.5 * sum * shadow;
+        direct += sum * shadow;
     }
     for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
         var shadow = 1.0;
@@ -847,16 +913,18 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
             shadow = shadows::fetch_directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
         var sum = vec3<f32>(0.0);
-        for (var k = 0u; k < 4u; k = k + 1u) {
-            across(&input, toward, side, across_offset(k));
-            sum += across_weight(k) * lighting::directional_light(i, &input, true);
+        for (var k = 0u; k < count; k = k + 1u) {
+            let normal = surface_normal(surface, k);
+            set_normal(&input, normal.xyz);
+            sum += normal.w * lighting::directional_light(i, &input, true);
         }
-        direct += 0.5 * sum * shadow;
+        direct += sum * shadow;
     }
 
-    // Indirect light is the same all round the ring to the precision of
-    // Bevy's split-sum terms: taken at the normal facing the viewer.
-    across(&input, toward, side, 0.0);
+    // Indirect light is the same all round the ring or the disk to the
+    // precision of Bevy's split-sum terms: taken at the normal facing the
+    // viewer.
+    set_normal(&input, toward);
     var indirect = vec3<f32>(0.0);
 #ifdef ENVIRONMENT_MAP
     let environment = environment_map::environment_map_light(&input, &ranges, false);
@@ -915,7 +983,8 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var axis = in.world_normal;
 #ifdef CONIFER_IMPOSTOR
     // The two views' texels over the pixel's footprint: coverage, wood,
-    // the mean axis (x, z).
+    // and the shares lit as a vertical cylinder and as one across the view
+    // (both times coverage; the rest is lit as a sphere).
     let du = dpdx(in.uv);
     let dv = dpdy(in.uv);
     let first = impostor_footprint(in.uv, du, dv, i32(round(in.color.x)));
@@ -933,10 +1002,18 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
         albedo = vec3<f32>(0.85, 0.2, 0.85);
     }
     pbr_input.material.base_color = vec4<f32>(albedo, texel.r * in.color.w);
-    let x = 2.0 * texel.b - 1.0;
-    let z = 2.0 * texel.a - 1.0;
-    let local_axis = vec3<f32>(x, sqrt(max(1.0 - x * x - z * z, 0.0)), z);
-    axis = normalize((world_from_local * vec4<f32>(local_axis, 0.0)).xyz);
+    let vertical_share = clamp(texel.b / texel.r, 0.0, 1.0);
+    let across_share = clamp(texel.a / texel.r, 0.0, 1.0 - vertical_share);
+    axis = normalize(world_from_local[1].xyz);
+    // The view's right: across the camera's azimuth round the impostor's
+    // axis, as the quad is turned.
+    let camera_local = tree_local_point(world_from_local, length(world_from_local[0].xyz), view.world_position);
+    var to_camera = camera_local.xz - species.impostor_box.xy;
+    if dot(to_camera, to_camera) < 1e-12 {
+        to_camera = vec2<f32>(0.0, 1.0);
+    }
+    to_camera = normalize(to_camera);
+    let across_axis = normalize((world_from_local * vec4<f32>(to_camera.y, 0.0, -to_camera.x, 0.0)).xyz);
 #endif
 #ifdef CONIFER_BARK
     // The bark's colour at this fragment's height (taken at the vertices,
@@ -977,6 +1054,21 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     pbr_input.world_normal = normalize(normal);
     pbr_input.N = pbr_input.world_normal;
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
+#else ifdef CONIFER_IMPOSTOR
+    // The texel's needles lit as shares of two cylinders and a sphere
+    // (CPU reference: `model::shading::TexelShares::lambert`).
+    var color = vec4<f32>(0.0);
+    if vertical_share > 1.0 / 512.0 {
+        color += vertical_share * cylinder_lighting(pbr_input, axis);
+    }
+    if across_share > 1.0 / 512.0 {
+        color += across_share * cylinder_lighting(pbr_input, across_axis);
+    }
+    let sphere_share = 1.0 - vertical_share - across_share;
+    if sphere_share > 1.0 / 512.0 {
+        color += sphere_share * sphere_lighting(pbr_input);
+    }
+    color.a = pbr_input.material.base_color.a;
 #else ifdef CONIFER_LINES
     var color = cylinder_lighting(pbr_input, axis);
 #else
