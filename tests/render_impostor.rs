@@ -307,3 +307,122 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
         "the footprint filter, not one trilinear sample: {footprint_error} vs {trilinear_error}"
     );
 }
+
+/// The impostor's texels are lit as their shares (CPU reference:
+/// `model::shading::TexelShares::lambert`): a picture of texels that are
+/// all vertical cylinders, all cylinders across the view or all spheres,
+/// lit by a sun from the camera and one across the view (no ambient light,
+/// no specular: reflectance 0, no tonemapping), keeps the Lambert
+/// reference's ratios (Bevy's Burley diffuse is Lambert's to a few per
+/// cent at these normals). Across the view a cylinder lit along its axis is
+/// dark; from the camera a sphere shows 2/3 where a cylinder shows π/4.
+#[test]
+fn the_impostor_is_lit_as_its_texels_shares() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_conifer_lod::model::shading::TexelShares;
+    use std::sync::Arc;
+    let _turn = common::gpu_turn();
+    let record = spruce();
+    let species = ConiferSpecies::from_record(record.clone()).unwrap();
+    let baked = species.impostor.clone().expect("an impostor");
+    let crown = species.crown_center;
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(SIZE, SIZE);
+    let world = renderer.world_mut();
+    let sun = HeadlessRenderer::spawn_lights(world);
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    // Six texels a pixel error: the impostor alone.
+    let distance = 6.0 * baked.texel / error_per_metre();
+    let eye = crown + Vec3::Z * distance;
+    let camera = world
+        .spawn(HeadlessRenderer::camera_bundle(
+            &target,
+            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
+            FOV_DEG.to_radians(),
+        ))
+        .id();
+    world.entity_mut(camera).insert((
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::NONE),
+            ..default()
+        },
+        Msaa::Off,
+        Tonemapping::None,
+    ));
+    let kinds = [
+        (
+            "vertical",
+            TexelShares {
+                vertical: 1.0,
+                across: 0.0,
+            },
+        ),
+        (
+            "across",
+            TexelShares {
+                vertical: 0.0,
+                across: 1.0,
+            },
+        ),
+        ("sphere", TexelShares::default()),
+    ];
+    let suns = [("front", Vec3::Z), ("side", Vec3::X)];
+    // Mean linear red + green + blue over the quad's opaque pixels.
+    let mut drawn = [[0.0f32; 3]; 2];
+    for (k, (kind, shares)) in kinds.iter().enumerate() {
+        let mut impostor = (*baked).clone();
+        let texel = [255, 0, (shares.vertical * 255.0) as u8, (shares.across * 255.0) as u8];
+        impostor.texels.iter_mut().for_each(|t| *t = texel);
+        let mut variant = ConiferSpecies::from_record(record.clone()).unwrap();
+        variant.impostor = Some(Arc::new(impostor));
+        variant.material.reflectance = 0.0;
+        let world = renderer.world_mut();
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(variant);
+        let tree = world.spawn((ConiferFoliage(handle), Transform::IDENTITY)).id();
+        for (s, (name, from)) in suns.iter().enumerate() {
+            *renderer.world_mut().get_mut::<Transform>(sun).unwrap() =
+                Transform::from_translation(crown + *from * 100.0).looking_at(crown, Vec3::Y);
+            for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+                renderer.update().unwrap();
+            }
+            let picture = renderer.capture(&target, 8).unwrap();
+            picture
+                .save(out_dir().join(format!("impostor_lit_{kind}_{name}.png")))
+                .unwrap();
+            let linear = |c: u8| {
+                let c = f32::from(c) / 255.0;
+                if c <= 0.04045 {
+                    c / 12.92
+                } else {
+                    ((c + 0.055) / 1.055).powf(2.4)
+                }
+            };
+            let opaque: Vec<f32> = picture
+                .pixels()
+                .filter(|p| p.0[3] == 255)
+                .map(|p| linear(p.0[0]) + linear(p.0[1]) + linear(p.0[2]))
+                .collect();
+            assert!(opaque.len() > 300, "{kind}, sun {name}: {} opaque pixels", opaque.len());
+            drawn[s][k] = opaque.iter().sum::<f32>() / opaque.len() as f32;
+        }
+        renderer.world_mut().despawn(tree);
+    }
+    let expected = suns.map(|(_, from)| kinds.map(|(_, shares)| shares.lambert(Vec3::Y, Vec3::X, Vec3::Z, from)));
+    println!("drawn (linear RGB sum) {drawn:?}, Lambert {expected:?}");
+    for s in 0..2 {
+        let bright = drawn[s][0];
+        assert!(bright > 0.01, "the vertical cylinders are lit: {drawn:?}");
+        for k in [1, 2] {
+            let (ratio, lambert) = (drawn[s][k] / bright, expected[s][k] / expected[s][0]);
+            assert!(
+                (ratio - lambert).abs() < 0.08,
+                "{}, sun {}: ratio {ratio} vs Lambert {lambert}",
+                kinds[k].0,
+                suns[s].0
+            );
+        }
+    }
+}

@@ -797,9 +797,11 @@ fn surface_normal(surface: Surface, k: u32) -> vec4<f32> {
     return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * across_weight(k));
 }
 
-// Sets the lighting input's normal to unit `n`.
+// Sets the lighting input's normal to unit `n`. `n·V` is kept ≤ 1: a
+// normal facing the viewer (the sphere's centre) can round past it, and
+// Burley's `pow(1 − n·V, 5)` of a negative base is NaN (a black pixel).
 fn set_normal(input: ptr<function, lighting::LightingInput>, n: vec3<f32>) {
-    let NdotV = max(dot(n, (*input).V), 0.0001);
+    let NdotV = clamp(dot(n, (*input).V), 0.0001, 1.0);
     (*input).layers[lighting::LAYER_BASE].N = n;
     (*input).layers[lighting::LAYER_BASE].NdotV = NdotV;
     (*input).layers[lighting::LAYER_BASE].R = reflect(-(*input).V, n);
