@@ -51,9 +51,11 @@ fn app_with(dir: &std::path::Path, plugin: ConiferLodPlugin) -> App {
 }
 
 /// Updates `app` until `handle` has loaded or failed (`Err` with Bevy's
-/// message).
+/// message), for up to two minutes: bakes run on a nice-19 thread, which a
+/// loaded machine can starve for many seconds.
 fn wait_for(app: &mut App, handle: &Handle<ConiferSpecies>) -> Result<(), String> {
-    for _ in 0..2_000 {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while std::time::Instant::now() < deadline {
         app.update();
         match app.world().resource::<AssetServer>().load_state(handle) {
             LoadState::Loaded => return Ok(()),
