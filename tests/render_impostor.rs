@@ -211,6 +211,28 @@ fn the_impostor_covers_what_the_needles_cover() {
     }
 }
 
+/// A camera on `+z` of `crown` where the pixel error spans six texels of
+/// side `texel` (the tree drawn as its impostor alone), clearing to
+/// transparent, without MSAA. Returns it and where it stands.
+fn impostor_camera(world: &mut World, target: &Handle<Image>, crown: Vec3, texel: f32) -> (Entity, Vec3) {
+    let eye = crown + Vec3::Z * (6.0 * texel / error_per_metre());
+    let camera = world
+        .spawn(HeadlessRenderer::camera_bundle(
+            target,
+            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
+            FOV_DEG.to_radians(),
+        ))
+        .id();
+    world.entity_mut(camera).insert((
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::NONE),
+            ..default()
+        },
+        Msaa::Off,
+    ));
+    (camera, eye)
+}
+
 /// Where the ray through the centre of pixel `(x, y)` of a `size²`
 /// picture from a camera at `eye` looking along `-z` (vertical field of
 /// view `FOV_DEG`) meets the vertical plane through `origin` whose
@@ -236,24 +258,10 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
     let world = renderer.world_mut();
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
-    // Six texels a pixel error: the impostor alone, the tree ~40 pixels
-    // tall, where one trilinear sample would blur two pixels.
-    let distance = 6.0 * impostor.texel / error_per_metre();
-    let eye = crown + Vec3::Z * distance;
-    let camera = world
-        .spawn(HeadlessRenderer::camera_bundle(
-            &target,
-            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
-            FOV_DEG.to_radians(),
-        ))
-        .id();
-    world.entity_mut(camera).insert((
-        Camera {
-            clear_color: ClearColorConfig::Custom(Color::NONE),
-            ..default()
-        },
-        Msaa::Off,
-    ));
+    // The tree ~40 pixels tall, where one trilinear sample would blur two
+    // pixels.
+    let (_, eye) = impostor_camera(world, &target, crown, impostor.texel);
+    let distance = eye.distance(crown);
     for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
         renderer.update().unwrap();
     }
@@ -334,24 +342,8 @@ fn the_impostor_is_lit_as_its_texels_shares() {
         brightness: 0.0,
         ..default()
     });
-    // Six texels a pixel error: the impostor alone.
-    let distance = 6.0 * baked.texel / error_per_metre();
-    let eye = crown + Vec3::Z * distance;
-    let camera = world
-        .spawn(HeadlessRenderer::camera_bundle(
-            &target,
-            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
-            FOV_DEG.to_radians(),
-        ))
-        .id();
-    world.entity_mut(camera).insert((
-        Camera {
-            clear_color: ClearColorConfig::Custom(Color::NONE),
-            ..default()
-        },
-        Msaa::Off,
-        Tonemapping::None,
-    ));
+    let (camera, _) = impostor_camera(world, &target, crown, baked.texel);
+    world.entity_mut(camera).insert(Tonemapping::None);
     let kinds = [
         (
             "vertical",
