@@ -355,10 +355,19 @@ fn facing_axis(axis: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
     if dot(across, across) >= 1e-12 * max(dot(toward, toward), 1e-30) {
         return normalize(across);
     }
+    return ring_basis(axis)[0];
+}
+
+// Two unit vectors square to unit `axis` and to each other, Duff et al.'s
+// basis (JCGT 2017; CPU reference: `model::compact::ring_basis`).
+fn ring_basis(axis: vec3<f32>) -> array<vec3<f32>, 2> {
     let sign = select(-1.0, 1.0, axis.z >= 0.0);
     let a = -1.0 / (sign + axis.z);
     let b = axis.x * axis.y * a;
-    return vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
+    return array<vec3<f32>, 2>(
+        vec3<f32>(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x),
+        vec3<f32>(b, sign + axis.y * axis.y * a, -axis.y),
+    );
 }
 
 // The direction to the view from `local_point`, in the frame of
@@ -835,12 +844,9 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
 fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
     var surface: Surface;
     surface.toward = in.V;
-    // The disk's frame, as `model::compact::ring_basis` builds it.
-    let sign = select(-1.0, 1.0, in.V.z >= 0.0);
-    let a = -1.0 / (sign + in.V.z);
-    let b = in.V.x * in.V.y * a;
-    surface.side = vec3<f32>(1.0 + sign * in.V.x * in.V.x * a, sign * b, -sign * in.V.x);
-    surface.up = vec3<f32>(b, sign + in.V.y * in.V.y * a, -in.V.y);
+    let frame = ring_basis(in.V);
+    surface.side = frame[0];
+    surface.up = frame[1];
     surface.is_sphere = true;
     return surface_lighting(in, surface);
 }
