@@ -425,18 +425,30 @@ mod tests {
             prop_assert!((quadrature - exact).abs() < 0.04, "{quadrature} vs {exact}");
         }
 
-        /// The table's bilinear shares are the direct fit's to 0.02, but
+        /// The table's bilinear shares light a needle as the direct fit
+        /// does, to 0.01 of the Lambert factor under every fitted sun, but
         /// within 16° of the view axis: a needle pointing nearly at the
         /// viewer shows its upper or its lower side as it tips, and its
         /// fit jumps there (its projected area, its weight in a texel, is
-        /// under a quarter of a needle seen side on).
+        /// under a quarter of a needle seen side on). The shares
+        /// themselves are compared through their lighting: a needle
+        /// tipped toward the viewer fits shares far outside `[0, 1]`
+        /// (−1.6 at 37°) whose basis lights nearly alike, so their own
+        /// difference says little.
         #[test]
-        fn the_table_is_the_fit(axis in direction()) {
+        fn the_table_lights_as_the_fit(axis in direction()) {
             prop_assume!(axis.z.abs() < 0.96);
-            let [vertical, across] = ShareFit::new().shares(axis);
+            let fit = ShareFit::new();
+            let [vertical, across] = fit.shares(axis);
             let table = texel_shares(axis);
-            prop_assert!((table.vertical - vertical).abs() < 0.02 && (table.across - across).abs() < 0.02,
-                "{table:?} vs {vertical} {across}");
+            for (index, &sun) in fit.suns.iter().enumerate() {
+                let lit = |v: f32, a: f32| {
+                    fit.sphere[index] + v * fit.basis[0][index] as f32 + a * fit.basis[1][index] as f32
+                };
+                let (direct, tabled) = (lit(vertical, across), lit(table.vertical, table.across));
+                prop_assert!((direct - tabled).abs() < 0.01,
+                    "sun {sun}: {tabled} vs {direct} ({table:?} vs {vertical} {across})");
+            }
         }
     }
 }
