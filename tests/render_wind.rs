@@ -9,55 +9,14 @@ mod common;
 
 use bevy::prelude::*;
 use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, turn_normal, wind_offset, wind_reach};
-use bevy_conifer_lod::model::{
-    BakeOptions, FoliageMaterial, Needle, Placement, PrototypeInput, WoodSegment, bake_prototypes,
-};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
 use bevy_conifer_lod::prelude::*;
-use common::{BACKGROUND, background_camera, covered};
+use common::{BACKGROUND, background_camera, covered, shoot, trunk_with_shoots};
 use std::path::PathBuf;
 
 const SIZE: u32 = 200;
 const FOV_DEG: f32 = 50.0;
-
-/// A shoot of 12 needles 30 cm long side by side in the prototype's x–y
-/// plane.
-fn shoot() -> Vec<Needle> {
-    common::side_by_side_needles(12, 0.03, 0.3, 0.012)
-}
-
-/// A 10 m trunk of ten pieces (as a grown trunk has: the wind bends it at
-/// their ends), piece `k` from radius `radius(k)` to `radius(k + 1)`, with
-/// a shoot at each of `shoots`.
-fn trunk_with_shoots(shoots: &[Vec3], radius: impl Fn(usize) -> f32) -> ConiferSpecies {
-    let input = PrototypeInput {
-        name: "wind".into(),
-        prototypes: vec![shoot()],
-        placements: shoots
-            .iter()
-            .map(|&translation| Placement {
-                translation,
-                ..Placement::identity(0)
-            })
-            .collect(),
-        wood: (0..10)
-            .map(|k| WoodSegment {
-                start: Vec3::new(0.0, 0.97 * k as f32, 0.0),
-                end: Vec3::new(0.0, 0.97 * (k + 1) as f32, 0.0),
-                start_radius: radius(k),
-                end_radius: radius(k + 1),
-            })
-            .collect(),
-        wood_mesh: Default::default(),
-        material: FoliageMaterial::default(),
-    };
-    let record = bake_prototypes(&input, &BakeOptions::default(), &())
-        .unwrap()
-        .quantized()
-        .unwrap();
-    ConiferSpecies::from_prototype_record(&record).unwrap()
-}
 
 /// A 10 m trunk with a shoot at its top and one at a branch's tip, 2.5 m
 /// out at 5 m up.

@@ -31,7 +31,7 @@
 //! Every displacement is at most [`wind_reach`]: culling and error spheres
 //! grow by it, so no tree is culled or under-detailed while it sways.
 
-use glam::{Vec2, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 use std::f32::consts::TAU;
 
 /// Wind over the trees: where it blows, how hard, how gusty and turbulent.
@@ -210,6 +210,39 @@ impl WindClock {
             gust: [phase(GUST_HZ[0]), phase(GUST_HZ[1])],
         }
     }
+
+    /// The oscillators `step` seconds before these, on a tree of `shape`:
+    /// each turns at a fixed rate, so they wind back by `2π · hz · step`
+    /// (not wrapped; the field takes their sines). The CPU reference of
+    /// the motion vector pass's `wind_clocks` (`conifer_compact.wgsl`),
+    /// which places each vertex where the previous frame's wind held it.
+    pub fn wound_back(self, step: f32, shape: &WindShape) -> WindClock {
+        let turn = std::f32::consts::TAU * if step.is_finite() { step } else { 0.0 };
+        let trunk = shape.trunk_hz();
+        WindClock {
+            trunk: self.trunk - turn * trunk,
+            branch: self.branch - turn * trunk * BRANCH_HZ_OVER_TRUNK,
+            flutter: self.flutter - turn * FLUTTER_HZ,
+            gust: [self.gust[0] - turn * GUST_HZ[0], self.gust[1] - turn * GUST_HZ[1]],
+        }
+    }
+}
+
+/// The screen motion of a point from `before` (world, last frame) to `now`
+/// (world, this frame), in Bevy's motion vector convention: this frame's
+/// clip position minus last frame's, in UV units (x right, y down), each
+/// through its frame's `clip_from_world`. The CPU reference of the motion
+/// vector pass's fragment (`conifer_compact.wgsl`); zero where either
+/// point is behind its camera.
+pub fn motion_vector(clip_from_world: Mat4, previous_clip_from_world: Mat4, now: Vec3, before: Vec3) -> Vec2 {
+    let (a, b) = (
+        clip_from_world * now.extend(1.0),
+        previous_clip_from_world * before.extend(1.0),
+    );
+    if !(a.w > 0.0 && b.w > 0.0) {
+        return Vec2::ZERO;
+    }
+    (a.truncate().truncate() / a.w - b.truncate().truncate() / b.w) * Vec2::new(0.5, -0.5)
 }
 
 /// A tree's own phases, from where it stands.
@@ -386,6 +419,45 @@ mod tests {
 
     fn shape() -> WindShape {
         WindShape::from_bounds(Vec3::new(-3.0, 0.0, -2.5), Vec3::new(3.0, 20.0, 2.5), Vec2::ZERO)
+    }
+
+    proptest::proptest! {
+        /// Winding the clocks back by a step gives the clocks of that
+        /// moment, up to whole turns, for steps of a frame to a second.
+        #[test]
+        fn wound_back_clocks_are_the_earlier_clocks(seconds in 1.0f64..10_000.0, step in 0.0f32..1.0, height in 2.0f32..60.0) {
+            let s = WindShape::from_bounds(Vec3::new(-3.0, 0.0, -2.5), Vec3::new(3.0, height, 2.5), Vec2::ZERO);
+            let back = WindClock::at(seconds, &s).wound_back(step, &s);
+            let earlier = WindClock::at(seconds - f64::from(step), &s);
+            let same = |a: f32, b: f32| {
+                let d = (a - b).rem_euclid(std::f32::consts::TAU);
+                d.min(std::f32::consts::TAU - d) < 1e-3
+            };
+            proptest::prop_assert!(same(back.trunk, earlier.trunk), "{back:?} vs {earlier:?}");
+            proptest::prop_assert!(same(back.branch, earlier.branch), "{back:?} vs {earlier:?}");
+            proptest::prop_assert!(same(back.flutter, earlier.flutter), "{back:?} vs {earlier:?}");
+            proptest::prop_assert!(same(back.gust[0], earlier.gust[0]) && same(back.gust[1], earlier.gust[1]));
+        }
+    }
+
+    #[test]
+    fn a_point_still_under_a_still_camera_does_not_move_and_a_pan_moves_it_against_the_pan() {
+        let projection = Mat4::perspective_infinite_reverse_rh(1.0, 1.0, 0.1);
+        let view = |x: f32| projection * Mat4::look_to_rh(Vec3::new(x, 0.0, 10.0), -Vec3::Z, Vec3::Y);
+        let point = Vec3::new(0.5, 1.0, 0.0);
+        assert_eq!(motion_vector(view(0.0), view(0.0), point, point), Vec2::ZERO);
+        // The camera moves right: the point moves left on screen.
+        let m = motion_vector(view(0.2), view(0.0), point, point);
+        let expected = -0.2 / (10.0 * (0.5f32).tan()) * 0.5;
+        assert!((m.x - expected).abs() < 1e-5 && m.y.abs() < 1e-6, "{m}");
+        // The wind lifts the point: it moves up on screen (y is down).
+        let lifted = motion_vector(view(0.0), view(0.0), point + Vec3::Y * 0.1, point);
+        assert!(lifted.y < 0.0 && lifted.x.abs() < 1e-6, "{lifted}");
+        // Behind the camera: no motion.
+        assert_eq!(
+            motion_vector(view(0.0), view(0.0), Vec3::new(0.0, 0.0, 20.0), point),
+            Vec2::ZERO
+        );
     }
 
     #[test]

@@ -146,3 +146,44 @@ pub fn one_tree_scene(
     let camera = background_camera(renderer.world_mut(), &target);
     (renderer, target, camera)
 }
+
+/// A shoot of 12 needles 30 cm long side by side in the prototype's x–y
+/// plane.
+pub fn shoot() -> Vec<bevy_conifer_lod::model::Needle> {
+    side_by_side_needles(12, 0.03, 0.3, 0.012)
+}
+
+/// A 10 m trunk of ten pieces (as a grown trunk has: the wind bends it at
+/// their ends), piece `k` from radius `radius(k)` to `radius(k + 1)`, with
+/// a shoot at each of `shoots`.
+pub fn trunk_with_shoots(shoots: &[Vec3], radius: impl Fn(usize) -> f32) -> bevy_conifer_lod::plugin::ConiferSpecies {
+    use bevy_conifer_lod::model::{
+        BakeOptions, FoliageMaterial, Placement, PrototypeInput, WoodSegment, bake_prototypes,
+    };
+    let input = PrototypeInput {
+        name: "wind".into(),
+        prototypes: vec![shoot()],
+        placements: shoots
+            .iter()
+            .map(|&translation| Placement {
+                translation,
+                ..Placement::identity(0)
+            })
+            .collect(),
+        wood: (0..10)
+            .map(|k| WoodSegment {
+                start: Vec3::new(0.0, 0.97 * k as f32, 0.0),
+                end: Vec3::new(0.0, 0.97 * (k + 1) as f32, 0.0),
+                start_radius: radius(k),
+                end_radius: radius(k + 1),
+            })
+            .collect(),
+        wood_mesh: Default::default(),
+        material: FoliageMaterial::default(),
+    };
+    let record = bake_prototypes(&input, &BakeOptions::default(), &())
+        .unwrap()
+        .quantized()
+        .unwrap();
+    bevy_conifer_lod::plugin::ConiferSpecies::from_prototype_record(&record).unwrap()
+}

@@ -88,7 +88,9 @@ struct SpeciesParams {
     // 1: each placement and level-2 line takes its own sphere's error
     // (`ErrorScope::Placement`); 0: one error per tree
     error_scope: u32,
-    padding_b: u32,
+    // wind seconds since the previous frame's clocks (the motion vector
+    // pass winds the oscillators back by it)
+    wind_step: f32,
     padding_c: u32,
     // a sphere holding every node's sphere and the wood (tree-local xyz, w radius)
     tree_sphere: vec4<f32>,

@@ -10,6 +10,9 @@
     mesh_view_bindings::view,
     view_transformations::position_world_to_clip,
 }
+#ifdef CONIFER_MOTION_VECTORS
+#import bevy_pbr::prepass_bindings::previous_view_uniforms
+#endif
 #ifndef CONIFER_SHADOW
 #import bevy_pbr::{
     pbr_types,
@@ -61,6 +64,9 @@
 @group(2) @binding(14) var impostor_sampler: sampler;
 
 const PI: f32 = 3.14159265358979;
+// A line blends its motion into a pixel's where it covers at least this
+// much of it (a line under 1/64 of a pixel hardly moves it).
+const MOTION_MIN_OPACITY: f32 = 0.015625;
 const TAU: f32 = 6.28318530717959;
 // `model::wind`'s constants.
 const WIND_TRUNK_LEAN: f32 = 0.008;
@@ -72,6 +78,9 @@ const WIND_BRANCH_WAVES: vec3<f32> = vec3<f32>(0.7, 1.1, 0.9);
 const WIND_FLUTTER_WAVES: vec3<f32> = vec3<f32>(4.1, 3.3, 4.7);
 const WIND_MAX_REACH_RATIO: f32 = 1.5;
 const WIND_NORMAL_STEP: f32 = 0.01;
+const WIND_BRANCH_HZ_OVER_TRUNK: f32 = 3.1;
+const WIND_FLUTTER_HZ: f32 = 3.7;
+const WIND_GUST_HZ: vec2<f32> = vec2<f32>(0.071, 0.173);
 
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
@@ -92,6 +101,10 @@ struct VertexOutput {
     // Height in the tree's frame, for the bark's colour.
     @location(3) local_height: f32,
 #endif
+#ifdef CONIFER_MOTION_VECTORS
+    // Where the point stood the frame before (last frame's wind).
+    @location(5) previous_world_position: vec4<f32>,
+#endif
 }
 
 // A position outside every clip plane: the primitive is not drawn.
@@ -111,6 +124,33 @@ var<private> wind_tree: mat4x4<f32>;
 // The impostor sways with the trunk only (its quad's corners stand off
 // the tree, where branch sway would wobble the picture).
 var<private> wind_trunk_only: bool;
+// Set while `finish` places a vertex where the wind held it the frame
+// before.
+var<private> wind_previous: bool;
+
+// The wind's oscillators (radians; `model::wind::WindClock`).
+struct WindClocks {
+    trunk: f32,
+    branch: f32,
+    flutter: f32,
+    gust: vec2<f32>,
+}
+
+// This frame's oscillators, or the previous frame's: each runs at a fixed
+// rate (`model::wind::WindClock::at`), so `wind_step` seconds back is a
+// known turn.
+fn wind_clocks() -> WindClocks {
+    var clocks = WindClocks(species.wind_motion.z, species.wind_motion.w, species.wind_clock.x, species.wind_clock.yz);
+    if wind_previous {
+        let turn = TAU * species.wind_step;
+        let trunk_hz = clamp(0.3 * sqrt(20.0 / max(species.wind_shape.w, 1e-3)), 0.15, 1.0);
+        clocks.trunk -= turn * trunk_hz;
+        clocks.branch -= turn * trunk_hz * WIND_BRANCH_HZ_OVER_TRUNK;
+        clocks.flutter -= turn * WIND_FLUTTER_HZ;
+        clocks.gust -= turn * WIND_GUST_HZ;
+    }
+    return clocks;
+}
 
 // PCG hash (Jarzynski and Olano, "Hash Functions for GPU Rendering", JCGT 2020).
 fn pcg(value: u32) -> u32 {
@@ -137,21 +177,22 @@ fn wind_displacement(world: vec3<f32>) -> vec3<f32> {
     let cell_z = bitcast<u32>(i32(floor(root.z * 100.0)));
     let sway_phase = f32(pcg(cell_x ^ pcg(cell_z)) >> 8u) / 16777216.0 * TAU;
     let gust_phase = -TAU * fract(dot(root.xz, direction) / WIND_GUST_WAVELENGTH);
-    let gust = 0.6 * sin(species.wind_clock.y + gust_phase) + 0.4 * sin(species.wind_clock.z + 1.7 * gust_phase);
+    let clocks = wind_clocks();
+    let gust = 0.6 * sin(clocks.gust.x + gust_phase) + 0.4 * sin(clocks.gust.y + 1.7 * gust_phase);
     let force = strength * (1.0 + species.wind.w * gust);
     let shape = species.wind_shape;
     let crown_radius = species.wind_clock.w;
     let h = clamp((p.y - shape.z) / shape.w, 0.0, 1.0);
     let r = min(length(p.xz - shape.xy) / crown_radius, WIND_MAX_REACH_RATIO);
-    let trunk = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(species.wind_motion.z + sway_phase));
+    let trunk = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(clocks.trunk + sway_phase));
     var along = trunk;
     var across = 0.0;
     var up = 0.0;
     if !wind_trunk_only {
         let branch_amplitude = force * WIND_BRANCH_SWAY * crown_radius * r * sqrt(r);
-        let branch = species.wind_motion.w + sway_phase + dot(p, WIND_BRANCH_WAVES);
+        let branch = clocks.branch + sway_phase + dot(p, WIND_BRANCH_WAVES);
         let flutter_amplitude = force * species.wind_motion.x * WIND_FLUTTER * r;
-        let flutter = species.wind_clock.x + sway_phase + dot(p, WIND_FLUTTER_WAVES);
+        let flutter = clocks.flutter + sway_phase + dot(p, WIND_FLUTTER_WAVES);
         along += 0.5 * branch_amplitude * sin(branch + 1.0);
         across = flutter_amplitude * sin(flutter);
         up = branch_amplitude * sin(branch) + 0.5 * flutter_amplitude * sin(flutter + 2.1);
@@ -241,10 +282,14 @@ fn swayed_surface_normal(world: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
 
 fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
     var out: VertexOutput;
-    out.world_position = world_from_local * vec4<f32>(local_position, 1.0);
-    out.world_position = vec4<f32>(out.world_position.xyz + wind_displacement(out.world_position.xyz), 1.0);
+    let calm = (world_from_local * vec4<f32>(local_position, 1.0)).xyz;
+    out.world_position = vec4<f32>(calm + wind_displacement(calm), 1.0);
     out.position = position_world_to_clip(out.world_position.xyz);
-#ifdef CONIFER_SHADOW
+#ifdef CONIFER_MOTION_VECTORS
+    wind_previous = true;
+    out.previous_world_position = vec4<f32>(calm + wind_displacement(calm), 1.0);
+    wind_previous = false;
+#else ifdef CONIFER_SHADOW
     // Directional shadow maps: casters nearer the light than the cascade's
     // near plane are flattened onto it ("pancaking"), not clipped.
     if view.clip_from_view[3][3] == 1.0 {
@@ -737,7 +782,43 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 }
 
-#ifdef CONIFER_SHADOW
+#ifdef CONIFER_MOTION_VECTORS
+
+// Motion vectors (Bevy's prepass convention: this frame's unjittered
+// clip position minus the previous frame's, in UV units). Prisms and wood
+// replace the pixel's vector; a line covering at least
+// `MOTION_MIN_OPACITY` of the pixel blends its own over it by its opacity
+// (the pipeline's alpha blending). CPU reference:
+// `model::wind::motion_vector`.
+struct MotionOutput {
+#ifdef CONIFER_NORMALS
+    // Bevy's normal prepass encoding (written by prisms and wood only: a
+    // line's target takes no writes).
+    @location(0) normal: vec4<f32>,
+#endif
+    @location(1) motion_vector: vec4<f32>,
+}
+
+@fragment
+fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOutput {
+#ifdef CONIFER_LINES
+    if !(in.color.a >= MOTION_MIN_OPACITY) {
+        discard;
+    }
+#endif
+    var out: MotionOutput;
+    let now = view.unjittered_clip_from_world * vec4<f32>(in.world_position.xyz, 1.0);
+    let before = previous_view_uniforms.clip_from_world * vec4<f32>(in.previous_world_position.xyz, 1.0);
+    let motion = (now.xy / now.w - before.xy / before.w) * vec2<f32>(0.5, -0.5);
+    out.motion_vector = vec4<f32>(motion, 0.0, saturate(in.color.a));
+#ifdef CONIFER_NORMALS
+    let normal = normalize(select(-in.world_normal, in.world_normal, is_front));
+    out.normal = vec4<f32>(normal * 0.5 + vec3<f32>(0.5), 1.0);
+#endif
+    return out;
+}
+
+#else ifdef CONIFER_SHADOW
 
 // Shadows of translucent lines: each fragment is kept with the line's
 // opacity, by a hash of its texel, line and tree, so a line casts the

@@ -207,8 +207,12 @@ pub struct SpeciesParams {
     pub total_needle_count: u32,
     /// 1: view-dependent detail ([`crate::plugin::ErrorScope::Placement`]).
     pub error_scope: u32,
+    /// Wind seconds from the previous frame's clocks to these: the motion
+    /// vector pass winds the oscillators back by it (each runs at a fixed
+    /// rate, [`crate::model::wind::WindClock::at`]).
+    pub wind_step: f32,
     /// Padding to 16 bytes.
-    pub padding: [u32; 2],
+    pub padding: u32,
     /// A sphere holding every node's sphere and the wood (tree-local centre, radius).
     pub tree_sphere: [f32; 4],
     /// The crown impostor's axis (tree-local x, z), half width and texel
@@ -244,8 +248,17 @@ pub struct SpeciesParams {
 }
 
 impl SpeciesParams {
-    /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`.
-    pub fn set_wind(&mut self, wind: &crate::model::wind::Wind, shape: &crate::model::wind::WindShape, seconds: f64) {
+    /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`,
+    /// `step` seconds after the previous frame's (0 on the first frame; a
+    /// non-finite step is 0).
+    pub fn set_wind(
+        &mut self,
+        wind: &crate::model::wind::Wind,
+        shape: &crate::model::wind::WindShape,
+        seconds: f64,
+        step: f64,
+    ) {
+        self.wind_step = if step.is_finite() { step as f32 } else { 0.0 };
         let w = wind.clamped();
         let clock = crate::model::wind::WindClock::at(seconds, shape);
         let reach = crate::model::wind::wind_reach(&w, shape);

@@ -46,16 +46,21 @@ use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::core_3d::{
     Opaque3d, Opaque3dBatchSetKey, Opaque3dBinKey, Transparent3d, TransparentSortingInfo3d,
 };
+use bevy::core_pipeline::prepass::{
+    DepthPrepass, MOTION_VECTOR_PREPASS_FORMAT, MotionVectorPrepass, NORMAL_PREPASS_FORMAT, NormalPrepass,
+    PreviousViewUniformOffset, ViewPrepassTextures,
+};
 use bevy::core_pipeline::schedule::camera_driver;
+use bevy::core_pipeline::{Core3d, Core3dSystems};
 use bevy::ecs::entity::EntityHashMap;
 use bevy::ecs::query::ROQueryItem;
 use bevy::ecs::system::SystemParamItem;
 use bevy::ecs::system::lifetimeless::{Read, SRes};
 use bevy::mesh::{MeshVertexBufferLayoutRef, MeshVertexBufferLayouts, PrimitiveTopology};
 use bevy::pbr::{
-    LightEntity, MeshPipeline, MeshPipelineKey, MeshPipelineSystems, PrepassPipeline, SetMeshViewBindGroup,
-    SetMeshViewBindingArrayBindGroup, SetPrepassViewBindGroup, SetPrepassViewEmptyBindGroup, Shadow, ShadowBatchSetKey,
-    ShadowBinKey, ViewKeyCache,
+    LightEntity, MeshPipeline, MeshPipelineKey, MeshPipelineSystems, PrepassPipeline, PrepassViewBindGroup,
+    SetMeshViewBindGroup, SetMeshViewBindingArrayBindGroup, SetPrepassViewBindGroup, SetPrepassViewEmptyBindGroup,
+    Shadow, ShadowBatchSetKey, ShadowBinKey, ViewKeyCache,
 };
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
@@ -79,9 +84,14 @@ use bevy::render::render_resource::{
     DepthStencilState, FragmentState, PipelineCache, PrimitiveState, RenderPipelineDescriptor, ShaderStages,
     SpecializedMeshPipeline, SpecializedRenderPipeline, SpecializedRenderPipelines, TextureFormat, VertexState,
 };
-use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue};
+use bevy::render::render_resource::{
+    BlendState, CachedRenderPipelineId, ColorTargetState, ColorWrites, LoadOp, MultisampleState, Operations,
+    RenderPassDepthStencilAttachment, RenderPassDescriptor, StoreOp,
+};
+use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue, ViewQuery};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::view::ExtractedView;
+use bevy::render::view::{ViewDepthTexture, ViewUniformOffset};
 use bevy::render::{Extract, ExtractSchedule, Render, RenderApp, RenderStartup, RenderSystems};
 use bevy::shader::{Shader, ShaderDefVal};
 use std::sync::Arc;
@@ -376,6 +386,9 @@ pub struct RenderCompactSpecies {
     max_expanded_placements: u32,
     /// [`ConiferLodSettings::line_lighting`].
     line_lighting: LineLighting,
+    /// The wind's clock at the last extraction ([`ConiferWind::seconds`]),
+    /// for the motion vectors' previous positions.
+    wind_seconds: Option<f64>,
 }
 
 /// GPU memory the compact path allocated, summed from the sizes of the
@@ -416,6 +429,7 @@ fn species_params(
     settings: &ConiferLodSettings,
     wind: &ConiferWind,
     seconds: f64,
+    wind_step: f64,
 ) -> SpeciesParams {
     let (impostor_box, impostor_span) = match &species.impostor {
         Some(i) => (
@@ -468,7 +482,7 @@ fn species_params(
             ErrorScope::Tree => 0,
             ErrorScope::Placement => 1,
         },
-        padding: [0; 2],
+        padding: 0,
         tree_sphere: compact.tree_sphere.to_array(),
         impostor_box,
         impostor_span,
@@ -479,7 +493,7 @@ fn species_params(
         wood_heights: [material.upper_wood_heights[0], material.upper_wood_heights[1], 0.0, 0.0],
         ..SpeciesParams::default()
     };
-    params.set_wind(&wind.model(), &species.wind_shape, wind.seconds(seconds));
+    params.set_wind(&wind.model(), &species.wind_shape, wind.seconds(seconds), wind_step);
     params
 }
 
@@ -495,6 +509,9 @@ fn extract_compact(
 ) {
     let seconds = time.elapsed_secs_f64();
     let render = &mut *render;
+    let wind_seconds = wind.seconds(seconds);
+    let wind_step = render.wind_seconds.map_or(0.0, |previous| wind_seconds - previous);
+    render.wind_seconds = Some(wind_seconds);
     render.max_expanded_placements = settings.max_expanded_placements;
     render.line_lighting = settings.line_lighting;
     let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
@@ -547,7 +564,7 @@ fn extract_compact(
             });
             entry.center = sum / entry.instances.len().max(1) as f32 + asset.crown_center;
         }
-        entry.params = species_params(asset, compact, &settings, &wind, seconds);
+        entry.params = species_params(asset, compact, &settings, &wind, seconds, wind_step);
         entry.params.instance_count = entry.instances.len() as u32;
     }
 }
@@ -837,6 +854,9 @@ pub struct CompactPipeline {
     mesh_pipeline: MeshPipeline,
     /// The view layouts of depth-only passes (`None` without Bevy's prepass).
     prepass_layouts: Option<(BindGroupLayoutDescriptor, BindGroupLayoutDescriptor)>,
+    /// The prepass view layout with the previous frame's view, for the
+    /// motion vector pass (`None` without Bevy's prepass).
+    motion_view_layout: Option<BindGroupLayoutDescriptor>,
     shader: Handle<Shader>,
     draw_layout: BindGroupLayoutDescriptor,
     cull_layout: BindGroupLayoutDescriptor,
@@ -864,11 +884,32 @@ pub struct CompactPipeline {
 pub struct CompactPipelineKey {
     mesh_key: MeshPipelineKey,
     kind: PartKind,
-    /// A depth-only shadow pipeline (prepass view layout, hashed alpha
-    /// test for lines).
-    shadow: bool,
+    /// Which pass the pipeline draws in.
+    pass: CompactPass,
     /// Lines lit as strips facing the viewer ([`LineLighting::FacingStrip`]).
     facing_strip: bool,
+}
+
+/// The passes the compact parts are drawn in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CompactPass {
+    /// The main pass: lit, in the opaque or the transparent phase.
+    Main,
+    /// A shadow map: depth only (prepass view layout, hashed alpha test
+    /// for lines).
+    Shadow,
+    /// The motion vector pass ([`draw_motion_vectors`]), after Bevy's
+    /// prepass, at the view's MSAA `samples`; with `writes_depth`, prisms
+    /// write the prepass depth texture (lines never write depth), and with
+    /// `normals` the normal prepass texture too.
+    MotionVectors {
+        /// The view's MSAA samples.
+        samples: u32,
+        /// Whether the view has a prepass depth texture to write.
+        writes_depth: bool,
+        /// Whether the view has a normal prepass texture to write.
+        normals: bool,
+    },
 }
 
 /// The view's key for lines: a line is a pixel wide or less, so the
@@ -990,7 +1031,10 @@ fn init_compact_pipeline(
     let no_vertices = positions.get_mesh_vertex_buffer_layout(&mut layouts);
     commands.insert_resource(CompactPipeline {
         mesh_pipeline: mesh_pipeline.clone(),
-        prepass_layouts: prepass_pipeline.map(|p| (p.view_layout_no_motion_vectors.clone(), p.empty_layout.clone())),
+        prepass_layouts: prepass_pipeline
+            .as_ref()
+            .map(|p| (p.view_layout_no_motion_vectors.clone(), p.empty_layout.clone())),
+        motion_view_layout: prepass_pipeline.as_ref().map(|p| p.view_layout_motion_vectors.clone()),
         shader: asset_server.load(shader_path("conifer_compact.wgsl")),
         draw_layout,
         cull_layout,
@@ -1017,8 +1061,16 @@ impl SpecializedRenderPipeline for CompactPipeline {
     type Key = CompactPipelineKey;
 
     fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
-        if key.shadow {
-            return self.shadow_descriptor(key.kind);
+        match key.pass {
+            CompactPass::Main => {}
+            CompactPass::Shadow => return self.shadow_descriptor(key.kind),
+            CompactPass::MotionVectors {
+                samples,
+                writes_depth,
+                normals,
+            } => {
+                return self.motion_descriptor(key.kind, samples, writes_depth, normals);
+            }
         }
         // A layout with positions never misses an attribute; an error here
         // leaves an empty descriptor, which the pipeline cache reports.
@@ -1108,6 +1160,105 @@ impl CompactPipeline {
                 stencil: default(),
                 bias: default(),
             }),
+            ..default()
+        }
+    }
+}
+
+impl CompactPipeline {
+    /// The motion vector pipeline of a part: the prepass view layout with
+    /// the previous frame's view; the fragment writes the motion vector
+    /// target (location 1, as in Bevy's prepass). Prisms and wood replace
+    /// what is there; a line blends its motion over it by its opacity
+    /// (skipping fragments under `MOTION_MIN_OPACITY`, 1/64): Bevy's target
+    /// holds one vector a pixel, and a pixel a faint near line crosses is
+    /// mostly what lies behind it (claiming all of it for the line let TAA
+    /// drag the far trees' history along the near line's motion: a haze). Prisms and wood write
+    /// the prepass depth texture when the view has one (`writes_depth`),
+    /// so the nearest part's motion wins and TAA finds it by depth; lines
+    /// only test depth: they are translucent, and a depth write would hide
+    /// the lines behind them. With `normals` (a normal prepass) the parts
+    /// that write depth write their normals too, as Bevy's prepass does,
+    /// so what reads both (SSAO) sees one surface.
+    fn motion_descriptor(
+        &self,
+        kind: PartKind,
+        samples: u32,
+        writes_depth: bool,
+        normals: bool,
+    ) -> RenderPipelineDescriptor {
+        let (Some(view_layout), Some((_, empty_layout))) =
+            (self.motion_view_layout.clone(), self.prepass_layouts.clone())
+        else {
+            return RenderPipelineDescriptor::default();
+        };
+        let mut defs: Vec<ShaderDefVal> = vec![
+            kind.shader_def().into(),
+            "CONIFER_SHADOW".into(),
+            "CONIFER_MOTION_VECTORS".into(),
+        ];
+        if kind.is_blended() {
+            defs.push("CONIFER_LINES".into());
+        }
+        if kind.placed_index().is_some() {
+            defs.push("CONIFER_PLACED".into());
+        }
+        let writes_surface = writes_depth && !kind.is_blended();
+        if normals {
+            defs.push("CONIFER_NORMALS".into());
+        }
+        RenderPipelineDescriptor {
+            label: Some(format!("conifer compact motion vectors {kind:?}").into()),
+            layout: vec![view_layout, empty_layout, self.draw_layout.clone()],
+            vertex: VertexState {
+                shader: self.shader.clone(),
+                shader_defs: defs.clone(),
+                entry_point: Some("vertex".into()),
+                buffers: Vec::new(),
+            },
+            fragment: Some(FragmentState {
+                shader: self.shader.clone(),
+                shader_defs: defs,
+                entry_point: Some("fragment".into()),
+                targets: vec![
+                    normals.then_some(ColorTargetState {
+                        format: NORMAL_PREPASS_FORMAT,
+                        blend: None,
+                        write_mask: if writes_surface {
+                            ColorWrites::ALL
+                        } else {
+                            ColorWrites::empty()
+                        },
+                    }),
+                    Some(ColorTargetState {
+                        format: MOTION_VECTOR_PREPASS_FORMAT,
+                        // A translucent line moves a pixel by its share:
+                        // what lies behind it keeps the rest.
+                        blend: kind.is_blended().then_some(BlendState::ALPHA_BLENDING),
+                        write_mask: ColorWrites::ALL,
+                    }),
+                ],
+            }),
+            primitive: PrimitiveState {
+                topology: if kind.is_lines() {
+                    PrimitiveTopology::LineList
+                } else {
+                    PrimitiveTopology::TriangleList
+                },
+                cull_mode: (!kind.is_blended()).then_some(Face::Back),
+                ..default()
+            },
+            depth_stencil: Some(DepthStencilState {
+                format: TextureFormat::Depth32Float,
+                depth_write_enabled: Some(writes_surface),
+                depth_compare: Some(CompareFunction::GreaterEqual),
+                stencil: default(),
+                bias: default(),
+            }),
+            multisample: MultisampleState {
+                count: samples,
+                ..default()
+            },
             ..default()
         }
     }
@@ -1423,7 +1574,7 @@ fn queue_compact(
                         | blend
                         | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
                     kind,
-                    shadow: false,
+                    pass: CompactPass::Main,
                     facing_strip: kind.is_blended() && render.line_lighting == LineLighting::FacingStrip,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
@@ -1505,7 +1656,7 @@ fn queue_compact_shadows(
                 let key = CompactPipelineKey {
                     mesh_key: MeshPipelineKey::DEPTH_PREPASS,
                     kind,
-                    shadow: true,
+                    pass: CompactPass::Shadow,
                     facing_strip: false,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
@@ -1523,6 +1674,141 @@ fn queue_compact_shadows(
                 );
             }
         }
+    }
+}
+
+/// The compact parts each view with a [`MotionVectorPrepass`] draws into
+/// its motion vectors, and their pipelines, queued each frame.
+#[derive(Resource, Default)]
+pub struct CompactMotionDraws {
+    views: EntityHashMap<Vec<(AssetId<ConiferSpecies>, PartKind, CachedRenderPipelineId)>>,
+}
+
+/// Queues the motion vector draws of every view with a
+/// [`MotionVectorPrepass`]: opaque parts first (they write the prepass
+/// depth), then lines. The impostor is left to the background's motion
+/// vectors: it stands for a crown at hundreds of metres, where a camera's
+/// move shows as its turn.
+#[allow(clippy::type_complexity)] // a view query
+fn queue_compact_motion_vectors(
+    pipeline: Res<CompactPipeline>,
+    mut pipelines: ResMut<SpecializedRenderPipelines<CompactPipeline>>,
+    pipeline_cache: Res<PipelineCache>,
+    render: Res<RenderCompactSpecies>,
+    mut draws: ResMut<CompactMotionDraws>,
+    views: Query<
+        (Entity, &Msaa, Has<DepthPrepass>, Has<NormalPrepass>),
+        (With<ExtractedView>, With<MotionVectorPrepass>),
+    >,
+) {
+    draws.views.clear();
+    if pipeline.motion_view_layout.is_none() || !pipeline.supported {
+        return;
+    }
+    for (view, msaa, depth_prepass, normal_prepass) in &views {
+        let pass = CompactPass::MotionVectors {
+            samples: msaa.samples(),
+            writes_depth: depth_prepass,
+            normals: normal_prepass,
+        };
+        let mut list = Vec::new();
+        for blended in [false, true] {
+            for (&id, species) in &render.species {
+                if species.instances.is_empty() {
+                    continue;
+                }
+                for kind in PartKind::ALL {
+                    if kind == PartKind::Impostor || kind.is_blended() != blended || !species.draws(kind) {
+                        continue;
+                    }
+                    let key = CompactPipelineKey {
+                        mesh_key: MeshPipelineKey::empty(),
+                        kind,
+                        pass,
+                        facing_strip: false,
+                    };
+                    list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
+                }
+            }
+        }
+        draws.views.insert(view, list);
+    }
+}
+
+/// Writes the compact parts' motion vectors after Bevy's prepass (so the
+/// background's camera-turn vectors, drawn where the prepass left no
+/// depth, are overwritten where a tree stands, lines included): each
+/// vertex's position this frame and last (last frame's camera, last
+/// frame's wind), as Bevy's prepass does for meshes. TAA reprojects the
+/// trees' history along them instead of the sky's.
+#[allow(clippy::type_complexity)] // a view query
+fn draw_motion_vectors(
+    view: ViewQuery<
+        (
+            &ViewDepthTexture,
+            &ViewPrepassTextures,
+            &ViewUniformOffset,
+            &PreviousViewUniformOffset,
+        ),
+        With<MotionVectorPrepass>,
+    >,
+    draws: Res<CompactMotionDraws>,
+    compact_views: Res<CompactViews>,
+    prepass_view_bind_group: Res<PrepassViewBindGroup>,
+    pipeline_cache: Res<PipelineCache>,
+    mut ctx: RenderContext,
+) {
+    let view_entity = view.entity();
+    let (view_depth, prepass_textures, view_offset, previous_offset) = view.into_inner();
+    let (Some(list), Some(motion_vectors), Some(view_group)) = (
+        draws.views.get(&view_entity),
+        prepass_textures.motion_vectors.as_ref(),
+        prepass_view_bind_group.motion_vectors.as_ref(),
+    ) else {
+        return;
+    };
+    if list.is_empty() {
+        return;
+    }
+    // Prisms write the prepass depth (what TAA and the other prepass
+    // readers sample), never the main pass's depth; without a depth
+    // prepass they test the main depth only.
+    let depth_stencil_attachment = match &prepass_textures.depth {
+        Some(depth) => RenderPassDepthStencilAttachment {
+            view: &depth.texture.default_view,
+            depth_ops: Some(Operations {
+                load: LoadOp::Load,
+                store: StoreOp::Store,
+            }),
+            stencil_ops: None,
+        },
+        None => view_depth.get_attachment(StoreOp::Store),
+    };
+    let color_attachments = [
+        prepass_textures.normal.as_ref().map(|normal| normal.get_attachment()),
+        Some(motion_vectors.get_attachment()),
+    ];
+    let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
+        label: Some("conifer motion vectors"),
+        color_attachments: &color_attachments,
+        depth_stencil_attachment: Some(depth_stencil_attachment),
+        timestamp_writes: None,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    });
+    for &(species, kind, pipeline_id) in list {
+        let (Some(pipeline), Some(buffers)) = (
+            pipeline_cache.get_render_pipeline(pipeline_id),
+            compact_views.views.get(&(view_entity, species)),
+        ) else {
+            continue;
+        };
+        let Some(groups) = &buffers.groups else { continue };
+        pass.set_render_pipeline(pipeline);
+        pass.set_bind_group(0, view_group, &[view_offset.offset, previous_offset.offset]);
+        pass.set_bind_group(1, &prepass_view_bind_group.empty_bind_group, &[]);
+        pass.set_bind_group(2, &groups.draw, &[]);
+        draw_indirect_part(&mut pass, buffers, kind, false);
     }
 }
 
@@ -1612,23 +1898,44 @@ impl<P: PhaseItem, const DEPTH_ONLY: bool> RenderCommand<P> for DrawCompactPart<
             return RenderCommandResult::Skip;
         };
         pass.set_bind_group(2, &groups.draw, &[]);
-        // One draw per tree for the tree's parts, one instanced draw per
-        // prototype and band for the placed ones.
-        let (args, draws, block) = match item.kind.placed_index() {
-            None => (&buffers.args, buffers.instance_count, item.kind.index()),
-            Some(_) if buffers.placed.entry_capacity == 0 => return RenderCommandResult::Skip,
-            Some(block) => (&buffers.placed.args, buffers.placed.draws, block),
-        };
-        let offset = block as u64 * u64::from(draws) * DRAW_ARGS_BYTES;
-        if DEPTH_ONLY && pipeline.split_depth_only_multi_draws {
-            for i in 0..u64::from(draws) {
-                pass.draw_indirect(args, offset + i * DRAW_ARGS_BYTES);
-            }
+        if draw_indirect_part(
+            pass,
+            buffers,
+            item.kind,
+            DEPTH_ONLY && pipeline.split_depth_only_multi_draws,
+        ) {
+            RenderCommandResult::Success
         } else {
-            pass.multi_draw_indirect(args, offset, draws);
+            RenderCommandResult::Skip
         }
-        RenderCommandResult::Success
     }
+}
+
+/// Issues the indirect draws of one part of a view's trees, the bind
+/// groups set: one draw per tree for the tree's parts, one instanced draw
+/// per prototype and band for the placed ones (`split`: one indirect draw
+/// each instead of one multi-draw). False when the view has no placed
+/// draws for a placed part.
+fn draw_indirect_part<'a>(
+    pass: &mut TrackedRenderPass<'a>,
+    buffers: &'a ViewSpecies,
+    kind: PartKind,
+    split: bool,
+) -> bool {
+    let (args, draws, block) = match kind.placed_index() {
+        None => (&buffers.args, buffers.instance_count, kind.index()),
+        Some(_) if buffers.placed.entry_capacity == 0 => return false,
+        Some(block) => (&buffers.placed.args, buffers.placed.draws, block),
+    };
+    let offset = block as u64 * u64::from(draws) * DRAW_ARGS_BYTES;
+    if split {
+        for i in 0..u64::from(draws) {
+            pass.draw_indirect(args, offset + i * DRAW_ARGS_BYTES);
+        }
+    } else {
+        pass.multi_draw_indirect(args, offset, draws);
+    }
+    true
 }
 
 /// The draw function of every compact part in shadow maps.
@@ -1685,6 +1992,7 @@ pub(super) fn build(app: &mut App) {
         .init_resource::<CompactViews>()
         .init_resource::<CompactGpuMemory>()
         .init_resource::<readback::PendingReadbacks>()
+        .init_resource::<CompactMotionDraws>()
         .init_resource::<SpecializedRenderPipelines<CompactPipeline>>()
         .add_render_command::<Opaque3d, DrawCompact>()
         .add_render_command::<Transparent3d, DrawCompact>()
@@ -1710,11 +2018,17 @@ pub(super) fn build(app: &mut App) {
                 (prepare_species, prepare_views)
                     .chain()
                     .in_set(RenderSystems::PrepareResources),
-                (queue_compact, queue_compact_shadows)
+                (queue_compact, queue_compact_motion_vectors, queue_compact_shadows)
                     .chain()
                     .in_set(RenderSystems::QueueMeshes),
                 readback::collect.in_set(RenderSystems::Cleanup),
             ),
         )
-        .add_systems(bevy::render::renderer::RenderGraph, cull_trees.before(camera_driver));
+        .add_systems(bevy::render::renderer::RenderGraph, cull_trees.before(camera_driver))
+        .add_systems(
+            Core3d,
+            draw_motion_vectors
+                .after(bevy::core_pipeline::prepass::node::late_prepass)
+                .in_set(Core3dSystems::Prepass),
+        );
 }
