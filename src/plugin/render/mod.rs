@@ -1122,40 +1122,71 @@ impl CompactPipeline {
     /// A depth-only pipeline for shadow maps: prisms write depth, lines
     /// keep each fragment with their opacity (hashed).
     fn shadow_descriptor(&self, kind: PartKind) -> RenderPipelineDescriptor {
-        let Some((view_layout, empty_layout)) = self.prepass_layouts.clone() else {
+        let Some((view_layout, _)) = self.prepass_layouts.clone() else {
             return RenderPipelineDescriptor::default();
         };
         let mut defs: Vec<ShaderDefVal> = vec![kind.shader_def().into(), "CONIFER_SHADOW".into()];
         if kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
         }
+        let fragment = kind.is_lines().then(|| self.fragment_state(&defs, Vec::new()));
+        let label = format!("conifer compact shadow {kind:?}");
+        self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, None, true)
+    }
+
+    /// The fragment stage of `conifer_compact.wgsl` with `defs`, writing
+    /// `targets`.
+    fn fragment_state(&self, defs: &[ShaderDefVal], targets: Vec<Option<ColorTargetState>>) -> FragmentState {
+        FragmentState {
+            shader: self.shader.clone(),
+            shader_defs: defs.to_vec(),
+            entry_point: Some("fragment".into()),
+            targets,
+        }
+    }
+
+    /// A pipeline of a part drawn with one of Bevy's prepass view layouts
+    /// (`view_layout`, then the prepass's empty group and the species'
+    /// draw group): its vertices pulled by `conifer_compact.wgsl` with
+    /// `defs`, lines as line lists, tested against `Depth32Float` (reversed
+    /// Z), writing depth when `writes_depth`, culling `cull_mode`. An empty
+    /// descriptor without Bevy's prepass (the pipeline cache reports it).
+    #[allow(clippy::too_many_arguments)] // one descriptor's parts
+    fn prepass_layout_descriptor(
+        &self,
+        label: String,
+        view_layout: BindGroupLayoutDescriptor,
+        kind: PartKind,
+        defs: &[ShaderDefVal],
+        fragment: Option<FragmentState>,
+        cull_mode: Option<Face>,
+        writes_depth: bool,
+    ) -> RenderPipelineDescriptor {
+        let Some((_, empty_layout)) = self.prepass_layouts.clone() else {
+            return RenderPipelineDescriptor::default();
+        };
         RenderPipelineDescriptor {
-            label: Some(format!("conifer compact shadow {kind:?}").into()),
+            label: Some(label.into()),
             layout: vec![view_layout, empty_layout, self.draw_layout.clone()],
             vertex: VertexState {
                 shader: self.shader.clone(),
-                shader_defs: defs.clone(),
+                shader_defs: defs.to_vec(),
                 entry_point: Some("vertex".into()),
                 buffers: Vec::new(),
             },
-            fragment: kind.is_lines().then(|| FragmentState {
-                shader: self.shader.clone(),
-                shader_defs: defs,
-                entry_point: Some("fragment".into()),
-                targets: Vec::new(),
-            }),
+            fragment,
             primitive: PrimitiveState {
                 topology: if kind.is_lines() {
                     PrimitiveTopology::LineList
                 } else {
                     PrimitiveTopology::TriangleList
                 },
-                cull_mode: None,
+                cull_mode,
                 ..default()
             },
             depth_stencil: Some(DepthStencilState {
                 format: TextureFormat::Depth32Float,
-                depth_write_enabled: Some(true),
+                depth_write_enabled: Some(writes_depth),
                 depth_compare: Some(CompareFunction::GreaterEqual),
                 stencil: default(),
                 bias: default(),
@@ -1187,9 +1218,7 @@ impl CompactPipeline {
         writes_depth: bool,
         normals: bool,
     ) -> RenderPipelineDescriptor {
-        let (Some(view_layout), Some((_, empty_layout))) =
-            (self.motion_view_layout.clone(), self.prepass_layouts.clone())
-        else {
+        let Some(view_layout) = self.motion_view_layout.clone() else {
             return RenderPipelineDescriptor::default();
         };
         let mut defs: Vec<ShaderDefVal> = vec![
@@ -1207,60 +1236,34 @@ impl CompactPipeline {
         if normals {
             defs.push("CONIFER_NORMALS".into());
         }
-        RenderPipelineDescriptor {
-            label: Some(format!("conifer compact motion vectors {kind:?}").into()),
-            layout: vec![view_layout, empty_layout, self.draw_layout.clone()],
-            vertex: VertexState {
-                shader: self.shader.clone(),
-                shader_defs: defs.clone(),
-                entry_point: Some("vertex".into()),
-                buffers: Vec::new(),
-            },
-            fragment: Some(FragmentState {
-                shader: self.shader.clone(),
-                shader_defs: defs,
-                entry_point: Some("fragment".into()),
-                targets: vec![
-                    normals.then_some(ColorTargetState {
-                        format: NORMAL_PREPASS_FORMAT,
-                        blend: None,
-                        write_mask: if writes_surface {
-                            ColorWrites::ALL
-                        } else {
-                            ColorWrites::empty()
-                        },
-                    }),
-                    Some(ColorTargetState {
-                        format: MOTION_VECTOR_PREPASS_FORMAT,
-                        // A translucent line moves a pixel by its share:
-                        // what lies behind it keeps the rest.
-                        blend: kind.is_blended().then_some(BlendState::ALPHA_BLENDING),
-                        write_mask: ColorWrites::ALL,
-                    }),
-                ],
-            }),
-            primitive: PrimitiveState {
-                topology: if kind.is_lines() {
-                    PrimitiveTopology::LineList
+        let targets = vec![
+            normals.then_some(ColorTargetState {
+                format: NORMAL_PREPASS_FORMAT,
+                blend: None,
+                write_mask: if writes_surface {
+                    ColorWrites::ALL
                 } else {
-                    PrimitiveTopology::TriangleList
+                    ColorWrites::empty()
                 },
-                cull_mode: (!kind.is_blended()).then_some(Face::Back),
-                ..default()
-            },
-            depth_stencil: Some(DepthStencilState {
-                format: TextureFormat::Depth32Float,
-                depth_write_enabled: Some(writes_surface),
-                depth_compare: Some(CompareFunction::GreaterEqual),
-                stencil: default(),
-                bias: default(),
             }),
-            multisample: MultisampleState {
-                count: samples,
-                ..default()
-            },
+            Some(ColorTargetState {
+                format: MOTION_VECTOR_PREPASS_FORMAT,
+                // A translucent line moves a pixel by its share: what lies
+                // behind it keeps the rest.
+                blend: kind.is_blended().then_some(BlendState::ALPHA_BLENDING),
+                write_mask: ColorWrites::ALL,
+            }),
+        ];
+        let fragment = Some(self.fragment_state(&defs, targets));
+        let label = format!("conifer compact motion vectors {kind:?}");
+        let cull_mode = (!kind.is_blended()).then_some(Face::Back);
+        let mut descriptor =
+            self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, cull_mode, writes_surface);
+        descriptor.multisample = MultisampleState {
+            count: samples,
             ..default()
-        }
+        };
+        descriptor
     }
 }
 
