@@ -118,6 +118,11 @@ struct Args {
     /// (`--frames`), looking the same way (a pan: what TAA's history sees).
     #[arg(long, value_parser = parse_vec3)]
     camera_step: Option<Vec3>,
+    /// Headless: time each render pass on the GPU (Bevy's
+    /// `RenderDiagnosticsPlugin`, where the GPU has timestamp queries) and
+    /// print the mean of the extra frames (`--frames`) as `gpu_ms`.
+    #[arg(long)]
+    gpu_timings: bool,
 }
 
 /// The camera's anti-aliasing (`--aa`).
@@ -182,8 +187,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let aa = args.aa;
     let camera_step = args.camera_step;
     let screenshot = args.screenshot.clone();
+    let gpu_timings = args.gpu_timings;
     let assets = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
     let mut renderer = HeadlessRenderer::with_setup(assets, |app| {
+        if gpu_timings {
+            app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);
+        }
         app.add_plugins(ConiferLodDebugPlugin::default())
             .insert_resource(args)
             .insert_resource(CameraStart { eye, target })
@@ -242,8 +251,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .query::<&ConiferFoliage>()
         .iter(renderer.world())
         .count();
+    let gpu_ms = if gpu_timings { gpu_pass_times(renderer.world()) } else { String::new() };
     println!(
-        "{{\"screenshot\": {:?}, \"aa\": \"{:?}\", \"load_s\": {:.2}, \"total_s\": {:.2}, \"median_frame_ms\": {:.1}, \"trees\": {trees}, \"visible\": {}, \"impostors\": {}, \"fading\": {}, \"prisms\": {}, \"triangles\": {}, \"lines\": {}, \"plugin_cpu_ms\": {:.3}}}",
+        "{{\"screenshot\": {:?}, \"aa\": \"{:?}\", \"load_s\": {:.2}, \"total_s\": {:.2}, \"median_frame_ms\": {:.1}, \"trees\": {trees}, \"visible\": {}, \"impostors\": {}, \"fading\": {}, \"prisms\": {}, \"triangles\": {}, \"lines\": {}, \"plugin_cpu_ms\": {:.3}{gpu_ms}}}",
         screenshot.display().to_string(),
         aa,
         loaded_after.as_secs_f64(),
@@ -258,6 +268,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         stats.plugin_cpu_ms
     );
     Ok(())
+}
+
+/// `, "gpu_ms": {...}`: the GPU time of each render pass Bevy's
+/// `RenderDiagnosticsPlugin` timed (its `…/elapsed_gpu` diagnostics), summed
+/// over the views that ran it in one frame (shadow cascades, cameras) and
+/// averaged over the frames it kept, and the top-level passes' sum as
+/// `"frame"`; empty where the GPU has no timestamp queries (lavapipe).
+fn gpu_pass_times(world: &World) -> String {
+    let store = world.resource::<bevy::diagnostic::DiagnosticsStore>();
+    let mut passes: Vec<(String, f64)> = store
+        .iter()
+        .filter_map(|d| {
+            let pass = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
+            // One frame's measurements arrive together, at one instant.
+            let mut frames: Vec<(std::time::Instant, f64)> = Vec::new();
+            for m in d.measurements() {
+                match frames.last_mut() {
+                    Some((time, sum)) if *time == m.time => *sum += m.value,
+                    _ => frames.push((m.time, m.value)),
+                }
+            }
+            let mean = frames.iter().map(|(_, ms)| ms).sum::<f64>() / frames.len().max(1) as f64;
+            (!frames.is_empty()).then(|| (pass.to_string(), mean))
+        })
+        .collect();
+    if passes.is_empty() {
+        return String::new();
+    }
+    passes.sort_by(|a, b| a.0.cmp(&b.0));
+    // A span inside another (`outer/inner`) is already in the outer's time.
+    let frame: f64 = passes.iter().filter(|(p, _)| !p.contains('/')).map(|(_, ms)| ms).sum();
+    let fields: Vec<String> = passes.iter().map(|(p, ms)| format!("{p:?}: {ms:.3}")).collect();
+    format!(", \"gpu_ms\": {{{}, \"frame\": {frame:.3}}}", fields.join(", "))
 }
 
 /// Where the camera starts.

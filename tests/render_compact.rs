@@ -333,6 +333,159 @@ fn lines_are_lit_as_the_cylinders_they_stand_for() {
     assert!(cylinder[2] < cylinder[1] && cylinder[1] < cylinder[0]);
 }
 
+/// Merged lines lit as their bundles (`LineLighting::Bundle`): the same
+/// tree drawn with every merged line's stored alignment set to 1 (needles
+/// along the chord: its cylinder) and to 0 (needles across it: `1 − β` of
+/// the cylinder, the rest a sphere) sends the light the CPU reference
+/// (`model::shading::bundle_lambert`, Lambert) gives the lines the GPU
+/// drew, to within 0.06 of the ratio (Bevy's Burley diffuse and the
+/// shader's quadrature against exact Lambert; black background, no
+/// ambient light, no specular, no tonemapping). `LineLighting::Cylinder`
+/// ignores the alignment: it draws alignment 0 as the bundle draws 1.
+#[test]
+fn merged_lines_are_lit_as_their_bundles() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_conifer_lod::model::shading::{bundle_lambert, cylinder_lambert};
+    use bevy_conifer_lod::plugin::CompactReadback;
+    use std::sync::Arc;
+    let _turn = common::gpu_turn();
+    let record = pine();
+    let crown = record.crown_center();
+    let base = ConiferSpecies::from_record(record.clone()).unwrap();
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(SIZE, SIZE);
+    let world = renderer.world_mut();
+    let sun = HeadlessRenderer::spawn_lights(world);
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    let camera = world
+        .spawn((
+            HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, 12f32.to_radians()),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::BLACK),
+                ..default()
+            },
+            Tonemapping::None,
+        ))
+        .id();
+    // 60 m through a telephoto: merged lines carry most of the crown.
+    let distance = 60.0;
+    look_at_crown(world, camera, crown, distance, 12.0);
+    let eye = crown + Vec3::Z * distance;
+    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+    world.resource_mut::<CompactReadback>().enabled = true;
+    // The tree with every merged line's alignment code set to `code`.
+    let variant = |code: u32| {
+        let mut species = base.clone();
+        let mut compact = (*species.compact).clone();
+        for line in &mut compact.merged_lines {
+            line[1] = (line[1] & 0x0fff_ffff) | code << 28;
+        }
+        species.compact = Arc::new(compact);
+        species.material.reflectance = 0.0;
+        species
+    };
+    let linear = |c: u8| {
+        let c = f32::from(c) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    // Summed linear RGB of the picture, and the cut the GPU drew.
+    let draw = |renderer: &mut HeadlessRenderer, code: u32, lighting: LineLighting, from: Vec3, name: &str| {
+        let world = renderer.world_mut();
+        world.resource_mut::<ConiferLodSettings>().line_lighting = lighting;
+        *world.get_mut::<Transform>(sun).unwrap() =
+            Transform::from_translation(crown + from * 100.0).looking_at(crown, Vec3::Y);
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(variant(code));
+        let tree = world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY)).id();
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+            renderer.update().unwrap();
+        }
+        let picture = renderer.capture(&target, 8).unwrap();
+        picture
+            .save(
+                PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                    .join(format!("target/test-output/render/compact_bundle_{name}.png")),
+            )
+            .unwrap();
+        let light: f32 = picture
+            .pixels()
+            .map(|p| linear(p.0[0]) + linear(p.0[1]) + linear(p.0[2]))
+            .sum();
+        let readback = renderer.world().resource::<CompactReadback>();
+        let lod = readback
+            .views
+            .iter()
+            .find(|v| v.species == handle.id() && v.perspective)
+            .expect("the camera's compute results")
+            .tree_lod(0);
+        renderer.world_mut().despawn(tree);
+        (light, lod)
+    };
+    let compact = &base.compact;
+    let merged_slot: std::collections::HashMap<u32, usize> = compact
+        .merged_source
+        .iter()
+        .enumerate()
+        .map(|(m, &node)| (node, m))
+        .collect();
+    for (name, from) in [("front", Vec3::Z), ("side", Vec3::X)] {
+        let (along, (code, e)) = draw(&mut renderer, 15, LineLighting::Bundle, from, &format!("along_{name}"));
+        let (across, lod) = draw(&mut renderer, 0, LineLighting::Bundle, from, &format!("across_{name}"));
+        let (cylinder, _) = draw(
+            &mut renderer,
+            0,
+            LineLighting::Cylinder,
+            from,
+            &format!("cylinder_{name}"),
+        );
+        assert_eq!(lod, (code, e), "the same cut");
+        // The light the CPU reference gives the cut the GPU drew: each line
+        // weighted by its width times its length seen across the view.
+        let cut = compact.drawn(code, e);
+        assert!(cut.prisms.is_empty(), "{} prisms", cut.prisms.len());
+        assert!(cut.merged_lines.len() > 500, "{} merged lines", cut.merged_lines.len());
+        let (mut expected_along, mut expected_across) = (0.0f64, 0.0f64);
+        let mut add = |a: Vec3, b: Vec3, width: f32, merged: bool| {
+            let v = (eye - 0.5 * (a + b)).normalize();
+            let chord = b - a;
+            let weight = f64::from(width * chord.cross(v).length());
+            let cylinder = f64::from(cylinder_lambert(chord, v, from));
+            expected_along += weight * cylinder;
+            expected_across += weight
+                * if merged {
+                    f64::from(bundle_lambert(chord, 0.0, v, from))
+                } else {
+                    cylinder
+                };
+        };
+        for &needle in &cut.original_lines {
+            let x = &record.needles[needle as usize];
+            add(x.base, x.tip, 2.0 * x.radius, false);
+        }
+        for &node in &cut.merged_lines {
+            let m = merged_slot[&node];
+            let [(a, _), (b, _)] = record.node_ends(node);
+            add(a, b, compact.merged_width(m), true);
+        }
+        let (ratio, expected) = (across / along, (expected_across / expected_along) as f32);
+        println!(
+            "sun {name}: {} original and {} merged lines; light across/along drawn {ratio:.4}, Lambert {expected:.4}; cylinder lighting {:.4}",
+            cut.original_lines.len(),
+            cut.merged_lines.len(),
+            cylinder / along
+        );
+        assert!(along > 1.0, "the tree is lit: {along}");
+        assert!((ratio - expected).abs() < 0.06, "sun {name}: {ratio} vs {expected}");
+        assert!((cylinder / along - 1.0).abs() < 1e-3, "Cylinder ignores the alignment");
+    }
+}
+
 /// `LineOpacity::Coverage` against the summed-area rule, both drawn by the
 /// shader: merged lines cover `1 − exp(−Σa/A)` of their footprint
 /// (`model::metric::merged_line_coverage`), never more than `Σa/A` and,

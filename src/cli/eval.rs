@@ -80,9 +80,11 @@ pub struct EvalArgs {
     /// across the view) or `back` (low, behind the tree: back light).
     #[arg(long, default_value = "front")]
     pub sun: String,
-    /// How the plugin lights lines: `cylinder` (the default) or
-    /// `facing-strip` (a strip turned toward the viewer).
-    #[arg(long, default_value = "cylinder")]
+    /// How the plugin lights lines: `bundle` (the default: a merged line
+    /// as its needles spread about its chord), `cylinder` (every line as
+    /// the cylinder along its chord) or `facing-strip` (a strip turned
+    /// toward the viewer).
+    #[arg(long, default_value = "bundle")]
     pub line_lighting: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`
@@ -131,9 +133,10 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         .find(|s| s.name() == args.sun)
         .with_context(|| format!("--sun {:?}: the suns are front, side, back", args.sun))?;
     let line_lighting = match args.line_lighting.as_str() {
+        "bundle" => LineLighting::Bundle,
         "cylinder" => LineLighting::Cylinder,
         "facing-strip" => LineLighting::FacingStrip,
-        other => bail!("--line-lighting {other:?}: cylinder or facing-strip"),
+        other => bail!("--line-lighting {other:?}: bundle, cylinder or facing-strip"),
     };
     let ours_line_opacity = match args.ours_opacity.as_str() {
         "area" => LineOpacity::AreaPreserving,

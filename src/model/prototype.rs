@@ -39,6 +39,7 @@ use super::metric::{NeedleForm, line_error, needle_form, relative_error};
 use super::needle::{FoliageMaterial, Needle, TreeInput, WoodSegment};
 use super::prism::TriangleMesh;
 use super::record::{BakeInfo, Cut, LodRecord, NO_PARENT, RecordInvalid, check_appearance, check_forest};
+use super::shading::AxisSpread;
 use super::view::{SPHERE_MARGIN, Sphere, ViewPoint};
 use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
@@ -622,6 +623,32 @@ impl PrototypeRecord {
             areas.push(area);
         }
         areas
+    }
+
+    /// The [`AxisSpread`] of the needles of every level-2 node
+    /// (placements, then `tree_merged`), tree metres: each prototype's
+    /// needles summed once, turned and scaled by its placements, summed up
+    /// the level-2 forest.
+    pub fn tree_node_spreads(&self) -> Vec<AxisSpread> {
+        let prototype_spread: Vec<AxisSpread> = self
+            .prototypes
+            .iter()
+            .map(|p| {
+                p.needles.iter().fold(AxisSpread::default(), |sum, n| {
+                    sum + AxisSpread::needle(n.base, n.tip, n.side_area())
+                })
+            })
+            .collect();
+        let mut spreads: Vec<AxisSpread> = self
+            .placements
+            .iter()
+            .map(|pl| prototype_spread[pl.prototype as usize].placed(pl.rotation, pl.scale * pl.scale))
+            .collect();
+        for line in &self.tree_merged {
+            let [a, b] = line.children.map(|c| spreads[c as usize]);
+            spreads.push(a + b);
+        }
+        spreads
     }
 
     /// The spatial error `view` gives level-2 node `node`: its own

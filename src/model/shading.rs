@@ -24,8 +24,25 @@
 //! cylinder, a cylinder across the view and the sphere; the fit is linear,
 //! so a texel's shares are its needles' area-weighted means and a mip
 //! level's shares its texels' means.
+//!
+//! ## A merged line's bundle
+//!
+//! A merged line stands for needles spread about its chord: a fascicle's
+//! needles fan out, a fir's two rows stand across their shoot, and a line
+//! merged over a branch holds shoots pointing every way. Lit as one
+//! cylinder along the chord, such a bundle is lit as if its needles lay
+//! along it. A needle at angle `θ` to the chord is lit, fitted over
+//! views, suns and its turn about the chord, as `a(θ)` of the chord's
+//! cylinder and `1 − a(θ)` of a sphere; `a` runs from 1 along the chord to
+//! about −0.4 across it (needles across the chord, turned every way about
+//! it, are lit as a sphere less a share of the chord's cylinder).
+//! [`bundle_cylinder_share`] takes `a ≈ 1 − β·sin²θ` ([`BUNDLE_SLOPE`]),
+//! the least-squares fit in `cos²θ`, so a bundle's share depends on its
+//! needles only through the area-weighted mean of `cos²θ`: its
+//! [`AxisSpread`] (the second moments of the needles' directions, which
+//! add over children and turn with a placement) seen along the chord.
 
-use glam::{Vec2, Vec3};
+use glam::{Mat3, Quat, Vec2, Vec3};
 use std::f32::consts::PI;
 use std::sync::OnceLock;
 
@@ -298,6 +315,129 @@ pub fn texel_shares(direction: Vec3) -> TexelShares {
     }
 }
 
+/// The second moments of a bundle of needles' directions, each weighted
+/// by its side area (`Σ aᵢ·tᵢtᵢᵀ`, and `Σ aᵢ`): what a merged line's
+/// lighting needs of its needles ([`AxisSpread::alignment`]). Sums of
+/// bundles are the moments of their union; a placed prototype's are its
+/// own turned by the placement and scaled by its area's scale. 28 bytes:
+/// the compact build keeps one per merged line while it runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AxisSpread {
+    /// `Σ aᵢ·tᵢtᵢᵀ`, symmetric, as `xx, yy, zz, xy, xz, yz`, m².
+    pub moments: [f32; 6],
+    /// `Σ aᵢ`, m².
+    pub area: f32,
+}
+
+impl std::ops::Add for AxisSpread {
+    type Output = Self;
+    fn add(self, other: Self) -> Self {
+        Self {
+            moments: std::array::from_fn(|i| self.moments[i] + other.moments[i]),
+            area: self.area + other.area,
+        }
+    }
+}
+
+impl AxisSpread {
+    /// One needle from `base` to `tip` of side area `area` (nothing for a
+    /// zero-length or non-finite needle, or a non-positive area).
+    pub fn needle(base: Vec3, tip: Vec3, area: f32) -> Self {
+        let t = tip - base;
+        let length = t.length();
+        if !(length > 0.0 && length.is_finite() && area > 0.0 && area.is_finite()) {
+            return Self::default();
+        }
+        Self::from_matrix(
+            Mat3::from_cols(t * t.x, t * t.y, t * t.z) * (area / (length * length)),
+            area,
+        )
+    }
+
+    fn from_matrix(m: Mat3, area: f32) -> Self {
+        Self {
+            moments: [m.x_axis.x, m.y_axis.y, m.z_axis.z, m.y_axis.x, m.z_axis.x, m.z_axis.y],
+            area,
+        }
+    }
+
+    fn matrix(&self) -> Mat3 {
+        let [xx, yy, zz, xy, xz, yz] = self.moments;
+        Mat3::from_cols(Vec3::new(xx, xy, xz), Vec3::new(xy, yy, yz), Vec3::new(xz, yz, zz))
+    }
+
+    /// The same bundle turned by unit `rotation` and its areas scaled by
+    /// `area_scale` (a placement's scale squared).
+    pub fn placed(self, rotation: Quat, area_scale: f32) -> Self {
+        let r = Mat3::from_quat(rotation);
+        Self::from_matrix(r * self.matrix() * r.transpose() * area_scale, self.area * area_scale)
+    }
+
+    /// The area-weighted mean of `cos²θ` between the needles and the unit
+    /// direction of `chord`, in `[0, 1]`: 1 for needles along it, 1/3 for
+    /// needles spread evenly over the sphere, 0 for needles across it. 1
+    /// for an empty bundle or a zero chord (lit as one cylinder).
+    pub fn alignment(&self, chord: Vec3) -> f32 {
+        let length = chord.length();
+        if !(self.area > 0.0 && length > 0.0 && length.is_finite()) {
+            return 1.0;
+        }
+        let c = chord / length;
+        let mean = c.dot(self.matrix() * c) / self.area;
+        if mean.is_finite() { mean.clamp(0.0, 1.0) } else { 1.0 }
+    }
+}
+
+/// `β` of [`bundle_cylinder_share`]: a needle at angle `θ` to a merged
+/// line's chord is lit as `1 − β·sin²θ` of the chord's cylinder and the
+/// rest as a sphere, the least-squares fit over views, suns and needles
+/// spread evenly about the chord (the test `the_bundle_slope_is_the_fit`
+/// computes it). The shader's `BUNDLE_SLOPE` (`conifer_compact.wgsl`).
+pub const BUNDLE_SLOPE: f32 = 1.45;
+
+/// The share of a merged line lit as the cylinder along its chord, for
+/// needles of [`AxisSpread::alignment`] `alignment`: `1 − β·(1 −
+/// alignment)`, from 1 (needles along the chord) down to `1 − β`
+/// (needles across it); the rest is lit as a sphere.
+pub fn bundle_cylinder_share(alignment: f32) -> f32 {
+    let alignment = if alignment.is_nan() {
+        1.0
+    } else {
+        alignment.clamp(0.0, 1.0)
+    };
+    1.0 - BUNDLE_SLOPE * (1.0 - alignment)
+}
+
+/// Steps of a stored alignment: it is kept in 4 bits of a merged line
+/// ([`super::compact`]).
+pub const ALIGNMENT_STEPS: u32 = 15;
+
+/// `alignment` rounded to its 4-bit code (`0..=ALIGNMENT_STEPS`).
+pub fn alignment_code(alignment: f32) -> u32 {
+    let alignment = if alignment.is_nan() {
+        1.0
+    } else {
+        alignment.clamp(0.0, 1.0)
+    };
+    (alignment * ALIGNMENT_STEPS as f32).round() as u32
+}
+
+/// The alignment a 4-bit code stands for (the shader's decoding).
+pub fn alignment_from_code(code: u32) -> f32 {
+    code.min(ALIGNMENT_STEPS) as f32 / ALIGNMENT_STEPS as f32
+}
+
+/// The Lambert factor of a merged line along `chord` whose needles have
+/// alignment `alignment`, seen from unit `to_viewer`, lit from unit
+/// `to_light`: its cylinder share of the chord's cylinder, the rest of a
+/// sphere, never below 0 (the CPU reference of the line fragment shader
+/// under `LineLighting::Bundle`).
+pub fn bundle_lambert(chord: Vec3, alignment: f32, to_viewer: Vec3, to_light: Vec3) -> f32 {
+    let share = bundle_cylinder_share(alignment);
+    (share * cylinder_lambert(chord, to_viewer, to_light) + (1.0 - share) * sphere_lambert(to_viewer, to_light))
+        .max(0.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -449,6 +589,172 @@ mod tests {
                 prop_assert!((direct - tabled).abs() < 0.01,
                     "sun {sun}: {tabled} vs {direct} ({table:?} vs {vertical} {across})");
             }
+        }
+    }
+
+    /// Unit directions spread evenly over the sphere (a Fibonacci spiral).
+    fn sphere_spiral(n: usize) -> Vec<Vec3> {
+        (0..n)
+            .map(|i| {
+                let y = 1.0 - 2.0 * (i as f32 + 0.5) / n as f32;
+                let r = (1.0 - y * y).max(0.0).sqrt();
+                let phi = i as f32 * 2.399_963_3;
+                Vec3::new(r * phi.cos(), y, r * phi.sin())
+            })
+            .collect()
+    }
+
+    /// A needle at `theta` to the z axis, turned `phi` about it.
+    fn tilted(theta: f32, phi: f32) -> Vec3 {
+        Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+    }
+
+    /// `BUNDLE_SLOPE` is the least-squares `β` of `a(θ) = 1 − β·sin²θ`:
+    /// over views and suns spread evenly over the sphere and needles spread
+    /// evenly about the chord (weight `sin θ`), it minimises the summed
+    /// squared difference between a needle's Lambert factor and
+    /// `a·cylinder(chord) + (1 − a)·sphere`.
+    #[test]
+    fn the_bundle_slope_is_the_fit() {
+        let chord = Vec3::Z;
+        let directions = sphere_spiral(40);
+        let pairs: Vec<(Vec3, Vec3, f64)> = directions
+            .iter()
+            .flat_map(|&v| directions.iter().map(move |&l| (v, l)))
+            .map(|(v, l)| (v, l, f64::from(cylinder_lambert(chord, v, l) - sphere_lambert(v, l))))
+            .collect();
+        let (mut numerator, mut denominator) = (0.0f64, 0.0f64);
+        let thetas = 36;
+        for i in 0..thetas {
+            let theta = (i as f32 + 0.5) / thetas as f32 * PI / 2.0;
+            let (sin2, weight) = (f64::from(theta.sin().powi(2)), f64::from(theta.sin()));
+            for j in 0..12 {
+                let t = tilted(theta, j as f32 * PI / 6.0 + 0.1);
+                for &(v, l, chord_residual) in &pairs {
+                    let needle_residual = f64::from(cylinder_lambert(t, v, l) - sphere_lambert(v, l));
+                    numerator += weight * (chord_residual - needle_residual) * sin2 * chord_residual;
+                    denominator += weight * sin2 * sin2 * chord_residual * chord_residual;
+                }
+            }
+        }
+        let beta = numerator / denominator;
+        println!("least-squares bundle slope: {beta:.4}");
+        assert!(
+            (beta - f64::from(BUNDLE_SLOPE)).abs() < 0.02,
+            "fit {beta} vs {BUNDLE_SLOPE}"
+        );
+    }
+
+    #[test]
+    fn alignment_of_known_bundles() {
+        let along = AxisSpread::needle(Vec3::ZERO, Vec3::Z, 1.0);
+        assert_eq!(along.alignment(Vec3::Z), 1.0);
+        assert_eq!(along.alignment(-Vec3::Z * 3.0), 1.0);
+        assert!(along.alignment(Vec3::X) < 1e-6);
+        let even = sphere_spiral(4096).into_iter().fold(AxisSpread::default(), |sum, t| {
+            sum + AxisSpread::needle(Vec3::ONE, Vec3::ONE + t, 0.5)
+        });
+        for chord in [Vec3::X, Vec3::Y, Vec3::new(1.0, -2.0, 0.5)] {
+            assert!(
+                (even.alignment(chord) - 1.0 / 3.0).abs() < 2e-3,
+                "{}",
+                even.alignment(chord)
+            );
+        }
+        // Two rows across the shoot, as a fir's: across the chord along the shoot.
+        let rows = AxisSpread::needle(Vec3::ZERO, Vec3::X, 1.0) + AxisSpread::needle(Vec3::ZERO, -Vec3::X, 1.0);
+        assert!(rows.alignment(Vec3::Z) < 1e-6);
+        // Weighted by area.
+        let mixed = AxisSpread::needle(Vec3::ZERO, Vec3::Z, 3.0) + AxisSpread::needle(Vec3::ZERO, Vec3::X, 1.0);
+        assert!((mixed.alignment(Vec3::Z) - 0.75).abs() < 1e-6);
+        // Nothing to light by: one cylinder.
+        for empty in [
+            AxisSpread::default(),
+            AxisSpread::needle(Vec3::ZERO, Vec3::ZERO, 1.0),
+            AxisSpread::needle(Vec3::ZERO, Vec3::NAN, 1.0),
+            AxisSpread::needle(Vec3::ZERO, Vec3::X, 0.0),
+        ] {
+            assert_eq!(empty.alignment(Vec3::Y), 1.0);
+        }
+        assert_eq!(mixed.alignment(Vec3::ZERO), 1.0);
+        assert_eq!(mixed.alignment(Vec3::NAN), 1.0);
+        assert_eq!(bundle_cylinder_share(1.0), 1.0);
+        assert!((bundle_cylinder_share(0.0) - (1.0 - BUNDLE_SLOPE)).abs() < 1e-6);
+        assert_eq!(bundle_cylinder_share(f32::NAN), 1.0);
+        assert_eq!(alignment_code(f32::NAN), ALIGNMENT_STEPS);
+        assert_eq!(alignment_from_code(99), 1.0);
+    }
+
+    proptest! {
+        /// A placed bundle's alignment along its placed chord is the
+        /// prototype's along its own, and its area scales.
+        #[test]
+        fn placement_keeps_the_alignment(
+            a in direction(), b in direction(), chord in direction(), axis in direction(),
+            angle in -3.0f32..3.0, scale in 0.1f32..10.0,
+        ) {
+            let spread = AxisSpread::needle(Vec3::ZERO, a, 0.3) + AxisSpread::needle(Vec3::ONE, Vec3::ONE + b, 0.7);
+            let rotation = Quat::from_axis_angle(axis, angle);
+            let placed = spread.placed(rotation, scale * scale);
+            prop_assert!((placed.alignment(rotation * chord) - spread.alignment(chord)).abs() < 1e-4);
+            prop_assert!((placed.area - spread.area * scale * scale).abs() < 1e-5 * placed.area.max(1.0));
+        }
+
+        /// The 4-bit code keeps an alignment to half a step.
+        #[test]
+        fn the_alignment_code_rounds_to_half_a_step(alignment in 0.0f32..=1.0) {
+            let decoded = alignment_from_code(alignment_code(alignment));
+            prop_assert!((decoded - alignment).abs() <= 0.5 / ALIGNMENT_STEPS as f32 + 1e-6);
+        }
+    }
+
+    /// Needles fanned about a chord, as a fascicle's or a fir's two rows,
+    /// are lit closer to their own mean by the bundle (its alignment's
+    /// share of the chord's cylinder, the rest a sphere) than by the
+    /// chord's cylinder alone: mean |error| of the Lambert factor over
+    /// views and suns spread over the sphere.
+    #[test]
+    fn a_fanned_bundle_is_lit_closer_to_its_needles_than_its_chord() {
+        let directions = sphere_spiral(48);
+        let chord = Vec3::Z;
+        for (name, needles) in [
+            // A cone of needles 40° round the chord.
+            (
+                "cone 40°",
+                (0..12).map(|j| tilted(0.7, j as f32 * PI / 6.0)).collect::<Vec<_>>(),
+            ),
+            // Two rows standing across the chord, 70° to it.
+            (
+                "two rows",
+                vec![
+                    tilted(1.22, 0.0),
+                    tilted(1.22, PI),
+                    tilted(1.22, 0.1),
+                    tilted(1.22, PI + 0.1),
+                ],
+            ),
+            // Shoots every way.
+            ("every way", sphere_spiral(64)),
+        ] {
+            let spread = needles.iter().fold(AxisSpread::default(), |sum, &t| {
+                sum + AxisSpread::needle(Vec3::ZERO, t, 1.0)
+            });
+            let alignment = spread.alignment(chord);
+            let (mut chord_error, mut bundle_error, mut count) = (0.0f32, 0.0f32, 0);
+            for &v in &directions {
+                for &l in &directions {
+                    let exact = needles.iter().map(|&t| cylinder_lambert(t, v, l)).sum::<f32>() / needles.len() as f32;
+                    chord_error += (cylinder_lambert(chord, v, l) - exact).abs();
+                    bundle_error += (bundle_lambert(chord, alignment, v, l) - exact).abs();
+                    count += 1;
+                }
+            }
+            let (chord_error, bundle_error) = (chord_error / count as f32, bundle_error / count as f32);
+            println!("{name}: alignment {alignment:.3}, mean |error| chord {chord_error:.4}, bundle {bundle_error:.4}");
+            assert!(
+                bundle_error < 0.6 * chord_error,
+                "{name}: {bundle_error} vs {chord_error}"
+            );
         }
     }
 }

@@ -68,6 +68,9 @@ const PI: f32 = 3.14159265358979;
 // much of it (a line under 1/64 of a pixel hardly moves it).
 const MOTION_MIN_OPACITY: f32 = 0.015625;
 const TAU: f32 = 6.28318530717959;
+// `model::shading::BUNDLE_SLOPE` and `ALIGNMENT_STEPS`.
+const BUNDLE_SLOPE: f32 = 1.45;
+const ALIGNMENT_STEPS: f32 = 15.0;
 // `model::wind`'s constants.
 const WIND_TRUNK_LEAN: f32 = 0.008;
 const WIND_TRUNK_SWAY: f32 = 0.005;
@@ -105,6 +108,9 @@ struct VertexOutput {
     // Where the point stood the frame before (last frame's wind).
     @location(5) previous_world_position: vec4<f32>,
 #endif
+    // How well the needles a line stands for lie along it (1 for a
+    // needle's own line and wood; `model::shading::AxisSpread::alignment`).
+    @location(6) @interpolate(flat) alignment: f32,
 }
 
 // A position outside every clip plane: the primitive is not drawn.
@@ -665,7 +671,9 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let position = select(base, tip, (vertex_index & 1u) != 0u);
-    return swayed_line(finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree)), base, tip, world_from_local, (vertex_index & 1u) != 0u);
+    var out = finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
+    out.alignment = 1.0;
+    return swayed_line(out, base, tip, world_from_local, (vertex_index & 1u) != 0u);
 #endif
 
 #ifdef CONIFER_MERGED_LINES
@@ -697,14 +705,18 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     if !(own <= line_code && parent_view_code < (codes >> 16u)) {
         return culled();
     }
-    let width = log_decode((a >> 24u) | ((b >> 24u) << 8u));
+    // The width code's top 12 bits (`model::compact::CompactSpecies::merged_width_code`).
+    let width = log_decode(((a >> 24u) | (((b >> 24u) & 0xfu) << 8u)) << 4u);
     let alpha = merged_line_alpha(lod, line_error, width, log_decode(own));
     let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
     let start = end_position(grid, a);
     let end = end_position(grid, b);
     let position = select(start, end, (vertex_index & 1u) != 0u);
-    return swayed_line(finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree)), start, end, world_from_local, (vertex_index & 1u) != 0u);
+    var out = finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
+    // `model::compact::CompactSpecies::merged_alignment`.
+    out.alignment = f32(b >> 28u) / ALIGNMENT_STEPS;
+    return swayed_line(out, start, end, world_from_local, (vertex_index & 1u) != 0u);
 #endif
 
 #ifdef CONIFER_WOOD_LINES
@@ -722,7 +734,9 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
-    return with_height(swayed_line(finish(position, end.xyz - start.xyz, world_from_local, color), start.xyz, end.xyz, world_from_local, (vertex_index & 1u) != 0u), position.y);
+    var out = finish(position, end.xyz - start.xyz, world_from_local, color);
+    out.alignment = 1.0;
+    return with_height(swayed_line(out, start.xyz, end.xyz, world_from_local, (vertex_index & 1u) != 0u), position.y);
 #endif
 
 #ifdef CONIFER_IMPOSTOR
@@ -1160,6 +1174,17 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     color.a = pbr_input.material.base_color.a;
 #else ifdef CONIFER_LINES
     var color = cylinder_lighting(pbr_input, axis);
+#ifdef CONIFER_BUNDLE
+    // A merged line's needles spread about its chord: its alignment's share
+    // of the chord's cylinder, the rest lit as a sphere (CPU reference:
+    // `model::shading::bundle_lambert`).
+    let cylinder_share = 1.0 - BUNDLE_SLOPE * (1.0 - in.alignment);
+    if cylinder_share < 1.0 - 1.0 / 512.0 {
+        let alpha = color.a;
+        color = max(cylinder_share * color + (1.0 - cylinder_share) * sphere_lighting(pbr_input), vec4<f32>(0.0));
+        color.a = alpha;
+    }
+#endif
 #else
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
 #endif

@@ -88,6 +88,7 @@ use bevy::render::render_resource::{
     BlendState, CachedRenderPipelineId, ColorTargetState, ColorWrites, LoadOp, MultisampleState, Operations,
     RenderPassDepthStencilAttachment, RenderPassDescriptor, StoreOp,
 };
+use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue, ViewQuery};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::view::ExtractedView;
@@ -886,8 +887,8 @@ pub struct CompactPipelineKey {
     kind: PartKind,
     /// Which pass the pipeline draws in.
     pass: CompactPass,
-    /// Lines lit as strips facing the viewer ([`LineLighting::FacingStrip`]).
-    facing_strip: bool,
+    /// How lines are lit (the default for every other part).
+    line_lighting: LineLighting,
 }
 
 /// The passes the compact parts are drawn in.
@@ -1091,8 +1092,10 @@ impl SpecializedRenderPipeline for CompactPipeline {
         ];
         if key.kind.is_blended() {
             defs.push("CONIFER_LINES".into());
-            if key.facing_strip {
-                defs.push("CONIFER_FACING_STRIP".into());
+            match key.line_lighting {
+                LineLighting::Bundle => defs.push("CONIFER_BUNDLE".into()),
+                LineLighting::Cylinder => {}
+                LineLighting::FacingStrip => defs.push("CONIFER_FACING_STRIP".into()),
             }
         }
         if key.kind.placed_index().is_some() {
@@ -1578,7 +1581,11 @@ fn queue_compact(
                         | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
                     kind,
                     pass: CompactPass::Main,
-                    facing_strip: kind.is_blended() && render.line_lighting == LineLighting::FacingStrip,
+                    line_lighting: if kind.is_blended() {
+                        render.line_lighting
+                    } else {
+                        LineLighting::default()
+                    },
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 if kind.is_blended() {
@@ -1660,7 +1667,7 @@ fn queue_compact_shadows(
                     mesh_key: MeshPipelineKey::DEPTH_PREPASS,
                     kind,
                     pass: CompactPass::Shadow,
-                    facing_strip: false,
+                    line_lighting: LineLighting::default(),
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 phase.add(
@@ -1728,7 +1735,7 @@ fn queue_compact_motion_vectors(
                         mesh_key: MeshPipelineKey::empty(),
                         kind,
                         pass,
-                        facing_strip: false,
+                        line_lighting: LineLighting::default(),
                     };
                     list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
                 }
@@ -1791,6 +1798,8 @@ fn draw_motion_vectors(
         prepass_textures.normal.as_ref().map(|normal| normal.get_attachment()),
         Some(motion_vectors.get_attachment()),
     ];
+    let diagnostics = ctx.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     let mut pass = ctx.begin_tracked_render_pass(RenderPassDescriptor {
         label: Some("conifer motion vectors"),
         color_attachments: &color_attachments,
@@ -1799,6 +1808,7 @@ fn draw_motion_vectors(
         occlusion_query_set: None,
         multiview_mask: None,
     });
+    let span = diagnostics.pass_span(&mut pass, "conifer_motion_vectors");
     for &(species, kind, pipeline_id) in list {
         let (Some(pipeline), Some(buffers)) = (
             pipeline_cache.get_render_pipeline(pipeline_id),
@@ -1813,6 +1823,7 @@ fn draw_motion_vectors(
         pass.set_bind_group(2, &groups.draw, &[]);
         draw_indirect_part(&mut pass, buffers, kind, false);
     }
+    span.end(&mut pass);
 }
 
 /// Culls every tree of every species for every view and writes the
@@ -1840,6 +1851,9 @@ fn cull_trees(
     if compact_views.views.is_empty() {
         return;
     }
+    // GPU time of the pass where Bevy's `RenderDiagnosticsPlugin` runs.
+    let diagnostics = render_context.diagnostic_recorder();
+    let diagnostics = diagnostics.as_deref();
     let encoder = render_context.command_encoder();
     for view in compact_views.views.values() {
         if view.placed.entry_capacity > 0 {
@@ -1850,6 +1864,7 @@ fn cull_trees(
         label: Some("conifer compact cull"),
         timestamp_writes: None,
     });
+    let span = diagnostics.pass_span(&mut pass, "conifer_cull");
     for view in compact_views.views.values() {
         let Some(groups) = &view.groups else { continue };
         pass.set_pipeline(cull);
@@ -1870,6 +1885,7 @@ fn cull_trees(
         pass.set_pipeline(scatter);
         pass.dispatch_workgroups_indirect(&view.placed.dispatch, 0);
     }
+    span.end(&mut pass);
     drop(pass);
     readback::stage(encoder, &device, &compact_views, &mut readbacks);
 }
