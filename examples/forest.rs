@@ -251,7 +251,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .query::<&ConiferFoliage>()
         .iter(renderer.world())
         .count();
-    let gpu_ms = if gpu_timings { gpu_pass_times(renderer.world()) } else { String::new() };
+    let gpu_ms = if gpu_timings {
+        gpu_pass_times(renderer.world())
+    } else {
+        String::new()
+    };
     println!(
         "{{\"screenshot\": {:?}, \"aa\": \"{:?}\", \"load_s\": {:.2}, \"total_s\": {:.2}, \"median_frame_ms\": {:.1}, \"trees\": {trees}, \"visible\": {}, \"impostors\": {}, \"fading\": {}, \"prisms\": {}, \"triangles\": {}, \"lines\": {}, \"plugin_cpu_ms\": {:.3}{gpu_ms}}}",
         screenshot.display().to_string(),
@@ -280,7 +284,11 @@ fn gpu_pass_times(world: &World) -> String {
     let mut passes: Vec<(String, f64)> = store
         .iter()
         .filter_map(|d| {
-            let pass = d.path().as_str().strip_prefix("render/")?.strip_suffix("/elapsed_gpu")?;
+            let pass = d
+                .path()
+                .as_str()
+                .strip_prefix("render/")?
+                .strip_suffix("/elapsed_gpu")?;
             // One frame's measurements arrive together, at one instant.
             let mut frames: Vec<(std::time::Instant, f64)> = Vec::new();
             for m in d.measurements() {

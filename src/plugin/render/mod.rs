@@ -64,6 +64,7 @@ use bevy::pbr::{
 };
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
+use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::mesh::allocator::MeshSlabs;
 use bevy::render::render_phase::{
     AddRenderCommand, BinnedRenderPhaseType, DrawFunctions, InputUniformIndex, PhaseItem, PhaseItemExtraIndex,
@@ -88,7 +89,6 @@ use bevy::render::render_resource::{
     BlendState, CachedRenderPipelineId, ColorTargetState, ColorWrites, LoadOp, MultisampleState, Operations,
     RenderPassDepthStencilAttachment, RenderPassDescriptor, StoreOp,
 };
-use bevy::render::diagnostic::RecordDiagnostics;
 use bevy::render::renderer::{RenderAdapterInfo, RenderContext, RenderDevice, RenderQueue, ViewQuery};
 use bevy::render::sync_world::MainEntity;
 use bevy::render::view::ExtractedView;
@@ -2043,7 +2043,14 @@ pub(super) fn build(app: &mut App) {
                 readback::collect.in_set(RenderSystems::Cleanup),
             ),
         )
-        .add_systems(bevy::render::renderer::RenderGraph, cull_trees.before(camera_driver))
+        // In the render set, so its pass is timed with the frame's (Bevy's
+        // `RenderDiagnosticsPlugin` begins a frame's spans before it).
+        .add_systems(
+            bevy::render::renderer::RenderGraph,
+            cull_trees
+                .in_set(bevy::render::renderer::RenderGraphSystems::Render)
+                .before(camera_driver),
+        )
         .add_systems(
             Core3d,
             draw_motion_vectors
