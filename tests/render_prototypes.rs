@@ -243,6 +243,83 @@ fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
     assert!(mean_difference(&full, &coarse) > 0.5, "and coarser than the full cut");
 }
 
+/// The expansion budget goes to the nearest tree, whatever order the
+/// trees were spawned in: three trees 6, 20 and 50 m from the camera,
+/// spawned farthest first, with room for the nearest one's placements
+/// alone. The nearest keeps its cut and its placements; the other two fall
+/// back to their level-2 lines (`model::compact::budget_expands`). Before
+/// the budget went by distance, the first trees the GPU reached (the far
+/// ones) took the room and the nearest lost its needles.
+#[test]
+fn the_expansion_budget_goes_to_the_nearest_tree() {
+    let _turn = common::gpu_turn();
+    let mut scene = Scene::new();
+    let world = scene.renderer.world_mut();
+    world.resource_mut::<CompactReadback>().enabled = true;
+    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+    scene.look_from(6.0, 45.0);
+    let placed = scene.placed.clone();
+    let compact = scene
+        .renderer
+        .world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(&placed)
+        .unwrap()
+        .compact
+        .clone();
+    let transforms = [-44.0f32, -14.0, 0.0].map(|z| Transform::from_xyz(0.0, 0.0, z));
+    // Each tree's threshold code and spatial error, by instance slot, and
+    // the trees with expanded placements.
+    let lods = |scene: &mut Scene, name: &str| {
+        scene.shot_of(&placed, &transforms, name);
+        let readback = scene.renderer.world().resource::<CompactReadback>();
+        let view = readback
+            .views
+            .iter()
+            .find(|v| v.species == placed.id() && v.perspective)
+            .expect("the camera's results were read back");
+        let trees: Vec<(u16, f32, bool)> = (0..view.lods.len())
+            .map(|t| {
+                let (code, e) = view.tree_lod(t);
+                (code, e, view.view_point(t).is_some())
+            })
+            .collect();
+        let mut expanded: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
+        expanded.sort_unstable();
+        expanded.dedup();
+        (trees, expanded)
+    };
+    let (roomy, roomy_expanded) = lods(&mut scene, "budget_roomy");
+    assert_eq!(roomy.len(), 3);
+    assert_eq!(roomy_expanded.len(), 3, "with room, every tree expands");
+    let nearest = (0..3).min_by(|&a, &b| roomy[a].1.total_cmp(&roomy[b].1)).unwrap();
+    let demand = |t: usize| compact.expanded_placements(roomy[t].0);
+    println!(
+        "codes {:?}, demands {:?}, nearest slot {nearest}",
+        roomy.iter().map(|t| t.0).collect::<Vec<_>>(),
+        (0..3).map(demand).collect::<Vec<_>>()
+    );
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .max_expanded_placements = demand(nearest);
+    let (tight, tight_expanded) = lods(&mut scene, "budget_nearest");
+    assert_eq!(tight_expanded, vec![nearest as u32], "only the nearest tree expands");
+    for t in 0..3 {
+        if t == nearest {
+            assert_eq!(tight[t], roomy[t], "the nearest tree keeps its cut");
+        } else {
+            assert!(
+                tight[t].0 > roomy[t].0 && !tight[t].2,
+                "tree {t} falls back to its level-2 lines: {:?} from {:?}",
+                tight[t],
+                roomy[t]
+            );
+        }
+    }
+}
+
 /// The per-tree draws the CPU reference (`CompactSpecies::prefixes`) gives
 /// for a tree at threshold code `code` and spatial error `e`, as the compute
 /// pass writes them: `[vertex count, first vertex]` of prisms, original

@@ -219,6 +219,72 @@ pub const MAX_PLACED_PROTOTYPES: usize = 1024;
 /// placement index in 16 bits.
 pub const MAX_PLACEMENTS: usize = 1 << 16;
 
+/// Buckets of a view's expansion budget (per species: the placements a
+/// view may expand, `ConiferLodSettings::max_expanded_placements`): a
+/// tree's bucket is its threshold code's top bits ([`budget_bucket`]), so
+/// a lower bucket is a tree seen with a smaller error (nearer), and the
+/// budget goes to the lowest buckets first ([`budget_cutoff`]).
+pub const BUDGET_BUCKETS: usize = 128;
+
+/// Threshold code bits below a budget bucket: `65535 >> 9 = 127`, and a
+/// bucket spans `512 · LOG_CODE_LN_STEP = 0.25` in `ln e` (errors within a
+/// factor 1.29).
+pub const BUDGET_BUCKET_SHIFT: u32 = 9;
+
+/// The budget bucket of a tree at threshold code `code`.
+pub fn budget_bucket(code: u16) -> usize {
+    usize::from(code >> BUDGET_BUCKET_SHIFT)
+}
+
+/// Where a view's expansion budget of `capacity` entries runs out:
+/// `(cutoff, base)`, the first bucket whose trees together no longer fit
+/// after the buckets before it ([`BUDGET_BUCKETS`] when every tree fits)
+/// and the entries those buckets take. Trees below the cutoff always
+/// expand; trees above it never do (they draw their level-2 lines);
+/// trees in it take what is left from `base` on, in the order the GPU
+/// reaches them. `demand[b]` is the placements bucket `b`'s trees would
+/// expand. CPU reference of `conifer_cull.wgsl`'s `budget_cutoff`.
+pub fn budget_cutoff(demand: &[u32; BUDGET_BUCKETS], capacity: u32) -> (usize, u32) {
+    let mut taken = 0u32;
+    for (bucket, &d) in demand.iter().enumerate() {
+        match taken.checked_add(d) {
+            Some(sum) if sum <= capacity => taken = sum,
+            _ => return (bucket, taken),
+        }
+    }
+    (BUDGET_BUCKETS, taken)
+}
+
+/// Which of a view's trees expand their placements under a budget of
+/// `capacity` entries: `trees` are each tree's threshold code and the
+/// placements it would expand, in the order the GPU reaches them. A tree
+/// that expands nothing is `true`. CPU reference of `conifer_cull.wgsl`'s
+/// `budget_demand`, `budget_cutoff` and `expand_placements`.
+pub fn budget_expands(trees: &[(u16, u32)], capacity: u32) -> Vec<bool> {
+    let mut demand = [0u32; BUDGET_BUCKETS];
+    for &(code, expanded) in trees {
+        let bucket = &mut demand[budget_bucket(code)];
+        *bucket = bucket.wrapping_add(expanded);
+    }
+    let (cutoff, base) = budget_cutoff(&demand, capacity);
+    let mut in_cutoff = 0u32;
+    trees
+        .iter()
+        .map(|&(code, expanded)| {
+            let bucket = budget_bucket(code);
+            if expanded == 0 || bucket < cutoff {
+                return true;
+            }
+            if bucket > cutoff {
+                return false;
+            }
+            let start = base.wrapping_add(in_cutoff);
+            in_cutoff = in_cutoff.wrapping_add(expanded);
+            start.checked_add(expanded).is_some_and(|end| end <= capacity)
+        })
+        .collect()
+}
+
 /// Bytes of each compact array.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct CompactBytes {
@@ -1415,6 +1481,58 @@ mod tests {
                 "{species:?}: {bundle_error} vs {chord_error}"
             );
         }
+    }
+
+    proptest::proptest! {
+        /// The budget goes to the nearest trees: the trees that expand in
+        /// buckets below the cutoff fit together, every tree of a lower
+        /// bucket than one that expands expands too (but within the
+        /// cutoff bucket, where the GPU's order decides), what the
+        /// expanding trees take never passes the capacity, and a tree past
+        /// the cutoff bucket would not have fitted after the buckets before
+        /// it.
+        #[test]
+        fn the_budget_goes_to_the_nearest_trees(
+            trees in proptest::collection::vec((0u16..=65534, 0u32..5000), 0..60),
+            capacity in 0u32..40_000,
+        ) {
+            let expands = budget_expands(&trees, capacity);
+            let mut demand = [0u32; BUDGET_BUCKETS];
+            for &(code, expanded) in &trees {
+                demand[budget_bucket(code)] += expanded;
+            }
+            let (cutoff, base) = budget_cutoff(&demand, capacity);
+            let taken: u64 = trees.iter().zip(&expands).filter(|(_, e)| **e).map(|(t, _)| u64::from(t.1)).sum();
+            proptest::prop_assert!(taken <= u64::from(capacity));
+            proptest::prop_assert_eq!(u64::from(base), demand[..cutoff].iter().map(|&d| u64::from(d)).sum::<u64>());
+            if cutoff < BUDGET_BUCKETS {
+                proptest::prop_assert!(u64::from(base) + u64::from(demand[cutoff]) > u64::from(capacity));
+            }
+            for (i, &(code, expanded)) in trees.iter().enumerate() {
+                let bucket = budget_bucket(code);
+                if expanded > 0 && bucket != cutoff {
+                    proptest::prop_assert_eq!(expands[i], bucket < cutoff);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_budget_with_room_for_all_and_for_none() {
+        let trees = [(100u16, 10u32), (9000, 20), (40_000, 0), (60_000, 5)];
+        assert_eq!(budget_expands(&trees, 35), vec![true; 4]);
+        assert_eq!(budget_cutoff(&[0; BUDGET_BUCKETS], 0), (BUDGET_BUCKETS, 0));
+        // Room for the nearest only, whichever order the GPU reaches them in.
+        let reversed: Vec<(u16, u32)> = trees.iter().rev().copied().collect();
+        assert_eq!(budget_expands(&reversed, 12), vec![false, true, false, true]);
+        // No room: only trees that expand nothing.
+        assert_eq!(budget_expands(&trees, 0), vec![false, false, true, false]);
+        // One bucket shared: first come, first served.
+        assert_eq!(
+            budget_expands(&[(10, 6), (11, 6), (12, 6)], 13),
+            vec![true, true, false]
+        );
+        assert_eq!(budget_bucket(u16::MAX), BUDGET_BUCKETS - 1);
     }
 
     #[test]

@@ -250,9 +250,11 @@ pub struct ConiferLodSettings {
     /// Trees of shared prototypes: most placements
     /// one view (a camera, a shadow cascade or face) expands into their
     /// prototypes' detail over all trees of a species (8 bytes each, twice,
-    /// per view). A tree whose placements do not fit that frame draws its
-    /// coarser cut (its level-2 lines). Default 131,072 (about 100 mature
-    /// trees within full detail of one view).
+    /// per view). The nearest trees get it first (by their spatial error,
+    /// in buckets of a factor 1.29; [`crate::model::compact::budget_expands`]);
+    /// a tree whose placements do not fit that frame draws its coarser cut
+    /// (its level-2 lines). Default 131,072 (about 100 mature trees within
+    /// full detail of one view).
     pub max_expanded_placements: u32,
     /// Where a tree's spatial error is measured from: one error per tree
     /// (the paper's) or each placement's own (default).

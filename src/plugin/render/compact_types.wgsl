@@ -210,10 +210,21 @@ const ENTRY_TREE_MASK: u32 = 0x3fffffffu;
 const ENTRY_FROM_NEEDLES: u32 = 0x80000000u;
 const ENTRY_MERGED_BY_OWN: u32 = 0x40000000u;
 const ENTRY_INVALID: u32 = 0xffffffffu;
-// The view's placement counters: a header, then per-draw arrays.
+// The view's placement counters: a header, then per-draw arrays. The
+// header: entries reserved below the budget's cutoff bucket, entries
+// written, the cutoff bucket, the entries the buckets before it take,
+// entries reserved in it, then the demand of each budget bucket.
 const COUNTER_TOTAL: u32 = 0u;
 const COUNTER_ENTRIES: u32 = 1u;
-const COUNTER_HEADER: u32 = 4u;
+const COUNTER_CUTOFF: u32 = 2u;
+const COUNTER_CUTOFF_BASE: u32 = 3u;
+const COUNTER_CUTOFF_TOTAL: u32 = 4u;
+const COUNTER_DEMAND: u32 = 8u;
+// `model::compact::BUDGET_BUCKETS`, `BUDGET_BUCKET_SHIFT`.
+const BUDGET_BUCKETS: u32 = 128u;
+const BUDGET_BUCKET_SHIFT: u32 = 9u;
+// `gpu::PLACED_COUNTER_HEADER`: COUNTER_DEMAND + BUDGET_BUCKETS.
+const COUNTER_HEADER: u32 = 136u;
 const ARRAY_COUNT: u32 = 0u;
 const ARRAY_CURSOR: u32 = 1u;
 const ARRAY_PRISMS: u32 = 2u;

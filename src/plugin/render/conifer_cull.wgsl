@@ -6,8 +6,9 @@
 // A species of shared prototypes also expands, per view, the placements
 // whose detail a tree's cut needs (a prefix of the placements sorted by
 // their root's parent code), and draws them instanced, one draw per
-// prototype and band (`cull` → `prepare_dispatch` → `count_placements` →
-// `scan_placements` → `scatter_placements`). CPU reference:
+// prototype and band (`budget_demand` → `budget_cutoff` → `cull` →
+// `prepare_dispatch` → `count_placements` → `scan_placements` →
+// `scatter_placements`). CPU reference:
 // `model::compact::CompactSpecies::placed_view`.
 
 #import bevy_conifer_lod::compact_types::{
@@ -15,6 +16,7 @@
     LOG_LN_MIN, LOG_LN_STEP, MAX_THRESHOLD_CODE, KIND_COUNT,
     Prototype, Placement, PLACED_BANDS, PLACED_PRISMS, PLACED_ORIGINAL_LINES, PLACED_MERGED_LINES,
     ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, ENTRY_INVALID, COUNTER_TOTAL, COUNTER_ENTRIES, COUNTER_HEADER,
+    COUNTER_CUTOFF, COUNTER_CUTOFF_BASE, COUNTER_CUTOFF_TOTAL, COUNTER_DEMAND, BUDGET_BUCKETS, BUDGET_BUCKET_SHIFT,
     ARRAY_COUNT, ARRAY_CURSOR, ARRAY_PRISMS, ARRAY_AFTER_PRISMS, ARRAY_BY_PARENT, ARRAY_MERGED, ARRAY_OFFSET, ARRAY_FLAGS,
     ARRAY_MERGED_BY_OWN,
     placement_band,
@@ -170,16 +172,28 @@ fn hide(instance: u32) {
     instance_lods[instance].view = vec4<f32>(0.0);
 }
 
-@compute @workgroup_size(64)
-fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
-    if i >= species.instance_count {
-        return;
-    }
+// What a view makes of tree `i` before its placements are expanded: whether
+// it is seen, its spatial error and threshold code, its fade into the
+// impostor, its view point and its overrides (`cull` and `budget_demand`
+// decide alike).
+struct TreeView {
+    seen: bool,
+    e: f32,
+    code: u32,
+    // 255: the impostor alone
+    fade: u32,
+    view_point: vec4<f32>,
+    pixel_error: f32,
+    transition: f32,
+    opacity_rule: u32,
+}
+
+fn view_tree(i: u32) -> TreeView {
+    var tree: TreeView;
+    tree.seen = false;
     let instance = instances[i];
     if (instance.flags & FLAG_VISIBLE) == 0u || (instance.layers & cull_view.layers) == 0u {
-        hide(i);
-        return;
+        return tree;
     }
     let world_from_local = instance_world_from_local(instance);
     let scale = instance_scale(instance);
@@ -191,8 +205,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let radius = (species.crown_center.w + reach) * scale;
     for (var p = 0u; p < 6u; p += 1u) {
         if dot(cull_view.planes[p].xyz, center) + cull_view.planes[p].w < -radius {
-            hide(i);
-            return;
+            return tree;
         }
     }
     // Per-tree overrides.
@@ -252,6 +265,71 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         let steep = clamp((elevation - IMPOSTOR_STEEP_START) / (IMPOSTOR_STEEP_END - IMPOSTOR_STEEP_START), 0.0, 1.0);
         fade = u32(round(t * (1.0 - steep) * 255.0));
     }
+    tree.seen = true;
+    tree.e = e;
+    tree.code = threshold_code(e);
+    tree.fade = fade;
+    tree.view_point = view_point;
+    tree.pixel_error = pixel_error;
+    tree.transition = transition;
+    tree.opacity_rule = opacity_rule;
+    return tree;
+}
+
+// Per tree: the placements its cut would expand, added to its budget
+// bucket's demand (`model::compact::budget_expands`).
+@compute @workgroup_size(64)
+fn budget_demand(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= species.instance_count {
+        return;
+    }
+    let tree = view_tree(i);
+    if !tree.seen || tree.fade >= 255u {
+        return;
+    }
+    let expanded = expanded_prefix(tree.code);
+    if expanded > 0u {
+        atomicAdd(&counters[COUNTER_DEMAND + (tree.code >> BUDGET_BUCKET_SHIFT)], expanded);
+    }
+}
+
+// One thread: the first bucket whose trees no longer fit after the
+// buckets before it, and the entries those take
+// (`model::compact::budget_cutoff`).
+@compute @workgroup_size(1)
+fn budget_cutoff() {
+    var taken = 0u;
+    var cutoff = BUDGET_BUCKETS;
+    for (var b = 0u; b < BUDGET_BUCKETS; b += 1u) {
+        let sum = taken + atomicLoad(&counters[COUNTER_DEMAND + b]);
+        if sum > cull_view.entry_capacity || sum < taken {
+            cutoff = b;
+            break;
+        }
+        taken = sum;
+    }
+    atomicStore(&counters[COUNTER_CUTOFF], cutoff);
+    atomicStore(&counters[COUNTER_CUTOFF_BASE], taken);
+}
+
+@compute @workgroup_size(64)
+fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= species.instance_count {
+        return;
+    }
+    let tree = view_tree(i);
+    if !tree.seen {
+        hide(i);
+        return;
+    }
+    let e = tree.e;
+    let fade = tree.fade;
+    let pixel_error = tree.pixel_error;
+    let transition = tree.transition;
+    let opacity_rule = tree.opacity_rule;
+    var view_point = tree.view_point;
     if fade >= 255u {
         for (var kind = 0u; kind < KIND_COUNT; kind += 1u) {
             write_args(kind, i, 0u, 0u);
@@ -264,7 +342,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         instance_lods[i].view = vec4<f32>(0.0);
         return;
     }
-    var code = threshold_code(e);
+    var code = tree.code;
     if species.placement_count > 0u {
         let expanded = expand_placements(i, code);
         // A tree whose placements did not fit draws its coarser cut at
@@ -313,21 +391,35 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // Reserves tree `tree`'s expanded placements in the view's entry list and
-// writes them; returns the tree's threshold code. A tree whose placements
-// do not fit falls back to the code that expands none (its coarser cut
-// from the level-2 lines) and marks the part of its range that fits invalid.
+// writes them; returns the tree's threshold code. The budget goes to the
+// nearest trees (`budget_cutoff`): a tree below the cutoff bucket always
+// fits; one in it fits if what is left holds it; one past it, or one in it
+// that does not fit, falls back to the code that expands none (its coarser
+// cut from the level-2 lines), the latter marking the part of its range
+// that fits invalid. CPU reference: `model::compact::budget_expands`.
 fn expand_placements(tree: u32, code: u32) -> u32 {
     let expanded = expanded_prefix(code);
     if expanded == 0u {
         return code;
     }
-    let base = atomicAdd(&counters[COUNTER_TOTAL], expanded);
+    let fallback = max(code, min(placements[0].parent_code, MAX_THRESHOLD_CODE));
+    let bucket = code >> BUDGET_BUCKET_SHIFT;
+    let cutoff = atomicLoad(&counters[COUNTER_CUTOFF]);
+    if bucket > cutoff {
+        return fallback;
+    }
+    var base = 0u;
+    if bucket < cutoff {
+        base = atomicAdd(&counters[COUNTER_TOTAL], expanded);
+    } else {
+        base = atomicLoad(&counters[COUNTER_CUTOFF_BASE]) + atomicAdd(&counters[COUNTER_CUTOFF_TOTAL], expanded);
+    }
     let capacity = cull_view.entry_capacity;
     if base + expanded > capacity || base + expanded < base {
         for (var j = base; j < min(base + expanded, capacity); j += 1u) {
             entries[j] = vec2<u32>(ENTRY_INVALID, ENTRY_INVALID);
         }
-        return max(code, min(placements[0].parent_code, MAX_THRESHOLD_CODE));
+        return fallback;
     }
     for (var j = 0u; j < expanded; j += 1u) {
         entries[base + j] = vec2<u32>(tree, j);
@@ -342,7 +434,10 @@ fn counter_index(array_index: u32, draw: u32) -> u32 {
 // One thread: the entry count and the indirect dispatch over the entries.
 @compute @workgroup_size(1)
 fn prepare_dispatch() {
-    let entries_written = min(atomicLoad(&counters[COUNTER_TOTAL]), cull_view.entry_capacity);
+    // Below the cutoff the entries fill [0, base) exactly; the cutoff
+    // bucket's follow from base.
+    let reserved = atomicLoad(&counters[COUNTER_TOTAL]) + atomicLoad(&counters[COUNTER_CUTOFF_TOTAL]);
+    let entries_written = min(reserved, cull_view.entry_capacity);
     atomicStore(&counters[COUNTER_ENTRIES], entries_written);
     dispatch[0] = (entries_written + 63u) / 64u;
     dispatch[1] = 1u;

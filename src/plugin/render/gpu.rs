@@ -392,8 +392,11 @@ pub fn pack_snorm8(values: [f32; 4]) -> u32 {
 /// the placement index (16 bits) and its threshold code (16 bits).
 pub const PLACED_ENTRY_BYTES: u64 = 8;
 
-/// Words of a view's placement counters before the per-draw arrays.
-pub const PLACED_COUNTER_HEADER: u64 = 4;
+/// Words of a view's placement counters before the per-draw arrays: five
+/// counters of the expansion budget, three spare, and the demand of each
+/// of its [`crate::model::compact::BUDGET_BUCKETS`] buckets
+/// (`conifer_cull.wgsl`'s `budget_demand`, `budget_cutoff`).
+pub const PLACED_COUNTER_HEADER: u64 = 8 + crate::model::compact::BUDGET_BUCKETS as u64;
 
 /// Per-draw arrays of a view's placement counters (count, cursor, four
 /// longest prefixes, offset, flags, longest merged prefix by own code).

@@ -865,9 +865,10 @@ pub struct CompactPipeline {
     dispatch_layout: BindGroupLayoutDescriptor,
     /// Trilinear, clamped: the impostors' sampler.
     impostor_sampler: Sampler,
-    /// `cull`, then the placed passes: `prepare_dispatch`,
+    /// The expansion budget (`budget_demand`, `budget_cutoff`; placed
+    /// species), `cull`, then the placed passes: `prepare_dispatch`,
     /// `count_placements`, `scan_placements`, `scatter_placements`.
-    cull_pipelines: [CachedComputePipelineId; 5],
+    cull_pipelines: [CachedComputePipelineId; 7],
     no_vertices: MeshVertexBufferLayoutRef,
     /// Whether indirect draws may start at an instance other than 0 (one
     /// draw per tree needs it).
@@ -1005,6 +1006,8 @@ fn init_compact_pipeline(
     );
     let cull_shader = asset_server.load(shader_path("conifer_cull.wgsl"));
     let cull_pipelines = [
+        "budget_demand",
+        "budget_cutoff",
         "cull",
         "prepare_dispatch",
         "count_placements",
@@ -1498,8 +1501,10 @@ fn prepare_views(
             v.instance_count = n as u32;
             v.perspective = perspective;
             v.used = true;
+            // The budget is the setting, however large the buffers grew
+            // (they shrink only well below their length).
             let cull_view = CullView {
-                entry_capacity: v.placed.entry_capacity,
+                entry_capacity: v.placed.entry_capacity.min(max_entries as u32),
                 ..cull_view
             };
             queue.write_buffer(&v.cull_view, 0, bytemuck::bytes_of(&cull_view));
@@ -1837,6 +1842,8 @@ fn cull_trees(
     mut readbacks: ResMut<readback::PendingReadbacks>,
 ) {
     let [
+        Some(budget_demand),
+        Some(budget_cutoff),
         Some(cull),
         Some(prepare_dispatch),
         Some(count),
@@ -1867,9 +1874,17 @@ fn cull_trees(
     let span = diagnostics.pass_span(&mut pass, "conifer_cull");
     for view in compact_views.views.values() {
         let Some(groups) = &view.groups else { continue };
-        pass.set_pipeline(cull);
         pass.set_bind_group(0, &groups.cull, &[]);
         pass.set_bind_group(1, &groups.placed[0], &[]);
+        if view.placed.entry_capacity > 0 {
+            // The expansion budget goes to the nearest trees: their demand
+            // by bucket, then where the budget runs out.
+            pass.set_pipeline(budget_demand);
+            pass.dispatch_workgroups(view.instance_count.div_ceil(64), 1, 1);
+            pass.set_pipeline(budget_cutoff);
+            pass.dispatch_workgroups(1, 1, 1);
+        }
+        pass.set_pipeline(cull);
         pass.dispatch_workgroups(view.instance_count.div_ceil(64), 1, 1);
         if view.placed.entry_capacity == 0 {
             continue;
