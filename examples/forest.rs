@@ -118,11 +118,25 @@ struct Args {
     /// (`--frames`), looking the same way (a pan: what TAA's history sees).
     #[arg(long, value_parser = parse_vec3)]
     camera_step: Option<Vec3>,
+    /// How lines are lit (`ConiferLodSettings::line_lighting`).
+    #[arg(long, value_enum, default_value_t = Lighting::Cylinder)]
+    line_lighting: Lighting,
     /// Headless: time each render pass on the GPU (Bevy's
     /// `RenderDiagnosticsPlugin`, where the GPU has timestamp queries) and
     /// print the mean of the extra frames (`--frames`) as `gpu_ms`.
     #[arg(long)]
     gpu_timings: bool,
+}
+
+/// How lines are lit (`--line-lighting`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum Lighting {
+    /// Every line as the cylinder along its chord (the default).
+    Cylinder,
+    /// A merged line as its needles spread about its chord.
+    Bundle,
+    /// A strip turned toward the viewer.
+    FacingStrip,
 }
 
 /// The camera's anti-aliasing (`--aa`).
@@ -453,6 +467,11 @@ fn setup(
 ) {
     settings.pixel_error = args.pixel_error;
     settings.enabled = !args.lod_off;
+    settings.line_lighting = match args.line_lighting {
+        Lighting::Bundle => LineLighting::Bundle,
+        Lighting::Cylinder => LineLighting::Cylinder,
+        Lighting::FacingStrip => LineLighting::FacingStrip,
+    };
     if let Some(strength) = args.wind {
         wind.strength = strength;
     }

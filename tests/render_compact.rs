@@ -207,9 +207,10 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     assert!(per_needle <= 36.0, "{per_needle} B/needle");
     // 3,000 trees: a 4,096-slot instance buffer (64 B each) and the
     // species' 368-byte parameters, and per view 4,096 LOD slots (32 B)
-    // and 7 × 4,096 indirect draws (16 B), and five 16-byte stand-ins for
-    // the placement buffers a flat species leaves empty.
-    let placed_stand_ins = 5 * 16;
+    // and 7 × 4,096 indirect draws (16 B), and four 16-byte stand-ins for
+    // the placement buffers a flat species leaves empty and its counters'
+    // header (136 words: the expansion budget's).
+    let placed_stand_ins = 4 * 16 + 4 * 136;
     assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 368);
     // The impostor's texture: every mip level of every view, as uploaded.
     let impostor = record_species_impostor_bytes(&scene, id);
@@ -366,14 +367,8 @@ fn merged_lines_are_lit_as_their_bundles() {
     let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
     let crown = record.crown_center();
     let base = ConiferSpecies::from_record(record.clone()).unwrap();
-    let mut renderer = HeadlessRenderer::new(".");
-    let target = renderer.render_target(SIZE, SIZE);
+    let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
     let world = renderer.world_mut();
-    let sun = HeadlessRenderer::spawn_lights(world);
-    world.insert_resource(GlobalAmbientLight {
-        brightness: 0.0,
-        ..default()
-    });
     let camera = world
         .spawn((
             HeadlessRenderer::camera_bundle(&target, Transform::IDENTITY, 12f32.to_radians()),
@@ -401,14 +396,6 @@ fn merged_lines_are_lit_as_their_bundles() {
         species.material.reflectance = 0.0;
         species
     };
-    let linear = |c: u8| {
-        let c = f32::from(c) / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
     // Summed linear RGB of the picture, and the cut the GPU drew.
     let draw = |renderer: &mut HeadlessRenderer, code: u32, lighting: LineLighting, from: Vec3, name: &str| {
         let world = renderer.world_mut();
@@ -429,7 +416,7 @@ fn merged_lines_are_lit_as_their_bundles() {
             .unwrap();
         let light: f32 = picture
             .pixels()
-            .map(|p| linear(p.0[0]) + linear(p.0[1]) + linear(p.0[2]))
+            .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
             .sum();
         let readback = renderer.world().resource::<CompactReadback>();
         let lod = readback

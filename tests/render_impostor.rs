@@ -334,14 +334,8 @@ fn the_impostor_is_lit_as_its_texels_shares() {
     let species = ConiferSpecies::from_record(record.clone()).unwrap();
     let baked = species.impostor.clone().expect("an impostor");
     let crown = species.crown_center;
-    let mut renderer = HeadlessRenderer::new(".");
-    let target = renderer.render_target(SIZE, SIZE);
+    let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
     let world = renderer.world_mut();
-    let sun = HeadlessRenderer::spawn_lights(world);
-    world.insert_resource(GlobalAmbientLight {
-        brightness: 0.0,
-        ..default()
-    });
     let (camera, _) = impostor_camera(world, &target, crown, baked.texel);
     world.entity_mut(camera).insert(Tonemapping::None);
     let kinds = [
@@ -384,18 +378,10 @@ fn the_impostor_is_lit_as_its_texels_shares() {
             picture
                 .save(out_dir().join(format!("impostor_lit_{kind}_{name}.png")))
                 .unwrap();
-            let linear = |c: u8| {
-                let c = f32::from(c) / 255.0;
-                if c <= 0.04045 {
-                    c / 12.92
-                } else {
-                    ((c + 0.055) / 1.055).powf(2.4)
-                }
-            };
             let opaque: Vec<f32> = picture
                 .pixels()
                 .filter(|p| p.0[3] == 255)
-                .map(|p| linear(p.0[0]) + linear(p.0[1]) + linear(p.0[2]))
+                .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
                 .collect();
             assert!(opaque.len() > 300, "{kind}, sun {name}: {} opaque pixels", opaque.len());
             drawn[s][k] = opaque.iter().sum::<f32>() / opaque.len() as f32;

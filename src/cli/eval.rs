@@ -80,11 +80,11 @@ pub struct EvalArgs {
     /// across the view) or `back` (low, behind the tree: back light).
     #[arg(long, default_value = "front")]
     pub sun: String,
-    /// How the plugin lights lines: `bundle` (the default: a merged line
-    /// as its needles spread about its chord), `cylinder` (every line as
-    /// the cylinder along its chord) or `facing-strip` (a strip turned
+    /// How the plugin lights lines: `cylinder` (the default: every line as
+    /// the cylinder along its chord), `bundle` (a merged line as its
+    /// needles spread about its chord) or `facing-strip` (a strip turned
     /// toward the viewer).
-    #[arg(long, default_value = "bundle")]
+    #[arg(long, default_value = "cylinder")]
     pub line_lighting: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`

@@ -400,12 +400,16 @@ pub const BUNDLE_SLOPE: f32 = 1.45;
 /// alignment)`, from 1 (needles along the chord) down to `1 − β`
 /// (needles across it); the rest is lit as a sphere.
 pub fn bundle_cylinder_share(alignment: f32) -> f32 {
-    let alignment = if alignment.is_nan() {
+    1.0 - BUNDLE_SLOPE * (1.0 - valid_alignment(alignment))
+}
+
+/// `alignment` in `[0, 1]`; a NaN is 1 (lit as one cylinder).
+fn valid_alignment(alignment: f32) -> f32 {
+    if alignment.is_nan() {
         1.0
     } else {
         alignment.clamp(0.0, 1.0)
-    };
-    1.0 - BUNDLE_SLOPE * (1.0 - alignment)
+    }
 }
 
 /// Steps of a stored alignment: it is kept in 4 bits of a merged line
@@ -414,12 +418,7 @@ pub const ALIGNMENT_STEPS: u32 = 15;
 
 /// `alignment` rounded to its 4-bit code (`0..=ALIGNMENT_STEPS`).
 pub fn alignment_code(alignment: f32) -> u32 {
-    let alignment = if alignment.is_nan() {
-        1.0
-    } else {
-        alignment.clamp(0.0, 1.0)
-    };
-    (alignment * ALIGNMENT_STEPS as f32).round() as u32
+    (valid_alignment(alignment) * ALIGNMENT_STEPS as f32).round() as u32
 }
 
 /// The alignment a 4-bit code stands for (the shader's decoding).

@@ -187,3 +187,34 @@ pub fn trunk_with_shoots(shoots: &[Vec3], radius: impl Fn(usize) -> f32) -> bevy
         .unwrap();
     bevy_conifer_lod::plugin::ConiferSpecies::from_prototype_record(&record).unwrap()
 }
+
+/// A headless renderer with a `size`² target, lit by the headless sun alone
+/// (no ambient light): what a picture shows is the sun's light. Returns the
+/// renderer, its target and the sun.
+pub fn sun_lit_renderer(
+    size: u32,
+) -> (
+    bevy_conifer_lod::plugin::headless::HeadlessRenderer,
+    Handle<Image>,
+    Entity,
+) {
+    let mut renderer = bevy_conifer_lod::plugin::headless::HeadlessRenderer::new(".");
+    let target = renderer.render_target(size, size);
+    let world = renderer.world_mut();
+    let sun = bevy_conifer_lod::plugin::headless::HeadlessRenderer::spawn_lights(world);
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    (renderer, target, sun)
+}
+
+/// An sRGB-encoded byte as linear light in `[0, 1]`.
+pub fn linear(c: u8) -> f32 {
+    let c = f32::from(c) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
