@@ -126,6 +126,11 @@ struct Args {
     /// print the mean of the extra frames (`--frames`) as `gpu_ms`.
     #[arg(long)]
     gpu_timings: bool,
+    /// Most placements one view expands into their prototypes' detail
+    /// (`ConiferLodSettings::max_expanded_placements`); trees past it, the
+    /// farthest first, are drawn as their impostors or level-2 lines.
+    #[arg(long)]
+    max_expanded: Option<u32>,
 }
 
 /// How lines are lit (`--line-lighting`).
@@ -474,6 +479,9 @@ fn setup(
     };
     if let Some(strength) = args.wind {
         wind.strength = strength;
+    }
+    if let Some(budget) = args.max_expanded {
+        settings.max_expanded_placements = budget;
     }
     debug.enabled = args.overlay;
     debug.always_collect_stats = args.headless;

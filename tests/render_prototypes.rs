@@ -13,7 +13,7 @@ use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
 use bevy_conifer_lod::model::compact::{CompactSpecies, PLACED_BANDS, PlacedDraw, shader_threshold_code};
 use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
-use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback};
+use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback, PartKind};
 use bevy_conifer_lod::prelude::*;
 use common::{background_camera, covered_count, look_at_crown, mean_difference, spawn_ground};
 use std::path::PathBuf;
@@ -247,9 +247,11 @@ fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
 /// trees were spawned in: three trees 6, 20 and 50 m from the camera,
 /// spawned farthest first, with room for the nearest one's placements
 /// alone. The nearest keeps its cut and its placements; the other two fall
-/// back to their level-2 lines (`model::compact::budget_expands`). Before
-/// the budget went by distance, the first trees the GPU reached (the far
-/// ones) took the room and the nearest lost its needles.
+/// back to their level-2 lines (`model::compact::budget_expands`), or,
+/// with the far impostor on, the one still in lines (20 m, fading into its
+/// impostor) is drawn as its impostor alone. Before the budget went by
+/// distance, the first trees the GPU reached (the far ones) took the room
+/// and the nearest lost its needles.
 #[test]
 fn the_expansion_budget_goes_to_the_nearest_tree() {
     let _turn = common::gpu_turn();
@@ -287,9 +289,18 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
         let mut expanded: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
         expanded.sort_unstable();
         expanded.dedup();
-        (trees, expanded)
+        let impostor_alone: Vec<bool> = (0..view.lods.len())
+            .map(|t| {
+                let lines = [PartKind::OriginalLines, PartKind::MergedLines, PartKind::Prisms]
+                    .map(|kind| view.tree_draw(kind, t)[0])
+                    .iter()
+                    .sum::<u32>();
+                view.impostor_fade(t) == 1.0 && view.tree_draw(PartKind::Impostor, t)[0] == 6 && lines == 0
+            })
+            .collect();
+        (trees, expanded, impostor_alone)
     };
-    let (roomy, roomy_expanded) = lods(&mut scene, "budget_roomy");
+    let (roomy, roomy_expanded, _) = lods(&mut scene, "budget_roomy");
     assert_eq!(roomy.len(), 3);
     assert_eq!(roomy_expanded.len(), 3, "with room, every tree expands");
     let nearest = (0..3).min_by(|&a, &b| roomy[a].1.total_cmp(&roomy[b].1)).unwrap();
@@ -304,7 +315,7 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
         .world_mut()
         .resource_mut::<ConiferLodSettings>()
         .max_expanded_placements = demand(nearest);
-    let (tight, tight_expanded) = lods(&mut scene, "budget_nearest");
+    let (tight, tight_expanded, _) = lods(&mut scene, "budget_nearest");
     assert_eq!(tight_expanded, vec![nearest as u32], "only the nearest tree expands");
     for t in 0..3 {
         if t == nearest {
@@ -318,6 +329,22 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
             );
         }
     }
+    // With the impostor: the tree at 20 m fades into it with room, and
+    // past the budget it is its impostor alone.
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .far_impostor = true;
+    let (with_impostor, expanded, impostor_alone) = lods(&mut scene, "budget_impostor");
+    let middle = (0..3)
+        .filter(|&t| t != nearest)
+        .min_by(|&a, &b| with_impostor[a].1.total_cmp(&with_impostor[b].1))
+        .unwrap();
+    println!("with the impostor: expanded {expanded:?}, impostor alone {impostor_alone:?}, middle slot {middle}");
+    assert_eq!(expanded, vec![nearest as u32]);
+    assert!(!impostor_alone[nearest], "the nearest tree keeps its lines");
+    assert!(impostor_alone[middle], "the tree past the budget is its impostor");
 }
 
 /// The per-tree draws the CPU reference (`CompactSpecies::prefixes`) gives

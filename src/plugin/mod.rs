@@ -255,9 +255,12 @@ pub struct ConiferLodSettings {
     /// prototypes' detail over all trees of a species (8 bytes each, twice,
     /// per view). The nearest trees get it first (by their spatial error,
     /// in buckets of a factor 1.29; [`crate::model::compact::budget_expands`]);
-    /// a tree whose placements do not fit that frame draws its coarser cut
-    /// (its level-2 lines). Default 131,072 (about 100 mature trees within
-    /// full detail of one view).
+    /// a tree whose placements do not fit that frame is drawn as its
+    /// impostor where a camera may draw one (`far_impostor`, not looked at
+    /// steeply), else as its coarser cut (its level-2 lines). Default
+    /// 131,072 (about 100 mature trees within full detail of one view);
+    /// at most what one storage binding of the device holds (8 bytes an
+    /// entry: 16,777,216 under wgpu's default 128 MiB), whatever is set.
     pub max_expanded_placements: u32,
     /// Where a tree's spatial error is measured from: one error per tree
     /// (the paper's) or each placement's own (default).

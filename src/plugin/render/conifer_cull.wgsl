@@ -182,6 +182,9 @@ struct TreeView {
     code: u32,
     // 255: the impostor alone
     fade: u32,
+    // Whether the view may draw the tree as its impostor at all (a camera,
+    // a tree with one, not looked at from steeply above or below).
+    impostor_allowed: bool,
     view_point: vec4<f32>,
     pixel_error: f32,
     transition: f32,
@@ -264,6 +267,7 @@ fn view_tree(i: u32) -> TreeView {
         let elevation = abs(above.y) / max(length(above.xz), 1e-9);
         let steep = clamp((elevation - IMPOSTOR_STEEP_START) / (IMPOSTOR_STEEP_END - IMPOSTOR_STEEP_START), 0.0, 1.0);
         fade = u32(round(t * (1.0 - steep) * 255.0));
+        tree.impostor_allowed = steep < 1.0;
     }
     tree.seen = true;
     tree.e = e;
@@ -313,6 +317,19 @@ fn budget_cutoff() {
     atomicStore(&counters[COUNTER_CUTOFF_BASE], taken);
 }
 
+// Tree `i` drawn as its impostor alone (one quad, nothing expanded).
+fn draw_impostor_alone(i: u32, tree: TreeView) {
+    for (var kind = 0u; kind < KIND_COUNT; kind += 1u) {
+        write_args(kind, i, 0u, 0u);
+    }
+    write_args(KIND_IMPOSTOR, i, 6u, 0u);
+    instance_lods[i].code = (255u << LOD_FADE_SHIFT) | (tree.opacity_rule << LOD_OPACITY_SHIFT);
+    instance_lods[i].spatial_error = tree.e;
+    instance_lods[i].pixel_error = max(tree.pixel_error, 1e-6);
+    instance_lods[i].transition = clamp(tree.transition, 0.0, 1.0);
+    instance_lods[i].view = vec4<f32>(0.0);
+}
+
 @compute @workgroup_size(64)
 fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -331,23 +348,20 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let opacity_rule = tree.opacity_rule;
     var view_point = tree.view_point;
     if fade >= 255u {
-        for (var kind = 0u; kind < KIND_COUNT; kind += 1u) {
-            write_args(kind, i, 0u, 0u);
-        }
-        write_args(KIND_IMPOSTOR, i, 6u, 0u);
-        instance_lods[i].code = (255u << LOD_FADE_SHIFT) | (opacity_rule << LOD_OPACITY_SHIFT);
-        instance_lods[i].spatial_error = e;
-        instance_lods[i].pixel_error = max(pixel_error, 1e-6);
-        instance_lods[i].transition = clamp(transition, 0.0, 1.0);
-        instance_lods[i].view = vec4<f32>(0.0);
+        draw_impostor_alone(i, tree);
         return;
     }
     var code = tree.code;
     if species.placement_count > 0u {
         let expanded = expand_placements(i, code);
-        // A tree whose placements did not fit draws its coarser cut at
-        // one error.
         if expanded != code {
+            // Past the budget: its impostor where the view may draw one
+            // (its level-2 lines alone read as bare branches near the
+            // camera), else its coarser cut at one error.
+            if tree.impostor_allowed {
+                draw_impostor_alone(i, tree);
+                return;
+            }
             view_point = vec4<f32>(0.0);
         }
         code = expanded;
@@ -394,9 +408,10 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
 // writes them; returns the tree's threshold code. The budget goes to the
 // nearest trees (`budget_cutoff`): a tree below the cutoff bucket always
 // fits; one in it fits if what is left holds it; one past it, or one in it
-// that does not fit, falls back to the code that expands none (its coarser
-// cut from the level-2 lines), the latter marking the part of its range
-// that fits invalid. CPU reference: `model::compact::budget_expands`.
+// that does not fit, gets the code that expands none (`cull` draws it as
+// its impostor, or its coarser cut from the level-2 lines), the latter
+// marking the part of its range that fits invalid. CPU reference:
+// `model::compact::budget_expands`.
 fn expand_placements(tree: u32, code: u32) -> u32 {
     let expanded = expanded_prefix(code);
     if expanded == 0u {

@@ -1371,7 +1371,10 @@ fn prepare_views(
             }
             let placements = species.compact.placements.len();
             let draws = species.compact.prototypes.len() as u32 * PLACED_BANDS;
-            let max_entries = render.max_expanded_placements.max(1) as usize;
+            // The budget, within what one storage binding of the device
+            // holds (a larger setting would fail to bind, drawing nothing).
+            let device_entries = device.limits().max_storage_buffer_binding_size / PLACED_ENTRY_BYTES;
+            let max_entries = u64::from(render.max_expanded_placements.max(1)).min(device_entries) as usize;
             let entries_needed = (n.saturating_mul(placements)).min(max_entries);
             let fresh = |capacity: usize| {
                 let cull_view = empty_buffer(
