@@ -873,12 +873,13 @@ pub struct CompactPipeline {
     /// Whether indirect draws may start at an instance other than 0 (one
     /// draw per tree needs it).
     supported: bool,
-    /// Draw depth-only passes with one indirect draw per tree instead of
-    /// one multi-draw: Mesa's lavapipe (22.3) takes every draw of a
-    /// multi-draw in a pass without colour attachments from the first
-    /// tree's instance, so only that tree cast a shadow
-    /// (`tests/render_shadows.rs`).
-    split_depth_only_multi_draws: bool,
+    /// Draw with one indirect draw per tree instead of one multi-draw:
+    /// Mesa's lavapipe (22.3) takes every draw of a multi-draw from the
+    /// first tree's instance in a pass without colour attachments (only
+    /// that tree cast a shadow, `tests/render_shadows.rs`), and in the main
+    /// pass once a mesh of Bevy's is drawn in it too (a tree's trunk
+    /// vanished beside the forest's terrain, `tests/render_trunk.rs`).
+    split_multi_draws: bool,
 }
 
 /// The key of a compact draw pipeline: the view's mesh key and the part.
@@ -935,7 +936,7 @@ fn init_compact_pipeline(
     adapter: Res<RenderAdapterInfo>,
     mut layouts: ResMut<MeshVertexBufferLayouts>,
 ) {
-    let split_depth_only_multi_draws = adapter.driver.contains("llvmpipe") || adapter.name.contains("llvmpipe");
+    let split_multi_draws = adapter.driver.contains("llvmpipe") || adapter.name.contains("llvmpipe");
     let supported = device.features().contains(WgpuFeatures::INDIRECT_FIRST_INSTANCE);
     if !supported {
         warn!(
@@ -1057,7 +1058,7 @@ fn init_compact_pipeline(
         cull_pipelines,
         no_vertices,
         supported,
-        split_depth_only_multi_draws,
+        split_multi_draws,
     });
 }
 
@@ -1774,6 +1775,7 @@ fn draw_motion_vectors(
     compact_views: Res<CompactViews>,
     prepass_view_bind_group: Res<PrepassViewBindGroup>,
     pipeline_cache: Res<PipelineCache>,
+    compact_pipeline: Res<CompactPipeline>,
     mut ctx: RenderContext,
 ) {
     let view_entity = view.entity();
@@ -1829,7 +1831,7 @@ fn draw_motion_vectors(
         pass.set_bind_group(0, view_group, &[view_offset.offset, previous_offset.offset]);
         pass.set_bind_group(1, &prepass_view_bind_group.empty_bind_group, &[]);
         pass.set_bind_group(2, &groups.draw, &[]);
-        draw_indirect_part(&mut pass, buffers, kind, false);
+        draw_indirect_part(&mut pass, buffers, kind, compact_pipeline.split_multi_draws);
     }
     span.end(&mut pass);
 }
@@ -1935,12 +1937,7 @@ impl<P: PhaseItem, const DEPTH_ONLY: bool> RenderCommand<P> for DrawCompactPart<
             return RenderCommandResult::Skip;
         };
         pass.set_bind_group(2, &groups.draw, &[]);
-        if draw_indirect_part(
-            pass,
-            buffers,
-            item.kind,
-            DEPTH_ONLY && pipeline.split_depth_only_multi_draws,
-        ) {
+        if draw_indirect_part(pass, buffers, item.kind, pipeline.split_multi_draws) {
             RenderCommandResult::Success
         } else {
             RenderCommandResult::Skip
