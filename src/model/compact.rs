@@ -240,7 +240,8 @@ pub fn budget_bucket(code: u16) -> usize {
 /// `(cutoff, base)`, the first bucket whose trees together no longer fit
 /// after the buckets before it ([`BUDGET_BUCKETS`] when every tree fits)
 /// and the entries those buckets take. Trees below the cutoff always
-/// expand; trees above it never do (they draw their level-2 lines);
+/// expand; trees above it never do (they draw their impostor or their
+/// level-2 lines);
 /// trees in it take what is left from `base` on, in the order the GPU
 /// reaches them. `demand[b]` is the placements bucket `b`'s trees would
 /// expand. CPU reference of `conifer_cull.wgsl`'s `budget_cutoff`.

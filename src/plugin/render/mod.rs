@@ -1333,6 +1333,9 @@ fn prepare_views(
     let cull_layout = pipeline_cache.get_bind_group_layout(&pipeline.cull_layout);
     let placed_layout = pipeline_cache.get_bind_group_layout(&pipeline.placed_layout);
     let dispatch_layout = pipeline_cache.get_bind_group_layout(&pipeline.dispatch_layout);
+    // Entries one storage binding of the device holds: no view's budget
+    // may pass it (a larger buffer would fail to bind, drawing nothing).
+    let device_entries = device.limits().max_storage_buffer_binding_size / PLACED_ENTRY_BYTES;
     for (view_entity, view, layers) in &views {
         if !opaque_phases.contains_key(&view.retained_view_entity)
             && !shadow_phases.contains_key(&view.retained_view_entity)
@@ -1372,9 +1375,6 @@ fn prepare_views(
             }
             let placements = species.compact.placements.len();
             let draws = species.compact.prototypes.len() as u32 * PLACED_BANDS;
-            // The budget, within what one storage binding of the device
-            // holds (a larger setting would fail to bind, drawing nothing).
-            let device_entries = device.limits().max_storage_buffer_binding_size / PLACED_ENTRY_BYTES;
             let max_entries = u64::from(render.max_expanded_placements.max(1)).min(device_entries) as usize;
             let entries_needed = (n.saturating_mul(placements)).min(max_entries);
             let fresh = |capacity: usize| {
@@ -1911,11 +1911,11 @@ fn cull_trees(
 }
 
 /// Binds a species' compact arrays and the view's culling results and draws
-/// one part of every tree with one multi-draw-indirect (`DEPTH_ONLY`: in
-/// a shadow pass).
-pub struct DrawCompactPart<const DEPTH_ONLY: bool>;
+/// one part of every tree with one multi-draw-indirect (in the main pass
+/// and in shadow passes alike).
+pub struct DrawCompactPart;
 
-impl<P: PhaseItem, const DEPTH_ONLY: bool> RenderCommand<P> for DrawCompactPart<DEPTH_ONLY> {
+impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
     type Param = (SRes<CompactViews>, SRes<CompactPipeline>);
     type ViewQuery = Entity;
     type ItemQuery = Read<CompactDrawItem>;
@@ -1977,7 +1977,7 @@ pub type DrawCompactShadow = (
     SetItemPipeline,
     SetPrepassViewBindGroup<0>,
     SetPrepassViewEmptyBindGroup<1>,
-    DrawCompactPart<true>,
+    DrawCompactPart,
 );
 
 /// The draw function of every compact part.
@@ -1985,7 +1985,7 @@ pub type DrawCompact = (
     SetItemPipeline,
     SetMeshViewBindGroup<0>,
     SetMeshViewBindingArrayBindGroup<1>,
-    DrawCompactPart<false>,
+    DrawCompactPart,
 );
 
 fn shader_path(file: &str) -> bevy::asset::AssetPath<'static> {
