@@ -207,7 +207,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let camera_step = args.camera_step;
     let screenshot = args.screenshot.clone();
     let gpu_timings = args.gpu_timings;
-    let assets = concat!(env!("CARGO_MANIFEST_DIR"), "/assets");
+    // The checkout's assets: `cargo run` names it at run time, so a build
+    // shared by two clones (one `CARGO_TARGET_DIR`) reads the right one.
+    let assets = std::env::var("CARGO_MANIFEST_DIR").map_or_else(
+        |_| concat!(env!("CARGO_MANIFEST_DIR"), "/assets").to_owned(),
+        |dir| format!("{dir}/assets"),
+    );
+    let assets = assets.as_str();
     let mut renderer = HeadlessRenderer::with_setup(assets, |app| {
         if gpu_timings {
             app.add_plugins(bevy::render::diagnostic::RenderDiagnosticsPlugin);

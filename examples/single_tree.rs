@@ -116,7 +116,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         app.run();
         return Ok(());
     }
-    let mut renderer = HeadlessRenderer::with_setup(concat!(env!("CARGO_MANIFEST_DIR"), "/assets"), scene);
+    // The checkout's assets: `cargo run` names it at run time, so a build
+    // shared by two clones (one `CARGO_TARGET_DIR`) reads the right one.
+    let assets = std::env::var("CARGO_MANIFEST_DIR").map_or_else(
+        |_| concat!(env!("CARGO_MANIFEST_DIR"), "/assets").to_owned(),
+        |dir| format!("{dir}/assets"),
+    );
+    let mut renderer = HeadlessRenderer::with_setup(&assets, scene);
     let target = renderer.render_target(args.size, args.size);
     renderer.world_mut().insert_resource(HeadlessTarget(target.clone()));
     // The species is built in Startup; a few frames bring it to the GPU.
