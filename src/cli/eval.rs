@@ -207,17 +207,19 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// The report as a Markdown table (the README's form).
 pub fn print_table(report: &EvalReport) {
     println!(
-        "| method | distance (m) | coverage error | colour error | crown colour error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
+        "| method | distance (m) | coverage error | colour error | crown colour error | crown shade error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, method) in &report.methods {
         for d in &method.distances {
             println!(
-                "| {name} | {:.2} | {:.4} | {:.2} | {:.2} | {:.3} | {} | {} | {} | {} | {:.1} |",
+                "| {name} | {:.2} | {:.4} | {:.2} | {:.2} | {:.2} ({:.0} %) | {:.3} | {} | {} | {} | {} | {:.1} |",
                 d.distance,
                 d.coverage_error,
                 d.color_error,
                 d.crown_color_error,
+                d.crown_shade.error,
+                100.0 * d.crown_shade.compared,
                 d.perceptual,
                 d.shadow_coverage_error.map_or("–".to_string(), |e| format!("{e:.4}")),
                 d.triangles,

@@ -206,6 +206,74 @@ pub fn crown_color_error(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRe
     })
 }
 
+/// [`crown_shade_error`]: the crown's colour error with the coverage
+/// difference taken out.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct CrownShade {
+    /// Mean absolute difference of the RGB channels, 0–255, over the crown
+    /// pixels the test covers too, each test pixel's own colour composited
+    /// with the reference's coverage.
+    pub error: f64,
+    /// Share of the crown's pixels that were compared (the test covers at
+    /// least [`CROWN_COVERAGE`] of them), in [0, 1]; 0 when none.
+    pub compared: f64,
+}
+
+/// The part of [`crown_color_error`] that is the tree's colour and not its
+/// coverage. A pixel's colour is `a·c + (1 − a)·b` in linear light (`c` the
+/// tree's own colour, `b` the plain `background`, given in sRGB 0–1, `a`
+/// the coverage in alpha); on a light background a coverage difference of
+/// 0.05 alone moves a dark crown's pixel by ~10 of 255. Here each test
+/// pixel's `c` is unmixed, `c = (p − (1 − a)·b) / a`, composited again
+/// with the reference's coverage and compared with the reference, over the
+/// crown's pixels (reference coverage ≥ [`CROWN_COVERAGE`]) that the test
+/// also covers by as much: a test that differs only in coverage scores ~0
+/// (8-bit rounding: up to ~2 of 255 where both cover little), one that
+/// differs only in colour scores its
+/// [`crown_color_error`].
+pub fn crown_shade_error(
+    reference: &RgbaImage,
+    test: &RgbaImage,
+    rect: &PixelRect,
+    background: [f32; 3],
+) -> Result<CrownShade, MeasureError> {
+    check_sizes(reference, test, rect)?;
+    let background = background.map(|c| srgb_to_linear((c.clamp(0.0, 1.0) * 255.0).round() as u8));
+    let (mut sum, mut compared, mut crown) = (0u64, 0u64, 0u64);
+    for (x, y) in rect.pixels() {
+        let (a, b) = (reference.get_pixel(x, y).0, test.get_pixel(x, y).0);
+        if a[3] < CROWN_COVERAGE {
+            continue;
+        }
+        crown += 1;
+        if b[3] < CROWN_COVERAGE {
+            continue;
+        }
+        compared += 1;
+        let (reference_alpha, test_alpha) = (f32::from(a[3]) / 255.0, f32::from(b[3]) / 255.0);
+        let recomposited: [u8; 4] = std::array::from_fn(|c| {
+            if c == 3 {
+                return a[3];
+            }
+            let own = ((srgb_to_linear(b[c]) - (1.0 - test_alpha) * background[c]) / test_alpha).clamp(0.0, 1.0);
+            linear_to_srgb(reference_alpha * own + (1.0 - reference_alpha) * background[c])
+        });
+        sum += rgb_difference(a, recomposited);
+    }
+    Ok(CrownShade {
+        error: if compared == 0 {
+            0.0
+        } else {
+            sum as f64 / (3.0 * compared as f64)
+        },
+        compared: if crown == 0 {
+            0.0
+        } else {
+            compared as f64 / crown as f64
+        },
+    })
+}
+
 /// The crown's see-through on `image` (its alpha as coverage) within
 /// `crown`, the needles' screen box: [`crate::model::look::crown_see_through`].
 /// `None` for a blank crown.
@@ -401,6 +469,86 @@ mod tests {
         };
         assert_eq!(color_error(&a, &b, &outside), Err(MeasureError::RectOutside));
         assert!((mean_coverage(&b, &rect) - 15.0 / 16.0).abs() < 1e-12);
+    }
+
+    /// A pixel of a tree of linear colour `own` covering `alpha` of it over
+    /// `background` (sRGB 0–1), as the renderer writes it.
+    fn composited(own: [f32; 3], alpha: f32, background: [f32; 3]) -> Rgba<u8> {
+        let b = background.map(|c| srgb_to_linear((c * 255.0).round() as u8));
+        Rgba([
+            linear_to_srgb(alpha * own[0] + (1.0 - alpha) * b[0]),
+            linear_to_srgb(alpha * own[1] + (1.0 - alpha) * b[1]),
+            linear_to_srgb(alpha * own[2] + (1.0 - alpha) * b[2]),
+            (alpha * 255.0).round() as u8,
+        ])
+    }
+
+    #[test]
+    fn crown_shade_takes_coverage_out() {
+        let background = [0.92, 0.93, 0.95];
+        let rect = PixelRect::full(4, 1);
+        let needle = [0.03, 0.09, 0.04];
+        let reference = RgbaImage::from_fn(4, 1, |x, _| {
+            composited(needle, [1.0, 0.8, 0.5, 0.05][x as usize], background)
+        });
+        // The same needles, covering a third less: the crown colour error is
+        // large, the shade error is 8-bit rounding (a level of the composite,
+        // scaled by the coverage ratio, moves the unmixed dark needle most).
+        let thinner = RgbaImage::from_fn(4, 1, |x, _| {
+            composited(needle, [0.7, 0.55, 0.35, 0.0][x as usize], background)
+        });
+        let crown = crown_color_error(&reference, &thinner, &rect).unwrap();
+        let shade = crown_shade_error(&reference, &thinner, &rect, background).unwrap();
+        assert!(crown > 30.0, "{crown}");
+        assert!(shade.error < 2.0, "{shade:?}");
+        assert!((shade.compared - 1.0).abs() < 1e-12, "{shade:?}");
+        // Lighter needles with the reference's coverage: the shade error is
+        // the crown colour error.
+        let lighter = RgbaImage::from_fn(4, 1, |x, _| {
+            composited([0.06, 0.15, 0.05], [1.0, 0.8, 0.5, 0.05][x as usize], background)
+        });
+        let crown = crown_color_error(&reference, &lighter, &rect).unwrap();
+        let shade = crown_shade_error(&reference, &lighter, &rect, background).unwrap();
+        assert!(crown > 5.0, "{crown}");
+        assert!((shade.error - crown).abs() <= 0.5, "{shade:?} against {crown}");
+        // A test that covers under 10 % of a crown pixel is not compared there.
+        let sparse = RgbaImage::from_fn(4, 1, |x, _| {
+            composited(needle, [1.0, 0.05, 0.5, 0.0][x as usize], background)
+        });
+        let shade = crown_shade_error(&reference, &sparse, &rect, background).unwrap();
+        assert!((shade.compared - 2.0 / 3.0).abs() < 1e-12, "{shade:?}");
+        let blank = flat(4, 1, [235, 237, 242, 0]);
+        assert_eq!(
+            crown_shade_error(&reference, &blank, &rect, background).unwrap(),
+            CrownShade {
+                error: 0.0,
+                compared: 0.0
+            }
+        );
+        assert_eq!(
+            crown_shade_error(&reference, &flat(3, 1, [0; 4]), &rect, background),
+            Err(MeasureError::SizeMismatch((4, 1), (3, 1)))
+        );
+    }
+
+    proptest::proptest! {
+        /// Whatever the tree's colour and the two coverages (each at least
+        /// 30 %), a test that differs only in coverage has a shade error of
+        /// a few 8-bit steps at most (rounding, scaled by the coverage ratio).
+        #[test]
+        fn crown_shade_ignores_coverage(
+            own in proptest::array::uniform3(0.0f32..1.0),
+            reference_alpha in 0.3f32..1.0,
+            test_alpha in 0.3f32..1.0,
+            background in proptest::array::uniform3(0.0f32..1.0),
+        ) {
+            let rect = PixelRect::full(1, 1);
+            let reference = RgbaImage::from_pixel(1, 1, composited(own, reference_alpha, background));
+            let test = RgbaImage::from_pixel(1, 1, composited(own, test_alpha, background));
+            let shade = crown_shade_error(&reference, &test, &rect, background).unwrap();
+            proptest::prop_assert!(shade.error <= 4.0, "{:?}", shade);
+            proptest::prop_assert_eq!(shade.compared, 1.0);
+        }
     }
 
     #[test]

@@ -136,6 +136,11 @@ pub struct DistanceReport {
     /// Mean absolute RGB difference over the reference crown's pixels only
     /// (coverage ≥ 10 %), 0–255: the tree's colour, undiluted by background.
     pub crown_color_error: f64,
+    /// The part of `crown_color_error` that is colour, not coverage: each
+    /// pixel's own colour composited with the reference's coverage
+    /// ([`measure::crown_shade_error`]), 0–255, with the share of the crown's
+    /// pixels it compared.
+    pub crown_shade: measure::CrownShade,
     /// Mean FLIP error (NVIDIA's perceptual difference, `nv-flip`) over the
     /// same box, in [0, 1].
     pub perceptual: f64,
@@ -419,6 +424,7 @@ pub fn evaluate(
                 coverage_error: measure::coverage_error(&frame.reference, picture, &rect)?,
                 color_error: measure::color_error(&frame.reference, picture, &rect)?,
                 crown_color_error: measure::crown_color_error(&frame.reference, picture, &rect)?,
+                crown_shade: measure::crown_shade_error(&frame.reference, picture, &rect, scene::BACKGROUND)?,
                 perceptual: flip_error(&frame.reference, picture, &rect)?,
                 triangles: counts.triangles,
                 lines: counts.lines,
