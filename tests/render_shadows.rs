@@ -2,7 +2,9 @@
 //! shadow on the ground, with the needles drawn as translucent lines in the
 //! shadow maps, is as dark as the shadow of every needle drawn as a prism
 //! (LOD off), not the shadow of opaque lines, under a directional light and
-//! under a point light near a tree the camera sees from far away.
+//! under a point light near a tree the camera sees from far away; a tree
+//! past a shadow view's expansion budget casts its crown impostor, as dark
+//! as the prisms' shadow.
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
@@ -53,6 +55,15 @@ fn shadow_darkening(
     (sum_lines / n, sum_prisms / n, count)
 }
 
+/// The tree a [`ShadowScene`] stands.
+enum Pine {
+    /// A 20,000-needle young Scots pine, one flat record.
+    Sapling,
+    /// The shipped mature Scots pine (shoot prototypes placed ~4,000
+    /// times, 1.4 M needles, ~20 m).
+    Mature,
+}
+
 struct ShadowScene {
     renderer: HeadlessRenderer,
     tree: Entity,
@@ -64,21 +75,32 @@ struct ShadowScene {
 impl ShadowScene {
     /// A 20,000-needle Scots pine at the origin on a grey ground.
     fn new() -> Self {
+        Self::with_pine(Pine::Sapling)
+    }
+
+    /// `pine` at the origin on a grey ground.
+    fn with_pine(pine: Pine) -> Self {
         let dir = tempfile::tempdir().unwrap();
         let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
         std::fs::create_dir_all(&out).unwrap();
-        let tree = generate(
-            Species::ScotsPine,
-            &GenerateOptions {
-                seed: 4,
-                target_needles: Some(20_000),
-                age: bevy_conifer_lod::generate::Age::Young,
-            },
-        );
-        let record = bake(&tree, &BakeOptions::default(), &()).unwrap();
-        write_record(&record, &dir.path().join("pine.conifer")).unwrap();
-        let mut renderer = HeadlessRenderer::new(&dir.path().to_string_lossy());
-        let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load("pine.conifer");
+        let (root, file) = match pine {
+            Pine::Sapling => {
+                let options = GenerateOptions {
+                    seed: 4,
+                    target_needles: Some(20_000),
+                    age: bevy_conifer_lod::generate::Age::Young,
+                };
+                let record = bake(&generate(Species::ScotsPine, &options), &BakeOptions::default(), &()).unwrap();
+                write_record(&record, &dir.path().join("pine.conifer")).unwrap();
+                (dir.path().to_string_lossy().into_owned(), "pine.conifer")
+            }
+            Pine::Mature => (
+                concat!(env!("CARGO_MANIFEST_DIR"), "/assets").to_owned(),
+                "trees/mature/scots-pine.conifer",
+            ),
+        };
+        let mut renderer = HeadlessRenderer::new(&root);
+        let handle: Handle<ConiferSpecies> = renderer.world().resource::<AssetServer>().load(file);
         // A tree out of every view first, so the tree measured is not its
         // species' first instance (multi-draws start at it).
         renderer
@@ -94,7 +116,8 @@ impl ShadowScene {
             ..default()
         });
         spawn_ground(world);
-        renderer.load(&[handle.untyped()], 600).unwrap();
+        // A mature record takes a while to load in a debug build.
+        renderer.load(&[handle.untyped()], 20_000).unwrap();
         let target = renderer.render_target(SIZE, SIZE);
         Self {
             renderer,
@@ -118,16 +141,17 @@ impl ShadowScene {
         ));
     }
 
+    /// A picture, saved as `shadow_{name}.png`.
+    fn shot(&mut self, name: &str) -> image::RgbaImage {
+        let image = self.renderer.capture(&self.target, 20).unwrap();
+        image.save(self.out.join(format!("shadow_{name}.png"))).unwrap();
+        image
+    }
+
     /// Pictures with the LOD on, with it off (every needle a prism), and
     /// without the tree.
     fn capture(&mut self, name: &str) -> [image::RgbaImage; 3] {
-        let shot = |scene: &mut Self, label: &str| {
-            let image = scene.renderer.capture(&scene.target, 20).unwrap();
-            image
-                .save(scene.out.join(format!("shadow_{name}_{label}.png")))
-                .unwrap();
-            image
-        };
+        let shot = |scene: &mut Self, label: &str| scene.shot(&format!("{name}_{label}"));
         // The camera and the lights may be new: let their views cull a
         // few frames first (a CI run once saw the lines cast no shadow in
         // the first frame; never reproduced locally).
@@ -218,4 +242,71 @@ fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
     scene.camera(Vec3::new(-3.0, 0.0, 0.0), 80.0, 8.0);
     // The crown seen from above covers rows 32–86: below is shadow only.
     scene.assert_line_shadow_like_prisms("lamp", 90..SIZE, 0.2);
+}
+
+#[test]
+fn a_mature_tree_past_the_shadow_budget_casts_its_impostor() {
+    let _turn = common::gpu_turn();
+    let mut scene = ShadowScene::with_pine(Pine::Mature);
+    // A sun 60° high from +x, one cascade over the 20 m tree and its
+    // shadow (texels of a few centimetres, as in the forest's cascades).
+    scene.renderer.world_mut().spawn((
+        DirectionalLight {
+            illuminance: 2_500.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(3.0, 5.2, 0.0).looking_at(Vec3::ZERO, Vec3::Y),
+        CascadeShadowConfigBuilder {
+            num_cascades: 1,
+            maximum_distance: 60.0,
+            first_cascade_far_bound: 60.0,
+            ..default()
+        }
+        .build(),
+    ));
+    // From 30 m above the shadow, 10 m toward −x: the crown is out of the
+    // picture, the trunk's foot at its top edge.
+    scene.camera(Vec3::new(-10.0, 0.0, 0.0), 30.0, 40.0);
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        scene.renderer.update().unwrap();
+    }
+    let expanded = scene.shot("mature_expanded");
+    // No view expands a placement: the sun's cascade casts the impostor
+    // (before, the level-2 lines, each a few centimetres wide but one
+    // texel thick, cast a fraction of the crown's shadow).
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .max_expanded_placements = 1;
+    let past = scene.shot("mature_past_budget");
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .max_expanded_placements = ConiferLodSettings::default().max_expanded_placements;
+    scene
+        .renderer
+        .world_mut()
+        .entity_mut(scene.tree)
+        .insert(Visibility::Hidden);
+    let lit = scene.shot("mature_no_tree");
+    // Darkening summed below the trunk's foot.
+    let rows = SIZE / 8..SIZE;
+    let total = |shaded: &image::RgbaImage| -> f32 {
+        let (lit, shaded) = (luminance(&lit), luminance(shaded));
+        (rows.start * SIZE..rows.end * SIZE)
+            .map(|i| i as usize)
+            .filter(|&i| lit[i] > 1e-4)
+            .map(|i| ((lit[i] - shaded[i]) / lit[i]).max(0.0))
+            .sum()
+    };
+    let (past, expanded) = (total(&past), total(&expanded));
+    println!("mature pine's shadow: darkening summed, expanded {expanded:.1}, past the budget {past:.1}");
+    assert!(expanded > 1000.0, "the tree casts a visible shadow: {expanded:.1}");
+    assert!(
+        (past - expanded).abs() <= expanded / 4.0,
+        "past the budget the tree's shadow darkens the ground by {past:.1} in all, expanded by {expanded:.1}"
+    );
 }

@@ -104,6 +104,26 @@ pub fn impostor_fade(spatial_error: f32, texel: f32, elevation: f32) -> f32 {
     (t * (1.0 - steep) * 255.0).round() / 255.0
 }
 
+/// How far, in radians, the impostor's card leans away from a light at
+/// `elevation` radians above the horizon (negative below) when a tree past
+/// a shadow view's budget casts it, for a crown `width` wide and `height`
+/// tall. Seen from the light, the crown spans `height·cos(el) +
+/// width·sin(|el|)` across it and an upright card only `height·cos(el)`:
+/// leaning by `t` about the crown's middle, the card spans `height·cos(|el|
+/// − |t|)`, as much (at most `height`, the card facing the light), so its
+/// shadow is as long as the crown's. The sign follows the elevation's; 0
+/// for a light on the horizon and for sizes or elevations that are not
+/// finite or not positive. CPU reference of the shadow pass's
+/// `CONIFER_IMPOSTOR` vertex.
+pub fn shadow_card_lean(elevation: f32, width: f32, height: f32) -> f32 {
+    if !(elevation.is_finite() && width > 0.0 && height > 0.0 && width.is_finite() && height.is_finite()) {
+        return 0.0;
+    }
+    let elevation = elevation.clamp(-std::f32::consts::FRAC_PI_2, std::f32::consts::FRAC_PI_2);
+    let across = (elevation.cos() + width / height * elevation.abs().sin()).min(1.0);
+    elevation.signum() * (elevation.abs() - across.acos()).max(0.0)
+}
+
 /// Fewest texels over a tree's height: a smaller tree gets texels smaller
 /// than [`ImpostorOptions::texel`].
 pub const MIN_ROWS: u32 = 8;
@@ -696,6 +716,47 @@ impl CrownImpostor {
 mod tests {
     use super::*;
     use crate::model::look::tests::needle;
+
+    proptest::proptest! {
+        /// Leaned by `shadow_card_lean`, the card spans across the light
+        /// what the crown spans (at most its height), never leans past
+        /// facing the light, and leans away from it.
+        #[test]
+        fn the_shadow_card_spans_what_the_crown_spans(
+            elevation in -1.57f32..1.57,
+            width in 0.1f32..30.0,
+            height in 0.1f32..60.0,
+        ) {
+            let lean = shadow_card_lean(elevation, width, height);
+            proptest::prop_assert!(lean.abs() <= elevation.abs() + 1e-6);
+            proptest::prop_assert!(lean * elevation >= 0.0);
+            let spans = height * (elevation.abs() - lean.abs()).cos();
+            let crown = (height * elevation.cos() + width * elevation.abs().sin()).min(height);
+            proptest::prop_assert!((spans - crown).abs() <= 1e-3 * height, "{} against {}", spans, crown);
+        }
+    }
+
+    #[test]
+    fn shadow_card_lean_of_known_lights() {
+        // On the horizon the card stands upright; overhead it spans the
+        // crown's width; a 20 m crown 5 m wide under a sun 60° high leans
+        // until cos(60° − t) = 0.5 + 0.25·0.866.
+        assert_eq!(shadow_card_lean(0.0, 5.0, 20.0), 0.0);
+        let overhead = shadow_card_lean(std::f32::consts::FRAC_PI_2, 5.0, 20.0);
+        assert!((20.0 * (std::f32::consts::FRAC_PI_2 - overhead).cos() - 5.0).abs() < 1e-3);
+        let sixty = 60f32.to_radians();
+        let expected = sixty - (0.5f32 + 0.25 * sixty.sin()).acos();
+        assert!((shadow_card_lean(sixty, 5.0, 20.0) - expected).abs() < 1e-6);
+        assert!((shadow_card_lean(-sixty, 5.0, 20.0) + expected).abs() < 1e-6);
+        // A crown wider than tall faces a high light.
+        assert!((shadow_card_lean(sixty, 40.0, 20.0) - sixty).abs() < 1e-6);
+        for bad in [f32::NAN, f32::INFINITY] {
+            assert_eq!(shadow_card_lean(bad, 5.0, 20.0), 0.0);
+            assert_eq!(shadow_card_lean(0.5, bad, 20.0), 0.0);
+        }
+        assert_eq!(shadow_card_lean(0.5, 5.0, 0.0), 0.0);
+    }
+
     use crate::model::look::{SideView, side_coverage};
 
     /// A cone of random needles, 10 m tall, 3 m across at the bottom.

@@ -257,7 +257,11 @@ pub struct ConiferLodSettings {
     /// in buckets of a factor 1.29; [`crate::model::compact::budget_expands`]);
     /// a tree whose placements do not fit that frame is drawn as its
     /// impostor where a camera may draw one (`far_impostor`, not looked at
-    /// steeply), else as its coarser cut (its level-2 lines). Default
+    /// steeply) and cast as its impostor in a shadow view (turned toward
+    /// the light, each texel casting its coverage), else as its coarser
+    /// cut (its level-2 lines). In a directional light's cascade every tree
+    /// has the same error, so which trees get the budget there is first
+    /// come; their shadows are the same either way. Default
     /// 131,072 (about 100 mature trees within full detail of one view);
     /// at most what one storage binding of the device holds (8 bytes an
     /// entry: 16,777,216 under wgpu's default 128 MiB), whatever is set.

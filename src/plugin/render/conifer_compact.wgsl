@@ -68,6 +68,8 @@ const PI: f32 = 3.14159265358979;
 // much of it (a line under 1/64 of a pixel hardly moves it).
 const MOTION_MIN_OPACITY: f32 = 0.015625;
 const TAU: f32 = 6.28318530717959;
+// The line number an impostor's shadow hashes with (no line has it).
+const IMPOSTOR_SHADOW_LINE: u32 = 0xfffffffeu;
 // `model::shading::BUNDLE_SLOPE` and `ALIGNMENT_STEPS`.
 const BUNDLE_SLOPE: f32 = 1.45;
 const ALIGNMENT_STEPS: f32 = 15.0;
@@ -750,7 +752,13 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let frame = species.impostor_box;
     let span = species.impostor_span;
-    let camera = tree_local_point(world_from_local, length(world_from_local[0].xyz), view.world_position);
+    // An orthographic view (a directional light's cascade) looks along
+    // one direction: the quad turns toward where the view looks from.
+    var eye = view.world_position;
+    if view.clip_from_view[3][3] == 1.0 {
+        eye = world_from_local[3].xyz + 1.0e4 * normalize(view.world_from_view[2].xyz);
+    }
+    let camera = tree_local_point(world_from_local, length(world_from_local[0].xyz), eye);
     var toward = vec2<f32>(camera.x - frame.x, camera.z - frame.y);
     if dot(toward, toward) < 1e-12 {
         toward = vec2<f32>(0.0, 1.0);
@@ -762,7 +770,24 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let corner = vertex_index % 6u;
     let u = select(0.0, 1.0, corner == 1u || corner == 2u || corner == 4u);
     let v = select(0.0, 1.0, corner == 2u || corner == 4u || corner == 5u);
-    let position = vec3<f32>(frame.x, mix(span.x, span.y, v), frame.y) + right * ((2.0 * u - 1.0) * frame.z);
+    var position = vec3<f32>(frame.x, mix(span.x, span.y, v), frame.y) + right * ((2.0 * u - 1.0) * frame.z);
+#ifdef CONIFER_SHADOW
+    // Cast for a shadow view: seen from a light at elevation `el`, a crown
+    // H tall and D wide spans H·cos(el) + D·sin(el) across the light, an
+    // upright card only H·cos(el). The card leans away from the light
+    // about the crown's middle by `t`, until H·cos(el − t) spans as much,
+    // so its shadow is as long as the crown's and falls where it does
+    // (CPU reference: `model::impostor::shadow_card_lean`).
+    let centre = 0.5 * (span.x + span.y);
+    let height = max(span.y - span.x, 1e-6);
+    let elevation = atan2(abs(camera.y - centre), max(length(toward), 1e-9));
+    let across = min(cos(elevation) + 2.0 * frame.z / height * sin(elevation), 1.0);
+    let lean = sign(camera.y - centre) * max(elevation - acos(across), 0.0);
+    let to_light = vec3<f32>(sin(phi), 0.0, cos(phi));
+    let up = cos(lean) * vec3<f32>(0.0, 1.0, 0.0) - sin(lean) * to_light;
+    position = vec3<f32>(frame.x, centre, frame.y) + (mix(span.x, span.y, v) - centre) * up
+        + right * ((2.0 * u - 1.0) * frame.z);
+#endif
     let views = max(span.z, 1.0);
     let f = fract(phi / TAU + 1.0) * views;
     let k0 = floor(f) % views;
@@ -795,6 +820,37 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     return with_height(out, position.y);
 #endif
 }
+
+#ifdef CONIFER_IMPOSTOR
+// `model::impostor::MAX_FOOTPRINT_TAPS`.
+const MAX_FOOTPRINT_TAPS: f32 = 4.0;
+
+// View `layer` of the impostor over the pixel's footprint `uv ± du/2 ±
+// dv/2`: cut into taps × taps cells (one a level-0 texel, at most
+// MAX_FOOTPRINT_TAPS a side), each read at its centre from the mip level
+// of its own size, averaged: a box filter of the pixel, where one
+// trilinear sample blurs the crown's gaps over two pixels (CPU reference:
+// `model::impostor::ImpostorMips::footprint`).
+fn impostor_footprint(uv: vec2<f32>, du: vec2<f32>, dv: vec2<f32>, layer: i32) -> vec4<f32> {
+    let size = vec2<f32>(textureDimensions(impostor_texture));
+    let texels = max(length(du * size), length(dv * size));
+    var taps = 1.0;
+    if texels == texels && texels < 1e30 {
+        taps = clamp(ceil(texels), 1.0, MAX_FOOTPRINT_TAPS);
+    }
+    let tap_du = du / taps;
+    let tap_dv = dv / taps;
+    var sum = vec4<f32>(0.0);
+    let n = u32(taps);
+    for (var a = 0u; a < n; a++) {
+        for (var b = 0u; b < n; b++) {
+            let offset = du * ((f32(a) + 0.5) / taps - 0.5) + dv * ((f32(b) + 0.5) / taps - 0.5);
+            sum += textureSampleGrad(impostor_texture, impostor_sampler, uv + offset, layer, tap_du, tap_dv);
+        }
+    }
+    return sum / (taps * taps);
+}
+#endif
 
 #ifdef CONIFER_MOTION_VECTORS
 
@@ -837,13 +893,26 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
 // Shadows of translucent lines: each fragment is kept with the line's
 // opacity, by a hash of its texel, line and tree, so a line casts the
 // shadow of the coverage it draws (`model::compact::shadow_texel_kept`).
+// A tree past a shadow view's budget casts its crown impostor, each
+// fragment kept with the coverage of the impostor's texels under it.
 @fragment
 fn fragment(in: VertexOutput) {
+#ifdef CONIFER_IMPOSTOR
+    let du = dpdx(in.uv);
+    let dv = dpdy(in.uv);
+    let first = impostor_footprint(in.uv, du, dv, i32(round(in.color.x)));
+    let second = impostor_footprint(in.uv, du, dv, i32(round(in.color.y)));
+    let coverage = mix(first.r, second.r, in.color.z) * in.color.w;
+    let line = IMPOSTOR_SHADOW_LINE;
+    let tree = in.tree;
+#else
+    let coverage = in.color.a;
     let line = u32(in.color.r + 0.5);
     let tree = u32(in.color.g + 0.5);
+#endif
     let texel = vec2<u32>(in.position.xy);
     let h = pcg(texel.x ^ pcg(texel.y ^ pcg(line ^ pcg(tree))));
-    if !(f32(h >> 8u) * (1.0 / 16777216.0) < in.color.a) {
+    if !(f32(h >> 8u) * (1.0 / 16777216.0) < coverage) {
         discard;
     }
 }
@@ -1048,36 +1117,6 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
 #endif
 #endif
 
-#ifdef CONIFER_IMPOSTOR
-// `model::impostor::MAX_FOOTPRINT_TAPS`.
-const MAX_FOOTPRINT_TAPS: f32 = 4.0;
-
-// View `layer` of the impostor over the pixel's footprint `uv ± du/2 ±
-// dv/2`: cut into taps × taps cells (one a level-0 texel, at most
-// MAX_FOOTPRINT_TAPS a side), each read at its centre from the mip level
-// of its own size, averaged: a box filter of the pixel, where one
-// trilinear sample blurs the crown's gaps over two pixels (CPU reference:
-// `model::impostor::ImpostorMips::footprint`).
-fn impostor_footprint(uv: vec2<f32>, du: vec2<f32>, dv: vec2<f32>, layer: i32) -> vec4<f32> {
-    let size = vec2<f32>(textureDimensions(impostor_texture));
-    let texels = max(length(du * size), length(dv * size));
-    var taps = 1.0;
-    if texels == texels && texels < 1e30 {
-        taps = clamp(ceil(texels), 1.0, MAX_FOOTPRINT_TAPS);
-    }
-    let tap_du = du / taps;
-    let tap_dv = dv / taps;
-    var sum = vec4<f32>(0.0);
-    let n = u32(taps);
-    for (var a = 0u; a < n; a++) {
-        for (var b = 0u; b < n; b++) {
-            let offset = du * ((f32(a) + 0.5) / taps - 0.5) + dv * ((f32(b) + 0.5) / taps - 0.5);
-            sum += textureSampleGrad(impostor_texture, impostor_sampler, uv + offset, layer, tap_du, tap_dv);
-        }
-    }
-    return sum / (taps * taps);
-}
-#endif
 
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {

@@ -269,6 +269,15 @@ fn view_tree(i: u32) -> TreeView {
         fade = u32(round(t * (1.0 - steep) * 255.0));
         tree.impostor_allowed = steep < 1.0;
     }
+    // A shadow view never fades a tree into its impostor, but casts it for
+    // a tree past its budget: its level-2 lines, far wider than the view's
+    // texels, would each cast one texel's width, a fraction of the crown's
+    // shadow (every tree of a cascade has the same error, so the budget
+    // cuts off trees at random and their shadows would differ by far).
+    if impostor && species.impostor_span.w > 0.5 && species.lod_enabled != 0u
+        && (cull_view.perspective & VIEW_CAMERA) == 0u {
+        tree.impostor_allowed = true;
+    }
     tree.seen = true;
     tree.e = e;
     tree.code = threshold_code(e);
@@ -357,7 +366,8 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
         if expanded != code {
             // Past the budget: its impostor where the view may draw one
             // (its level-2 lines alone read as bare branches near the
-            // camera), else its coarser cut at one error.
+            // camera, and cast a fraction of the crown's shadow), else its
+            // coarser cut at one error.
             if tree.impostor_allowed {
                 draw_impostor_alone(i, tree);
                 return;

@@ -1127,7 +1127,8 @@ impl SpecializedRenderPipeline for CompactPipeline {
 
 impl CompactPipeline {
     /// A depth-only pipeline for shadow maps: prisms write depth, lines
-    /// keep each fragment with their opacity (hashed).
+    /// keep each fragment with their opacity (hashed), the impostor with
+    /// its texels' coverage (hashed).
     fn shadow_descriptor(&self, kind: PartKind) -> RenderPipelineDescriptor {
         let Some((view_layout, _)) = self.prepass_layouts.clone() else {
             return RenderPipelineDescriptor::default();
@@ -1136,7 +1137,7 @@ impl CompactPipeline {
         if kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
         }
-        let fragment = kind.is_lines().then(|| self.fragment_state(&defs, Vec::new()));
+        let fragment = (kind.is_lines() || kind == PartKind::Impostor).then(|| self.fragment_state(&defs, Vec::new()));
         let label = format!("conifer compact shadow {kind:?}");
         self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, None, true)
     }
@@ -1356,8 +1357,9 @@ fn prepare_views(
             // flattened onto it), so the near plane culls nothing.
             planes[5] = [0.0, 0.0, 0.0, 1.0];
         }
-        // Only cameras draw impostors: a shadow view casts the lines'
-        // shadows at its own texel's error.
+        // Cameras fade trees into their impostors; a shadow view casts the
+        // lines' shadows at its own texel's error, and the impostor only
+        // for the trees past its budget.
         let camera = opaque_phases.contains_key(&view.retained_view_entity);
         let cull_view = CullView {
             planes,
@@ -1669,7 +1671,8 @@ fn queue_compact_shadows(
                 let entity = species.draw_entities[kind.index()];
                 let main_entity = species.phase_keys[kind.index()];
                 phase.remove(main_entity);
-                if !drawn || kind == PartKind::Impostor || !species.draws(kind) {
+                // The impostor casts for the trees past the view's budget.
+                if !drawn || !species.draws(kind) {
                     continue;
                 }
                 let key = CompactPipelineKey {
