@@ -479,7 +479,7 @@ fn merged_lines_are_lit_as_their_bundles() {
             // shader's normals: four across the cylinder, seven over the
             // sphere's disk.
             let lambert = |n: Vec3| burley(n, v, from);
-            let cylinder = f64::from(across_average(chord, v, lambert));
+            let cylinder = f64::from(across_average(chord, v, from, lambert));
             let sphere = f64::from(disk_average(v, lambert));
             let share = f64::from(bundle_cylinder_share(0.0));
             expected_along += weight * cylinder;

@@ -959,15 +959,37 @@ fn surface_count(surface: Surface) -> u32 {
     return select(4u, 7u, surface.is_sphere);
 }
 
-// Normal `k` of the surface and its weight (the weights sum to 1).
-fn surface_normal(surface: Surface, k: u32) -> vec4<f32> {
+// The part `[s0, s1]` of a cylinder's projected width whose normals face
+// the light `to_light` (n(s)·L ≥ 0); empty for a light along the axis
+// (CPU reference: `model::shading::lit_across`).
+fn lit_across(surface: Surface, to_light: vec3<f32>) -> vec2<f32> {
+    let a = dot(surface.toward, to_light);
+    let b = dot(surface.side, to_light);
+    let r = length(vec2<f32>(a, b));
+    if r < 1e-6 {
+        return vec2<f32>(0.0);
+    }
+    if b >= 0.0 {
+        return vec2<f32>(-a / r, 1.0);
+    }
+    return vec2<f32>(-1.0, a / r);
+}
+
+// Normal `k` of the surface lit by `to_light` and its weight (weights that
+// sum to the lit share of the surface). A cylinder takes its four nodes
+// over the part of its width the light reaches: over the whole width, a
+// light from behind lights only a band at one edge, which the nodes
+// missed (under half the light a cylinder's bright rim shows from behind).
+fn surface_normal(surface: Surface, k: u32, to_light: vec3<f32>) -> vec4<f32> {
     if surface.is_sphere {
         let p = disk_point(k);
         let out = sqrt(max(1.0 - dot(p, p), 0.0));
         return vec4<f32>(out * surface.toward + p.x * surface.side + p.y * surface.up, disk_weight(k));
     }
-    let s = across_offset(k);
-    return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * across_weight(k));
+    let lit = lit_across(surface, to_light);
+    let half = 0.5 * (lit.y - lit.x);
+    let s = 0.5 * (lit.x + lit.y) + half * across_offset(k);
+    return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * half * across_weight(k));
 }
 
 // Sets the lighting input's normal to unit `n`. `n·V` is kept ≤ 1: a
@@ -1051,9 +1073,10 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = shadows::fetch_point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
+        let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         var sum = vec3<f32>(0.0);
         for (var k = 0u; k < count; k = k + 1u) {
-            let normal = surface_normal(surface, k);
+            let normal = surface_normal(surface, k, to_light);
             set_normal(&input, normal.xyz);
             sum += normal.w * lighting::point_light(light_id, &input, true, true);
         }
@@ -1071,9 +1094,10 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
                 in.frag_coord.xy,
             );
         }
+        let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         var sum = vec3<f32>(0.0);
         for (var k = 0u; k < count; k = k + 1u) {
-            let normal = surface_normal(surface, k);
+            let normal = surface_normal(surface, k, to_light);
             set_normal(&input, normal.xyz);
             sum += normal.w * lighting::spot_light(light_id, &input, true);
         }
@@ -1084,9 +1108,10 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = shadows::fetch_directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
+        let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
         var sum = vec3<f32>(0.0);
         for (var k = 0u; k < count; k = k + 1u) {
-            let normal = surface_normal(surface, k);
+            let normal = surface_normal(surface, k, to_light);
             set_normal(&input, normal.xyz);
             sum += normal.w * lighting::directional_light(i, &input, true);
         }
