@@ -73,7 +73,11 @@ exits_cleanly() { # $1: what made it exit
 }
 
 start keys
-shot base
+# The first frame can take longer than `start`'s wait (every species'
+# pipelines compile on lavapipe): the window shows the dark clear colour
+# until then, and a base taken then made every later comparison of the
+# panel's region compare the scene with itself.
+wait_for base "above \$($TOOL brightness $OUT/base.xwd $PANEL) 0.3"
 press F3
 wait_for overlay "above \$($TOOL differ $OUT/base.xwd $OUT/overlay.xwd $PANEL) 0.3"
 press bracketright

@@ -6,6 +6,7 @@ close as a window manager's close button does (WM_DELETE_WINDOW).
 
   xtool.py png DUMP.xwd OUT.png
   xtool.py differ A.xwd B.xwd X Y W H      # share of pixels that differ in a region
+  xtool.py brightness DUMP.xwd X Y W H     # mean of a region's channels, 0-1
   xtool.py close WINDOW_ID                 # WM_DELETE_WINDOW to the window
 """
 import ctypes
@@ -58,6 +59,12 @@ def differ(rows_a, rows_b, x, y, w, h):
     return changed / max(len(pairs), 1)
 
 
+def brightness(rows, x, y, w, h):
+    """Mean of the region's colour channels, in [0, 1]."""
+    values = [c for row in rows[y:y + h] for pixel in row[x:x + w] for c in pixel[:3]]
+    return sum(values) / (255 * max(len(values), 1))
+
+
 class XClientMessageEvent(ctypes.Structure):
     _fields_ = [("type", ctypes.c_int), ("serial", ctypes.c_ulong), ("send_event", ctypes.c_int),
                 ("display", ctypes.c_void_p), ("window", ctypes.c_ulong), ("message_type", ctypes.c_ulong),
@@ -103,6 +110,9 @@ if __name__ == "__main__":
         _, _, rows_a = read_xwd(sys.argv[2])
         _, _, rows_b = read_xwd(sys.argv[3])
         print(f"{differ(rows_a, rows_b, *(int(v) for v in sys.argv[4:8])):.6f}")
+    elif command == "brightness":
+        _, _, rows = read_xwd(sys.argv[2])
+        print(f"{brightness(rows, *(int(v) for v in sys.argv[3:7])):.6f}")
     elif command == "close":
         close(int(sys.argv[2], 0))
     else:
