@@ -770,7 +770,9 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let corner = vertex_index % 6u;
     let u = select(0.0, 1.0, corner == 1u || corner == 2u || corner == 4u);
     let v = select(0.0, 1.0, corner == 2u || corner == 4u || corner == 5u);
-    var position = vec3<f32>(frame.x, mix(span.x, span.y, v), frame.y) + right * ((2.0 * u - 1.0) * frame.z);
+    // The card stands on the axis about the crown's middle.
+    let centre = 0.5 * (span.x + span.y);
+    var up = vec3<f32>(0.0, 1.0, 0.0);
 #ifdef CONIFER_SHADOW
     // Cast for a shadow view: seen from a light at elevation `el`, a crown
     // H tall and D wide spans H·cos(el) + D·sin(el) across the light, an
@@ -778,16 +780,15 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     // about the crown's middle by `t`, until H·cos(el − t) spans as much,
     // so its shadow is as long as the crown's and falls where it does
     // (CPU reference: `model::impostor::shadow_card_lean`).
-    let centre = 0.5 * (span.x + span.y);
     let height = max(span.y - span.x, 1e-6);
     let elevation = atan2(abs(camera.y - centre), max(length(toward), 1e-9));
     let across = min(cos(elevation) + 2.0 * frame.z / height * sin(elevation), 1.0);
     let lean = sign(camera.y - centre) * max(elevation - acos(across), 0.0);
     let to_light = vec3<f32>(sin(phi), 0.0, cos(phi));
-    let up = cos(lean) * vec3<f32>(0.0, 1.0, 0.0) - sin(lean) * to_light;
-    position = vec3<f32>(frame.x, centre, frame.y) + (mix(span.x, span.y, v) - centre) * up
-        + right * ((2.0 * u - 1.0) * frame.z);
+    up = cos(lean) * up - sin(lean) * to_light;
 #endif
+    let position = vec3<f32>(frame.x, centre, frame.y) + (mix(span.x, span.y, v) - centre) * up
+        + right * ((2.0 * u - 1.0) * frame.z);
     let views = max(span.z, 1.0);
     let f = fract(phi / TAU + 1.0) * views;
     let k0 = floor(f) % views;
@@ -850,6 +851,17 @@ fn impostor_footprint(uv: vec2<f32>, du: vec2<f32>, dv: vec2<f32>, layer: i32) -
     }
     return sum / (taps * taps);
 }
+
+// The impostor's texel under this fragment: its two views nearest the
+// camera's azimuth (layers `color.x` and `color.y`), each over the pixel's
+// footprint, blended by `color.z`.
+fn impostor_texel(uv: vec2<f32>, color: vec4<f32>) -> vec4<f32> {
+    let du = dpdx(uv);
+    let dv = dpdy(uv);
+    let first = impostor_footprint(uv, du, dv, i32(round(color.x)));
+    let second = impostor_footprint(uv, du, dv, i32(round(color.y)));
+    return mix(first, second, color.z);
+}
 #endif
 
 #ifdef CONIFER_MOTION_VECTORS
@@ -898,11 +910,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
 @fragment
 fn fragment(in: VertexOutput) {
 #ifdef CONIFER_IMPOSTOR
-    let du = dpdx(in.uv);
-    let dv = dpdy(in.uv);
-    let first = impostor_footprint(in.uv, du, dv, i32(round(in.color.x)));
-    let second = impostor_footprint(in.uv, du, dv, i32(round(in.color.y)));
-    let coverage = mix(first.r, second.r, in.color.z) * in.color.w;
+    let coverage = impostor_texel(in.uv, in.color).r * in.color.w;
     let line = IMPOSTOR_SHADOW_LINE;
     let tree = in.tree;
 #else
@@ -1142,7 +1150,6 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
 #endif
 #endif
 
-
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
@@ -1152,11 +1159,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The two views' texels over the pixel's footprint: coverage, wood,
     // and the shares lit as a vertical cylinder and as one across the view
     // (both times coverage; the rest is lit as a sphere).
-    let du = dpdx(in.uv);
-    let dv = dpdy(in.uv);
-    let first = impostor_footprint(in.uv, du, dv, i32(round(in.color.x)));
-    let second = impostor_footprint(in.uv, du, dv, i32(round(in.color.y)));
-    let texel = mix(first, second, in.color.z);
+    let texel = impostor_texel(in.uv, in.color);
     if !(texel.r > 1.0 / 512.0) {
         discard;
     }
