@@ -404,3 +404,66 @@ fn the_impostor_is_lit_as_its_texels_shares() {
         }
     }
 }
+
+/// Texels lit as a sphere glow under a sun from behind as the CPU table
+/// says (`model::shading::SphereLight`, Bevy's BRDF averaged over the lit
+/// part of the sphere's disk): the picture's light under the eval's back
+/// sun (15° up behind the tree) over its light under a sun from the
+/// camera keeps the table's ratio (specular on, no ambient light or
+/// tonemapping). Seven normals over the disk gave this sphere no light
+/// from behind at all.
+#[test]
+fn a_sphere_texel_glows_from_behind_as_the_table_says() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_conifer_lod::model::shading::SphereLight;
+    use std::sync::Arc;
+    let _turn = common::gpu_turn();
+    let record = spruce();
+    let species = ConiferSpecies::from_record(record.clone()).unwrap();
+    let baked = species.impostor.clone().expect("an impostor");
+    let crown = species.crown_center;
+    let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
+    let world = renderer.world_mut();
+    let (camera, eye) = impostor_camera(world, &target, crown, baked.texel);
+    world.entity_mut(camera).insert(Tonemapping::None);
+    let mut impostor = (*baked).clone();
+    impostor.texels.iter_mut().for_each(|t| *t = [255, 0, 0, 0]);
+    let mut variant = ConiferSpecies::from_record(record).unwrap();
+    variant.impostor = Some(Arc::new(impostor));
+    let albedo = Vec3::from_slice(&variant.compact.far_needle_color.to_array());
+    let table = SphereLight::new(variant.material.roughness, variant.material.reflectance);
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(variant);
+    world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
+    let low = 15f32.to_radians();
+    let suns = [("front", Vec3::Z), ("back", Vec3::new(0.0, low.sin(), -low.cos()))];
+    let mut drawn = [0.0f32; 2];
+    let mut expected = [0.0f32; 2];
+    for (s, (name, from)) in suns.iter().enumerate() {
+        *renderer.world_mut().get_mut::<Transform>(sun).unwrap() =
+            Transform::from_translation(crown + *from * 100.0).looking_at(crown, Vec3::Y);
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+            renderer.update().unwrap();
+        }
+        let picture = renderer.capture(&target, 8).unwrap();
+        picture
+            .save(out_dir().join(format!("impostor_sphere_{name}.png")))
+            .unwrap();
+        let opaque: Vec<f32> = picture
+            .pixels()
+            .filter(|p| p.0[3] == 255)
+            .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
+            .collect();
+        assert!(opaque.len() > 300, "sun {name}: {} opaque pixels", opaque.len());
+        drawn[s] = opaque.iter().sum::<f32>() / opaque.len() as f32;
+        let (diffuse, specular) = table.at((eye - crown).normalize(), *from);
+        expected[s] = (albedo * diffuse + Vec3::splat(specular)).element_sum();
+    }
+    let (ratio, table_ratio) = (drawn[1] / drawn[0], expected[1] / expected[0]);
+    println!("drawn (linear RGB sum) {drawn:?}; back / front drawn {ratio:.4}, table {table_ratio:.4}");
+    assert!(drawn[0] > 0.01, "the front-lit sphere shows: {drawn:?}");
+    assert!(table_ratio > 0.1, "the table's sphere glows from behind: {table_ratio}");
+    assert!(
+        (ratio / table_ratio - 1.0).abs() < 0.1,
+        "drawn {ratio} vs table {table_ratio}"
+    );
+}

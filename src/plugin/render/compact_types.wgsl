@@ -118,7 +118,14 @@ struct SpeciesParams {
     wind_clock: vec4<f32>,
     // trunk axis (tree-local x, z), base height, height
     wind_shape: vec4<f32>,
+    // a sphere's mean diffuse and specular at SPHERE_LIGHT_STEPS angles
+    // between the viewer and the light, four a row
+    // (`model::shading::SphereLight`)
+    sphere_diffuse: array<vec4<f32>, 16>,
+    sphere_specular: array<vec4<f32>, 16>,
 }
+
+const SPHERE_LIGHT_STEPS: u32 = 64u;
 
 struct CullView {
     // frustum planes (xyz normal pointing inside, w offset)

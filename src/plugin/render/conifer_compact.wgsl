@@ -41,6 +41,7 @@
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
+    SPHERE_LIGHT_STEPS,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment,
 }
@@ -938,33 +939,14 @@ fn across_weight(k: u32) -> f32 {
     return select(0.65214515486, 0.34785484514, (k & 1u) != 0u);
 }
 
-// Seven points on the unit disk and their weights (summing to 1), exact
-// for polynomials of degree 5 (Stroud's S2 5-1; `model::shading::DISK_NODES`).
-fn disk_point(k: u32) -> vec2<f32> {
-    if k == 0u {
-        return vec2<f32>(0.0);
-    }
-    let angle = f32(k - 1u) * 1.0471975512;
-    return 0.81649658093 * vec2<f32>(cos(angle), sin(angle));
-}
-
-fn disk_weight(k: u32) -> f32 {
-    return select(0.125, 0.25, k == 0u);
-}
-
 // What a pixel of lines or of the impostor sees: a cylinder's visible half
 // (four normals across its projected width, `toward` facing the viewer
-// turning to `side`) or a sphere's (seven normals over its projected disk
-// round `toward`, `side` and `up` spanning the disk).
+// turning to `side`) or a sphere's projected disk (facing the viewer
+// `toward`, lit by its table, `sphere_light`).
 struct Surface {
     toward: vec3<f32>,
     side: vec3<f32>,
-    up: vec3<f32>,
     is_sphere: bool,
-}
-
-fn surface_count(surface: Surface) -> u32 {
-    return select(4u, 7u, surface.is_sphere);
 }
 
 // The part `[s0, s1]` of a cylinder's projected width whose normals face
@@ -983,21 +965,89 @@ fn lit_across(surface: Surface, to_light: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(-1.0, a / r);
 }
 
-// Normal `k` of the surface lit by `to_light` and its weight (weights that
-// sum to the lit share of the surface). A cylinder takes its four nodes
-// over the part of its width the light reaches: over the whole width, a
-// light from behind lights only a band at one edge, which the nodes
-// missed (under half the light a cylinder's bright rim shows from behind).
-fn surface_normal(surface: Surface, k: u32, to_light: vec3<f32>) -> vec4<f32> {
-    if surface.is_sphere {
-        let p = disk_point(k);
-        let out = sqrt(max(1.0 - dot(p, p), 0.0));
-        return vec4<f32>(out * surface.toward + p.x * surface.side + p.y * surface.up, disk_weight(k));
-    }
+// Normal `k` of a cylinder lit by `to_light` and its weight (weights that
+// sum to the lit share of the width): the four nodes over the part of its
+// width the light reaches. Over the whole width, a light from behind
+// lights only a band at one edge, which the nodes missed (under half the
+// light a cylinder's bright rim shows from behind).
+fn cylinder_normal(surface: Surface, k: u32, to_light: vec3<f32>) -> vec4<f32> {
     let lit = lit_across(surface, to_light);
     let half = 0.5 * (lit.y - lit.x);
     let s = 0.5 * (lit.x + lit.y) + half * across_offset(k);
     return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * half * across_weight(k));
+}
+
+// A sphere's mean diffuse (per unit diffuse colour) and specular over its
+// projected disk, seen from `to_viewer` under a light of unit irradiance
+// from `to_light`: the species' table by the angle between them,
+// interpolated linearly (CPU reference: `model::shading::SphereLight::at`).
+fn sphere_light(to_viewer: vec3<f32>, to_light: vec3<f32>) -> vec2<f32> {
+    let x = acos(clamp(dot(to_viewer, to_light), -1.0, 1.0)) * (f32(SPHERE_LIGHT_STEPS - 1u) / PI);
+    let k = min(u32(x), SPHERE_LIGHT_STEPS - 2u);
+    let j = k + 1u;
+    let below = vec2<f32>(species.sphere_diffuse[k / 4u][k % 4u], species.sphere_specular[k / 4u][k % 4u]);
+    let above = vec2<f32>(species.sphere_diffuse[j / 4u][j % 4u], species.sphere_specular[j / 4u][j % 4u]);
+    return mix(below, above, x - f32(k));
+}
+
+const LIGHT_POINT: u32 = 0u;
+const LIGHT_SPOT: u32 = 1u;
+const LIGHT_DIRECTIONAL: u32 = 2u;
+
+// Bevy's light `light_id` of `kind` on the lighting input.
+fn bevy_light(kind: u32, light_id: u32, input: ptr<function, lighting::LightingInput>) -> vec3<f32> {
+    if kind == LIGHT_POINT {
+        return lighting::point_light(light_id, input, true, true);
+    }
+    if kind == LIGHT_SPOT {
+        return lighting::spot_light(light_id, input, true);
+    }
+    return lighting::directional_light(light_id, input, true);
+}
+
+// The irradiance a light of `kind` brings to `position` from `to_light`
+// (its colour, distance falloff, spot cone and light texture): Bevy's own
+// light function on a probe whose response is exactly 1/π of it, a white
+// Burley diffuse seen and lit along its normal (both scatter terms 1) with
+// no specular (F0 0).
+fn light_irradiance(kind: u32, light_id: u32, position: vec3<f32>, to_light: vec3<f32>) -> vec3<f32> {
+    var probe: lighting::LightingInput;
+    probe.layers[lighting::LAYER_BASE].perceptual_roughness = 1.0;
+    probe.layers[lighting::LAYER_BASE].roughness = 1.0;
+    probe.layers[lighting::LAYER_BASE].N = to_light;
+    probe.layers[lighting::LAYER_BASE].NdotV = 1.0;
+    probe.layers[lighting::LAYER_BASE].R = to_light;
+    probe.P = position;
+    probe.V = to_light;
+    probe.diffuse_color = vec3<f32>(1.0);
+    probe.metallic = 0.0;
+    probe.F0_dielectric = vec3<f32>(0.0);
+    probe.F0_metallic = vec3<f32>(0.0);
+    probe.F_ab = vec2<f32>(1.0, 0.0);
+    return PI * bevy_light(kind, light_id, &probe);
+}
+
+// The surface's mean radiance under one light: a cylinder's Bevy BRDF at
+// its four lit normals, a sphere's table times the light's irradiance.
+fn surface_light(
+    surface: Surface,
+    input: ptr<function, lighting::LightingInput>,
+    kind: u32,
+    light_id: u32,
+    to_light: vec3<f32>,
+) -> vec3<f32> {
+    if surface.is_sphere {
+        let response = sphere_light((*input).V, to_light);
+        let irradiance = light_irradiance(kind, light_id, (*input).P, to_light);
+        return irradiance * ((*input).diffuse_color * response.x + response.y);
+    }
+    var sum = vec3<f32>(0.0);
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        let normal = cylinder_normal(surface, k, to_light);
+        set_normal(input, normal.xyz);
+        sum += normal.w * bevy_light(kind, light_id, input);
+    }
+    return sum;
 }
 
 // Sets the lighting input's normal to unit `n`. `n·V` is kept ≤ 1: a
@@ -1028,19 +1078,16 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
     var surface: Surface;
     surface.toward = toward;
     surface.side = cross(T, toward);
-    surface.up = T;
     surface.is_sphere = false;
     return surface_lighting(in, surface);
 }
 
-// Needles spread every way are lit as a sphere (`model::shading::sphere_lambert`):
-// Bevy's BRDF at seven normals over its projected disk.
+// Needles spread every way are lit as a sphere: the mean of Bevy's BRDF
+// over its projected disk, from the species' table
+// (`model::shading::SphereLight`).
 fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
     var surface: Surface;
     surface.toward = in.V;
-    let frame = ring_basis(in.V);
-    surface.side = frame[0];
-    surface.up = frame[1];
     surface.is_sphere = true;
     return surface_lighting(in, surface);
 }
@@ -1050,7 +1097,6 @@ fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
 fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     let V = in.V;
     let toward = surface.toward;
-    let count = surface_count(surface);
 
     let base = in.material.base_color.rgb;
     let perceptual_roughness = in.material.perceptual_roughness;
@@ -1082,13 +1128,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
             shadow = shadows::fetch_point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
         let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
-        var sum = vec3<f32>(0.0);
-        for (var k = 0u; k < count; k = k + 1u) {
-            let normal = surface_normal(surface, k, to_light);
-            set_normal(&input, normal.xyz);
-            sum += normal.w * lighting::point_light(light_id, &input, true, true);
-        }
-        direct += sum * shadow;
+        direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow;
     }
     for (var i: u32 = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i = i + 1u) {
         let light_id = clustering::get_clusterable_object_id(i);
@@ -1103,13 +1143,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
             );
         }
         let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
-        var sum = vec3<f32>(0.0);
-        for (var k = 0u; k < count; k = k + 1u) {
-            let normal = surface_normal(surface, k, to_light);
-            set_normal(&input, normal.xyz);
-            sum += normal.w * lighting::spot_light(light_id, &input, true);
-        }
-        direct += sum * shadow;
+        direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow;
     }
     for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
         var shadow = 1.0;
@@ -1117,13 +1151,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
             shadow = shadows::fetch_directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
         let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
-        var sum = vec3<f32>(0.0);
-        for (var k = 0u; k < count; k = k + 1u) {
-            let normal = surface_normal(surface, k, to_light);
-            set_normal(&input, normal.xyz);
-            sum += normal.w * lighting::directional_light(i, &input, true);
-        }
-        direct += sum * shadow;
+        direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
     }
 
     // Indirect light is the same all round the ring or the disk to the

@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 368 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 880 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -245,9 +245,28 @@ pub struct SpeciesParams {
     /// The trunk axis (tree-local x, z), the tree's base height and height
     /// ([`crate::model::wind::WindShape`]).
     pub wind_shape: [f32; 4],
+    /// A sphere's mean diffuse by the angle between the viewer and the
+    /// light ([`crate::model::shading::SphereLight::diffuse`], four
+    /// angles a row).
+    pub sphere_diffuse: [[f32; 4]; SPHERE_LIGHT_ROWS],
+    /// Its mean specular ([`crate::model::shading::SphereLight::specular`]).
+    pub sphere_specular: [[f32; 4]; SPHERE_LIGHT_ROWS],
 }
 
+/// Rows of four angles that hold a [`crate::model::shading::SphereLight`]
+/// table.
+pub const SPHERE_LIGHT_ROWS: usize = crate::model::shading::SPHERE_LIGHT_STEPS / 4;
+
 impl SpeciesParams {
+    /// Sets the sphere light table: how the needles an impostor texel or a
+    /// merged line lights as a sphere send each light toward the viewer.
+    pub fn set_sphere_light(&mut self, table: &crate::model::shading::SphereLight) {
+        for k in 0..crate::model::shading::SPHERE_LIGHT_STEPS {
+            self.sphere_diffuse[k / 4][k % 4] = table.diffuse[k];
+            self.sphere_specular[k / 4][k % 4] = table.specular[k];
+        }
+    }
+
     /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`,
     /// `step` seconds after the previous frame's (0 on the first frame; a
     /// non-finite step is 0).
@@ -432,9 +451,19 @@ mod tests {
         }
     }
 
+    /// The shader's table is as long as `model::shading`'s.
+    #[test]
+    fn the_shader_has_the_sphere_tables_length() {
+        let types = include_str!("compact_types.wgsl");
+        let steps = crate::model::shading::SPHERE_LIGHT_STEPS;
+        assert!(types.contains(&format!("const SPHERE_LIGHT_STEPS: u32 = {steps}u;")));
+        let rows = super::SPHERE_LIGHT_ROWS;
+        assert_eq!(types.matches(&format!("array<vec4<f32>, {rows}>")).count(), 2);
+    }
+
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_368_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 368);
+    fn species_params_is_880_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 880);
     }
 }

@@ -41,6 +41,7 @@ use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
 use crate::model::impostor::CrownImpostor;
 use crate::model::prism::WOOD_LINE_FADE;
+use crate::model::shading::SphereLight;
 use bevy::asset::{embedded_asset, embedded_path};
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::core_3d::{
@@ -307,6 +308,9 @@ struct RenderSpecies {
     draw_entities: [Entity; PART_KINDS],
     /// The main-world entities that key them there.
     phase_keys: [MainEntity; PART_KINDS],
+    /// The sphere light table and the material's roughness and reflectance
+    /// (bits) it was made for.
+    sphere_light: ([u32; 2], SphereLight),
 }
 
 impl RenderSpecies {
@@ -431,6 +435,7 @@ fn species_params(
     wind: &ConiferWind,
     seconds: f64,
     wind_step: f64,
+    sphere_light: &SphereLight,
 ) -> SpeciesParams {
     let (impostor_box, impostor_span) = match &species.impostor {
         Some(i) => (
@@ -495,6 +500,7 @@ fn species_params(
         ..SpeciesParams::default()
     };
     params.set_wind(&wind.model(), &species.wind_shape, wind.seconds(seconds), wind_step);
+    params.set_sphere_light(sphere_light);
     params
 }
 
@@ -537,6 +543,8 @@ fn extract_compact(
         let Some(keys) = tracked.phase_keys else {
             continue;
         };
+        let material_key = [asset.material.roughness.to_bits(), asset.material.reflectance.to_bits()];
+        let sphere_light = || SphereLight::new(asset.material.roughness, asset.material.reflectance);
         let entry = render.species.entry(id).or_insert_with(|| RenderSpecies {
             compact: compact.clone(),
             impostor: asset.impostor.clone(),
@@ -548,7 +556,11 @@ fn extract_compact(
             gpu: None,
             draw_entities: PartKind::ALL.map(|kind| commands.spawn(CompactDrawItem { species: id, kind }).id()),
             phase_keys: keys.map(MainEntity::from),
+            sphere_light: (material_key, sphere_light()),
         });
+        if entry.sphere_light.0 != material_key {
+            entry.sphere_light = (material_key, sphere_light());
+        }
         if !Arc::ptr_eq(&entry.compact, compact) {
             // A reloaded record: new arrays.
             entry.compact = compact.clone();
@@ -565,7 +577,15 @@ fn extract_compact(
             });
             entry.center = sum / entry.instances.len().max(1) as f32 + asset.crown_center;
         }
-        entry.params = species_params(asset, compact, &settings, &wind, seconds, wind_step);
+        entry.params = species_params(
+            asset,
+            compact,
+            &settings,
+            &wind,
+            seconds,
+            wind_step,
+            &entry.sphere_light.1,
+        );
         entry.params.instance_count = entry.instances.len() as u32;
     }
 }
