@@ -219,11 +219,12 @@ pub enum LineLighting {
     /// cylinder, a merged line as its bundle of needles, which spread about
     /// its chord: the share of the chord's cylinder its needles' alignment
     /// gives ([`crate::model::shading::bundle_cylinder_share`]), the rest
-    /// lit as a sphere (needles spread every way). Each merged line is
-    /// about three times closer to its needles' mean lighting, but the
-    /// sphere's seven normals make a merged line's fragment dearer (a
-    /// lavapipe frame of the forest 40 % longer) while the picture's crown
-    /// colour moves by under 0.3 of 255 in `conifer eval`.
+    /// lit as a sphere (needles spread every way,
+    /// [`crate::model::shading::SphereLight`]). Each merged line is about
+    /// three times closer to its needles' mean lighting; a merged line's
+    /// fragment is dearer (a lavapipe frame of the forest about 14 %
+    /// longer) while the picture's crown colour moves by under 0.5 of 255
+    /// in `conifer eval`.
     Bundle,
     /// As a flat strip turned toward the viewer (render path v2 before the
     /// cylinder; the paper lights a line with one stored normal): every line
