@@ -12,7 +12,7 @@ use bevy::prelude::*;
 use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
 use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
-use bevy_conifer_lod::model::impostor::{FADE_END, FADE_START, ImpostorMips, impostor_fade};
+use bevy_conifer_lod::model::impostor::{CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade};
 use bevy_conifer_lod::model::{BakeOptions, LodRecord, bake};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
@@ -316,6 +316,65 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
     );
 }
 
+/// The spruce's impostor under a sun alone (no ambient light), seen by
+/// [`impostor_camera`] without tonemapping.
+struct LitImpostor {
+    record: LodRecord,
+    baked: std::sync::Arc<CrownImpostor>,
+    crown: Vec3,
+    renderer: HeadlessRenderer,
+    target: Handle<Image>,
+    sun: Entity,
+    eye: Vec3,
+}
+
+fn lit_impostor() -> LitImpostor {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    let record = spruce();
+    let species = ConiferSpecies::from_record(record.clone()).unwrap();
+    let baked = species.impostor.clone().expect("an impostor");
+    let crown = species.crown_center;
+    let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
+    let world = renderer.world_mut();
+    let (camera, eye) = impostor_camera(world, &target, crown, baked.texel);
+    world.entity_mut(camera).insert(Tonemapping::None);
+    LitImpostor {
+        record,
+        baked,
+        crown,
+        renderer,
+        target,
+        sun,
+        eye,
+    }
+}
+
+/// The sun `(entity, from, toward)` placed, the picture settled, saved as
+/// `name` and its mean linear red + green + blue over its opaque pixels
+/// (more than 300 of them).
+fn sunlit_opaque_light(
+    renderer: &mut HeadlessRenderer,
+    target: &Handle<Image>,
+    sun: (Entity, Vec3, Vec3),
+    name: &str,
+) -> f32 {
+    let (sun, from, toward) = sun;
+    *renderer.world_mut().get_mut::<Transform>(sun).unwrap() =
+        Transform::from_translation(from).looking_at(toward, Vec3::Y);
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        renderer.update().unwrap();
+    }
+    let picture = renderer.capture(target, 8).unwrap();
+    picture.save(out_dir().join(format!("{name}.png"))).unwrap();
+    let opaque: Vec<f32> = picture
+        .pixels()
+        .filter(|p| p.0[3] == 255)
+        .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
+        .collect();
+    assert!(opaque.len() > 300, "{name}: {} opaque pixels", opaque.len());
+    opaque.iter().sum::<f32>() / opaque.len() as f32
+}
+
 /// The impostor's texels are lit as their shares (CPU reference:
 /// `model::shading::TexelShares::lambert`): a picture of texels that are
 /// all vertical cylinders, all cylinders across the view or all spheres,
@@ -326,18 +385,11 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
 /// dark; from the camera a sphere shows 2/3 where a cylinder shows π/4.
 #[test]
 fn the_impostor_is_lit_as_its_texels_shares() {
-    use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_conifer_lod::model::shading::TexelShares;
     use std::sync::Arc;
     let _turn = common::gpu_turn();
-    let record = spruce();
-    let species = ConiferSpecies::from_record(record.clone()).unwrap();
-    let baked = species.impostor.clone().expect("an impostor");
-    let crown = species.crown_center;
-    let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
-    let world = renderer.world_mut();
-    let (camera, _) = impostor_camera(world, &target, crown, baked.texel);
-    world.entity_mut(camera).insert(Tonemapping::None);
+    let mut lit = lit_impostor();
+    let (record, baked, crown, sun) = (lit.record.clone(), lit.baked.clone(), lit.crown, lit.sun);
     let kinds = [
         (
             "vertical",
@@ -365,28 +417,18 @@ fn the_impostor_is_lit_as_its_texels_shares() {
         let mut variant = ConiferSpecies::from_record(record.clone()).unwrap();
         variant.impostor = Some(Arc::new(impostor));
         variant.material.reflectance = 0.0;
-        let world = renderer.world_mut();
+        let world = lit.renderer.world_mut();
         let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(variant);
         let tree = world.spawn((ConiferFoliage(handle), Transform::IDENTITY)).id();
         for (s, (name, from)) in suns.iter().enumerate() {
-            *renderer.world_mut().get_mut::<Transform>(sun).unwrap() =
-                Transform::from_translation(crown + *from * 100.0).looking_at(crown, Vec3::Y);
-            for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
-                renderer.update().unwrap();
-            }
-            let picture = renderer.capture(&target, 8).unwrap();
-            picture
-                .save(out_dir().join(format!("impostor_lit_{kind}_{name}.png")))
-                .unwrap();
-            let opaque: Vec<f32> = picture
-                .pixels()
-                .filter(|p| p.0[3] == 255)
-                .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
-                .collect();
-            assert!(opaque.len() > 300, "{kind}, sun {name}: {} opaque pixels", opaque.len());
-            drawn[s][k] = opaque.iter().sum::<f32>() / opaque.len() as f32;
+            drawn[s][k] = sunlit_opaque_light(
+                &mut lit.renderer,
+                &lit.target,
+                (sun, crown + *from * 100.0, crown),
+                &format!("impostor_lit_{kind}_{name}"),
+            );
         }
-        renderer.world_mut().despawn(tree);
+        lit.renderer.world_mut().despawn(tree);
     }
     let expected = suns.map(|(_, from)| kinds.map(|(_, shares)| shares.lambert(Vec3::Y, Vec3::X, Vec3::Z, from)));
     println!("drawn (linear RGB sum) {drawn:?}, Lambert {expected:?}");
@@ -414,18 +456,12 @@ fn the_impostor_is_lit_as_its_texels_shares() {
 /// from behind at all.
 #[test]
 fn a_sphere_texel_glows_from_behind_as_the_table_says() {
-    use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_conifer_lod::model::shading::SphereLight;
     use std::sync::Arc;
     let _turn = common::gpu_turn();
-    let record = spruce();
-    let species = ConiferSpecies::from_record(record.clone()).unwrap();
-    let baked = species.impostor.clone().expect("an impostor");
-    let crown = species.crown_center;
-    let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
-    let world = renderer.world_mut();
-    let (camera, eye) = impostor_camera(world, &target, crown, baked.texel);
-    world.entity_mut(camera).insert(Tonemapping::None);
+    let mut lit = lit_impostor();
+    let (record, baked, crown, sun) = (lit.record.clone(), lit.baked.clone(), lit.crown, lit.sun);
+    let world = lit.renderer.world_mut();
     let mut impostor = (*baked).clone();
     impostor.texels.iter_mut().for_each(|t| *t = [255, 0, 0, 0]);
     let mut variant = ConiferSpecies::from_record(record).unwrap();
@@ -439,23 +475,13 @@ fn a_sphere_texel_glows_from_behind_as_the_table_says() {
     let mut drawn = [0.0f32; 2];
     let mut expected = [0.0f32; 2];
     for (s, (name, from)) in suns.iter().enumerate() {
-        *renderer.world_mut().get_mut::<Transform>(sun).unwrap() =
-            Transform::from_translation(crown + *from * 100.0).looking_at(crown, Vec3::Y);
-        for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
-            renderer.update().unwrap();
-        }
-        let picture = renderer.capture(&target, 8).unwrap();
-        picture
-            .save(out_dir().join(format!("impostor_sphere_{name}.png")))
-            .unwrap();
-        let opaque: Vec<f32> = picture
-            .pixels()
-            .filter(|p| p.0[3] == 255)
-            .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
-            .collect();
-        assert!(opaque.len() > 300, "sun {name}: {} opaque pixels", opaque.len());
-        drawn[s] = opaque.iter().sum::<f32>() / opaque.len() as f32;
-        let (diffuse, specular) = table.at((eye - crown).normalize(), *from);
+        drawn[s] = sunlit_opaque_light(
+            &mut lit.renderer,
+            &lit.target,
+            (sun, crown + *from * 100.0, crown),
+            &format!("impostor_sphere_{name}"),
+        );
+        let (diffuse, specular) = table.at((lit.eye - crown).normalize(), *from);
         expected[s] = (albedo * diffuse + Vec3::splat(specular)).element_sum();
     }
     let (ratio, table_ratio) = (drawn[1] / drawn[0], expected[1] / expected[0]);

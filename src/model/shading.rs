@@ -657,6 +657,16 @@ mod tests {
         (0.05 * burley + distribution * visibility * fresnel) * n_dot_l
     }
 
+    /// Numbers in `[−1, 1]` from a xorshift generator seeded with `state`.
+    fn xorshift(mut state: u32) -> impl FnMut() -> f32 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            state as f32 / u32::MAX as f32 * 2.0 - 1.0
+        }
+    }
+
     /// Needles in 500 directions lit from behind (15° up, the eval's back
     /// sun): the four nodes over the lit part of the width give the
     /// dense integral's light to 3 % (1.029 of it); over the whole width
@@ -666,13 +676,7 @@ mod tests {
         let (viewer, low) = (Vec3::Z, 15f32.to_radians());
         let light = Vec3::new(0.0, low.sin(), -low.cos());
         let (mut dense, mut lit, mut whole) = (0.0f64, 0.0f64, 0.0f64);
-        let mut state = 0x2545_f491u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32 * 2.0 - 1.0
-        };
+        let mut next = xorshift(0x2545_f491);
         for _ in 0..500 {
             let axis = Vec3::new(next(), next(), next()).normalize_or(Vec3::Y);
             let radiance = |n: Vec3| bevy_radiance(n, viewer, light);
@@ -707,13 +711,7 @@ mod tests {
     /// normals, viewers and lights.
     #[test]
     fn bevy_direct_is_bevys_brdf() {
-        let mut state = 0x9e37_79b9u32;
-        let mut next = move || {
-            state ^= state << 13;
-            state ^= state >> 17;
-            state ^= state << 5;
-            state as f32 / u32::MAX as f32 * 2.0 - 1.0
-        };
+        let mut next = xorshift(0x9e37_79b9);
         let mut compared = 0;
         for _ in 0..2000 {
             let [n, v, l] = [(); 3].map(|_| Vec3::new(next(), next(), next()).normalize_or(Vec3::Y));
