@@ -217,6 +217,11 @@ const LUNE_NODES: usize = 32;
 /// part of the disk is a thin crescent at its rim, where a rule over the
 /// whole disk has no node).
 pub fn lune_average(to_viewer: Vec3, to_light: Vec3, radiance: impl Fn(Vec3) -> f32) -> f32 {
+    lune_average_pair(to_viewer, to_light, |n| (radiance(n), 0.0)).0
+}
+
+/// [`lune_average`] of two radiances at once (one evaluation a node).
+fn lune_average_pair(to_viewer: Vec3, to_light: Vec3, radiance: impl Fn(Vec3) -> (f32, f32)) -> (f32, f32) {
     let to_viewer = to_viewer.try_normalize().unwrap_or(Vec3::Z);
     let to_light = to_light.try_normalize().unwrap_or(to_viewer);
     let pole = to_viewer.cross(to_light);
@@ -227,10 +232,10 @@ pub fn lune_average(to_viewer: Vec3, to_light: Vec3, radiance: impl Fn(Vec3) -> 
     let alpha = to_viewer.dot(to_light).clamp(-1.0, 1.0).acos();
     let (phi0, phi1) = (alpha - PI / 2.0, PI / 2.0);
     if phi1 <= phi0 {
-        return 0.0;
+        return (0.0, 0.0);
     }
     let nodes = gauss_legendre(LUNE_NODES);
-    let mut sum = 0.0f64;
+    let (mut first, mut second) = (0.0f64, 0.0f64);
     for &(x, w) in nodes {
         let phi = 0.5 * (phi0 + phi1) + 0.5 * (phi1 - phi0) * x as f32;
         let (sin_phi, cos_phi) = phi.sin_cos();
@@ -238,12 +243,15 @@ pub fn lune_average(to_viewer: Vec3, to_light: Vec3, radiance: impl Fn(Vec3) -> 
         for &(y, v) in nodes {
             let t = 0.5 * PI * y as f32;
             let (sin_t, cos_t) = t.sin_cos();
-            let n = cos_t * meridian + sin_t * pole;
-            sum += w * v * f64::from(cos_t * cos_t * cos_phi * radiance(n));
+            let (a, b) = radiance(cos_t * meridian + sin_t * pole);
+            let weight = w * v * f64::from(cos_t * cos_t * cos_phi);
+            first += weight * f64::from(a);
+            second += weight * f64::from(b);
         }
     }
     // dφ = (φ1 − φ0)/2 dx, dt = π/2 dy, over the measure's π.
-    (sum * f64::from(phi1 - phi0) / 4.0) as f32
+    let scale = f64::from(phi1 - phi0) / 4.0;
+    ((first * scale) as f32, (second * scale) as f32)
 }
 
 /// The `n`-point Gauss–Legendre rule on `[−1, 1]` (nodes and weights,
@@ -305,9 +313,9 @@ impl SphereLight {
         for k in 0..SPHERE_LIGHT_STEPS {
             let alpha = k as f32 * PI / (SPHERE_LIGHT_STEPS - 1) as f32;
             let to_light = Vec3::new(alpha.sin(), 0.0, alpha.cos());
-            let direct = |n: Vec3| bevy_direct(n, Vec3::Z, to_light, perceptual_roughness, reflectance);
-            diffuse[k] = lune_average(Vec3::Z, to_light, |n| direct(n).0);
-            specular[k] = lune_average(Vec3::Z, to_light, |n| direct(n).1);
+            (diffuse[k], specular[k]) = lune_average_pair(Vec3::Z, to_light, |n| {
+                bevy_direct(n, Vec3::Z, to_light, perceptual_roughness, reflectance)
+            });
         }
         Self { diffuse, specular }
     }
@@ -735,8 +743,8 @@ mod tests {
     /// 0.6, under the eval's suns and three more behind it: within 2 %
     /// (1.1 % from behind, where the grid's own steps are coarse across
     /// the lit crescent; nearly straight behind, where the crescent is 3°
-    /// wide, within 2 % of a tenth of the front's light). From behind (15° up, the eval's back sun) the sphere
-    /// still sends 0.33 of what it sends lit from the front: the specular
+    /// wide, within 2 % of a tenth of the front's light). From behind (15°
+    /// up, the eval's back sun) the sphere still sends 0.33 of what it sends lit from the front: the specular
     /// glow of its lit rim, which seven normals over the disk missed
     /// entirely.
     #[test]
