@@ -10,7 +10,9 @@ mod common;
 
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
-use bevy_conifer_lod::model::compact::{CompactSpecies, PLACED_BANDS, PlacedDraw, shader_threshold_code};
+use bevy_conifer_lod::model::compact::{
+    CompactSpecies, PLACED_BANDS, PlacedDraw, budget_error, budget_expands, shader_threshold_code,
+};
 use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback, PartKind};
@@ -345,6 +347,112 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
     assert_eq!(expanded, vec![nearest as u32]);
     assert!(!impostor_alone[nearest], "the nearest tree keeps its lines");
     assert!(impostor_alone[middle], "the tree past the budget is its impostor");
+}
+
+/// A directional light's cascade sees every tree at the same error (its
+/// texel), so the budget cannot go by it: it goes to the trees nearest the
+/// camera the cascade serves (`model::compact::budget_error`). Three trees
+/// 6, 20 and 50 m from the camera, spawned farthest first, one cascade over
+/// all three and room for one tree's placements in it: the nearest casts
+/// its lines, the other two their impostors, as the CPU reference
+/// (`budget_expands` over the trees' `budget_error` codes) says. Before,
+/// the first tree the GPU reached took the room (the farthest), and in the
+/// forest a far tree's card cast a straight-edged band across the crowns
+/// next to the camera.
+#[test]
+fn a_cascade_gives_its_budget_to_the_trees_nearest_its_camera() {
+    let _turn = common::gpu_turn();
+    let mut scene = Scene::new();
+    let world = scene.renderer.world_mut();
+    world.resource_mut::<CompactReadback>().enabled = true;
+    let sun = world
+        .query_filtered::<Entity, With<DirectionalLight>>()
+        .single(world)
+        .unwrap();
+    world.get_mut::<DirectionalLight>(sun).unwrap().shadow_maps_enabled = true;
+    world.entity_mut(sun).insert(
+        bevy::light::CascadeShadowConfigBuilder {
+            num_cascades: 1,
+            maximum_distance: 80.0,
+            first_cascade_far_bound: 80.0,
+            ..default()
+        }
+        .build(),
+    );
+    scene.look_from(6.0, 45.0);
+    let placed = scene.placed.clone();
+    let compact = scene
+        .renderer
+        .world()
+        .resource::<Assets<ConiferSpecies>>()
+        .get(&placed)
+        .unwrap()
+        .compact
+        .clone();
+    let transforms = [-44.0f32, -14.0, 0.0].map(|z| Transform::from_xyz(0.0, 0.0, z));
+    // The cascade's threshold code per tree and the trees it expanded.
+    let cascade = |scene: &mut Scene, name: &str| {
+        scene.shot_of(&placed, &transforms, name);
+        let readback = scene.renderer.world().resource::<CompactReadback>();
+        let view = readback
+            .views
+            .iter()
+            .find(|v| v.species == placed.id() && !v.perspective)
+            .expect("the cascade's results were read back");
+        let codes: Vec<u16> = (0..view.lods.len()).map(|t| view.tree_lod(t).0).collect();
+        let mut expanded: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
+        expanded.sort_unstable();
+        expanded.dedup();
+        let impostor: Vec<bool> = (0..view.lods.len())
+            .map(|t| view.tree_draw(PartKind::Impostor, t)[0] == 6)
+            .collect();
+        (codes, expanded, impostor)
+    };
+    let (codes, roomy_expanded, _) = cascade(&mut scene, "cascade_roomy");
+    assert_eq!(codes.len(), 3);
+    assert!(
+        codes.iter().all(|&c| c == codes[0]),
+        "one error for the cascade: {codes:?}"
+    );
+    assert_eq!(roomy_expanded, vec![0, 1, 2], "with room, every tree casts its lines");
+    let demand = compact.expanded_placements(codes[0]);
+    assert!(demand > 0, "the cascade's cut expands placements");
+    // The CPU reference: each tree ranked by the error its camera sees it
+    // at (45°, 160 pixels high).
+    let slope = 2.0 * (22.5f32).to_radians().tan() / SIZE as f32;
+    let eye = scene.crown + Vec3::Z * 6.0;
+    let trees: Vec<(u16, u32)> = transforms
+        .iter()
+        .map(|t| {
+            let distance = eye.distance(scene.crown + t.translation);
+            (
+                shader_threshold_code(budget_error(distance, 0.0, slope, 1.0, 1.0)),
+                demand,
+            )
+        })
+        .collect();
+    let reference = budget_expands(&trees, demand);
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .max_expanded_placements = demand;
+    let (_, expanded, impostor) = cascade(&mut scene, "cascade_nearest");
+    println!(
+        "cascade code {}, demand {demand}: expanded {expanded:?}, impostors {impostor:?}, reference {reference:?}",
+        codes[0]
+    );
+    assert_eq!(
+        reference,
+        vec![false, false, true],
+        "the reference gives the room to the nearest tree"
+    );
+    assert_eq!(expanded, vec![2], "the cascade expands the tree nearest its camera");
+    assert_eq!(
+        impostor,
+        vec![true, true, false],
+        "the trees past its budget cast their impostors"
+    );
 }
 
 /// The per-tree draws the CPU reference (`CompactSpecies::prefixes`) gives

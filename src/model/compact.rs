@@ -236,6 +236,18 @@ pub fn budget_bucket(code: u16) -> usize {
     usize::from(code >> BUDGET_BUCKET_SHIFT)
 }
 
+/// The spatial error (tree metres) a directional light's cascade ranks a
+/// tree by for its expansion budget: every tree of the cascade has the same
+/// error (its texel), so the budget goes by the error the cascade's camera
+/// sees the tree at, from its crown centre `distance` metres from that
+/// camera less the wind's `reach` (world metres), at the camera's
+/// `error_slope` (`2 / (P₁₁ · H)`), the tree's `pixel_error` and `scale`.
+/// Its [`shader_threshold_code`] is the tree's [`budget_bucket`] code.
+/// CPU reference of `conifer_cull.wgsl`'s `TreeView::budget_code`.
+pub fn budget_error(distance: f32, reach: f32, error_slope: f32, pixel_error: f32, scale: f32) -> f32 {
+    pixel_error.max(0.0) * (distance - reach).max(0.0) * error_slope / scale.max(1e-6)
+}
+
 /// Where a view's expansion budget of `capacity` entries runs out:
 /// `(cutoff, base)`, the first bucket whose trees together no longer fit
 /// after the buckets before it ([`BUDGET_BUCKETS`] when every tree fits)
@@ -258,7 +270,8 @@ pub fn budget_cutoff(demand: &[u32; BUDGET_BUCKETS], capacity: u32) -> (usize, u
 
 /// Which of a view's trees expand their placements under a budget of
 /// `capacity` entries: `trees` are each tree's threshold code and the
-/// placements it would expand, in the order the GPU reaches them. A tree
+/// placements it would expand, in the order the GPU reaches them (in a
+/// directional cascade the code of the tree's [`budget_error`]). A tree
 /// that expands nothing is `true`. CPU reference of `conifer_cull.wgsl`'s
 /// `budget_demand`, `budget_cutoff` and `expand_placements`.
 pub fn budget_expands(trees: &[(u16, u32)], capacity: u32) -> Vec<bool> {
@@ -1516,6 +1529,28 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A cascade's trees share one error; ranked by `budget_error` its
+    /// budget goes to the trees nearest its camera, in whatever order the
+    /// GPU reaches them, and a tree within the wind's reach of the camera
+    /// ranks first.
+    #[test]
+    fn a_cascade_ranks_its_trees_by_distance_to_its_camera() {
+        let slope = 2.0 * 22.5f32.to_radians().tan() / 1080.0;
+        let code = |distance: f32| shader_threshold_code(budget_error(distance, 1.5, slope, 1.0, 1.0));
+        let distances = [400.0f32, 9.0, 120.0, 1.0, 35.0];
+        let trees: Vec<(u16, u32)> = distances.iter().map(|&d| (code(d), 1000)).collect();
+        // Room for two trees: the ones 1 and 9 m away.
+        assert_eq!(budget_expands(&trees, 2000), vec![false, true, false, true, false]);
+        assert_eq!(budget_expands(&trees, 3000), vec![false, true, false, true, true]);
+        assert_eq!(budget_error(1.0, 1.5, slope, 1.0, 1.0), 0.0);
+        // Larger trees (scale 2) are seen at half the error in their metres.
+        assert_eq!(
+            budget_error(40.0, 0.0, slope, 1.0, 2.0),
+            budget_error(20.0, 0.0, slope, 1.0, 1.0)
+        );
+        assert!(budget_error(40.0, 0.0, slope, 1.0, 0.0).is_finite());
     }
 
     #[test]

@@ -261,8 +261,10 @@ pub struct ConiferLodSettings {
     /// steeply) and cast as its impostor in a shadow view (turned toward
     /// the light, each texel casting its coverage), else as its coarser
     /// cut (its level-2 lines). In a directional light's cascade every tree
-    /// has the same error, so which trees get the budget there is first
-    /// come; their shadows are the same either way. Default
+    /// has the same error: there the budget goes to the trees nearest the
+    /// camera the cascade serves ([`crate::model::compact::budget_error`]),
+    /// whose shadows that camera sees closest and whose own crowns it sees
+    /// self-shadowed by their lines. Default
     /// 131,072 (about 100 mature trees within full detail of one view);
     /// at most what one storage binding of the device holds (8 bytes an
     /// entry: 16,777,216 under wgpu's default 128 MiB), whatever is set.

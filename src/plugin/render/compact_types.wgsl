@@ -138,6 +138,9 @@ struct CullView {
     layers: u32,
     // expanded placements the view's entry buffers hold
     entry_capacity: u32,
+    // where the budget is ranked from: a cascade's camera (xyz, w its
+    // error slope); w = 0: the view's own spatial error
+    budget_origin: vec4<f32>,
 }
 
 struct Instance {

@@ -180,6 +180,9 @@ struct TreeView {
     seen: bool,
     e: f32,
     code: u32,
+    // The code the expansion budget ranks the tree by: `code`, or in a
+    // directional cascade the code its camera sees it at.
+    budget_code: u32,
     // 255: the impostor alone
     fade: u32,
     // Whether the view may draw the tree as its impostor at all (a camera,
@@ -272,8 +275,8 @@ fn view_tree(i: u32) -> TreeView {
     // A shadow view never fades a tree into its impostor, but casts it for
     // a tree past its budget: its level-2 lines, far wider than the view's
     // texels, would each cast one texel's width, a fraction of the crown's
-    // shadow (every tree of a cascade has the same error, so the budget
-    // cuts off trees at random and their shadows would differ by far).
+    // shadow (a cascade's budget goes to the trees nearest its camera; the
+    // farther ones' shadows would differ by far).
     if impostor && species.impostor_span.w > 0.5 && species.lod_enabled != 0u
         && (cull_view.perspective & VIEW_CAMERA) == 0u {
         tree.impostor_allowed = true;
@@ -281,6 +284,15 @@ fn view_tree(i: u32) -> TreeView {
     tree.seen = true;
     tree.e = e;
     tree.code = threshold_code(e);
+    // Every tree of a directional cascade has the same error: its budget
+    // goes to the trees nearest the camera the cascade serves, whose
+    // shadows that camera sees closest (`model::compact::budget_error`).
+    tree.budget_code = tree.code;
+    if cull_view.budget_origin.w > 0.0 {
+        let from_camera = max(length(center - cull_view.budget_origin.xyz) - reach * scale, 0.0);
+        tree.budget_code = threshold_code(
+            max(pixel_error, 0.0) * from_camera * cull_view.budget_origin.w / max(scale, 1e-6));
+    }
     tree.fade = fade;
     tree.view_point = view_point;
     tree.pixel_error = pixel_error;
@@ -303,7 +315,7 @@ fn budget_demand(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let expanded = expanded_prefix(tree.code);
     if expanded > 0u {
-        atomicAdd(&counters[COUNTER_DEMAND + (tree.code >> BUDGET_BUCKET_SHIFT)], expanded);
+        atomicAdd(&counters[COUNTER_DEMAND + (tree.budget_code >> BUDGET_BUCKET_SHIFT)], expanded);
     }
 }
 
@@ -362,7 +374,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     var code = tree.code;
     if species.placement_count > 0u {
-        let expanded = expand_placements(i, code);
+        let expanded = expand_placements(i, code, tree.budget_code);
         if expanded != code {
             // Past the budget: its impostor where the view may draw one
             // (its level-2 lines alone read as bare branches near the
@@ -416,19 +428,19 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
 
 // Reserves tree `tree`'s expanded placements in the view's entry list and
 // writes them; returns the tree's threshold code. The budget goes to the
-// nearest trees (`budget_cutoff`): a tree below the cutoff bucket always
+// nearest trees by `budget_code` (`budget_cutoff`): a tree below the cutoff bucket always
 // fits; one in it fits if what is left holds it; one past it, or one in it
 // that does not fit, gets the code that expands none (`cull` draws it as
 // its impostor, or its coarser cut from the level-2 lines), the latter
 // marking the part of its range that fits invalid. CPU reference:
 // `model::compact::budget_expands`.
-fn expand_placements(tree: u32, code: u32) -> u32 {
+fn expand_placements(tree: u32, code: u32, budget_code: u32) -> u32 {
     let expanded = expanded_prefix(code);
     if expanded == 0u {
         return code;
     }
     let fallback = max(code, min(placements[0].parent_code, MAX_THRESHOLD_CODE));
-    let bucket = code >> BUDGET_BUCKET_SHIFT;
+    let bucket = budget_code >> BUDGET_BUCKET_SHIFT;
     let cutoff = atomicLoad(&counters[COUNTER_CUTOFF]);
     if bucket > cutoff {
         return fallback;

@@ -292,7 +292,7 @@ impl SpeciesParams {
 /// never draws impostors).
 pub const VIEW_CAMERA: u32 = 2;
 
-/// A view as the compute pass sees it (`CullView` in WGSL), 128 bytes.
+/// A view as the compute pass sees it (`CullView` in WGSL), 144 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct CullView {
@@ -308,6 +308,11 @@ pub struct CullView {
     pub layers: u32,
     /// Expanded placements the view's entry buffers hold.
     pub entry_capacity: u32,
+    /// Where the view's expansion budget is ranked from: a directional
+    /// light's cascade gives it to the trees nearest the camera it serves
+    /// (xyz that camera's position, w its `2 / (P₁₁ · H)`); w = 0 ranks by
+    /// the view's own spatial error.
+    pub budget_origin: [f32; 4],
 }
 
 /// What the compute pass writes per tree and view (`InstanceLod`), 32

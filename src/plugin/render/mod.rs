@@ -1346,9 +1346,25 @@ fn prepare_views(
     opaque_phases: Res<ViewBinnedRenderPhases<Opaque3d>>,
     shadow_phases: Res<ViewBinnedRenderPhases<Shadow>>,
     views: Query<(Entity, &ExtractedView, Option<&RenderLayers>)>,
+    cameras: Query<(&ExtractedView, &bevy::pbr::ViewLightEntities)>,
+    cascades: Query<&bevy::pbr::LightEntity>,
 ) {
     for view in compact_views.views.values_mut() {
         view.used = false;
+    }
+    // A directional light's cascades belong to one camera each: their
+    // budget goes to the trees nearest that camera.
+    let mut budget_origins = EntityHashMap::<[f32; 4]>::default();
+    for (camera, light_views) in &cameras {
+        let Some((slope, true)) = super::view_error_slope(&camera.clip_from_view, camera.viewport.w as f32) else {
+            continue;
+        };
+        let origin = camera.world_from_view.translation().extend(slope).to_array();
+        for &light_view in &light_views.lights {
+            if matches!(cascades.get(light_view), Ok(bevy::pbr::LightEntity::Directional { .. })) {
+                budget_origins.insert(light_view, origin);
+            }
+        }
     }
     let draw_layout = pipeline_cache.get_bind_group_layout(&pipeline.draw_layout);
     let cull_layout = pipeline_cache.get_bind_group_layout(&pipeline.cull_layout);
@@ -1388,6 +1404,7 @@ fn prepare_views(
             perspective: u32::from(perspective) | if camera { VIEW_CAMERA } else { 0 },
             layers: view_layers(layers),
             entry_capacity: 0,
+            budget_origin: budget_origins.get(&view_entity).copied().unwrap_or_default(),
         };
         for (&id, species) in &render.species {
             let Some(gpu) = species.gpu.as_ref() else { continue };
