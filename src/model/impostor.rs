@@ -124,6 +124,41 @@ pub fn shadow_card_lean(elevation: f32, width: f32, height: f32) -> f32 {
     elevation.signum() * (elevation.abs() - across.acos()).max(0.0)
 }
 
+/// Shadow samples an impostor texel takes through the crown
+/// ([`shadow_sample_depths`]).
+pub const SHADOW_SAMPLES: usize = 3;
+
+/// Heights a [`CrownImpostor::crown_radii`] profile holds, bottom to top.
+pub const CROWN_PROFILE_STEPS: usize = 32;
+
+/// Where an impostor texel takes the shadows it receives: depths (tree
+/// metres, toward the camera from the card) of [`SHADOW_SAMPLES`] points
+/// on the view ray through the crown, which the shader averages. The ray
+/// enters a crown of `radius` (at the texel's height,
+/// [`CrownImpostor::crown_radius_at`]) at
+/// `√(radius² − offset²)` for a texel `offset` from the axis across the
+/// card, and crosses a chord twice that long; with the needles spread
+/// evenly along it and the texel's `coverage` (1 − what the chord lets
+/// through), the visible needles lie deeper by `s` with probability
+/// `(1 − (1 − coverage)^(s/chord)) / coverage`, and the points sit at the
+/// 1/6, 1/2 and 5/6 quantiles of that: toward the near side in a dense
+/// crown, along the whole chord in a sparse one. One plane (the card, or
+/// the crown's near side) takes a neighbour's shadow with a hard edge and
+/// none of the crown's own: its sunlit impostors read flat and pale.
+/// Texels outside the crown's circle, and inputs that are not finite,
+/// take the three at the card's plane offset by nothing. CPU reference of
+/// the impostor fragment's `impostor_shadow_depths`.
+pub fn shadow_sample_depths(coverage: f32, offset: f32, radius: f32) -> [f32; SHADOW_SAMPLES] {
+    let half_chord = (radius * radius - offset * offset).max(0.0).sqrt();
+    if !(half_chord > 0.0 && half_chord.is_finite() && coverage.is_finite()) {
+        return [0.0; SHADOW_SAMPLES];
+    }
+    let coverage = coverage.clamp(1e-4, 0.999);
+    let chord = 2.0 * half_chord;
+    let through = (1.0 - coverage).ln();
+    [1.0f32 / 6.0, 0.5, 5.0 / 6.0].map(|q| half_chord - chord * (1.0 - q * coverage).ln() / through)
+}
+
 /// Fewest texels over a tree's height: a smaller tree gets texels smaller
 /// than [`ImpostorOptions::texel`].
 pub const MIN_ROWS: u32 = 8;
@@ -449,6 +484,66 @@ impl CrownImpostor {
         Some(impostor)
     }
 
+    /// The crown's radius about the axis at [`CROWN_PROFILE_STEPS`]
+    /// heights, bottom to top, each over an even share of the rows: per
+    /// view, the distance from the axis within which 95 % of the share's
+    /// coverage lies (a stray branch tip does not widen it), averaged over
+    /// the views; at least half a texel. A conical crown's radius shrinks
+    /// to its tip where the pictures' half width is its widest.
+    pub fn crown_radii(&self) -> [f32; CROWN_PROFILE_STEPS] {
+        let mut radii = [0.5 * self.texel; CROWN_PROFILE_STEPS];
+        if self.rows == 0 || self.columns == 0 || self.views == 0 {
+            return radii;
+        }
+        for (step, radius) in radii.iter_mut().enumerate() {
+            // Rows run from the top: step 0 is the bottom share.
+            let first = self.rows - ((step as u32 + 1) * self.rows).div_ceil(CROWN_PROFILE_STEPS as u32);
+            let last = self.rows - (step as u32 * self.rows) / CROWN_PROFILE_STEPS as u32;
+            let mut sum = 0.0;
+            for view in 0..self.views {
+                // Coverage by distance from the axis, one bin a column.
+                let mut by_distance: Vec<(f32, f32)> = Vec::new();
+                for row in first..last.max(first + 1).min(self.rows) {
+                    for column in 0..self.columns {
+                        let c = self.texels[((view * self.rows + row) * self.columns + column) as usize][0];
+                        if c > 0 {
+                            let along = (column as f32 + 0.5) * self.texel - self.half_width;
+                            by_distance.push((along.abs() + 0.5 * self.texel, f32::from(c)));
+                        }
+                    }
+                }
+                by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
+                let total: f32 = by_distance.iter().map(|d| d.1).sum();
+                let mut seen = 0.0;
+                let mut reach = 0.0;
+                for (distance, c) in by_distance {
+                    reach = distance;
+                    seen += c;
+                    if seen >= 0.95 * total {
+                        break;
+                    }
+                }
+                sum += reach;
+            }
+            *radius = (sum / self.views as f32).max(0.5 * self.texel);
+        }
+        radii
+    }
+
+    /// The crown's radius at tree-local `height`, from a
+    /// [`CrownImpostor::crown_radii`] profile `radii` of the pictures from
+    /// `bottom` to `top`: linear between the steps' middles, the end
+    /// steps' outside them. CPU reference of the impostor fragment's
+    /// `crown_radius_at`.
+    pub fn crown_radius_at(radii: &[f32; CROWN_PROFILE_STEPS], bottom: f32, top: f32, height: f32) -> f32 {
+        let steps = CROWN_PROFILE_STEPS as f32;
+        let f = ((height - bottom) / (top - bottom) * steps - 0.5).clamp(0.0, steps - 1.0);
+        let f = if f.is_nan() { 0.0 } else { f };
+        let k = (f as usize).min(CROWN_PROFILE_STEPS - 2);
+        let t = f - k as f32;
+        radii[k] * (1.0 - t) + radii[k + 1] * t
+    }
+
     /// Tree-local height of the pictures' top edge.
     pub fn top(&self) -> f32 {
         self.bottom + self.rows as f32 * self.texel
@@ -714,6 +809,107 @@ impl CrownImpostor {
 
 #[cfg(test)]
 mod tests {
+
+    /// A cone's pictures give its radius by height: 64 rows of a crown
+    /// 3 m wide at the bottom narrowing to nothing at the top, one stray
+    /// texel at the picture's edge in every row where the cone is over
+    /// half a metre wide (2 % of a row's coverage at most: inside the 5 %
+    /// the profile leaves out). Between the
+    /// steps the radius is linear; past the ends it is the end steps'.
+    #[test]
+    fn the_crown_profile_follows_a_cone() {
+        let (columns, rows, texel) = (64u32, 64u32, 0.1f32);
+        let half_width = columns as f32 * texel / 2.0;
+        let mut texels = vec![[0u8; 4]; (2 * rows * columns) as usize];
+        for view in 0..2 {
+            for row in 0..rows {
+                // Height fraction of the row's middle, 0 at the bottom.
+                let up = 1.0 - (row as f32 + 0.5) / rows as f32;
+                let radius = 1.5 * (1.0 - up);
+                for column in 0..columns {
+                    let along = (column as f32 + 0.5) * texel - half_width;
+                    let i = ((view * rows + row) * columns + column) as usize;
+                    if along.abs() < radius {
+                        texels[i] = [200, 0, 0, 0];
+                    }
+                }
+                if radius > 0.5 {
+                    texels[((view * rows + row) * columns) as usize] = [2, 0, 0, 0];
+                }
+            }
+        }
+        let impostor = CrownImpostor {
+            views: 2,
+            columns,
+            rows,
+            axis: Vec2::ZERO,
+            half_width,
+            bottom: 1.0,
+            texel,
+            texels,
+        };
+        let radii = impostor.crown_radii();
+        for (step, radius) in radii.iter().enumerate() {
+            let up = (step as f32 + 0.5) / CROWN_PROFILE_STEPS as f32;
+            let cone = 1.5 * (1.0 - up);
+            assert!(
+                (radius - cone).abs() <= 1.5 * texel,
+                "step {step}: {radius} for a cone's {cone}"
+            );
+        }
+        assert!(radii[0] > 10.0 * radii[CROWN_PROFILE_STEPS - 1]);
+        let (bottom, top) = (impostor.bottom, impostor.top());
+        let step = (top - bottom) / CROWN_PROFILE_STEPS as f32;
+        let at = |h: f32| CrownImpostor::crown_radius_at(&radii, bottom, top, h);
+        assert_eq!(at(bottom - 5.0), radii[0]);
+        assert_eq!(at(top + 5.0), radii[CROWN_PROFILE_STEPS - 1]);
+        assert!((at(bottom + 3.5 * step) - radii[3]).abs() < 1e-5);
+        assert!((at(bottom + 4.0 * step) - 0.5 * (radii[3] + radii[4])).abs() < 1e-5);
+        assert_eq!(at(f32::NAN), radii[0]);
+    }
+
+    /// The shadow samples sit at the quantiles of the visible needles'
+    /// depth: in front of each lies 1/6, 1/2, 5/6 of what the texel shows
+    /// (integrated with needles even along the chord), inside the crown,
+    /// nearer the near side the denser the texel; outside the circle they
+    /// are on the card.
+    #[test]
+    fn shadow_samples_sit_where_the_texel_s_needles_are_seen() {
+        let radius = 3.0f32;
+        for offset in [0.0f32, 1.0, 2.5] {
+            let half = (radius * radius - offset * offset).sqrt();
+            let mut previous_deepest = f32::NEG_INFINITY;
+            for coverage in [0.05f32, 0.5, 0.9, 0.99] {
+                let depths = shadow_sample_depths(coverage, offset, radius);
+                for (q, depth) in [1.0f32 / 6.0, 0.5, 5.0 / 6.0].into_iter().zip(depths) {
+                    assert!(depth <= half && depth >= -half, "{depth} inside ±{half}");
+                    // Share of the seen needles in front of `depth`, by a
+                    // sum over 10,000 slices of the chord.
+                    let slices = 10_000;
+                    let step = 2.0 * half / slices as f32;
+                    let density = -(1.0 - coverage).ln() / (2.0 * half);
+                    let seen = |s: f32| density * (-density * s).exp();
+                    let total: f32 = (0..slices).map(|k| seen((k as f32 + 0.5) * step) * step).sum();
+                    let front: f32 = (0..slices)
+                        .map(|k| (k as f32 + 0.5) * step)
+                        .filter(|&s| half - s > depth)
+                        .map(|s| seen(s) * step)
+                        .sum();
+                    assert!(
+                        (front / total - q).abs() < 2e-3,
+                        "offset {offset}, coverage {coverage}: {} for {q}",
+                        front / total
+                    );
+                }
+                assert!(depths[0] > depths[1] && depths[1] > depths[2]);
+                assert!(depths[2] > previous_deepest, "a denser texel is seen nearer its front");
+                previous_deepest = depths[2];
+            }
+        }
+        assert_eq!(shadow_sample_depths(0.5, 4.0, 3.0), [0.0; 3]);
+        assert_eq!(shadow_sample_depths(f32::NAN, 0.0, 3.0), [0.0; 3]);
+        assert_eq!(shadow_sample_depths(0.5, 0.0, f32::INFINITY), [0.0; 3]);
+    }
     use super::*;
     use crate::model::look::tests::needle;
 

@@ -123,7 +123,13 @@ struct SpeciesParams {
     // (`model::shading::SphereLight`)
     sphere_diffuse: array<vec4<f32>, 16>,
     sphere_specular: array<vec4<f32>, 16>,
+    // the impostor's crown radius (tree metres) at CROWN_PROFILE_STEPS
+    // heights from its bottom to its top, four a row
+    // (`model::impostor::CrownImpostor::crown_radii`)
+    crown_radii: array<vec4<f32>, 8>,
 }
+
+const CROWN_PROFILE_STEPS: u32 = 32u;
 
 const SPHERE_LIGHT_STEPS: u32 = 64u;
 

@@ -41,7 +41,7 @@
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
-    SPHERE_LIGHT_STEPS,
+    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment,
 }
@@ -1092,6 +1092,128 @@ fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
     return surface_lighting(in, surface);
 }
 
+// View depth of a world point (directional cascades are chosen by it).
+fn view_depth(position: vec4<f32>) -> f32 {
+    return dot(vec4<f32>(
+        view_bindings::view.view_from_world[0].z,
+        view_bindings::view.view_from_world[1].z,
+        view_bindings::view.view_from_world[2].z,
+        view_bindings::view.view_from_world[3].z
+    ), position);
+}
+
+#ifdef CONIFER_IMPOSTOR
+// `model::impostor::SHADOW_SAMPLES` points on the view ray through the
+// crown where an impostor texel takes the shadows it receives, and the
+// directional lights' shadows averaged over them (the first
+// IMPOSTOR_CACHED_LIGHTS lights; set once a fragment by
+// `impostor_shadow_samples`, read by every share's lighting).
+const IMPOSTOR_SHADOW_SAMPLES: u32 = 3u;
+const IMPOSTOR_CACHED_LIGHTS: u32 = 4u;
+var<private> impostor_shadow_points: array<vec4<f32>, 3>;
+var<private> impostor_directional_shadows: array<f32, 4>;
+
+// Depths (tree metres toward the camera from the card) of the texel's
+// shadow samples: the 1/6, 1/2 and 5/6 quantiles of where its visible
+// needles lie on the chord through a crown of `radius`, the texel `offset`
+// from the axis, needles even along the chord and `coverage` seen (CPU
+// reference: `model::impostor::shadow_sample_depths`).
+fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> {
+    let half_chord = sqrt(max(radius * radius - offset * offset, 0.0));
+    if !(half_chord > 0.0 && half_chord < 1e30 && coverage == coverage) {
+        return vec3<f32>(0.0);
+    }
+    let c = clamp(coverage, 1e-4, 0.999);
+    let through = log(1.0 - c);
+    let q = vec3<f32>(1.0 / 6.0, 0.5, 5.0 / 6.0);
+    return vec3<f32>(half_chord) - 2.0 * half_chord * log(vec3<f32>(1.0) - q * c) / through;
+}
+
+// The crown's radius at tree-local `height`: linear between the profile's
+// steps (CPU reference: `model::impostor::CrownImpostor::crown_radius_at`).
+fn crown_radius_at(height: f32) -> f32 {
+    let steps = f32(CROWN_PROFILE_STEPS);
+    let span = species.impostor_span;
+    var f = clamp((height - span.x) / (span.y - span.x) * steps - 0.5, 0.0, steps - 1.0);
+    if !(f == f) {
+        f = 0.0;
+    }
+    let k = min(u32(f), CROWN_PROFILE_STEPS - 2u);
+    let t = f - f32(k);
+    let a = species.crown_radii[k / 4u][k % 4u];
+    let b = species.crown_radii[(k + 1u) / 4u][(k + 1u) % 4u];
+    return mix(a, b, t);
+}
+
+// Places the texel's shadow samples on the view ray `V` through the crown
+// from the card point `card` (world; `scale` world metres a tree metre) and
+// averages the directional lights' shadows over them.
+fn impostor_shadow_samples(card: vec3<f32>, V: vec3<f32>, depths: vec3<f32>, scale: f32, frag: vec2<f32>) {
+    for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
+        impostor_shadow_points[k] = vec4<f32>(card + V * (depths[k] * scale), 1.0);
+    }
+    for (var i = 0u; i < min(view_bindings::lights.n_directional_lights, IMPOSTOR_CACHED_LIGHTS); i++) {
+        var shadow = 1.0;
+        if (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
+            shadow = 0.0;
+            for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
+                let p = impostor_shadow_points[k];
+                shadow += shadows::fetch_directional_shadow(i, p, V, view_depth(p), frag);
+            }
+            shadow /= f32(IMPOSTOR_SHADOW_SAMPLES);
+        }
+        impostor_directional_shadows[i] = shadow;
+    }
+}
+#endif
+
+// Directional light `i`'s shadow at `position` (an impostor texel's: the
+// mean over its samples through the crown).
+fn directional_shadow(i: u32, position: vec4<f32>, toward: vec3<f32>, view_z: f32, frag: vec2<f32>) -> f32 {
+#ifdef CONIFER_IMPOSTOR
+    if i < IMPOSTOR_CACHED_LIGHTS {
+        return impostor_directional_shadows[i];
+    }
+    var sum = 0.0;
+    for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
+        let p = impostor_shadow_points[k];
+        sum += shadows::fetch_directional_shadow(i, p, toward, view_depth(p), frag);
+    }
+    return sum / f32(IMPOSTOR_SHADOW_SAMPLES);
+#else
+    return shadows::fetch_directional_shadow(i, position, toward, view_z, frag);
+#endif
+}
+
+// Point light `light_id`'s shadow at `position` (an impostor texel's: the
+// mean over its samples through the crown).
+fn point_shadow(light_id: u32, position: vec4<f32>, toward: vec3<f32>, frag: vec2<f32>) -> f32 {
+#ifdef CONIFER_IMPOSTOR
+    var sum = 0.0;
+    for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
+        sum += shadows::fetch_point_shadow(light_id, impostor_shadow_points[k], toward, frag);
+    }
+    return sum / f32(IMPOSTOR_SHADOW_SAMPLES);
+#else
+    return shadows::fetch_point_shadow(light_id, position, toward, frag);
+#endif
+}
+
+// Spot light `light_id`'s shadow at `position` (an impostor texel's: the
+// mean over its samples through the crown).
+fn spot_shadow(light_id: u32, position: vec4<f32>, toward: vec3<f32>, frag: vec2<f32>) -> f32 {
+    let near_z = view_bindings::clustered_lights.data[light_id].shadow_map_near_z;
+#ifdef CONIFER_IMPOSTOR
+    var sum = 0.0;
+    for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
+        sum += shadows::fetch_spot_shadow(light_id, impostor_shadow_points[k], toward, near_z, frag);
+    }
+    return sum / f32(IMPOSTOR_SHADOW_SAMPLES);
+#else
+    return shadows::fetch_spot_shadow(light_id, position, toward, near_z, frag);
+#endif
+}
+
 // The surface's radiance averaged over what the pixel sees of it; each
 // light's shadow is fetched once, at the normal facing the viewer.
 fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
@@ -1110,12 +1232,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     input.F0_dielectric = pbr_functions::calculate_F0_dielectric(in.material.reflectance);
     input.F0_metallic = base;
 
-    let view_z = dot(vec4<f32>(
-        view_bindings::view.view_from_world[0].z,
-        view_bindings::view.view_from_world[1].z,
-        view_bindings::view.view_from_world[2].z,
-        view_bindings::view.view_from_world[3].z
-    ), in.world_position);
+    let view_z = view_depth(in.world_position);
     let cluster_index = clustering::view_fragment_cluster_index(in.frag_coord.xy, view_z, in.is_orthographic);
     var ranges = clustering::unpack_clusterable_object_index_ranges(cluster_index);
     let receiver = (in.flags & MESH_FLAGS_SHADOW_RECEIVER_BIT) != 0u;
@@ -1125,7 +1242,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         let light_id = clustering::get_clusterable_object_id(i);
         var shadow = 1.0;
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
+            shadow = point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
         let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow;
@@ -1134,13 +1251,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         let light_id = clustering::get_clusterable_object_id(i);
         var shadow = 1.0;
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_spot_shadow(
-                light_id,
-                in.world_position,
-                toward,
-                view_bindings::clustered_lights.data[light_id].shadow_map_near_z,
-                in.frag_coord.xy,
-            );
+            shadow = spot_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
         let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow;
@@ -1148,7 +1259,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
         var shadow = 1.0;
         if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = shadows::fetch_directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
+            shadow = directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
         let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
         direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
@@ -1235,11 +1346,14 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     pbr_input.is_orthographic = view.clip_from_view[3].w == 1.0;
     pbr_input.V = pbr_functions::calculate_view(in.world_position, pbr_input.is_orthographic);
 #ifdef CONIFER_IMPOSTOR
-    // The quad stands on the trunk, inside the crown, where the crown's own
-    // shadow falls: what the camera sees is the crown's near side, half its
-    // width nearer. Lights and shadows are taken there.
-    let reach = species.impostor_box.z * length(world_from_local[0].xyz);
-    pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * reach, 1.0);
+    // The quad stands on the trunk, inside the crown: what the camera sees
+    // of a texel are needles spread along its ray through the crown, nearer
+    // its near side the denser it is. Shadows are averaged over three
+    // points where they lie, lights taken at the middle one.
+    let scale = length(world_from_local[0].xyz);
+    let depths = impostor_shadow_depths(texel.r, (2.0 * in.uv.x - 1.0) * species.impostor_box.z, crown_radius_at(height));
+    impostor_shadow_samples(in.world_position.xyz, pbr_input.V, depths, scale, in.position.xy);
+    pbr_input.world_position = impostor_shadow_points[1];
 #endif
     pbr_input.N = pbr_input.world_normal;
     pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;

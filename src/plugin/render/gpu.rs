@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 880 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 1,008 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -251,7 +251,16 @@ pub struct SpeciesParams {
     pub sphere_diffuse: [[f32; 4]; SPHERE_LIGHT_ROWS],
     /// Its mean specular ([`crate::model::shading::SphereLight::specular`]).
     pub sphere_specular: [[f32; 4]; SPHERE_LIGHT_ROWS],
+    /// The impostor's crown radius (tree metres) at
+    /// [`crate::model::impostor::CROWN_PROFILE_STEPS`] heights, four a
+    /// row ([`crate::model::impostor::CrownImpostor::crown_radii`]): where
+    /// a texel's ray enters the crown, for its shadow samples.
+    pub crown_radii: [[f32; 4]; CROWN_RADII_ROWS],
 }
+
+/// Rows of four heights that hold a
+/// [`crate::model::impostor::CrownImpostor::crown_radii`] profile.
+pub const CROWN_RADII_ROWS: usize = crate::model::impostor::CROWN_PROFILE_STEPS / 4;
 
 /// Rows of four angles that hold a [`crate::model::shading::SphereLight`]
 /// table.
@@ -264,6 +273,14 @@ impl SpeciesParams {
         for k in 0..crate::model::shading::SPHERE_LIGHT_STEPS {
             self.sphere_diffuse[k / 4][k % 4] = table.diffuse[k];
             self.sphere_specular[k / 4][k % 4] = table.specular[k];
+        }
+    }
+
+    /// Sets the impostor's crown radius by height
+    /// ([`crate::model::impostor::CrownImpostor::crown_radii`]).
+    pub fn set_crown_radii(&mut self, radii: &[f32; crate::model::impostor::CROWN_PROFILE_STEPS]) {
+        for (k, &radius) in radii.iter().enumerate() {
+            self.crown_radii[k / 4][k % 4] = radius;
         }
     }
 
@@ -468,7 +485,16 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_880_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 880);
+    fn species_params_is_1008_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 1008);
+    }
+
+    /// The shader's crown profile is as long as `model::impostor`'s.
+    #[test]
+    fn the_shader_has_the_crown_profiles_length() {
+        let types = include_str!("compact_types.wgsl");
+        let steps = crate::model::impostor::CROWN_PROFILE_STEPS;
+        assert!(types.contains(&format!("const CROWN_PROFILE_STEPS: u32 = {steps}u;")));
+        assert!(types.contains(&format!("crown_radii: array<vec4<f32>, {}>", super::CROWN_RADII_ROWS)));
     }
 }

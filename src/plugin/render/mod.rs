@@ -311,6 +311,9 @@ struct RenderSpecies {
     /// The sphere light table and the material's roughness and reflectance
     /// (bits) it was made for.
     sphere_light: ([u32; 2], SphereLight),
+    /// The impostor's crown radius by height
+    /// ([`CrownImpostor::crown_radii`]; zeros without one).
+    crown_radii: [f32; crate::model::impostor::CROWN_PROFILE_STEPS],
 }
 
 impl RenderSpecies {
@@ -504,6 +507,11 @@ fn species_params(
     params
 }
 
+/// An impostor's crown radius by height (zeros without one).
+fn crown_radii(impostor: Option<&CrownImpostor>) -> [f32; crate::model::impostor::CROWN_PROFILE_STEPS] {
+    impostor.map(CrownImpostor::crown_radii).unwrap_or_default()
+}
+
 /// Copies the species and trees that changed into the render world.
 fn extract_compact(
     mut commands: Commands,
@@ -557,6 +565,7 @@ fn extract_compact(
             draw_entities: PartKind::ALL.map(|kind| commands.spawn(CompactDrawItem { species: id, kind }).id()),
             phase_keys: keys.map(MainEntity::from),
             sphere_light: (material_key, sphere_light()),
+            crown_radii: crown_radii(asset.impostor.as_deref()),
         });
         if entry.sphere_light.0 != material_key {
             entry.sphere_light = (material_key, sphere_light());
@@ -565,6 +574,7 @@ fn extract_compact(
             // A reloaded record: new arrays.
             entry.compact = compact.clone();
             entry.impostor = asset.impostor.clone();
+            entry.crown_radii = crown_radii(asset.impostor.as_deref());
             entry.gpu = None;
             entry.instances_dirty = true;
         }
@@ -586,6 +596,7 @@ fn extract_compact(
             wind_step,
             &entry.sphere_light.1,
         );
+        entry.params.set_crown_radii(&entry.crown_radii);
         entry.params.instance_count = entry.instances.len() as u32;
     }
 }
