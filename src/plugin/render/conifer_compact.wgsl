@@ -1215,7 +1215,8 @@ fn spot_shadow(light_id: u32, position: vec4<f32>, toward: vec3<f32>, frag: vec2
 }
 
 // The surface's radiance averaged over what the pixel sees of it; each
-// light's shadow is fetched once, at the normal facing the viewer.
+// light's shadow is fetched once, at the normal facing the viewer (an
+// impostor texel's is the mean over its samples through the crown).
 fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     let V = in.V;
     let toward = surface.toward;
