@@ -211,11 +211,12 @@ fn the_impostor_covers_what_the_needles_cover() {
     }
 }
 
-/// A camera on `+z` of `crown` where the pixel error spans six texels of
-/// side `texel` (the tree drawn as its impostor alone), clearing to
-/// transparent, without MSAA. Returns it and where it stands.
-fn impostor_camera(world: &mut World, target: &Handle<Image>, crown: Vec3, texel: f32) -> (Entity, Vec3) {
-    let eye = crown + Vec3::Z * (6.0 * texel / error_per_metre());
+/// A camera on `+z` of `crown` where the pixel error spans `texels`
+/// texels of side `texel` (from 1.6 the tree is drawn as its impostor
+/// alone), clearing to transparent, without MSAA. Returns it and where it
+/// stands.
+fn impostor_camera(world: &mut World, target: &Handle<Image>, crown: Vec3, texel: f32, texels: f32) -> (Entity, Vec3) {
+    let eye = crown + Vec3::Z * (texels * texel / error_per_metre());
     let camera = world
         .spawn(HeadlessRenderer::camera_bundle(
             target,
@@ -260,7 +261,7 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
     // The tree ~40 pixels tall, where one trilinear sample would blur two
     // pixels.
-    let (_, eye) = impostor_camera(world, &target, crown, impostor.texel);
+    let (_, eye) = impostor_camera(world, &target, crown, impostor.texel, 6.0);
     let distance = eye.distance(crown);
     for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
         renderer.update().unwrap();
@@ -336,7 +337,7 @@ fn lit_impostor() -> LitImpostor {
     let crown = species.crown_center;
     let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
     let world = renderer.world_mut();
-    let (camera, eye) = impostor_camera(world, &target, crown, baked.texel);
+    let (camera, eye) = impostor_camera(world, &target, crown, baked.texel, 6.0);
     world.entity_mut(camera).insert(Tonemapping::None);
     LitImpostor {
         record,
@@ -566,24 +567,10 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
         }
         .build(),
     ));
-    // Two texels a pixel error: the impostor alone (it fades in from 0.8
-    // to 1.6), the tree ~110 pixels tall.
-    let eye = crown + Vec3::Z * (2.0 * texel / error_per_metre());
-    let camera = world
-        .spawn(HeadlessRenderer::camera_bundle(
-            &target,
-            Transform::from_translation(eye).looking_at(crown, Vec3::Y),
-            FOV_DEG.to_radians(),
-        ))
-        .id();
-    world.entity_mut(camera).insert((
-        Camera {
-            clear_color: ClearColorConfig::Custom(Color::NONE),
-            ..default()
-        },
-        Msaa::Off,
-        Tonemapping::None,
-    ));
+    // Two texels a pixel error: the impostor alone, the tree ~110 pixels
+    // tall.
+    let (camera, _) = impostor_camera(world, &target, crown, texel, 2.0);
+    world.entity_mut(camera).insert(Tonemapping::None);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
     let shot = |renderer: &mut HeadlessRenderer, far_impostor: bool, name: &str| {
         renderer.world_mut().resource_mut::<ConiferLodSettings>().far_impostor = far_impostor;

@@ -15,7 +15,7 @@ use bevy_conifer_lod::model::compact::{
 };
 use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
-use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback, PartKind};
+use bevy_conifer_lod::plugin::{CompactGpuMemory, CompactReadback, PartKind, ViewReadback};
 use bevy_conifer_lod::prelude::*;
 use common::{background_camera, covered_count, look_at_crown, mean_difference, spawn_ground};
 use std::path::PathBuf;
@@ -108,9 +108,41 @@ impl Scene {
         image
     }
 
+    /// The compact arrays of `species`.
+    fn compact(&self, species: &Handle<ConiferSpecies>) -> std::sync::Arc<CompactSpecies> {
+        let assets = self.renderer.world().resource::<Assets<ConiferSpecies>>();
+        assets.get(species).unwrap().compact.clone()
+    }
+
+    /// Trees of `species` standing at `transforms`, pictured as `name`,
+    /// and what the compute passes wrote for its camera (`perspective`)
+    /// or its directional cascade.
+    fn read_back(
+        &mut self,
+        species: &Handle<ConiferSpecies>,
+        transforms: &[Transform],
+        name: &str,
+        perspective: bool,
+    ) -> ViewReadback {
+        self.shot_of(species, transforms, name);
+        let readback = self.renderer.world().resource::<CompactReadback>();
+        readback
+            .views
+            .iter()
+            .find(|v| v.species == species.id() && v.perspective == perspective)
+            .expect("the view's results were read back")
+            .clone()
+    }
+
     fn memory(&self) -> CompactGpuMemory {
         self.renderer.world().resource::<CompactGpuMemory>().clone()
     }
+}
+
+/// Three trees 50, 20 and 6 m from a camera 6 m from the crown on `+z`,
+/// farthest first.
+fn three_trees() -> [Transform; 3] {
+    [-44.0f32, -14.0, 0.0].map(|z| Transform::from_xyz(0.0, 0.0, z))
 }
 
 fn assert_alike(what: &str, placed: &image::RgbaImage, flat: &image::RgbaImage) {
@@ -263,25 +295,12 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
     world.resource_mut::<ConiferLodSettings>().far_impostor = false;
     scene.look_from(6.0, 45.0);
     let placed = scene.placed.clone();
-    let compact = scene
-        .renderer
-        .world()
-        .resource::<Assets<ConiferSpecies>>()
-        .get(&placed)
-        .unwrap()
-        .compact
-        .clone();
-    let transforms = [-44.0f32, -14.0, 0.0].map(|z| Transform::from_xyz(0.0, 0.0, z));
+    let compact = scene.compact(&placed);
+    let transforms = three_trees();
     // Each tree's threshold code and spatial error, by instance slot, and
     // the trees with expanded placements.
     let lods = |scene: &mut Scene, name: &str| {
-        scene.shot_of(&placed, &transforms, name);
-        let readback = scene.renderer.world().resource::<CompactReadback>();
-        let view = readback
-            .views
-            .iter()
-            .find(|v| v.species == placed.id() && v.perspective)
-            .expect("the camera's results were read back");
+        let view = scene.read_back(&placed, &transforms, name, true);
         let trees: Vec<(u16, f32, bool)> = (0..view.lods.len())
             .map(|t| {
                 let (code, e) = view.tree_lod(t);
@@ -381,24 +400,11 @@ fn a_cascade_gives_its_budget_to_the_trees_nearest_its_camera() {
     );
     scene.look_from(6.0, 45.0);
     let placed = scene.placed.clone();
-    let compact = scene
-        .renderer
-        .world()
-        .resource::<Assets<ConiferSpecies>>()
-        .get(&placed)
-        .unwrap()
-        .compact
-        .clone();
-    let transforms = [-44.0f32, -14.0, 0.0].map(|z| Transform::from_xyz(0.0, 0.0, z));
+    let compact = scene.compact(&placed);
+    let transforms = three_trees();
     // The cascade's threshold code per tree and the trees it expanded.
     let cascade = |scene: &mut Scene, name: &str| {
-        scene.shot_of(&placed, &transforms, name);
-        let readback = scene.renderer.world().resource::<CompactReadback>();
-        let view = readback
-            .views
-            .iter()
-            .find(|v| v.species == placed.id() && !v.perspective)
-            .expect("the cascade's results were read back");
+        let view = scene.read_back(&placed, &transforms, name, false);
         let codes: Vec<u16> = (0..view.lods.len()).map(|t| view.tree_lod(t).0).collect();
         let mut expanded: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
         expanded.sort_unstable();
