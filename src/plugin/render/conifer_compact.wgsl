@@ -1113,38 +1113,6 @@ const IMPOSTOR_CACHED_LIGHTS: u32 = 4u;
 var<private> impostor_shadow_points: array<vec4<f32>, 3>;
 var<private> impostor_directional_shadows: array<f32, 4>;
 
-// Depths (tree metres toward the camera from the card) of the texel's
-// shadow samples: the 1/6, 1/2 and 5/6 quantiles of where its visible
-// needles lie on the chord through a crown of `radius`, the texel `offset`
-// from the axis, needles even along the chord and `coverage` seen (CPU
-// reference: `model::impostor::shadow_sample_depths`).
-fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> {
-    let half_chord = sqrt(max(radius * radius - offset * offset, 0.0));
-    if !(half_chord > 0.0 && half_chord < 1e30 && coverage == coverage) {
-        return vec3<f32>(0.0);
-    }
-    let c = clamp(coverage, 1e-4, 0.999);
-    let through = log(1.0 - c);
-    let q = vec3<f32>(1.0 / 6.0, 0.5, 5.0 / 6.0);
-    return vec3<f32>(half_chord) - 2.0 * half_chord * log(vec3<f32>(1.0) - q * c) / through;
-}
-
-// The crown's radius at tree-local `height`: linear between the profile's
-// steps (CPU reference: `model::impostor::CrownImpostor::crown_radius_at`).
-fn crown_radius_at(height: f32) -> f32 {
-    let steps = f32(CROWN_PROFILE_STEPS);
-    let span = species.impostor_span;
-    var f = clamp((height - span.x) / (span.y - span.x) * steps - 0.5, 0.0, steps - 1.0);
-    if !(f == f) {
-        f = 0.0;
-    }
-    let k = min(u32(f), CROWN_PROFILE_STEPS - 2u);
-    let t = f - f32(k);
-    let a = species.crown_radii[k / 4u][k % 4u];
-    let b = species.crown_radii[(k + 1u) / 4u][(k + 1u) % 4u];
-    return mix(a, b, t);
-}
-
 // Places the texel's shadow samples on the view ray `V` through the crown
 // from the card point `card` (world; `scale` world metres a tree metre) and
 // averages the directional lights' shadows over them.
@@ -1290,6 +1258,40 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
 #endif
 #endif
 
+#ifdef CONIFER_IMPOSTOR
+// Depths (tree metres toward the camera from the card) of the texel's
+// shadow samples: the 1/6, 1/2 and 5/6 quantiles of where its visible
+// needles lie on the chord through a crown of `radius`, the texel `offset`
+// from the axis, needles even along the chord and `coverage` seen (CPU
+// reference: `model::impostor::shadow_sample_depths`).
+fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> {
+    let half_chord = sqrt(max(radius * radius - offset * offset, 0.0));
+    if !(half_chord > 0.0 && half_chord < 1e30 && coverage == coverage) {
+        return vec3<f32>(0.0);
+    }
+    let c = clamp(coverage, 1e-4, 0.999);
+    let through = log(1.0 - c);
+    let q = vec3<f32>(1.0 / 6.0, 0.5, 5.0 / 6.0);
+    return vec3<f32>(half_chord) - 2.0 * half_chord * log(vec3<f32>(1.0) - q * c) / through;
+}
+
+// The crown's radius at tree-local `height`: linear between the profile's
+// steps (CPU reference: `model::impostor::CrownImpostor::crown_radius_at`).
+fn crown_radius_at(height: f32) -> f32 {
+    let steps = f32(CROWN_PROFILE_STEPS);
+    let span = species.impostor_span;
+    var f = clamp((height - span.x) / (span.y - span.x) * steps - 0.5, 0.0, steps - 1.0);
+    if !(f == f) {
+        f = 0.0;
+    }
+    let k = min(u32(f), CROWN_PROFILE_STEPS - 2u);
+    let t = f - f32(k);
+    let a = species.crown_radii[k / 4u][k % 4u];
+    let b = species.crown_radii[(k + 1u) / 4u][(k + 1u) % 4u];
+    return mix(a, b, t);
+}
+#endif
+
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
@@ -1353,8 +1355,13 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // points where they lie, lights taken at the middle one.
     let scale = length(world_from_local[0].xyz);
     let depths = impostor_shadow_depths(texel.r, (2.0 * in.uv.x - 1.0) * species.impostor_box.z, crown_radius_at(height));
+#ifdef CONIFER_FACING_STRIP
+    // Bevy's own lighting takes one shadow, at the middle sample.
+    pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * (depths[1] * scale), 1.0);
+#else
     impostor_shadow_samples(in.world_position.xyz, pbr_input.V, depths, scale, in.position.xy);
     pbr_input.world_position = impostor_shadow_points[1];
+#endif
 #endif
     pbr_input.N = pbr_input.world_normal;
     pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;
