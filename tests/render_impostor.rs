@@ -518,7 +518,7 @@ fn halves_light(picture: &image::RgbaImage, split: u32) -> [f32; 2] {
 /// the crown where the texel's needles are seen
 /// (`model::impostor::shadow_sample_depths`, the crown's radius at the
 /// texel's height from `CrownImpostor::crown_radii`), so its far half
-/// darkens as its lines' does: far half over sunlit half 0.232 against the
+/// darkens as its lines' does: far half over sunlit half 0.233 against the
 /// lines' 0.210. Taken at one plane (the crown's near side, as before) it
 /// was 0.359: the far half lit almost as the near one, flat and pale
 /// beside the lines it replaces; with the samples on a chord of the

@@ -139,6 +139,14 @@ impl Scene {
     }
 }
 
+/// The trees (instance slots) with expanded placements in `view`, sorted.
+fn expanded_trees(view: &ViewReadback) -> Vec<u32> {
+    let mut trees: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
+    trees.sort_unstable();
+    trees.dedup();
+    trees
+}
+
 /// Three trees 50, 20 and 6 m from a camera 6 m from the crown on `+z`,
 /// farthest first.
 fn three_trees() -> [Transform; 3] {
@@ -307,9 +315,7 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
                 (code, e, view.view_point(t).is_some())
             })
             .collect();
-        let mut expanded: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
-        expanded.sort_unstable();
-        expanded.dedup();
+        let expanded = expanded_trees(&view);
         let impostor_alone: Vec<bool> = (0..view.lods.len())
             .map(|t| {
                 let lines = [PartKind::OriginalLines, PartKind::MergedLines, PartKind::Prisms]
@@ -406,9 +412,7 @@ fn a_cascade_gives_its_budget_to_the_trees_nearest_its_camera() {
     let cascade = |scene: &mut Scene, name: &str| {
         let view = scene.read_back(&placed, &transforms, name, false);
         let codes: Vec<u16> = (0..view.lods.len()).map(|t| view.tree_lod(t).0).collect();
-        let mut expanded: Vec<u32> = view.entries.iter().map(|&[tree, _]| tree & 0x3fff_ffff).collect();
-        expanded.sort_unstable();
-        expanded.dedup();
+        let expanded = expanded_trees(&view);
         let impostor: Vec<bool> = (0..view.lods.len())
             .map(|t| view.tree_draw(PartKind::Impostor, t)[0] == 6)
             .collect();

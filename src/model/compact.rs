@@ -243,7 +243,8 @@ pub fn budget_bucket(code: u16) -> usize {
 /// camera less the wind's `reach` (world metres), at the camera's
 /// `error_slope` (`2 / (P₁₁ · H)`), the tree's `pixel_error` and `scale`.
 /// Its [`shader_threshold_code`] is the tree's [`budget_bucket`] code.
-/// CPU reference of `conifer_cull.wgsl`'s `TreeView::budget_code`.
+/// CPU reference of `conifer_cull.wgsl`'s `error_from` (a camera's error
+/// for a tree, and a cascade's `budget_code`).
 pub fn budget_error(distance: f32, reach: f32, error_slope: f32, pixel_error: f32, scale: f32) -> f32 {
     pixel_error.max(0.0) * (distance - reach).max(0.0) * error_slope / scale.max(1e-6)
 }

@@ -496,19 +496,20 @@ impl CrownImpostor {
             return radii;
         }
         for (step, radius) in radii.iter_mut().enumerate() {
-            // Rows run from the top: step 0 is the bottom share.
+            // Rows run from the top: step 0 is the bottom share; every
+            // share holds at least one row (`rows` ≥ 1).
             let first = self.rows - ((step as u32 + 1) * self.rows).div_ceil(CROWN_PROFILE_STEPS as u32);
             let last = self.rows - (step as u32 * self.rows) / CROWN_PROFILE_STEPS as u32;
             let mut sum = 0.0;
             for view in 0..self.views {
                 // Coverage by distance from the axis, one bin a column.
                 let mut by_distance: Vec<(f32, f32)> = Vec::new();
-                for row in first..last.max(first + 1).min(self.rows) {
+                for row in first..last {
                     for column in 0..self.columns {
-                        let c = self.texels[((view * self.rows + row) * self.columns + column) as usize][0];
-                        if c > 0 {
+                        let c = self.texel_at(view, column, row).map_or(0.0, |t| t.coverage);
+                        if c > 0.0 {
                             let along = (column as f32 + 0.5) * self.texel - self.half_width;
-                            by_distance.push((along.abs() + 0.5 * self.texel, f32::from(c)));
+                            by_distance.push((along.abs() + 0.5 * self.texel, c));
                         }
                     }
                 }

@@ -194,6 +194,15 @@ struct TreeView {
     opacity_rule: u32,
 }
 
+// The spatial error (tree metres) of a tree of `scale` whose crown centre
+// stands at `center`, seen from `eye` with `slope` metres of error a metre
+// and its `pixel_error`, nearer by the wind's `reach` (world metres). CPU
+// reference: `model::compact::budget_error`.
+fn error_from(eye: vec3<f32>, center: vec3<f32>, reach: f32, slope: f32, pixel_error: f32, scale: f32) -> f32 {
+    let distance = max(length(center - eye) - reach, 0.0);
+    return max(pixel_error, 0.0) * distance * slope / max(scale, 1e-6);
+}
+
 fn view_tree(i: u32) -> TreeView {
     var tree: TreeView;
     tree.seen = false;
@@ -228,11 +237,11 @@ fn view_tree(i: u32) -> TreeView {
     if rule_override != 0u {
         opacity_rule = rule_override - 1u;
     }
-    var distance = 1.0;
+    // An orthographic view has one error everywhere (its texel's).
+    var e = max(pixel_error, 0.0) * cull_view.error_slope / max(scale, 1e-6);
     if (cull_view.perspective & VIEW_PERSPECTIVE) != 0u {
-        distance = max(length(center - cull_view.world_position.xyz) - reach * scale, 0.0);
+        e = error_from(cull_view.world_position.xyz, center, reach * scale, cull_view.error_slope, pixel_error, scale);
     }
-    var e = max(pixel_error, 0.0) * distance * cull_view.error_slope / max(scale, 1e-6);
     if species.lod_enabled == 0u {
         e = 0.0;
     }
@@ -289,9 +298,8 @@ fn view_tree(i: u32) -> TreeView {
     // shadows that camera sees closest (`model::compact::budget_error`).
     tree.budget_code = tree.code;
     if cull_view.budget_origin.w > 0.0 {
-        let from_camera = max(length(center - cull_view.budget_origin.xyz) - reach * scale, 0.0);
-        tree.budget_code = threshold_code(
-            max(pixel_error, 0.0) * from_camera * cull_view.budget_origin.w / max(scale, 1e-6));
+        let origin = cull_view.budget_origin;
+        tree.budget_code = threshold_code(error_from(origin.xyz, center, reach * scale, origin.w, pixel_error, scale));
     }
     tree.fade = fade;
     tree.view_point = view_point;
