@@ -12,7 +12,10 @@ use bevy::prelude::*;
 use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
 use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
-use bevy_conifer_lod::model::impostor::{CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade};
+use bevy_conifer_lod::model::impostor::{
+    CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade, swayed_card_point,
+};
+use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, sway_offset, sway_reach, trunk_offset};
 use bevy_conifer_lod::model::{BakeOptions, LodRecord, bake};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
@@ -315,6 +318,118 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
         footprint_error < 0.5 * trilinear_error,
         "the footprint filter, not one trilinear sample: {footprint_error} vs {trilinear_error}"
     );
+}
+
+/// In wind the impostor's quad leans with the trunk and its fragments
+/// read the picture where the branches' sway and the shoots' flutter
+/// moved it from (CPU reference: the quad's corners moved by
+/// `trunk_offset`, each pixel's calm card point moved back by
+/// `swayed_card_point` of `sway_offset`, sampled by `ImpostorMips::footprint`),
+/// at three moments of a strong wind across the view; the same picture
+/// leaning with the trunk alone, as it was drawn before, is several times
+/// further off.
+#[test]
+fn the_impostor_sways_as_its_needles_do() {
+    let _turn = common::gpu_turn();
+    let species = ConiferSpecies::from_record(spruce()).unwrap();
+    let impostor = species.impostor.clone().expect("an impostor");
+    let shape = species.wind_shape;
+    let crown = species.crown_center;
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(SIZE, SIZE);
+    let world = renderer.world_mut();
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+    world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
+    // The tree ~120 pixels tall, drawn as its impostor alone.
+    let (_, eye) = impostor_camera(world, &target, crown, impostor.texel, 2.0);
+    let origin = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+    let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
+    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
+    let views = impostor.views as f32;
+    let f = (phi / std::f32::consts::TAU + 1.0).fract() * views;
+    let (k0, k1, blend) = (f.floor() % views, (f.floor() + 1.0) % views, f.fract());
+    let mips = ImpostorMips::new(&impostor);
+    let height = impostor.top() - impostor.bottom;
+    let uv_of = |p: Vec3| {
+        let (across, up) = ((p - origin).dot(right), p.y);
+        Vec2::new((across / impostor.half_width + 1.0) / 2.0, (impostor.top() - up) / height)
+    };
+    let mut worst_moved = 0.0f32;
+    for seconds in [0.9, 2.3, 4.1] {
+        // Blowing along the card, so the trunk's lean stays in its plane.
+        let wind = ConiferWind {
+            direction: Vec2::new(right.x, right.z),
+            strength: 4.0,
+            gustiness: 0.3,
+            turbulence: 0.8,
+            time: Some(seconds),
+        };
+        let model = wind.model();
+        renderer.world_mut().insert_resource(wind);
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+            renderer.update().unwrap();
+        }
+        let picture = renderer.capture(&target, 8).unwrap();
+        picture
+            .save(out_dir().join(format!("impostor_wind_{seconds}s.png")))
+            .unwrap();
+        let clock = WindClock::at(seconds, &shape);
+        let phase = TreeWindPhase::of_root(Vec2::ZERO, &model);
+        // The quad: wider by the sway's reach, its corners leaning with
+        // the trunk (the same along its bottom and its top edge).
+        let margin = sway_reach(&model, &shape);
+        let (bottom, top) = (impostor.bottom - margin, impostor.top() + margin);
+        let lean = |y: f32| trunk_offset(&model, &shape, &clock, &phase, origin + Vec3::Y * y).along;
+        let (lean_bottom, lean_top) = (lean(bottom), lean(top));
+        // A pixel's calm card point, and where it reads the picture with
+        // the sway and without.
+        let card_point = |x: f32, y: f32| {
+            let hit = on_quad(x, y, eye, origin, right);
+            let lean = lean_bottom + (lean_top - lean_bottom) * (hit.y - bottom) / (top - bottom);
+            origin + right * (hit.x - lean) + Vec3::Y * hit.y
+        };
+        let swayed = |p: Vec3| {
+            let sway = sway_offset(&model, &shape, &clock, &phase, p).world(model.unit_direction(), 1.0);
+            uv_of(swayed_card_point(p, right, Vec3::Y, sway))
+        };
+        let (mut swayed_error, mut leaning_error, mut moved, mut n) = (0.0f64, 0.0f64, 0.0f32, 0.0f64);
+        for y in 0..SIZE {
+            for x in 0..SIZE {
+                let expect = |read: &dyn Fn(Vec3) -> Vec2| {
+                    let at = |dx: f32, dy: f32| read(card_point(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy));
+                    let uv = at(0.0, 0.0);
+                    let (du, dv) = (at(1.0, 0.0) - uv, at(0.0, 1.0) - uv);
+                    let inside = (0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y);
+                    let (a, b) = (mips.footprint(k0 as u32, uv, du, dv)[0], mips.footprint(k1 as u32, uv, du, dv)[0]);
+                    let c = a + (b - a) * blend;
+                    (uv, inside, if c > 1.0 / 512.0 { c } else { 0.0 })
+                };
+                let (uv, inside, expected) = expect(&swayed);
+                let (calm_uv, calm_inside, leaning) = expect(&uv_of);
+                if !(inside && calm_inside) {
+                    continue;
+                }
+                moved = moved.max(((uv - calm_uv) * Vec2::new(2.0 * impostor.half_width, height)).length());
+                let drawn = f32::from(picture.get_pixel(x, y).0[3]) / 255.0;
+                swayed_error += f64::from((drawn - expected).abs());
+                leaning_error += f64::from((drawn - leaning).abs());
+                n += 1.0;
+            }
+        }
+        let (swayed_error, leaning_error) = (swayed_error / n, leaning_error / n);
+        println!(
+            "{seconds} s: picture moved up to {moved:.3} m (margin {margin:.3} m); |drawn − swayed reference| {swayed_error:.4}, |drawn − leaning with the trunk alone| {leaning_error:.4} over {n} pixels"
+        );
+        assert!(moved <= margin, "the sway stays within the quad's margin");
+        assert!(swayed_error < 0.003, "{seconds} s: drawn vs the CPU reference: {swayed_error}");
+        assert!(
+            swayed_error < 0.2 * leaning_error,
+            "{seconds} s: the picture sways: {swayed_error} vs {leaning_error} leaning alone"
+        );
+        worst_moved = worst_moved.max(moved);
+    }
+    // The sway moved the picture by more than a pixel (~0.2 m here).
+    assert!(worst_moved > 0.3, "{worst_moved}");
 }
 
 /// The spruce's impostor under a sun alone (no ambient light), seen by

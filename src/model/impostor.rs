@@ -159,6 +159,29 @@ pub fn shadow_sample_depths(coverage: f32, offset: f32, radius: f32) -> [f32; SH
     [1.0f32 / 6.0, 0.5, 5.0 / 6.0].map(|q| half_chord - chord * (1.0 - q * coverage).ln() / through)
 }
 
+/// Where on its calm card an impostor fragment reads the crown's picture
+/// when the wind sways it: the fragment's calm card point `at`
+/// (tree-local) moved back by `sway` (tree metres, the branches' sway and
+/// the shoots' flutter there, [`crate::model::wind::sway_offset`]) across
+/// the card (`right`, unit) and up it (`up`, unit); a move along the view
+/// moves no picture. The quad itself leans with the trunk
+/// ([`crate::model::wind::trunk_offset`] at its corners) and is wider by
+/// [`crate::model::wind::sway_reach`] on every side, so the picture can
+/// move past the calm crown's edge. The field is taken at the card's
+/// plane, which stands on the trunk's axis turned to the camera: the
+/// middle of the chord a texel's ray crosses the crown on, and at the
+/// crown's edge, where a move shows most, where its needles are. Moving
+/// back by the sway at `at` rather than at the moved point is the first
+/// step of the inverse: off by the field's slope times the sway (a
+/// centimetre in a strong wind). CPU reference of the impostor fragment's
+/// `impostor_swayed_uv`.
+pub fn swayed_card_point(at: Vec3, right: Vec3, up: Vec3, sway: Vec3) -> Vec3 {
+    if !sway.is_finite() {
+        return at;
+    }
+    at - right * sway.dot(right) - up * sway.dot(up)
+}
+
 /// Fewest texels over a tree's height: a smaller tree gets texels smaller
 /// than [`ImpostorOptions::texel`].
 pub const MIN_ROWS: u32 = 8;
@@ -334,7 +357,9 @@ impl ImpostorMips {
     /// sampled at its centre from the level of its own size, averaged. A
     /// box filter of the pixel where one trilinear sample is a box
     /// convolved with two tents (its error at 30 pixels a tree is a fifth
-    /// of trilinear's).
+    /// of trilinear's). A cell whose centre is off the pictures (outside
+    /// `[0, 1]²`) sees nothing: the card is wider than the pictures in
+    /// wind ([`swayed_card_point`]).
     pub fn footprint(&self, view: u32, uv: Vec2, du: Vec2, dv: Vec2) -> [f32; 4] {
         let (w, h) = self.size();
         let texels = Vec2::new(w as f32, h as f32);
@@ -344,8 +369,11 @@ impl ImpostorMips {
         let mut sum = [0.0; 4];
         for a in 0..taps {
             for b in 0..taps {
-                let offset = du * ((a as f32 + 0.5) / n - 0.5) + dv * ((b as f32 + 0.5) / n - 0.5);
-                let sample = self.sample_grad(view, uv + offset, du_tap, dv_tap);
+                let at = uv + du * ((a as f32 + 0.5) / n - 0.5) + dv * ((b as f32 + 0.5) / n - 0.5);
+                if !(at.cmpge(Vec2::ZERO).all() && at.cmple(Vec2::ONE).all()) {
+                    continue;
+                }
+                let sample = self.sample_grad(view, at, du_tap, dv_tap);
                 for (s, v) in sum.iter_mut().zip(sample) {
                     *s += v;
                 }
@@ -931,6 +959,49 @@ mod tests {
             let crown = (height * elevation.cos() + width * elevation.abs().sin()).min(height);
             proptest::prop_assert!((spans - crown).abs() <= 1e-3 * height, "{} against {}", spans, crown);
         }
+    }
+
+    proptest::proptest! {
+        /// A fragment of the swayed card reads the picture where the field
+        /// came from: a crown point `p` on the card moved by its sway
+        /// (across the card and up) to `q` is read back at `p` to within
+        /// a fifth of the move in winds up to a gale (the first step of
+        /// the inverse, off by the field's slope times the move), and a
+        /// sway along the view moves nothing.
+        #[test]
+        fn a_swayed_card_reads_the_picture_where_its_needles_came_from(
+            across in -3.0f32..3.0, height in 2.0f32..20.0, azimuth in 0.0f32..6.28,
+            seconds in 0.0f64..1e4, strength in 0.1f32..4.0, turbulence in 0.0f32..1.0,
+        ) {
+            use crate::model::wind::{TreeWindPhase, Wind, WindClock, WindShape, sway_offset};
+            let shape = WindShape::from_bounds(Vec3::new(-3.0, 0.0, -3.0), Vec3::new(3.0, 20.0, 3.0), Vec2::ZERO);
+            let wind = Wind { direction: Vec2::new(0.6, 0.8), strength, gustiness: 0.5, turbulence };
+            let clock = WindClock::at(seconds, &shape);
+            let phase = TreeWindPhase::of_root(Vec2::new(3.0, -7.0), &wind);
+            let sway = |p: Vec3| sway_offset(&wind, &shape, &clock, &phase, p).world(wind.unit_direction(), 1.0);
+            let right = Vec3::new(azimuth.cos(), 0.0, -azimuth.sin());
+            let p = right * across + Vec3::Y * height;
+            let moved = sway(p) - right.cross(Vec3::Y) * sway(p).dot(right.cross(Vec3::Y));
+            let q = p + moved;
+            let back = swayed_card_point(q, right, Vec3::Y, sway(q));
+            proptest::prop_assert!(
+                (back - p).length() <= 0.2 * moved.length() + 1e-5,
+                "read back {} m off after a move of {} m", (back - p).length(), moved.length()
+            );
+            let along_view = right.cross(Vec3::Y) * 0.4;
+            proptest::prop_assert!((swayed_card_point(p, right, Vec3::Y, along_view) - p).length() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn a_swayed_card_point_of_known_moves() {
+        let (right, up) = (Vec3::X, Vec3::Y);
+        let at = Vec3::new(1.0, 5.0, 0.0);
+        assert_eq!(
+            swayed_card_point(at, right, up, Vec3::new(0.2, -0.1, 0.3)),
+            Vec3::new(0.8, 5.1, 0.0)
+        );
+        assert_eq!(swayed_card_point(at, right, up, Vec3::splat(f32::NAN)), at);
     }
 
     #[test]

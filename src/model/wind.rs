@@ -323,8 +323,10 @@ pub fn gust_factor(wind: &Wind, clock: &WindClock, phase: &TreeWindPhase) -> f32
 }
 
 /// The displacement of the tree-local point `point` (record metres) of a
-/// tree of `shape`, at `clock`, with its own `phase`. The shader computes
-/// the same ([`WindOffset::world`] turns it into world metres).
+/// tree of `shape`, at `clock`, with its own `phase`: the trunk's bend
+/// ([`trunk_offset`]) plus the branches' sway and the shoots' flutter
+/// ([`sway_offset`]). The shader computes the same ([`WindOffset::world`]
+/// turns it into world metres).
 pub fn wind_offset(
     wind: &Wind,
     shape: &WindShape,
@@ -332,20 +334,75 @@ pub fn wind_offset(
     phase: &TreeWindPhase,
     point: Vec3,
 ) -> WindOffset {
+    let trunk = trunk_offset(wind, shape, clock, phase, point);
+    let sway = sway_offset(wind, shape, clock, phase, point);
+    WindOffset {
+        along: trunk.along + sway.along,
+        across: sway.across,
+        up: sway.up,
+    }
+}
+
+/// The strength gusts make of `wind` at this tree now, and the point's
+/// height over the tree's height and distance from the trunk over the
+/// crown radius (capped at [`MAX_REACH_RATIO`]); `None` in calm or for a
+/// point that is not finite.
+fn field_terms(
+    wind: &Wind,
+    shape: &WindShape,
+    clock: &WindClock,
+    phase: &TreeWindPhase,
+    point: Vec3,
+) -> Option<(f32, f32, f32)> {
     let w = wind.clamped();
     if w.strength == 0.0 || !point.is_finite() {
-        return WindOffset::default();
+        return None;
     }
     let force = w.strength * gust_factor(&w, clock, phase);
     let h = ((point.y - shape.base) / shape.height).clamp(0.0, 1.0);
     let r = ((Vec2::new(point.x, point.z) - shape.axis).length() / shape.crown_radius).min(MAX_REACH_RATIO);
-    let trunk = force * shape.height * h * h * (TRUNK_LEAN + TRUNK_SWAY * (clock.trunk + phase.sway).sin());
+    Some((force, h, r))
+}
+
+/// The trunk's bend at `point`: along the wind, `force · H · h² · (lean +
+/// sway · sin)`, the same for every point at one height. What the crown
+/// impostor's quad takes at its corners (it leans with the trunk).
+pub fn trunk_offset(
+    wind: &Wind,
+    shape: &WindShape,
+    clock: &WindClock,
+    phase: &TreeWindPhase,
+    point: Vec3,
+) -> WindOffset {
+    let Some((force, h, _)) = field_terms(wind, shape, clock, phase, point) else {
+        return WindOffset::default();
+    };
+    WindOffset {
+        along: force * shape.height * h * h * (TRUNK_LEAN + TRUNK_SWAY * (clock.trunk + phase.sway).sin()),
+        across: 0.0,
+        up: 0.0,
+    }
+}
+
+/// The branches' sway and the shoots' flutter at `point`: [`wind_offset`]
+/// without the trunk's bend. What the crown impostor's fragments move its
+/// picture by ([`crate::model::impostor::swayed_card_point`]).
+pub fn sway_offset(
+    wind: &Wind,
+    shape: &WindShape,
+    clock: &WindClock,
+    phase: &TreeWindPhase,
+    point: Vec3,
+) -> WindOffset {
+    let Some((force, _, r)) = field_terms(wind, shape, clock, phase, point) else {
+        return WindOffset::default();
+    };
     let branch_amplitude = force * BRANCH_SWAY * shape.crown_radius * r * r.sqrt();
     let branch = clock.branch + phase.sway + point.dot(BRANCH_WAVES);
-    let flutter_amplitude = force * w.turbulence * FLUTTER * r;
+    let flutter_amplitude = force * wind.clamped().turbulence * FLUTTER * r;
     let flutter = clock.flutter + phase.sway + point.dot(FLUTTER_WAVES);
     WindOffset {
-        along: trunk + 0.5 * branch_amplitude * (branch + 1.0).sin(),
+        along: 0.5 * branch_amplitude * (branch + 1.0).sin(),
         across: flutter_amplitude * flutter.sin(),
         up: branch_amplitude * branch.sin() + 0.5 * flutter_amplitude * (flutter + 2.1).sin(),
     }
@@ -407,10 +464,25 @@ pub fn wind_reach(wind: &Wind, shape: &WindShape) -> f32 {
     }
     let force = w.strength * (1.0 + w.gustiness);
     let trunk = force * shape.height * (TRUNK_LEAN + TRUNK_SWAY);
+    // Rounding head room, so the bound holds in f32 on the GPU too.
+    trunk * 1.001 + sway_reach(wind, shape)
+}
+
+/// The largest displacement [`sway_offset`] can give in `shape` under
+/// `wind` (tree metres): branch sway and flutter at their largest. The
+/// crown impostor's quad is this much wider on every side, so its picture
+/// can sway past the calm crown's edge. The vertex shader's
+/// `impostor_sway_margin`.
+pub fn sway_reach(wind: &Wind, shape: &WindShape) -> f32 {
+    let w = wind.clamped();
+    if w.strength == 0.0 {
+        return 0.0;
+    }
+    let force = w.strength * (1.0 + w.gustiness);
     let branch = force * BRANCH_SWAY * shape.crown_radius * MAX_REACH_RATIO.powf(1.5) * 1.25f32.sqrt();
     let flutter = force * w.turbulence * FLUTTER * MAX_REACH_RATIO * 1.25f32.sqrt();
     // Rounding head room, so the bound holds in f32 on the GPU too.
-    (trunk + branch + flutter) * 1.001
+    (branch + flutter) * 1.001
 }
 
 #[cfg(test)]
@@ -593,6 +665,15 @@ mod tests {
             let phase = TreeWindPhase::of_root(Vec2::new(root_x, root_z), &wind);
             let o = wind_offset(&wind, &s, &clock, &phase, Vec3::new(x, y, z));
             proptest::prop_assert!(o.length() <= wind_reach(&wind, &s), "{} > {}", o.length(), wind_reach(&wind, &s));
+            // The parts: the trunk's bend along the wind, the sway within
+            // its own reach (the impostor's margin), summing to the whole.
+            let point = Vec3::new(x, y, z);
+            let trunk = trunk_offset(&wind, &s, &clock, &phase, point);
+            let sway = sway_offset(&wind, &s, &clock, &phase, point);
+            proptest::prop_assert!(trunk.across == 0.0 && trunk.up == 0.0);
+            proptest::prop_assert!(sway.length() <= sway_reach(&wind, &s), "{} > {}", sway.length(), sway_reach(&wind, &s));
+            proptest::prop_assert_eq!(trunk.along + sway.along, o.along);
+            proptest::prop_assert_eq!((sway.across, sway.up), (o.across, o.up));
         }
 
         #[test]

@@ -99,9 +99,14 @@ struct VertexOutput {
     @location(2) color: vec4<f32>,
 #endif
 #ifdef CONIFER_IMPOSTOR
-    // Where on the impostor's pictures (u right, v down).
+    // Where on the impostor's pictures (u right, v down) the calm card
+    // point lies (outside [0, 1] on the margin the wind's sway needs).
     @location(3) uv: vec2<f32>,
     @location(4) @interpolate(flat) tree: u32,
+    // The card's point (tree-local, calm) and its unit axes across and up.
+    @location(7) card_point: vec3<f32>,
+    @location(8) @interpolate(flat) card_right: vec3<f32>,
+    @location(9) @interpolate(flat) card_up: vec3<f32>,
 #endif
 #ifdef CONIFER_BARK
     // Height in the tree's frame, for the bark's colour.
@@ -130,9 +135,14 @@ fn culled() -> VertexOutput {
 // by `vertex`: the frame of the tree's own parts, of its placements, and
 // of the wind.
 var<private> wind_tree: mat4x4<f32>;
-// The impostor sways with the trunk only (its quad's corners stand off
-// the tree, where branch sway would wobble the picture).
-var<private> wind_trunk_only: bool;
+// Which part of the field `wind_displacement` gives: the whole, the
+// trunk's bend only (the impostor's quad leans with the trunk), or the
+// branches' sway and the shoots' flutter only (what the impostor's
+// fragments move its picture by).
+const WIND_WHOLE: u32 = 0u;
+const WIND_TRUNK: u32 = 1u;
+const WIND_SWAY: u32 = 2u;
+var<private> wind_part: u32 = WIND_WHOLE;
 // Set while `finish` places a vertex where the wind held it the frame
 // before.
 var<private> wind_previous: bool;
@@ -193,11 +203,13 @@ fn wind_displacement(world: vec3<f32>) -> vec3<f32> {
     let crown_radius = species.wind_clock.w;
     let h = clamp((p.y - shape.z) / shape.w, 0.0, 1.0);
     let r = min(length(p.xz - shape.xy) / crown_radius, WIND_MAX_REACH_RATIO);
-    let trunk = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(clocks.trunk + sway_phase));
-    var along = trunk;
+    var along = 0.0;
     var across = 0.0;
     var up = 0.0;
-    if !wind_trunk_only {
+    if wind_part != WIND_SWAY {
+        along = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(clocks.trunk + sway_phase));
+    }
+    if wind_part != WIND_TRUNK {
         let branch_amplitude = force * WIND_BRANCH_SWAY * crown_radius * r * sqrt(r);
         let branch = clocks.branch + sway_phase + dot(p, WIND_BRANCH_WAVES);
         let flutter_amplitude = force * species.wind_motion.x * WIND_FLUTTER * r;
@@ -746,7 +758,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     // One quad standing on the impostor's axis, turned about it toward the
     // camera; its pictures are the two views nearest the camera's azimuth,
     // blended (`model::impostor`).
-    wind_trunk_only = true;
+    wind_part = WIND_TRUNK;
     let fade = impostor_fade(lod);
     if !(fade > 0.0) {
         return culled();
@@ -788,15 +800,23 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let to_light = vec3<f32>(sin(phi), 0.0, cos(phi));
     up = cos(lean) * up - sin(lean) * to_light;
 #endif
-    let position = vec3<f32>(frame.x, centre, frame.y) + (mix(span.x, span.y, v) - centre) * up
-        + right * ((2.0 * u - 1.0) * frame.z);
+    // In wind the card is wider and taller by the sway's reach on every
+    // side: its fragments move the picture by the branches' sway
+    // (`impostor_swayed_uv`), past the calm crown's edge.
+    let margin = impostor_sway_margin();
+    let across_card = (2.0 * u - 1.0) * (frame.z + margin);
+    let along_card = mix(span.x - margin, span.y + margin, v);
+    let position = vec3<f32>(frame.x, centre, frame.y) + (along_card - centre) * up + right * across_card;
     let views = max(span.z, 1.0);
     let f = fract(phi / TAU + 1.0) * views;
     let k0 = floor(f) % views;
     let k1 = (k0 + 1.0) % views;
     var out = finish(position, vec3<f32>(0.0, 1.0, 0.0), world_from_local, vec4<f32>(k0, k1, f - floor(f), fade));
-    out.uv = vec2<f32>(u, 1.0 - v);
+    out.uv = vec2<f32>(0.5 * (across_card / frame.z + 1.0), (span.y - along_card) / max(span.y - span.x, 1e-6));
     out.tree = tree;
+    out.card_point = position;
+    out.card_right = right;
+    out.card_up = up;
     return out;
 #endif
 
@@ -824,6 +844,52 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 }
 
 #ifdef CONIFER_IMPOSTOR
+// The largest sway of a branch and flutter of a shoot the wind can give
+// this species, tree metres: how far past the calm crown the impostor's
+// picture can move (CPU reference: `model::wind::sway_reach`).
+fn impostor_sway_margin() -> f32 {
+    let strength = species.wind.z;
+    if !(strength > 0.0) {
+        return 0.0;
+    }
+    let force = strength * (1.0 + species.wind.w);
+    // MAX_REACH_RATIO^1.5 and the √1.25 of a sine and half a sine summed.
+    let most = 1.8371173 * 1.1180340;
+    let branch = force * WIND_BRANCH_SWAY * species.wind_clock.w * most;
+    let flutter = force * species.wind_motion.x * WIND_FLUTTER * WIND_MAX_REACH_RATIO * 1.1180340;
+    return (branch + flutter) * 1.001;
+}
+
+// Where on the impostor's pictures this fragment reads: its calm card
+// point moved back by the branches' sway and the shoots' flutter there,
+// across the card and up (along the view a shift moves nothing), so the
+// crown's picture sways as its needles do while the quad leans with the
+// trunk (CPU reference: `model::impostor::swayed_card_point`).
+fn impostor_swayed_uv(uv: vec2<f32>, tree: u32, card_point: vec3<f32>, right: vec3<f32>, up: vec3<f32>) -> vec2<f32> {
+    if !(species.wind.z > 0.0) {
+        return uv;
+    }
+    let world_from_local = instance_world_from_local(instances[tree]);
+    wind_tree = world_from_local;
+    wind_part = WIND_SWAY;
+    let sway = wind_displacement((world_from_local * vec4<f32>(card_point, 1.0)).xyz);
+    wind_part = WIND_WHOLE;
+    // Back to tree metres in the tree's frame (its columns are the
+    // rotation times the scale).
+    let scale2 = max(dot(world_from_local[0].xyz, world_from_local[0].xyz), 1e-12);
+    let local = vec3<f32>(
+        dot(world_from_local[0].xyz, sway),
+        dot(world_from_local[1].xyz, sway),
+        dot(world_from_local[2].xyz, sway),
+    ) / scale2;
+    let frame = species.impostor_box;
+    let span = species.impostor_span;
+    return uv - vec2<f32>(
+        0.5 * dot(local, right) / max(frame.z, 1e-6),
+        -dot(local, up) / max(span.y - span.x, 1e-6),
+    );
+}
+
 // `model::impostor::MAX_FOOTPRINT_TAPS`.
 const MAX_FOOTPRINT_TAPS: f32 = 4.0;
 
@@ -846,8 +912,12 @@ fn impostor_footprint(uv: vec2<f32>, du: vec2<f32>, dv: vec2<f32>, layer: i32) -
     let n = u32(taps);
     for (var a = 0u; a < n; a++) {
         for (var b = 0u; b < n; b++) {
-            let offset = du * ((f32(a) + 0.5) / taps - 0.5) + dv * ((f32(b) + 0.5) / taps - 0.5);
-            sum += textureSampleGrad(impostor_texture, impostor_sampler, uv + offset, layer, tap_du, tap_dv);
+            let at = uv + du * ((f32(a) + 0.5) / taps - 0.5) + dv * ((f32(b) + 0.5) / taps - 0.5);
+            // A tap off the pictures sees nothing (the sampler would
+            // repeat their edge over the wind's margin).
+            if all(at >= vec2<f32>(0.0)) && all(at <= vec2<f32>(1.0)) {
+                sum += textureSampleGrad(impostor_texture, impostor_sampler, at, layer, tap_du, tap_dv);
+            }
         }
     }
     return sum / (taps * taps);
@@ -911,7 +981,8 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
 @fragment
 fn fragment(in: VertexOutput) {
 #ifdef CONIFER_IMPOSTOR
-    let coverage = impostor_texel(in.uv, in.color).r * in.color.w;
+    let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up);
+    let coverage = impostor_texel(uv, in.color).r * in.color.w;
     let line = IMPOSTOR_SHADOW_LINE;
     let tree = in.tree;
 #else
@@ -1301,7 +1372,8 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The two views' texels over the pixel's footprint: coverage, wood,
     // and the shares lit as a vertical cylinder and as one across the view
     // (both times coverage; the rest is lit as a sphere).
-    let texel = impostor_texel(in.uv, in.color);
+    let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up);
+    let texel = impostor_texel(uv, in.color);
     if !(texel.r > 1.0 / 512.0) {
         discard;
     }
@@ -1354,7 +1426,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // its near side the denser it is. Shadows are averaged over three
     // points where they lie, lights taken at the middle one.
     let scale = length(world_from_local[0].xyz);
-    let depths = impostor_shadow_depths(texel.r, (2.0 * in.uv.x - 1.0) * species.impostor_box.z, crown_radius_at(height));
+    let depths = impostor_shadow_depths(texel.r, (2.0 * uv.x - 1.0) * species.impostor_box.z, crown_radius_at(height));
 #ifdef CONIFER_FACING_STRIP
     // Bevy's own lighting takes one shadow, at the middle sample.
     pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * (depths[1] * scale), 1.0);
