@@ -160,26 +160,28 @@ pub fn shadow_sample_depths(coverage: f32, offset: f32, radius: f32) -> [f32; SH
 }
 
 /// Where on its calm card an impostor fragment reads the crown's picture
-/// when the wind sways it: the fragment's calm card point `at`
-/// (tree-local) moved back by `sway` (tree metres, the branches' sway and
-/// the shoots' flutter there, [`crate::model::wind::sway_offset`]) across
-/// the card (`right`, unit) and up it (`up`, unit); a move along the view
-/// moves no picture. The quad itself leans with the trunk
-/// ([`crate::model::wind::trunk_offset`] at its corners) and is wider by
-/// [`crate::model::wind::sway_reach`] on every side, so the picture can
-/// move past the calm crown's edge. The field is taken at the card's
+/// when the wind moves it: the fragment's calm card point `at`
+/// (tree-local) moved back by `moved` (tree metres) across the card
+/// (`right`, unit) and up it (`up`, unit); a move along the view moves no
+/// picture. The quad's corners lean with the trunk
+/// ([`crate::model::wind::trunk_offset`] there), straight between them,
+/// so `moved` is what the field ([`crate::model::wind::wind_offset`])
+/// moves `at` by less what that lean moved the fragment by: the
+/// branches' sway, the shoots' flutter, and where the trunk's bend strays
+/// from the straight lean. The quad is wider and taller by
+/// [`crate::model::wind::impostor_margin`] on every side, so the picture
+/// can move past the calm crown's edge. The field is taken at the card's
 /// plane, which stands on the trunk's axis turned to the camera: the
 /// middle of the chord a texel's ray crosses the crown on, and at the
 /// crown's edge, where a move shows most, where its needles are. Moving
-/// back by the sway at `at` rather than at the moved point is the first
-/// step of the inverse: off by the field's slope times the sway (a
-/// centimetre in a strong wind). CPU reference of the impostor fragment's
-/// `impostor_swayed_uv`.
-pub fn swayed_card_point(at: Vec3, right: Vec3, up: Vec3, sway: Vec3) -> Vec3 {
-    if !sway.is_finite() {
+/// back by the field at `at` rather than at the moved point is the first
+/// step of the inverse: off by the field's slope times the move. CPU
+/// reference of the impostor fragment's `impostor_swayed_uv`.
+pub fn swayed_card_point(at: Vec3, right: Vec3, up: Vec3, moved: Vec3) -> Vec3 {
+    if !moved.is_finite() {
         return at;
     }
-    at - right * sway.dot(right) - up * sway.dot(up)
+    at - right * moved.dot(right) - up * moved.dot(up)
 }
 
 /// Fewest texels over a tree's height: a smaller tree gets texels smaller
@@ -965,9 +967,10 @@ mod tests {
         /// A fragment of the swayed card reads the picture where the field
         /// came from: a crown point `p` on the card moved by its sway
         /// (across the card and up) to `q` is read back at `p` to within
-        /// a fifth of the move in winds up to a gale (the first step of
-        /// the inverse, off by the field's slope times the move), and a
-        /// sway along the view moves nothing.
+        /// the field's change between `p` and `q`, its slope times the
+        /// move: a slope under 0.1 per unit of the strongest gust's force
+        /// (under 0.15 in a light breeze). A sway along the view moves
+        /// nothing.
         #[test]
         fn a_swayed_card_reads_the_picture_where_its_needles_came_from(
             across in -3.0f32..3.0, height in 2.0f32..20.0, azimuth in 0.0f32..6.28,
@@ -985,7 +988,7 @@ mod tests {
             let q = p + moved;
             let back = swayed_card_point(q, right, Vec3::Y, sway(q));
             proptest::prop_assert!(
-                (back - p).length() <= 0.2 * moved.length() + 1e-5,
+                (back - p).length() <= 0.1 * strength * 1.5 * moved.length() + 1e-5,
                 "read back {} m off after a move of {} m", (back - p).length(), moved.length()
             );
             let along_view = right.cross(Vec3::Y) * 0.4;

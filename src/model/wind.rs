@@ -366,7 +366,8 @@ fn field_terms(
 
 /// The trunk's bend at `point`: along the wind, `force · H · h² · (lean +
 /// sway · sin)`, the same for every point at one height. What the crown
-/// impostor's quad takes at its corners (it leans with the trunk).
+/// impostor's quad takes at its corners (it leans with the trunk,
+/// straight between them).
 pub fn trunk_offset(
     wind: &Wind,
     shape: &WindShape,
@@ -385,8 +386,7 @@ pub fn trunk_offset(
 }
 
 /// The branches' sway and the shoots' flutter at `point`: [`wind_offset`]
-/// without the trunk's bend. What the crown impostor's fragments move its
-/// picture by ([`crate::model::impostor::swayed_card_point`]).
+/// without the trunk's bend.
 pub fn sway_offset(
     wind: &Wind,
     shape: &WindShape,
@@ -462,17 +462,38 @@ pub fn wind_reach(wind: &Wind, shape: &WindShape) -> f32 {
     if w.strength == 0.0 {
         return 0.0;
     }
-    let force = w.strength * (1.0 + w.gustiness);
-    let trunk = force * shape.height * (TRUNK_LEAN + TRUNK_SWAY);
     // Rounding head room, so the bound holds in f32 on the GPU too.
-    trunk * 1.001 + sway_reach(wind, shape)
+    trunk_reach(wind, shape) * 1.001 + sway_reach(wind, shape)
+}
+
+/// The largest displacement [`trunk_offset`] can give in `shape` under
+/// `wind` (tree metres): the top's lean and sway at the strongest gust.
+pub fn trunk_reach(wind: &Wind, shape: &WindShape) -> f32 {
+    let w = wind.clamped();
+    let force = w.strength * (1.0 + w.gustiness);
+    force * shape.height * (TRUNK_LEAN + TRUNK_SWAY)
+}
+
+/// How much wider and taller than the calm crown the impostor's quad is
+/// on every side in `wind` (tree metres): its corners lean with the trunk,
+/// and its fragments move the picture by the rest of the field
+/// ([`crate::model::impostor::swayed_card_point`]): the sway
+/// ([`sway_reach`]) and where the trunk's bend, a parabola in the height,
+/// strays from the quad's straight lean between its corners (at most a
+/// quarter of [`trunk_reach`]). The vertex shader's `impostor_sway_margin`.
+pub fn impostor_margin(wind: &Wind, shape: &WindShape) -> f32 {
+    let w = wind.clamped();
+    if w.strength == 0.0 {
+        return 0.0;
+    }
+    let force = w.strength * (1.0 + w.gustiness);
+    let branch = force * BRANCH_SWAY * shape.crown_radius * MAX_REACH_RATIO.powf(1.5) * 1.25f32.sqrt();
+    let flutter = force * w.turbulence * FLUTTER * MAX_REACH_RATIO * 1.25f32.sqrt();
+    (branch + flutter + 0.25 * trunk_reach(wind, shape)) * 1.001
 }
 
 /// The largest displacement [`sway_offset`] can give in `shape` under
-/// `wind` (tree metres): branch sway and flutter at their largest. The
-/// crown impostor's quad is this much wider on every side, so its picture
-/// can sway past the calm crown's edge. The vertex shader's
-/// `impostor_sway_margin`.
+/// `wind` (tree metres): branch sway and flutter at their largest.
 pub fn sway_reach(wind: &Wind, shape: &WindShape) -> f32 {
     let w = wind.clamped();
     if w.strength == 0.0 {
@@ -674,6 +695,29 @@ mod tests {
             proptest::prop_assert!(sway.length() <= sway_reach(&wind, &s), "{} > {}", sway.length(), sway_reach(&wind, &s));
             proptest::prop_assert_eq!(trunk.along + sway.along, o.along);
             proptest::prop_assert_eq!((sway.across, sway.up), (o.across, o.up));
+        }
+
+        /// A crown impostor's quad leans with the trunk at its corners
+        /// (heights `below` and `above` a point), straight between them:
+        /// what the field moves the point by beyond that lean stays within
+        /// the quad's margin.
+        #[test]
+        fn the_field_beyond_a_straight_lean_stays_within_the_impostors_margin(
+            x in -6.0f32..6.0, y in 0.0f32..20.0, z in -6.0f32..6.0,
+            below in 0.0f32..20.0, above in 0.0f32..20.0, seconds in 0.0f64..1e4,
+            strength in 0.0f32..4.0, gustiness in 0.0f32..1.0, turbulence in 0.0f32..1.0,
+        ) {
+            let s = shape();
+            let wind = Wind { direction: Vec2::new(0.3, -1.0), strength, gustiness, turbulence };
+            let clock = WindClock::at(seconds, &s);
+            let phase = TreeWindPhase::of_root(Vec2::new(4.0, 9.0), &wind);
+            let (bottom, top) = (below.min(y), above.max(y));
+            let lean = |h: f32| trunk_offset(&wind, &s, &clock, &phase, Vec3::new(0.0, h, 0.0)).along;
+            let t = if top > bottom { (y - bottom) / (top - bottom) } else { 0.0 };
+            let straight = lean(bottom) + (lean(top) - lean(bottom)) * t;
+            let o = wind_offset(&wind, &s, &clock, &phase, Vec3::new(x, y, z));
+            let beyond = Vec3::new(o.along - straight, o.across, o.up).length();
+            proptest::prop_assert!(beyond <= impostor_margin(&wind, &s), "{} > {}", beyond, impostor_margin(&wind, &s));
         }
 
         #[test]

@@ -800,8 +800,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let to_light = vec3<f32>(sin(phi), 0.0, cos(phi));
     up = cos(lean) * up - sin(lean) * to_light;
 #endif
-    // In wind the card is wider and taller by the sway's reach on every
-    // side: its fragments move the picture by the branches' sway
+    // In wind the card is wider and taller on every side: its fragments
+    // move the picture by what the field moves it by and the lean did not
     // (`impostor_swayed_uv`), past the calm crown's edge.
     let margin = impostor_sway_margin();
     let across_card = (2.0 * u - 1.0) * (frame.z + margin);
@@ -844,9 +844,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 }
 
 #ifdef CONIFER_IMPOSTOR
-// The largest sway of a branch and flutter of a shoot the wind can give
-// this species, tree metres: how far past the calm crown the impostor's
-// picture can move (CPU reference: `model::wind::sway_reach`).
+// How far past the calm crown the impostor's picture can move on its
+// leaning quad, tree metres: the largest sway of a branch and flutter of a
+// shoot, and a quarter of the trunk's largest bend (how far a parabola
+// strays from its chord). CPU reference: `model::wind::impostor_margin`.
 fn impostor_sway_margin() -> f32 {
     let strength = species.wind.z;
     if !(strength > 0.0) {
@@ -857,23 +858,25 @@ fn impostor_sway_margin() -> f32 {
     let most = 1.8371173 * 1.1180340;
     let branch = force * WIND_BRANCH_SWAY * species.wind_clock.w * most;
     let flutter = force * species.wind_motion.x * WIND_FLUTTER * WIND_MAX_REACH_RATIO * 1.1180340;
-    return (branch + flutter) * 1.001;
+    let trunk = force * species.wind_shape.w * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY);
+    return (branch + flutter + 0.25 * trunk) * 1.001;
 }
 
 // Where on the impostor's pictures this fragment reads: its calm card
-// point moved back by the branches' sway and the shoots' flutter there,
-// across the card and up (along the view a shift moves nothing), so the
-// crown's picture sways as its needles do while the quad leans with the
-// trunk (CPU reference: `model::impostor::swayed_card_point`).
-fn impostor_swayed_uv(uv: vec2<f32>, tree: u32, card_point: vec3<f32>, right: vec3<f32>, up: vec3<f32>) -> vec2<f32> {
+// point moved back by what the field moves it by there and the quad's
+// lean did not (the quad's corners lean with the trunk, straight between
+// them where the trunk bends), across the card and up (along the view a
+// shift moves nothing), so the crown's picture sways as its needles do
+// (CPU reference: `model::impostor::swayed_card_point`). `world` is where
+// the leaning quad put the fragment.
+fn impostor_swayed_uv(uv: vec2<f32>, tree: u32, card_point: vec3<f32>, right: vec3<f32>, up: vec3<f32>, world: vec3<f32>) -> vec2<f32> {
     if !(species.wind.z > 0.0) {
         return uv;
     }
     let world_from_local = instance_world_from_local(instances[tree]);
     wind_tree = world_from_local;
-    wind_part = WIND_SWAY;
-    let sway = wind_displacement((world_from_local * vec4<f32>(card_point, 1.0)).xyz);
-    wind_part = WIND_WHOLE;
+    let calm = (world_from_local * vec4<f32>(card_point, 1.0)).xyz;
+    let sway = wind_displacement(calm) - (world - calm);
     // Back to tree metres in the tree's frame (its columns are the
     // rotation times the scale).
     let scale2 = max(dot(world_from_local[0].xyz, world_from_local[0].xyz), 1e-12);
@@ -981,7 +984,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
 @fragment
 fn fragment(in: VertexOutput) {
 #ifdef CONIFER_IMPOSTOR
-    let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up);
+    let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up, in.world_position.xyz);
     let coverage = impostor_texel(uv, in.color).r * in.color.w;
     let line = IMPOSTOR_SHADOW_LINE;
     let tree = in.tree;
@@ -1372,7 +1375,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The two views' texels over the pixel's footprint: coverage, wood,
     // and the shares lit as a vertical cylinder and as one across the view
     // (both times coverage; the rest is lit as a sphere).
-    let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up);
+    let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up, in.world_position.xyz);
     let texel = impostor_texel(uv, in.color);
     if !(texel.r > 1.0 / 512.0) {
         discard;
