@@ -2,7 +2,8 @@
 //! into its crown impostor as the spatial error grows from one texel to
 //! two (the cull pass against its CPU reference, `impostor_fade`), a shadow
 //! view never does, and the impostor covers what the needles cover, as
-//! `conifer eval` measures against the supersampled reference.
+//! `conifer eval` measures against the supersampled reference, in calm
+//! and as it sways in the wind.
 //! Pictures go to `target/test-output/render/`.
 #![cfg(feature = "plugin")]
 
