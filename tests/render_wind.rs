@@ -8,6 +8,7 @@
 mod common;
 
 use bevy::prelude::*;
+use bevy_conifer_lod::model::WoodSegment;
 use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, turn_normal, wind_offset, wind_reach};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::plugin::{CompactReadback, PartKind};
@@ -148,6 +149,77 @@ fn needles_and_wood_move_where_the_cpu_field_says() {
     // The pictures did change: the top moved by pixels, not by nothing.
     assert!(moved > 3.0, "{moved}");
     assert_eq!(calm.get_pixel(0, 0).0[..3], BACKGROUND);
+}
+
+/// In wind a wood segment bends along its length: drawn in
+/// `WOOD_SECTIONS` sections, a 3 m branch's middle moves where the field
+/// moves it, not where a branch straight between its moved ends would be
+/// (CPU reference: `wood_offset` at points along it; `wood_bend_gap`).
+#[test]
+fn a_long_branch_bends_along_its_length() {
+    let _turn = common::gpu_turn();
+    // A branch 3 m long, 20 cm thick, straight out at 6 m up.
+    let (root, tip) = (Vec3::new(0.12, 6.0, 0.0), Vec3::new(3.12, 6.0, 0.0));
+    let branch = WoodSegment {
+        start: root,
+        end: tip,
+        start_radius: 0.1,
+        end_radius: 0.1,
+    };
+    let species = common::trunk_with_branches(&[Vec3::new(-0.17, 9.7, 0.0)], |k| 0.15 - 0.011 * k as f32, &[branch]);
+    let shape = species.wind_shape;
+    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
+    // 6 m in front of the branch's middle: a metre is 36 pixels.
+    let look = Vec3::new(1.62, 6.0, 0.0);
+    let distance = 6.0f32;
+    common::look_at_crown(renderer.world_mut(), camera, look, distance, FOV_DEG);
+    let pixels_per_metre = SIZE as f32 / (2.0 * distance * (FOV_DEG.to_radians() / 2.0).tan());
+    let row = |y: f32| SIZE as f32 / 2.0 - (y - look.y) * pixels_per_metre;
+    let column = |x: f32| SIZE as f32 / 2.0 + (x - look.x) * pixels_per_metre;
+    let mut shot = |wind: ConiferWind, name: &str| shot_in(&mut renderer, &target, wind, &format!("branch_{name}"));
+    let calm = shot(ConiferWind::CALM, "calm");
+    // The branch's middle third, and rows well beyond its sway.
+    let (from, to) = (root.lerp(tip, 1.0 / 3.0), root.lerp(tip, 2.0 / 3.0));
+    let columns = column(from.x) as u32..column(to.x) as u32;
+    let rows = (row(6.0) - 30.0) as u32..(row(6.0) + 30.0) as u32;
+    let (mut bent, mut straight_apart) = (0.0f32, 0.0f32);
+    for seconds in [0.8, 2.3, 3.9] {
+        let w = wind(seconds);
+        let windy = shot(w, &format!("{seconds}s"));
+        let clock = WindClock::at(seconds, &shape);
+        let phase = TreeWindPhase::of_root(Vec2::ZERO, &w.model());
+        let up = |p: Vec3| wind_offset(&w.model(), &shape, &clock, &phase, p).up;
+        let (before, n_before) = centroid(&calm, columns.clone(), rows.clone());
+        let (after, n_after) = centroid(&windy, columns.clone(), rows.clone());
+        assert!(n_before > 100 && n_after > 100, "{n_before}, {n_after} pixels");
+        // Down the picture is up the tree.
+        let measured = (before.y - after.y) / pixels_per_metre;
+        let points: Vec<f32> = (0..32).map(|i| (i as f32 + 0.5) / 32.0).collect();
+        let field = points.iter().map(|&t| up(from.lerp(to, t))).sum::<f32>() / points.len() as f32;
+        let straight = points
+            .iter()
+            .map(|&t| {
+                let along = (from.x - root.x + t * (to.x - from.x)) / (tip.x - root.x);
+                up(root) + (up(tip) - up(root)) * along
+            })
+            .sum::<f32>()
+            / points.len() as f32;
+        println!(
+            "{seconds} s: the branch's middle rose {:.1} px; the field says {:.1} px, straight between its ends {:.1} px",
+            measured * pixels_per_metre,
+            field * pixels_per_metre,
+            straight * pixels_per_metre
+        );
+        assert!(
+            (measured - field).abs() * pixels_per_metre < 0.6,
+            "{seconds} s: the middle rose {measured} m, the field says {field} m"
+        );
+        bent = bent.max(measured.abs());
+        straight_apart = straight_apart.max((straight - field).abs() * pixels_per_metre);
+    }
+    // The wind moved the branch, and drawn straight it would have missed.
+    assert!(bent * pixels_per_metre > 0.8, "{bent}");
+    assert!(straight_apart > 1.5, "straight would be off by {straight_apart} px at most");
 }
 
 /// A thick 10 m trunk (radius 0.5 m) and a shoot 4 m out: the trunk fills

@@ -157,6 +157,15 @@ pub fn shoot() -> Vec<bevy_conifer_lod::model::Needle> {
 /// their ends), piece `k` from radius `radius(k)` to `radius(k + 1)`, with
 /// a shoot at each of `shoots`.
 pub fn trunk_with_shoots(shoots: &[Vec3], radius: impl Fn(usize) -> f32) -> bevy_conifer_lod::plugin::ConiferSpecies {
+    trunk_with_branches(shoots, radius, &[])
+}
+
+/// [`trunk_with_shoots`] with the wood segments `branches` too.
+pub fn trunk_with_branches(
+    shoots: &[Vec3],
+    radius: impl Fn(usize) -> f32,
+    branches: &[bevy_conifer_lod::model::WoodSegment],
+) -> bevy_conifer_lod::plugin::ConiferSpecies {
     use bevy_conifer_lod::model::{
         BakeOptions, FoliageMaterial, Placement, PrototypeInput, WoodSegment, bake_prototypes,
     };
@@ -177,6 +186,7 @@ pub fn trunk_with_shoots(shoots: &[Vec3], radius: impl Fn(usize) -> f32) -> bevy
                 start_radius: radius(k),
                 end_radius: radius(k + 1),
             })
+            .chain(branches.iter().copied())
             .collect(),
         wood_mesh: Default::default(),
         material: FoliageMaterial::default(),

@@ -20,6 +20,15 @@ const KIND_WOOD_LINES: u32 = 4u;
 const KIND_WOOD_MESH: u32 = 5u;
 const KIND_IMPOSTOR: u32 = 6u;
 
+// Equal sections a wood segment is drawn in while the wind blows, one in
+// calm (`model::wind::WOOD_SECTIONS`): each is straight between its ends
+// as the field moves them, so a branch bends along its length.
+const WOOD_SECTIONS: u32 = 4u;
+
+fn wood_sections(wind_strength: f32) -> u32 {
+    return select(1u, WOOD_SECTIONS, wind_strength > 0.0);
+}
+
 // Instance flags.
 const FLAG_VISIBLE: u32 = 1u;
 // Bits 1–2: 0 no override, 1 paper, 2 area-preserving.

@@ -43,7 +43,7 @@
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS,
     instance_world_from_local, log_decode, placement_matrix,
-    threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment,
+    threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
 
 @group(2) @binding(0) var<uniform> species: SpeciesParams;
@@ -649,7 +649,12 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 
 #ifdef CONIFER_WOOD_PRISMS
-    let s = vertex_index / species.prism_vertices;
+    // In wind a segment is drawn in sections, each a prism straight
+    // between its ends as the field moves them (CPU reference:
+    // `model::wind::wood_bend_gap`); their joints' rings coincide.
+    let sections = wood_sections(species.wind.z);
+    let slot = vertex_index / species.prism_vertices;
+    let s = slot / sections;
     let ends = decode_wood_segment(wood_segments[s], species.wood_grid);
     let start = ends.start;
     let end = ends.end;
@@ -660,14 +665,17 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let sides = prism_sides(max(start.w, end.w), wood_error);
     let corner = prism_corner(vertex_index % species.prism_vertices);
     let toward = toward_view_local(world_from_local, 0.5 * (start.xyz + end.xyz));
-    let p = prism_vertex(start.xyz, end.xyz, start.w, end.w, sides, corner, toward);
+    let section = f32(slot % sections);
+    let a = mix(start, end, section / f32(sections));
+    let b = mix(start, end, (section + 1.0) / f32(sections));
+    let p = prism_vertex(a.xyz, b.xyz, a.w, b.w, sides, corner, toward);
     let m = max(species.max_sides, 3u);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     var color = base_color(2, 0.0, 1.0, species.wood_color.rgb);
     if species.debug_colors != 0u {
         color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0, color.rgb);
     }
-    return with_height(swayed_prism(finish(p.position, p.normal, world_from_local, color), start.xyz, end.xyz, world_from_local), p.position.y);
+    return with_height(swayed_prism(finish(p.position, p.normal, world_from_local, color), a.xyz, b.xyz, world_from_local), p.position.y);
 #endif
 
 #ifdef CONIFER_ORIGINAL_LINES
@@ -735,7 +743,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 
 #ifdef CONIFER_WOOD_LINES
-    let s = vertex_index / 2u;
+    // In wind a segment is drawn in sections, as its prism is.
+    let sections = wood_sections(species.wind.z);
+    let slot = vertex_index / 2u;
+    let s = slot / sections;
     let ends = decode_wood_segment(wood_segments[s], species.wood_grid);
     let start = ends.start;
     let end = ends.end;
@@ -746,12 +757,15 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let alpha = line_alpha(lod, wood_error, width, width);
-    let position = select(start.xyz, end.xyz, (vertex_index & 1u) != 0u);
+    let section = f32(slot % sections);
+    let a = mix(start.xyz, end.xyz, section / f32(sections));
+    let b = mix(start.xyz, end.xyz, (section + 1.0) / f32(sections));
+    let position = select(a, b, (vertex_index & 1u) != 0u);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
-    var out = finish(position, end.xyz - start.xyz, world_from_local, color);
+    var out = finish(position, b - a, world_from_local, color);
     out.alignment = 1.0;
-    return with_height(swayed_line(out, start.xyz, end.xyz, world_from_local, (vertex_index & 1u) != 0u), position.y);
+    return with_height(swayed_line(out, a, b, world_from_local, (vertex_index & 1u) != 0u), position.y);
 #endif
 
 #ifdef CONIFER_IMPOSTOR

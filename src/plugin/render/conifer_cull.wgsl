@@ -25,7 +25,7 @@
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale, tree_local_point,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
-    wood_segment_radius,
+    wood_segment_radius, wood_sections,
 }
 
 @group(0) @binding(0) var<uniform> cull_view: CullView;
@@ -421,7 +421,9 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     write_args(KIND_PRISMS, i, prisms * species.prism_vertices, 0u);
     write_args(KIND_ORIGINAL_LINES, i, 2u * original, original_first);
     write_args(KIND_MERGED_LINES, i, 2u * merged, 0u);
-    write_args(KIND_WOOD_PRISMS, i, wood_prisms * species.prism_vertices, 0u);
+    // In wind a wood segment is drawn in sections (`wood_sections`).
+    let sections = wood_sections(species.wind.z);
+    write_args(KIND_WOOD_PRISMS, i, wood_prisms * species.prism_vertices * sections, 0u);
     // Wood lines: the segments after the prisms, up to the fade; seen from
     // a view point, every segment up to the fade (each decides by its own
     // sphere's error).
@@ -429,7 +431,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     if view_point.w > 0.0 {
         wood_lines_first = 0u;
     }
-    write_args(KIND_WOOD_LINES, i, 2u * (wood_lines - wood_lines_first), 2u * wood_lines_first);
+    write_args(KIND_WOOD_LINES, i, 2u * sections * (wood_lines - wood_lines_first), 2u * sections * wood_lines_first);
     write_args(KIND_WOOD_MESH, i, species.wood_index_count, 0u);
     write_args(KIND_IMPOSTOR, i, select(0u, 6u, fade > 0u), 0u);
 }
