@@ -257,7 +257,9 @@ fn the_swaying_impostor_covers_what_the_swaying_needles_cover() {
                     .reference
                     .save(out_dir().join(format!("impostor_{what}_reference.png")))
                     .unwrap();
-                picture.save(out_dir().join(format!("impostor_{what}_ours.png"))).unwrap();
+                picture
+                    .save(out_dir().join(format!("impostor_{what}_ours.png")))
+                    .unwrap();
             }
             sum += error;
         }
@@ -265,7 +267,12 @@ fn the_swaying_impostor_covers_what_the_swaying_needles_cover() {
     }
     println!("mean coverage error: calm {:.4}, wind {:.4}", errors[0], errors[1]);
     assert!(errors[0] < 0.05, "calm: {}", errors[0]);
-    assert!(errors[1] <= errors[0] + 0.005, "wind {} against calm {}", errors[1], errors[0]);
+    assert!(
+        errors[1] <= errors[0] + 0.005,
+        "wind {} against calm {}",
+        errors[1],
+        errors[0]
+    );
 }
 
 /// A camera on `+z` of `crown` where the pixel error spans `texels`
@@ -406,7 +413,10 @@ fn the_impostor_sways_as_its_needles_do() {
     let height = impostor.top() - impostor.bottom;
     let uv_of = |p: Vec3| {
         let (across, up) = ((p - origin).dot(right), p.y);
-        Vec2::new((across / impostor.half_width + 1.0) / 2.0, (impostor.top() - up) / height)
+        Vec2::new(
+            (across / impostor.half_width + 1.0) / 2.0,
+            (impostor.top() - up) / height,
+        )
     };
     let mut worst_moved = 0.0f32;
     for seconds in [0.9, 2.3, 4.1] {
@@ -454,7 +464,10 @@ fn the_impostor_sways_as_its_needles_do() {
                     let uv = at(0.0, 0.0);
                     let (du, dv) = (at(1.0, 0.0) - uv, at(0.0, 1.0) - uv);
                     let inside = (0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y);
-                    let (a, b) = (mips.footprint(k0 as u32, uv, du, dv)[0], mips.footprint(k1 as u32, uv, du, dv)[0]);
+                    let (a, b) = (
+                        mips.footprint(k0 as u32, uv, du, dv)[0],
+                        mips.footprint(k1 as u32, uv, du, dv)[0],
+                    );
                     let c = a + (b - a) * blend;
                     (uv, inside, if c > 1.0 / 512.0 { c } else { 0.0 })
                 };
@@ -475,7 +488,10 @@ fn the_impostor_sways_as_its_needles_do() {
             "{seconds} s: picture moved up to {moved:.3} m (margin {margin:.3} m); |drawn − swayed reference| {swayed_error:.4}, |drawn − leaning with the trunk alone| {leaning_error:.4} over {n} pixels"
         );
         assert!(moved <= margin, "the sway stays within the quad's margin");
-        assert!(swayed_error < 0.003, "{seconds} s: drawn vs the CPU reference: {swayed_error}");
+        assert!(
+            swayed_error < 0.003,
+            "{seconds} s: drawn vs the CPU reference: {swayed_error}"
+        );
         assert!(
             swayed_error < 0.2 * leaning_error,
             "{seconds} s: the picture sways: {swayed_error} vs {leaning_error} leaning alone"

@@ -219,7 +219,10 @@ fn a_long_branch_bends_along_its_length() {
     }
     // The wind moved the branch, and drawn straight it would have missed.
     assert!(bent * pixels_per_metre > 0.8, "{bent}");
-    assert!(straight_apart > 1.5, "straight would be off by {straight_apart} px at most");
+    assert!(
+        straight_apart > 1.5,
+        "straight would be off by {straight_apart} px at most"
+    );
 }
 
 /// A thick 10 m trunk (radius 0.5 m) and a shoot 4 m out: the trunk fills

@@ -605,10 +605,18 @@ mod tests {
             for w in &record.wood {
                 (lo, hi) = (lo.min(w.start).min(w.end), hi.max(w.start).max(w.end));
             }
-            let foot = record.wood.iter().map(|w| w.start).min_by(|a, b| a.y.total_cmp(&b.y)).unwrap();
+            let foot = record
+                .wood
+                .iter()
+                .map(|w| w.start)
+                .min_by(|a, b| a.y.total_cmp(&b.y))
+                .unwrap();
             let shape = WindShape::from_bounds(lo, hi, Vec2::new(foot.x, foot.z));
             for strength in [1.0f32, 2.5] {
-                let wind = Wind { strength, ..Wind::LIGHT_BREEZE };
+                let wind = Wind {
+                    strength,
+                    ..Wind::LIGHT_BREEZE
+                };
                 let phase = TreeWindPhase::of_root(Vec2::new(3.0, 7.0), &wind);
                 let (mut straight, mut sections) = (0f32, 0f32);
                 for moment in 0..20 {
