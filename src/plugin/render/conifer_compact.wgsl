@@ -890,14 +890,14 @@ fn impostor_swayed_uv(uv: vec2<f32>, tree: u32, card_point: vec3<f32>, right: ve
     let world_from_local = instance_world_from_local(instances[tree]);
     wind_tree = world_from_local;
     let calm = (world_from_local * vec4<f32>(card_point, 1.0)).xyz;
-    let sway = wind_displacement(calm) - (world - calm);
+    let moved = wind_displacement(calm) - (world - calm);
     // Back to tree metres in the tree's frame (its columns are the
     // rotation times the scale).
     let scale2 = max(dot(world_from_local[0].xyz, world_from_local[0].xyz), 1e-12);
     let local = vec3<f32>(
-        dot(world_from_local[0].xyz, sway),
-        dot(world_from_local[1].xyz, sway),
-        dot(world_from_local[2].xyz, sway),
+        dot(world_from_local[0].xyz, moved),
+        dot(world_from_local[1].xyz, moved),
+        dot(world_from_local[2].xyz, moved),
     ) / scale2;
     let frame = species.impostor_box;
     let span = species.impostor_span;
