@@ -973,7 +973,7 @@ mod tests {
         /// nothing.
         #[test]
         fn a_swayed_card_reads_the_picture_where_its_needles_came_from(
-            across in -3.0f32..3.0, height in 2.0f32..20.0, azimuth in 0.0f32..6.28,
+            across in -3.0f32..3.0, height in 2.0f32..20.0, azimuth in 0.0f32..std::f32::consts::TAU,
             seconds in 0.0f64..1e4, strength in 0.1f32..4.0, turbulence in 0.0f32..1.0,
         ) {
             use crate::model::wind::{TreeWindPhase, Wind, WindClock, WindShape, sway_offset};
