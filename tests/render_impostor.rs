@@ -312,42 +312,105 @@ fn on_quad(x: f32, y: f32, eye: Vec3, origin: Vec3, right: Vec3) -> Vec2 {
     Vec2::new((hit - origin).dot(right), hit.y)
 }
 
+/// Where on `impostor`'s pictures the point `(along right, height)` of its
+/// quad lies.
+fn picture_uv(impostor: &CrownImpostor, p: Vec2) -> Vec2 {
+    let height = impostor.top() - impostor.bottom;
+    Vec2::new((p.x / impostor.half_width + 1.0) / 2.0, (impostor.top() - p.y) / height)
+}
+
+/// The spruce alone at the origin, seen by [`impostor_camera`] where a
+/// pixel error spans `texels` texels, and its impostor's quad as the
+/// vertex shader turns it toward that camera.
+struct ImpostorScene {
+    renderer: HeadlessRenderer,
+    target: Handle<Image>,
+    impostor: std::sync::Arc<CrownImpostor>,
+    wind_shape: bevy_conifer_lod::model::wind::WindShape,
+    crown: Vec3,
+    eye: Vec3,
+    /// The quad's foot on the impostor's axis.
+    origin: Vec3,
+    /// The quad's horizontal direction.
+    right: Vec3,
+    /// The two views nearest the camera's azimuth and the second's weight.
+    views: (u32, u32, f32),
+}
+
+impl ImpostorScene {
+    fn new(texels: f32) -> Self {
+        let species = ConiferSpecies::from_record(spruce()).unwrap();
+        let impostor = species.impostor.clone().expect("an impostor");
+        let (wind_shape, crown) = (species.wind_shape, species.crown_center);
+        let mut renderer = HeadlessRenderer::new(".");
+        let target = renderer.render_target(SIZE, SIZE);
+        let world = renderer.world_mut();
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+        world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
+        let (_, eye) = impostor_camera(world, &target, crown, impostor.texel, texels);
+        let origin = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+        let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
+        let count = impostor.views as f32;
+        let f = (phi / std::f32::consts::TAU + 1.0).fract() * count;
+        Self {
+            renderer,
+            target,
+            wind_shape,
+            crown,
+            eye,
+            origin,
+            right: Vec3::new(phi.cos(), 0.0, -phi.sin()),
+            views: (
+                (f.floor() % count) as u32,
+                ((f.floor() + 1.0) % count) as u32,
+                f.fract(),
+            ),
+            impostor,
+        }
+    }
+
+    /// The settled picture, saved as `NAME.png`.
+    fn picture(&mut self, name: &str) -> image::RgbaImage {
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+            self.renderer.update().unwrap();
+        }
+        let picture = self.renderer.capture(&self.target, 8).unwrap();
+        picture.save(out_dir().join(format!("{name}.png"))).unwrap();
+        picture
+    }
+
+    /// The two nearest views' coverage as `sample` gives it, blended as
+    /// the fragment does (0 under its discard threshold).
+    fn blended(&self, sample: impl Fn(u32) -> [f32; 4]) -> f32 {
+        let (k0, k1, blend) = self.views;
+        let (a, b) = (sample(k0)[0], sample(k1)[0]);
+        let c = a + (b - a) * blend;
+        if c > 1.0 / 512.0 { c } else { 0.0 }
+    }
+}
+
 #[test]
 fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
     let _turn = common::gpu_turn();
-    let species = ConiferSpecies::from_record(spruce()).unwrap();
-    let impostor = species.impostor.clone().expect("an impostor");
-    let crown = species.crown_center;
-    let mut renderer = HeadlessRenderer::new(".");
-    let target = renderer.render_target(SIZE, SIZE);
-    let world = renderer.world_mut();
-    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-    world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
     // The tree ~40 pixels tall, where one trilinear sample would blur two
     // pixels.
-    let (_, eye) = impostor_camera(world, &target, crown, impostor.texel, 6.0);
-    let distance = eye.distance(crown);
-    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
-        renderer.update().unwrap();
-    }
-    let picture = renderer.capture(&target, 8).unwrap();
-    picture.save(out_dir().join("impostor_footprint.png")).unwrap();
+    let mut scene = ImpostorScene::new(6.0);
+    let distance = scene.eye.distance(scene.crown);
+    let picture = scene.picture("impostor_footprint");
     // The CPU reference: the quad turned toward the camera's azimuth, the
     // two nearest views blended (as the vertex shader does), each pixel
     // sampled over its footprint, and with one trilinear sample.
-    let mips = ImpostorMips::new(&impostor);
-    let origin = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
-    let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
-    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
-    let views = impostor.views as f32;
-    let f = (phi / std::f32::consts::TAU + 1.0).fract() * views;
-    let (k0, k1, blend) = (f.floor() % views, (f.floor() + 1.0) % views, f.fract());
-    let height = impostor.top() - impostor.bottom;
-    let uv_of = |p: Vec2| Vec2::new((p.x / impostor.half_width + 1.0) / 2.0, (impostor.top() - p.y) / height);
+    let mips = ImpostorMips::new(&scene.impostor);
+    let (eye, origin, right) = (scene.eye, scene.origin, scene.right);
     let (mut footprint_error, mut trilinear_error, mut covered, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
     for y in 0..SIZE {
         for x in 0..SIZE {
-            let at = |dx: f32, dy: f32| uv_of(on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right));
+            let at = |dx: f32, dy: f32| {
+                picture_uv(
+                    &scene.impostor,
+                    on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right),
+                )
+            };
             let uv = at(0.0, 0.0);
             // A pixel's footprint: one pixel on, as the quad's derivatives.
             let (du, dv) = (at(1.0, 0.0) - uv, at(0.0, 1.0) - uv);
@@ -355,13 +418,8 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
             if !inside {
                 continue; // off the quad, or on its edge (partial pixels)
             }
-            let blended = |sample: &dyn Fn(u32) -> [f32; 4]| {
-                let (a, b) = (sample(k0 as u32)[0], sample(k1 as u32)[0]);
-                let c = a + (b - a) * blend;
-                if inside && c > 1.0 / 512.0 { c } else { 0.0 }
-            };
-            let expected = blended(&|view| mips.footprint(view, uv, du, dv));
-            let trilinear = blended(&|view| mips.sample_grad(view, uv, du, dv));
+            let expected = scene.blended(|view| mips.footprint(view, uv, du, dv));
+            let trilinear = scene.blended(|view| mips.sample_grad(view, uv, du, dv));
             let drawn = f32::from(picture.get_pixel(x, y).0[3]) / 255.0;
             footprint_error += f64::from((drawn - expected).abs());
             trilinear_error += f64::from((drawn - trilinear).abs());
@@ -392,32 +450,13 @@ fn each_pixel_of_the_impostor_is_the_box_of_its_footprint() {
 #[test]
 fn the_impostor_sways_as_its_needles_do() {
     let _turn = common::gpu_turn();
-    let species = ConiferSpecies::from_record(spruce()).unwrap();
-    let impostor = species.impostor.clone().expect("an impostor");
-    let shape = species.wind_shape;
-    let crown = species.crown_center;
-    let mut renderer = HeadlessRenderer::new(".");
-    let target = renderer.render_target(SIZE, SIZE);
-    let world = renderer.world_mut();
-    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-    world.spawn((ConiferFoliage(handle), Transform::IDENTITY));
     // The tree ~120 pixels tall, drawn as its impostor alone.
-    let (_, eye) = impostor_camera(world, &target, crown, impostor.texel, 2.0);
-    let origin = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
-    let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
-    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
-    let views = impostor.views as f32;
-    let f = (phi / std::f32::consts::TAU + 1.0).fract() * views;
-    let (k0, k1, blend) = (f.floor() % views, (f.floor() + 1.0) % views, f.fract());
+    let mut scene = ImpostorScene::new(2.0);
+    let (impostor, shape) = (scene.impostor.clone(), scene.wind_shape);
+    let (eye, origin, right) = (scene.eye, scene.origin, scene.right);
     let mips = ImpostorMips::new(&impostor);
     let height = impostor.top() - impostor.bottom;
-    let uv_of = |p: Vec3| {
-        let (across, up) = ((p - origin).dot(right), p.y);
-        Vec2::new(
-            (across / impostor.half_width + 1.0) / 2.0,
-            (impostor.top() - up) / height,
-        )
-    };
+    let uv_of = |p: Vec3| picture_uv(&impostor, Vec2::new((p - origin).dot(right), p.y));
     let mut worst_moved = 0.0f32;
     for seconds in [0.9, 2.3, 4.1] {
         // Blowing along the card, so the trunk's lean stays in its plane.
@@ -429,14 +468,8 @@ fn the_impostor_sways_as_its_needles_do() {
             time: Some(seconds),
         };
         let model = wind.model();
-        renderer.world_mut().insert_resource(wind);
-        for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
-            renderer.update().unwrap();
-        }
-        let picture = renderer.capture(&target, 8).unwrap();
-        picture
-            .save(out_dir().join(format!("impostor_wind_{seconds}s.png")))
-            .unwrap();
+        scene.renderer.world_mut().insert_resource(wind);
+        let picture = scene.picture(&format!("impostor_wind_{seconds}s"));
         let clock = WindClock::at(seconds, &shape);
         let phase = TreeWindPhase::of_root(Vec2::ZERO, &model);
         // The quad: wider by the margin, its corners leaning with the
@@ -464,12 +497,7 @@ fn the_impostor_sways_as_its_needles_do() {
                     let uv = at(0.0, 0.0);
                     let (du, dv) = (at(1.0, 0.0) - uv, at(0.0, 1.0) - uv);
                     let inside = (0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y);
-                    let (a, b) = (
-                        mips.footprint(k0 as u32, uv, du, dv)[0],
-                        mips.footprint(k1 as u32, uv, du, dv)[0],
-                    );
-                    let c = a + (b - a) * blend;
-                    (uv, inside, if c > 1.0 / 512.0 { c } else { 0.0 })
+                    (uv, inside, scene.blended(|view| mips.footprint(view, uv, du, dv)))
                 };
                 let (uv, inside, expected) = expect(&swayed);
                 let (calm_uv, calm_inside, leaning) = expect(&uv_of);
