@@ -50,6 +50,17 @@ fn spruce() -> LodRecord {
     bake(&tree, &BakeOptions::default(), &()).unwrap()
 }
 
+/// [`spruce`] and the side of its impostor's texel.
+fn spruce_and_texel() -> (LodRecord, f32) {
+    let record = spruce();
+    let texel = ConiferSpecies::from_record(record.clone())
+        .unwrap()
+        .impostor
+        .expect("an impostor")
+        .texel;
+    (record, texel)
+}
+
 /// Spatial error per metre of distance at ε = 1 in the tests' view.
 fn error_per_metre() -> f32 {
     2.0 * (0.5 * FOV_DEG.to_radians()).tan() / SIZE as f32
@@ -157,12 +168,7 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
 #[test]
 fn the_impostor_covers_what_the_needles_cover() {
     let _turn = common::gpu_turn();
-    let record = spruce();
-    let texel = ConiferSpecies::from_record(record.clone())
-        .unwrap()
-        .impostor
-        .expect("an impostor")
-        .texel;
+    let (record, texel) = spruce_and_texel();
     let view = EvalView::square(SIZE, FOV_DEG);
     let mut scene = EvalScene::new(record, &[Method::Paper, Method::Ours], view).unwrap();
     let out = out_dir();
@@ -224,12 +230,7 @@ fn the_impostor_covers_what_the_needles_cover() {
 #[test]
 fn the_swaying_impostor_covers_what_the_swaying_needles_cover() {
     let _turn = common::gpu_turn();
-    let record = spruce();
-    let texel = ConiferSpecies::from_record(record.clone())
-        .unwrap()
-        .impostor
-        .expect("an impostor")
-        .texel;
+    let (record, texel) = spruce_and_texel();
     let view = EvalView::square(SIZE, FOV_DEG);
     let distance = 2.0 * texel / error_per_metre();
     let wind = ConiferWind {
