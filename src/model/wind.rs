@@ -415,6 +415,26 @@ pub fn sway_offset(
 /// ([`wood_bend_gap`] measures how far it strays).
 pub const WOOD_SECTIONS: u32 = 4;
 
+/// Pixels a section of a wood *line* is at least long: a line shorter
+/// than about a pixel may light no pixel at all (the rasteriser's diamond
+/// rule), and a far branch drawn in four such pieces lost most of its
+/// coverage.
+pub const WOOD_LINE_SECTION_PIXELS: f32 = 2.0;
+
+/// Sections a wood segment `length` long (tree metres) drawn as a line is
+/// cut into while the wind blows, where a pixel spans `metres_per_pixel`:
+/// as many as keep each [`WOOD_LINE_SECTION_PIXELS`] long, one to
+/// [`WOOD_SECTIONS`]; one for inputs that are not finite or not positive.
+/// The vertex shader's wood lines.
+pub fn wood_line_sections(length: f32, metres_per_pixel: f32) -> u32 {
+    let fit = length / (WOOD_LINE_SECTION_PIXELS * metres_per_pixel);
+    if fit.is_finite() && fit >= 1.0 {
+        (fit as u32).min(WOOD_SECTIONS)
+    } else {
+        1
+    }
+}
+
 /// How far the wood of the segment `start`–`end` (tree-local), drawn in
 /// `sections` equal pieces each straight between its moved ends, strays
 /// from where the field moves the points it stands for: the largest
@@ -633,6 +653,21 @@ mod tests {
                 );
                 assert!(sections <= 0.25 * straight, "{sections} against {straight}");
             }
+        }
+    }
+
+    #[test]
+    fn wood_line_sections_stay_two_pixels_long() {
+        assert_eq!(wood_line_sections(1.0, 0.1), WOOD_SECTIONS);
+        assert_eq!(wood_line_sections(0.5, 0.1), 2);
+        assert_eq!(wood_line_sections(0.3, 0.1), 1);
+        assert_eq!(wood_line_sections(0.1, 0.1), 1);
+        for bad in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(wood_line_sections(1.0, bad), 1);
+        }
+        for n in 1..=WOOD_SECTIONS {
+            let length = 0.37 * n as f32 * WOOD_LINE_SECTION_PIXELS + 1e-4;
+            assert!(length / wood_line_sections(length, 0.37) as f32 >= WOOD_LINE_SECTION_PIXELS * 0.37);
         }
     }
 

@@ -75,6 +75,7 @@ const IMPOSTOR_SHADOW_LINE: u32 = 0xfffffffeu;
 const BUNDLE_SLOPE: f32 = 1.45;
 const ALIGNMENT_STEPS: f32 = 15.0;
 // `model::wind`'s constants.
+const WOOD_LINE_SECTION_PIXELS: f32 = 2.0;
 const WIND_TRUNK_LEAN: f32 = 0.008;
 const WIND_TRUNK_SWAY: f32 = 0.005;
 const WIND_BRANCH_SWAY: f32 = 0.015;
@@ -757,9 +758,21 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let alpha = line_alpha(lod, wood_error, width, width);
-    let section = f32(slot % sections);
-    let a = mix(start.xyz, end.xyz, section / f32(sections));
-    let b = mix(start.xyz, end.xyz, (section + 1.0) / f32(sections));
+    // Sections at least two pixels long: a line shorter than a pixel may
+    // light none (CPU reference: `model::wind::wood_line_sections`); the
+    // segment's slots past them are not drawn.
+    let metres_per_pixel = wood_error / max(lod.pixel_error, 1e-6);
+    let fit = distance(start.xyz, end.xyz) / (WOOD_LINE_SECTION_PIXELS * metres_per_pixel);
+    var drawn = 1u;
+    if fit >= 1.0 && fit < 1e9 {
+        drawn = min(u32(fit), sections);
+    }
+    let section = slot % sections;
+    if section >= drawn {
+        return culled();
+    }
+    let a = mix(start.xyz, end.xyz, f32(section) / f32(drawn));
+    let b = mix(start.xyz, end.xyz, f32(section + 1u) / f32(drawn));
     let position = select(a, b, (vertex_index & 1u) != 0u);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
