@@ -183,7 +183,7 @@ fn in_wind_ours_sways_with_the_reference() {
         let options = EvalOptions {
             methods: vec![Method::Ours],
             distances: vec![3.0, 12.0],
-            // Lines: the impostor leans with the trunk only.
+            // Lines (the swaying impostor is measured in render_impostor).
             view: EvalView {
                 ours_impostor: false,
                 ..EvalView::square(96, 45.0)

@@ -334,34 +334,63 @@ pub fn wind_offset(
     phase: &TreeWindPhase,
     point: Vec3,
 ) -> WindOffset {
-    let trunk = trunk_offset(wind, shape, clock, phase, point);
-    let sway = sway_offset(wind, shape, clock, phase, point);
+    let Some(terms) = FieldTerms::at(wind, shape, clock, phase, point) else {
+        return WindOffset::default();
+    };
+    let sway = terms.sway(shape, clock, phase, point);
     WindOffset {
-        along: trunk.along + sway.along,
+        along: terms.trunk(shape, clock, phase) + sway.along,
         across: sway.across,
         up: sway.up,
     }
 }
 
-/// The strength gusts make of `wind` at this tree now, and the point's
-/// height over the tree's height and distance from the trunk over the
-/// crown radius (capped at [`MAX_REACH_RATIO`]); `None` in calm or for a
-/// point that is not finite.
-fn field_terms(
-    wind: &Wind,
-    shape: &WindShape,
-    clock: &WindClock,
-    phase: &TreeWindPhase,
-    point: Vec3,
-) -> Option<(f32, f32, f32)> {
-    let w = wind.clamped();
-    if w.strength == 0.0 || !point.is_finite() {
-        return None;
+/// What every motion of the field needs of a point, computed once.
+struct FieldTerms {
+    /// The strength gusts make of the wind at this tree now.
+    force: f32,
+    /// The point's height over the tree's base over the tree's height.
+    h: f32,
+    /// Its distance from the trunk over the crown radius, capped at
+    /// [`MAX_REACH_RATIO`].
+    r: f32,
+    /// The wind's turbulence, clamped.
+    turbulence: f32,
+}
+
+impl FieldTerms {
+    /// `None` in calm or for a point that is not finite.
+    fn at(wind: &Wind, shape: &WindShape, clock: &WindClock, phase: &TreeWindPhase, point: Vec3) -> Option<Self> {
+        let w = wind.clamped();
+        if w.strength == 0.0 || !point.is_finite() {
+            return None;
+        }
+        Some(FieldTerms {
+            force: w.strength * gust_factor(&w, clock, phase),
+            h: ((point.y - shape.base) / shape.height).clamp(0.0, 1.0),
+            r: ((Vec2::new(point.x, point.z) - shape.axis).length() / shape.crown_radius).min(MAX_REACH_RATIO),
+            turbulence: w.turbulence,
+        })
     }
-    let force = w.strength * gust_factor(&w, clock, phase);
-    let h = ((point.y - shape.base) / shape.height).clamp(0.0, 1.0);
-    let r = ((Vec2::new(point.x, point.z) - shape.axis).length() / shape.crown_radius).min(MAX_REACH_RATIO);
-    Some((force, h, r))
+
+    /// The trunk's bend along the wind ([`trunk_offset`]).
+    fn trunk(&self, shape: &WindShape, clock: &WindClock, phase: &TreeWindPhase) -> f32 {
+        self.force * shape.height * self.h * self.h * (TRUNK_LEAN + TRUNK_SWAY * (clock.trunk + phase.sway).sin())
+    }
+
+    /// The branches' sway and the shoots' flutter ([`sway_offset`]).
+    fn sway(&self, shape: &WindShape, clock: &WindClock, phase: &TreeWindPhase, point: Vec3) -> WindOffset {
+        let r = self.r;
+        let branch_amplitude = self.force * BRANCH_SWAY * shape.crown_radius * r * r.sqrt();
+        let branch = clock.branch + phase.sway + point.dot(BRANCH_WAVES);
+        let flutter_amplitude = self.force * self.turbulence * FLUTTER * r;
+        let flutter = clock.flutter + phase.sway + point.dot(FLUTTER_WAVES);
+        WindOffset {
+            along: 0.5 * branch_amplitude * (branch + 1.0).sin(),
+            across: flutter_amplitude * flutter.sin(),
+            up: branch_amplitude * branch.sin() + 0.5 * flutter_amplitude * (flutter + 2.1).sin(),
+        }
+    }
 }
 
 /// The trunk's bend at `point`: along the wind, `force · H · h² · (lean +
@@ -375,11 +404,9 @@ pub fn trunk_offset(
     phase: &TreeWindPhase,
     point: Vec3,
 ) -> WindOffset {
-    let Some((force, h, _)) = field_terms(wind, shape, clock, phase, point) else {
-        return WindOffset::default();
-    };
+    let along = FieldTerms::at(wind, shape, clock, phase, point).map_or(0.0, |t| t.trunk(shape, clock, phase));
     WindOffset {
-        along: force * shape.height * h * h * (TRUNK_LEAN + TRUNK_SWAY * (clock.trunk + phase.sway).sin()),
+        along,
         across: 0.0,
         up: 0.0,
     }
@@ -394,18 +421,8 @@ pub fn sway_offset(
     phase: &TreeWindPhase,
     point: Vec3,
 ) -> WindOffset {
-    let Some((force, _, r)) = field_terms(wind, shape, clock, phase, point) else {
-        return WindOffset::default();
-    };
-    let branch_amplitude = force * BRANCH_SWAY * shape.crown_radius * r * r.sqrt();
-    let branch = clock.branch + phase.sway + point.dot(BRANCH_WAVES);
-    let flutter_amplitude = force * wind.clamped().turbulence * FLUTTER * r;
-    let flutter = clock.flutter + phase.sway + point.dot(FLUTTER_WAVES);
-    WindOffset {
-        along: 0.5 * branch_amplitude * (branch + 1.0).sin(),
-        across: flutter_amplitude * flutter.sin(),
-        up: branch_amplitude * branch.sin() + 0.5 * flutter_amplitude * (flutter + 2.1).sin(),
-    }
+    FieldTerms::at(wind, shape, clock, phase, point)
+        .map_or_else(WindOffset::default, |t| t.sway(shape, clock, phase, point))
 }
 
 /// Equal sections a wood segment is drawn in while the wind blows (one in
@@ -538,14 +555,7 @@ pub fn trunk_reach(wind: &Wind, shape: &WindShape) -> f32 {
 /// strays from the quad's straight lean between its corners (at most a
 /// quarter of [`trunk_reach`]). The vertex shader's `impostor_sway_margin`.
 pub fn impostor_margin(wind: &Wind, shape: &WindShape) -> f32 {
-    let w = wind.clamped();
-    if w.strength == 0.0 {
-        return 0.0;
-    }
-    let force = w.strength * (1.0 + w.gustiness);
-    let branch = force * BRANCH_SWAY * shape.crown_radius * MAX_REACH_RATIO.powf(1.5) * 1.25f32.sqrt();
-    let flutter = force * w.turbulence * FLUTTER * MAX_REACH_RATIO * 1.25f32.sqrt();
-    (branch + flutter + 0.25 * trunk_reach(wind, shape)) * 1.001
+    sway_reach(wind, shape) + 0.25 * trunk_reach(wind, shape) * 1.001
 }
 
 /// The largest displacement [`sway_offset`] can give in `shape` under

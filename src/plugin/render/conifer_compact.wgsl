@@ -136,14 +136,9 @@ fn culled() -> VertexOutput {
 // by `vertex`: the frame of the tree's own parts, of its placements, and
 // of the wind.
 var<private> wind_tree: mat4x4<f32>;
-// Which part of the field `wind_displacement` gives: the whole, the
-// trunk's bend only (the impostor's quad leans with the trunk), or the
-// branches' sway and the shoots' flutter only (what the impostor's
-// fragments move its picture by).
-const WIND_WHOLE: u32 = 0u;
-const WIND_TRUNK: u32 = 1u;
-const WIND_SWAY: u32 = 2u;
-var<private> wind_part: u32 = WIND_WHOLE;
+// The impostor's quad leans with the trunk only (its fragments move the
+// picture by the rest of the field, `impostor_swayed_uv`).
+var<private> wind_trunk_only: bool;
 // Set while `finish` places a vertex where the wind held it the frame
 // before.
 var<private> wind_previous: bool;
@@ -204,13 +199,11 @@ fn wind_displacement(world: vec3<f32>) -> vec3<f32> {
     let crown_radius = species.wind_clock.w;
     let h = clamp((p.y - shape.z) / shape.w, 0.0, 1.0);
     let r = min(length(p.xz - shape.xy) / crown_radius, WIND_MAX_REACH_RATIO);
-    var along = 0.0;
+    let trunk = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(clocks.trunk + sway_phase));
+    var along = trunk;
     var across = 0.0;
     var up = 0.0;
-    if wind_part != WIND_SWAY {
-        along = force * shape.w * h * h * (WIND_TRUNK_LEAN + WIND_TRUNK_SWAY * sin(clocks.trunk + sway_phase));
-    }
-    if wind_part != WIND_TRUNK {
+    if !wind_trunk_only {
         let branch_amplitude = force * WIND_BRANCH_SWAY * crown_radius * r * sqrt(r);
         let branch = clocks.branch + sway_phase + dot(p, WIND_BRANCH_WAVES);
         let flutter_amplitude = force * species.wind_motion.x * WIND_FLUTTER * r;
@@ -785,7 +778,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     // One quad standing on the impostor's axis, turned about it toward the
     // camera; its pictures are the two views nearest the camera's azimuth,
     // blended (`model::impostor`).
-    wind_part = WIND_TRUNK;
+    wind_trunk_only = true;
     let fade = impostor_fade(lod);
     if !(fade > 0.0) {
         return culled();
