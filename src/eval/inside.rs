@@ -13,7 +13,8 @@
 //! `render_prototypes`).
 
 use super::measure::{self, PixelRect};
-use super::scene::{EvalError, EvalView, RawTree, raw_materials, wood_counts, wood_counts_by};
+use super::reference::{ReferenceMaterialPlugin, reference_materials};
+use super::scene::{EvalError, EvalView, RawTree, wood_counts, wood_counts_by};
 use super::{EvaluateError, flip_error};
 use crate::model::{Cut, LodRecord, PrototypeRecord, Sphere, ViewPoint};
 use crate::plugin::headless::HeadlessRenderer;
@@ -130,7 +131,9 @@ pub fn evaluate_inside(
 
     progress("building the scene (placed species, raw reference)");
     let species = ConiferSpecies::from_prototype_record(record).map_err(EvalError::from)?;
-    let mut renderer = HeadlessRenderer::new(".");
+    let mut renderer = HeadlessRenderer::with_setup(".", |app| {
+        app.add_plugins(ReferenceMaterialPlugin);
+    });
     *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
         pixel_error: view.pixel_error,
         transition: view.transition,
@@ -144,7 +147,7 @@ pub fn evaluate_inside(
         .insert((RenderLayers::from_layers(&[0, 1]), view.sun.transform()));
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY, RenderLayers::layer(0)));
-    let (needle_material, wood_material) = raw_materials(world, &flat);
+    let (needle_material, wood_material) = reference_materials(world, &flat);
     let raw = RawTree::new(&flat);
     let reference_triangles = (raw.needles.triangle_count() + raw.wood.triangle_count()) as u64;
     for (mesh, material) in [(&raw.needles, &needle_material), (&raw.wood, &wood_material)] {

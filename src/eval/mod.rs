@@ -14,6 +14,7 @@ pub mod decimate;
 pub mod inside;
 pub mod measure;
 pub mod plot;
+pub mod reference;
 pub mod scene;
 pub mod shadow;
 

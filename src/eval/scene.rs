@@ -6,7 +6,10 @@
 //!   line opacity and with the plugin's defaults.
 //! * `raw`: every needle as an `Lmax`-sided prism and the wood as cones, one
 //!   ordinary `StandardMaterial` mesh each, no LOD. The reference is the same
-//!   geometry rendered `supersampling²` times larger and box-filtered down.
+//!   geometry rendered `supersampling²` times larger and box-filtered down,
+//!   shaded at the centroid of each pixel's covered samples
+//!   ([`super::reference`]; `raw`'s `StandardMaterial` extrapolates the
+//!   normals of sub-pixel needles to the pixel's centre).
 //! * `bevy-lod`: the raw mesh plus four meshoptimizer simplifications
 //!   (50/25/12/6 %), switched by Bevy's `VisibilityRange` with its dithered
 //!   crossfade, each level entering where its simplification error reaches
@@ -19,6 +22,7 @@
 //!   lines blended with their opacity as vertex alpha).
 
 use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
+use super::reference::{ReferenceMaterialPlugin, reference_materials};
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
 use crate::model::prism::{
@@ -53,6 +57,10 @@ pub enum Method {
     /// A random sample of original lines at `ours`' primitive budget.
     Sampling,
 }
+
+/// The render layer of the supersampled reference (the raw meshes with
+/// [`super::reference::ReferenceMaterial`]); the methods' are `1..=5`.
+pub const REFERENCE_LAYER: usize = 1 + Method::ALL.len();
 
 impl Method {
     /// Every method, in report order.
@@ -108,7 +116,9 @@ pub(super) fn renderer_with_species(
     if view.width == 0 || view.height == 0 {
         return Err(EvalError::EmptyPicture(view.width, view.height));
     }
-    let mut renderer = HeadlessRenderer::new(".");
+    let mut renderer = HeadlessRenderer::with_setup(".", |app| {
+        app.add_plugins(ReferenceMaterialPlugin);
+    });
     *renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings {
         pixel_error: view.pixel_error,
         transition: view.transition,
@@ -389,7 +399,7 @@ impl EvalScene {
         methods.sort();
         methods.dedup();
 
-        let all_layers = RenderLayers::from_layers(&[0, 1, 2, 3, 4, 5, 6]);
+        let all_layers = RenderLayers::from_layers(&[0, 1, 2, 3, 4, 5, REFERENCE_LAYER]);
         let world = renderer.world_mut();
         let sun = HeadlessRenderer::spawn_lights(world);
         world.entity_mut(sun).insert((all_layers, view.sun.transform()));
@@ -434,8 +444,22 @@ impl EvalScene {
                 ))
                 .id()
         };
-        spawn_mesh(world, &raw.needles, &needle_material, Method::Raw.layer());
-        spawn_mesh(world, &raw.wood, &wood_material, Method::Raw.layer());
+        // The reference draws the raw meshes (the same handles: they sway
+        // together) with its own material, on its own layer.
+        let (reference_needles, reference_wood) = reference_materials(world, &record);
+        for (mesh, material, reference_material) in [
+            (&raw.needles, &needle_material, reference_needles),
+            (&raw.wood, &wood_material, reference_wood),
+        ] {
+            let raw_entity = spawn_mesh(world, mesh, material, Method::Raw.layer());
+            let handle = world.get::<Mesh3d>(raw_entity).map(|m| m.0.clone()).unwrap_or_default();
+            world.spawn((
+                Mesh3d(handle),
+                MeshMaterial3d(reference_material),
+                Transform::IDENTITY,
+                RenderLayers::layer(REFERENCE_LAYER),
+            ));
+        }
 
         // bevy-lod: the raw level and four simplifications.
         let params = view.params();
@@ -540,7 +564,7 @@ impl EvalScene {
             &mut renderer,
             view.width * s,
             view.height * s,
-            Method::Raw.layer(),
+            REFERENCE_LAYER,
             methods.len() as isize,
         );
         // The reference keeps Bevy's 4× MSAA on top of its supersampling:
@@ -1075,6 +1099,9 @@ pub fn visibility_range(enters: &[f32], k: usize, to_range: impl Fn(f32) -> f32)
     }
 }
 
+/// The raw tree's bark roughness.
+pub const WOOD_ROUGHNESS: f32 = 0.9;
+
 /// The `StandardMaterial`s of a raw tree: the needles' and the wood's
 /// colours, as the plugin's own materials use them.
 pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardMaterial>, Handle<StandardMaterial>) {
@@ -1088,7 +1115,7 @@ pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardM
     });
     let wood = materials.add(StandardMaterial {
         base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], 1.0),
-        perceptual_roughness: 0.9,
+        perceptual_roughness: WOOD_ROUGHNESS,
         ..default()
     });
     (needles, wood)
