@@ -100,8 +100,8 @@ pub fn reference_materials(
     let [r, g, b, _] = m.wood_color;
     let wood = materials.add(ReferenceMaterial::new(
         LinearRgba::new(r, g, b, 1.0),
-        super::scene::WOOD_ROUGHNESS,
-        StandardMaterial::default().reflectance,
+        crate::model::needle::BARK_ROUGHNESS,
+        crate::model::needle::BARK_REFLECTANCE,
     ));
     (needles, wood)
 }

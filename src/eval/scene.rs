@@ -1099,9 +1099,6 @@ pub fn visibility_range(enters: &[f32], k: usize, to_range: impl Fn(f32) -> f32)
     }
 }
 
-/// The raw tree's bark roughness.
-pub const WOOD_ROUGHNESS: f32 = 0.9;
-
 /// The `StandardMaterial`s of a raw tree: the needles' and the wood's
 /// colours, as the plugin's own materials use them.
 pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardMaterial>, Handle<StandardMaterial>) {
@@ -1115,7 +1112,8 @@ pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardM
     });
     let wood = materials.add(StandardMaterial {
         base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], 1.0),
-        perceptual_roughness: WOOD_ROUGHNESS,
+        perceptual_roughness: crate::model::needle::BARK_ROUGHNESS,
+        reflectance: crate::model::needle::BARK_REFLECTANCE,
         ..default()
     });
     (needles, wood)

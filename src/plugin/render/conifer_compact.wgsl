@@ -74,6 +74,9 @@ const IMPOSTOR_SHADOW_LINE: u32 = 0xfffffffeu;
 // `model::shading::BUNDLE_SLOPE` and `ALIGNMENT_STEPS`.
 const BUNDLE_SLOPE: f32 = 1.45;
 const ALIGNMENT_STEPS: f32 = 15.0;
+// `model::needle::BARK_ROUGHNESS` and `BARK_REFLECTANCE`.
+const BARK_ROUGHNESS: f32 = 0.9;
+const BARK_REFLECTANCE: f32 = 0.5;
 // `model::wind`'s constants.
 const WOOD_LINE_SECTION_PIXELS: f32 = 2.0;
 const WIND_TRUNK_LEAN: f32 = 0.008;
@@ -1071,6 +1074,19 @@ fn cylinder_normal(surface: Surface, k: u32, to_light: vec3<f32>) -> vec4<f32> {
     return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * half * across_weight(k));
 }
 
+// View cosine `k` (n·V) at which a cylinder's (or a sphere's) indirect
+// light is taken, and its weight: the four-point Gauss–Legendre rule in
+// the normal's angle φ ∈ [0, π/2] from the viewer, weighted by cos φ (a
+// cylinder's projected width, s = sin φ) or by 2 sin φ cos φ (a sphere's
+// disk), the weights summing to 1 (CPU reference:
+// `model::shading::indirect_nodes`).
+fn indirect_node(k: u32, is_sphere: bool) -> vec2<f32> {
+    var cosines = array<f32, 4>(0.99405849, 0.86862415, 0.49547160, 0.10884719);
+    var cylinder = array<f32, 4>(0.27158132, 0.44490373, 0.25377738, 0.02973755);
+    var sphere = array<f32, 4>(0.05912220, 0.44087780, 0.44087780, 0.05912220);
+    return vec2<f32>(cosines[k], select(cylinder[k], sphere[k], is_sphere));
+}
+
 // A sphere's mean diffuse (per unit diffuse colour) and specular over its
 // projected disk, seen from `to_viewer` under a light of unit irradiance
 // from `to_light`: the species' table by the angle between them,
@@ -1328,25 +1344,31 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
     }
 
-    // Indirect light is the same all round the ring or the disk to the
-    // precision of Bevy's split-sum terms: taken at the normal facing the
-    // viewer.
-    set_normal(&input, toward);
+    // Bevy's indirect light depends on the normal's angle to the view (its
+    // split-sum Fresnel grows toward a silhouette): averaged over the
+    // cylinder's width or the sphere's disk at four view cosines. Bevy's
+    // ambient light reads only the cosine; the environment map is taken at
+    // the normal facing the viewer.
+    let F0 = pbr_functions::calculate_F0(base, 0.0, in.material.reflectance);
     var indirect = vec3<f32>(0.0);
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        let node = indirect_node(k, surface.is_sphere);
+        indirect += node.y * ambient::ambient_light(
+            in.world_position,
+            toward,
+            V,
+            node.x,
+            input.diffuse_color,
+            F0,
+            perceptual_roughness,
+            in.diffuse_occlusion,
+        );
+    }
+    set_normal(&input, toward);
 #ifdef ENVIRONMENT_MAP
     let environment = environment_map::environment_map_light(&input, &ranges, false);
     indirect += environment.diffuse * in.diffuse_occlusion + environment.specular * in.specular_occlusion;
 #endif
-    indirect += ambient::ambient_light(
-        in.world_position,
-        toward,
-        V,
-        input.layers[lighting::LAYER_BASE].NdotV,
-        input.diffuse_color,
-        pbr_functions::calculate_F0(base, 0.0, in.material.reflectance),
-        perceptual_roughness,
-        in.diffuse_occlusion,
-    );
     return vec4<f32>(view_bindings::view.exposure * (direct + indirect), in.material.base_color.a);
 }
 #endif
@@ -1429,8 +1451,13 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
         pbr_input.material.base_color = vec4<f32>(bark_albedo(in.local_height), in.color.a);
     }
 #endif
+#ifdef CONIFER_BARK
+    pbr_input.material.perceptual_roughness = BARK_ROUGHNESS;
+    pbr_input.material.reflectance = vec3<f32>(BARK_REFLECTANCE);
+#else
     pbr_input.material.perceptual_roughness = species.roughness;
     pbr_input.material.reflectance = vec3<f32>(species.reflectance);
+#endif
 #ifdef CONIFER_LINES
     pbr_input.material.flags = pbr_types::STANDARD_MATERIAL_FLAGS_FOG_ENABLED_BIT
         | pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_BLEND;

@@ -447,9 +447,9 @@ pub const PLACED_COUNTER_ARRAYS: u64 = 9;
 mod tests {
     use crate::model::wind;
 
-    /// The vertex shader's copies of `model::wind`'s constants.
+    /// The shader's copies of `model::wind`'s constants and the bark's.
     #[test]
-    fn the_shader_has_the_wind_models_constants() {
+    fn the_shader_has_the_models_constants() {
         let shader = include_str!("conifer_compact.wgsl");
         let scalars = [
             ("WIND_TRUNK_LEAN", wind::TRUNK_LEAN),
@@ -459,6 +459,8 @@ mod tests {
             ("WIND_GUST_WAVELENGTH", wind::GUST_WAVELENGTH),
             ("WIND_MAX_REACH_RATIO", wind::MAX_REACH_RATIO),
             ("WIND_NORMAL_STEP", wind::NORMAL_STEP),
+            ("BARK_ROUGHNESS", crate::model::needle::BARK_ROUGHNESS),
+            ("BARK_REFLECTANCE", crate::model::needle::BARK_REFLECTANCE),
         ];
         for (name, value) in scalars {
             let line = format!("const {name}: f32 = {value:?};");
@@ -469,6 +471,26 @@ mod tests {
             ("WIND_FLUTTER_WAVES", wind::FLUTTER_WAVES),
         ] {
             let line = format!("const {name}: vec3<f32> = vec3<f32>({:?}, {:?}, {:?});", v.x, v.y, v.z);
+            assert!(shader.contains(&line), "{line}");
+        }
+    }
+
+    /// The shader's view cosines and weights for indirect light are
+    /// `model::shading::indirect_nodes`.
+    #[test]
+    fn the_shader_has_the_indirect_nodes() {
+        let shader = include_str!("conifer_compact.wgsl");
+        let nodes = crate::model::shading::indirect_nodes();
+        let row = |column: fn(&(f32, f32, f32)) -> f32| {
+            let values: Vec<String> = nodes.iter().map(|n| format!("{:.8}", column(n))).collect();
+            format!("array<f32, 4>({})", values.join(", "))
+        };
+        for (name, column) in [
+            ("cosines", (|n| n.0) as fn(&(f32, f32, f32)) -> f32),
+            ("cylinder", |n| n.1),
+            ("sphere", |n| n.2),
+        ] {
+            let line = format!("var {name} = {};", row(column));
             assert!(shader.contains(&line), "{line}");
         }
     }
