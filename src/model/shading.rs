@@ -142,6 +142,28 @@ pub fn sphere_lambert(to_viewer: Vec3, to_light: Vec3) -> f32 {
     2.0 * (alpha.sin() + (PI - alpha) * alpha.cos()) / (3.0 * PI)
 }
 
+/// The normal of the round cylinder a prism stands for, where one of its
+/// fragments lies, as the shader's `round_prism_normal`: `normal` is the
+/// prism's normal interpolated across a face (unit at the corners, not
+/// normalized between them), `side` and `toward` the unit frame its ring
+/// was turned to ([`visible_frame`]: across the view and facing it). A
+/// corner's normal is its radial direction, so the normal's component
+/// along `side` is interpolated as the fragment's offset across the width
+/// over the radius, `s`; the cylinder's normal there is
+/// `√(1 − s²)·toward + s·side`. Interpolated as it is, a prism of few sides
+/// spends more of its width near its rim than a cylinder does (a triangle
+/// seen corner-on: its last third of each face even turned away from the
+/// viewer, past the rim), which a light from behind lights. A cap's normal
+/// (along the axis) is kept.
+pub fn round_prism_normal(normal: Vec3, side: Vec3, toward: Vec3) -> Vec3 {
+    let s = normal.dot(side).clamp(-1.0, 1.0);
+    let along = normal - s * side - normal.dot(toward) * toward;
+    if along.length_squared() > 0.25 {
+        return normal.normalize_or_zero();
+    }
+    (1.0 - s * s).max(0.0).sqrt() * toward + s * side
+}
+
 /// The view cosines `n·V` at which a cylinder's or a sphere's indirect
 /// light is taken, each with its weight over a cylinder's projected width
 /// and over a sphere's disk: `(cosine, cylinder weight, sphere weight)`,
@@ -744,6 +766,49 @@ mod tests {
     /// (Burley of albedo 0.05 plus GGX, F0 0.04) to 5 % (the model
     /// leaves out Bevy's multiple-scattering compensation), over random
     /// normals, viewers and lights.
+    proptest! {
+        /// Anywhere on a side face of a prism whose ring faces the viewer
+        /// (any face not turned away), the round normal is the cylinder's
+        /// at the fragment's offset across the width (its position along
+        /// `side` over the radius), facing the viewer; on a cap it is the
+        /// axis.
+        #[test]
+        fn a_prism_is_shaded_as_its_round_cylinder(
+            sides in 3u32..16,
+            face in 0u32..16,
+            t in 0.0f32..=1.0,
+            axis in (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0),
+            viewer in (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0),
+        ) {
+            let axis = Vec3::new(axis.0, axis.1, axis.2);
+            let viewer = Vec3::new(viewer.0, viewer.1, viewer.2);
+            prop_assume!(axis.length() > 0.1 && viewer.length() > 0.1);
+            let axis = axis.normalize();
+            let viewer = viewer.normalize();
+            prop_assume!(axis.cross(viewer).length() > 0.05);
+            let (toward, side) = visible_frame(axis, viewer);
+            // Corners of the ring (as `prism_vertex`: the first toward the
+            // viewer), on the visible half.
+            let k = face % sides;
+            let corner = |k: u32| {
+                let angle = std::f32::consts::TAU * k as f32 / sides as f32;
+                toward * angle.cos() + side * angle.sin()
+            };
+            // Any face in front (a triangle's faces reach past the rim).
+            let (a, b) = (corner(k), corner(k + 1));
+            prop_assume!(a.dot(toward) + b.dot(toward) > 0.0);
+            let normal = a.lerp(b, t);
+            let position = a.lerp(b, t); // radius 1, centre 0
+            let round = round_prism_normal(normal, side, toward);
+            let s = position.dot(side);
+            prop_assert!((round.length() - 1.0).abs() < 1e-4);
+            prop_assert!((round.dot(side) - s).abs() < 1e-4);
+            prop_assert!((round.dot(toward) - (1.0 - s * s).max(0.0).sqrt()).abs() < 2e-3);
+            prop_assert!(round.dot(axis).abs() < 1e-4);
+            prop_assert!((round_prism_normal(axis, side, toward) - axis).length() < 1e-5);
+        }
+    }
+
     /// Dense averages of `g(n·V)` over a cylinder's projected width and a
     /// sphere's disk.
     fn dense_view_averages(g: impl Fn(f32) -> f32) -> (f32, f32) {

@@ -96,7 +96,11 @@ struct VertexOutput {
     @builtin(position) position: vec4<f32>,
     @location(0) world_position: vec4<f32>,
     // A prism's normal; a line's direction (the axis of what it stands for).
-    @location(1) world_normal: vec3<f32>,
+    // Taken at the centroid of the pixel's covered samples: with MSAA a
+    // fragment runs at the pixel's centre, and a prism's edge covering only
+    // samples near it would have its normal extrapolated past the ring,
+    // sideways, where a light from behind lights the rim.
+    @location(1) @interpolate(perspective, centroid) world_normal: vec3<f32>,
 #ifdef CONIFER_SHADOW
     @location(2) @interpolate(flat) color: vec4<f32>,
 #else
@@ -123,6 +127,13 @@ struct VertexOutput {
     // How well the needles a line stands for lie along it (1 for a
     // needle's own line and wood; `model::shading::AxisSpread::alignment`).
     @location(6) @interpolate(flat) alignment: f32,
+#ifdef CONIFER_ROUND_PRISMS
+    // A prism's ring frame (world, unit): across the view, its normals'
+    // component along it the offset across the cylinder's width, and the
+    // normal facing the view its ring was turned to.
+    @location(10) @interpolate(flat) prism_side: vec3<f32>,
+    @location(11) @interpolate(flat) prism_toward: vec3<f32>,
+#endif
 }
 
 // A position outside every clip plane: the primitive is not drawn.
@@ -254,8 +265,33 @@ fn swayed_prism(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local:
     // (Shadow passes light nothing: their normals go unused.)
     if species.wind.z > 0.0 {
         let calm = (world_from_local * vec4<f32>(b - a, 0.0)).xyz;
-        result.world_normal = turn_normal(out.world_normal, calm, swayed_segment(a, b, world_from_local));
+        let swayed = swayed_segment(a, b, world_from_local);
+        result.world_normal = turn_normal(out.world_normal, calm, swayed);
+#ifdef CONIFER_ROUND_PRISMS
+        result.prism_side = turn_normal(out.prism_side, calm, swayed);
+        result.prism_toward = turn_normal(out.prism_toward, calm, swayed);
+#endif
     }
+#endif
+    return result;
+}
+
+// `out` (a corner of the prism from `a` to `b` whose ring faces `toward`,
+// in the frame of `world_from_local`) with the prism's ring frame, as
+// `prism_vertex` turns its ring.
+fn with_prism_side(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, toward: vec3<f32>, world_from_local: mat4x4<f32>) -> VertexOutput {
+    var result = out;
+#ifdef CONIFER_ROUND_PRISMS
+    var axis = b - a;
+    if dot(axis, axis) < 1e-24 {
+        axis = vec3<f32>(0.0, 1.0, 0.0);
+    }
+    axis = normalize(axis);
+    let facing = facing_axis(axis, toward);
+    let side = (world_from_local * vec4<f32>(cross(axis, facing), 0.0)).xyz;
+    let front = (world_from_local * vec4<f32>(facing, 0.0)).xyz;
+    result.prism_side = side / max(length(side), 1e-20);
+    result.prism_toward = front / max(length(front), 1e-20);
 #endif
     return result;
 }
@@ -642,7 +678,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let p = prism_vertex(base, tip, radius, radius, sides, corner, toward);
     let m = max(species.max_sides, 3u);
     let amount = f32(m - sides) / max(f32(m - 3u), 1.0);
-    return swayed_prism(finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0, needle_albedo)), base, tip, world_from_local);
+    let out = finish(p.position, p.normal, world_from_local, base_color(-1, amount, 1.0, needle_albedo));
+    return swayed_prism(with_prism_side(out, base, tip, toward, world_from_local), base, tip, world_from_local);
 #endif
 
 #ifdef CONIFER_WOOD_PRISMS
@@ -672,7 +709,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     if species.debug_colors != 0u {
         color = base_color(-1, f32(m - sides) / max(f32(m - 3u), 1.0), 1.0, color.rgb);
     }
-    return with_height(swayed_prism(finish(p.position, p.normal, world_from_local, color), a.xyz, b.xyz, world_from_local), p.position.y);
+    let out = with_prism_side(finish(p.position, p.normal, world_from_local, color), a.xyz, b.xyz, toward, world_from_local);
+    return with_height(swayed_prism(out, a.xyz, b.xyz, world_from_local), p.position.y);
 #endif
 
 #ifdef CONIFER_ORIGINAL_LINES
@@ -1087,6 +1125,26 @@ fn indirect_node(k: u32, is_sphere: bool) -> vec2<f32> {
     return vec2<f32>(cosines[k], select(cylinder[k], sphere[k], is_sphere));
 }
 
+// The normal in the middle of the part of a cylinder's width that
+// `to_light` reaches: where a line's shadow from that light is fetched
+// (Bevy's normal bias moves the fetch along it). At the normal facing the
+// viewer, a light from behind would be fetched on the line's far side from
+// it, inside the shadow the line casts itself (lines cast their coverage).
+// A sphere's, an unlit cylinder's and an impostor texel's (whose shadows
+// are taken at samples through the crown) is the one facing the viewer.
+fn lit_normal(surface: Surface, to_light: vec3<f32>) -> vec3<f32> {
+#ifdef CONIFER_IMPOSTOR
+    return surface.toward;
+#else
+    let lit = lit_across(surface, to_light);
+    if surface.is_sphere || lit.y <= lit.x {
+        return surface.toward;
+    }
+    let s = 0.5 * (lit.x + lit.y);
+    return sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side;
+#endif
+}
+
 // A sphere's mean diffuse (per unit diffuse colour) and specular over its
 // projected disk, seen from `to_viewer` under a light of unit irradiance
 // from `to_light`: the species' table by the angle between them,
@@ -1293,8 +1351,9 @@ fn spot_shadow(light_id: u32, position: vec4<f32>, toward: vec3<f32>, frag: vec2
 }
 
 // The surface's radiance averaged over what the pixel sees of it; each
-// light's shadow is fetched once, at the normal facing the viewer (an
-// impostor texel's is the mean over its samples through the crown).
+// light's shadow is fetched once, at the middle of the part of the width
+// it lights (`lit_normal`; an impostor texel's is the mean over its
+// samples through the crown).
 fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     let V = in.V;
     let toward = surface.toward;
@@ -1319,28 +1378,28 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     var direct = vec3<f32>(0.0);
     for (var i: u32 = ranges.first_point_light_index_offset; i < ranges.first_spot_light_index_offset; i = i + 1u) {
         let light_id = clustering::get_clusterable_object_id(i);
+        let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         var shadow = 1.0;
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
+            shadow = point_shadow(light_id, in.world_position, lit_normal(surface, to_light), in.frag_coord.xy);
         }
-        let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow;
     }
     for (var i: u32 = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i = i + 1u) {
         let light_id = clustering::get_clusterable_object_id(i);
+        let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         var shadow = 1.0;
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = spot_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
+            shadow = spot_shadow(light_id, in.world_position, lit_normal(surface, to_light), in.frag_coord.xy);
         }
-        let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow;
     }
     for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
+        let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
         var shadow = 1.0;
         if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
+            shadow = directional_shadow(i, in.world_position, lit_normal(surface, to_light), view_z, in.frag_coord.xy);
         }
-        let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
         direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
     }
 
@@ -1408,6 +1467,24 @@ fn crown_radius_at(height: f32) -> f32 {
 }
 #endif
 
+#ifdef CONIFER_ROUND_PRISMS
+// The normal of a round cylinder where a prism's fragment lies: `normal`
+// is the prism's normal interpolated across its face (not normalized), its
+// component along the unit `side` (across the view) the offset `s` across
+// the width, as a corner's position is; `toward` is the ring's normal
+// facing the view. Returns `√(1 − s²)·toward + s·side`; a cap's normal
+// (along the axis) is kept. CPU reference:
+// `model::shading::round_prism_normal`.
+fn round_prism_normal(normal: vec3<f32>, side: vec3<f32>, toward: vec3<f32>) -> vec3<f32> {
+    let s = clamp(dot(normal, side), -1.0, 1.0);
+    let along = normal - s * side - dot(normal, toward) * toward;
+    if dot(along, along) > 0.25 {
+        return normalize(normal);
+    }
+    return sqrt(max(1.0 - s * s, 0.0)) * toward + s * side;
+}
+#endif
+
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
@@ -1443,6 +1520,13 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     }
     to_camera = normalize(to_camera);
     let across_axis = normalize((world_from_local * vec4<f32>(to_camera.y, 0.0, -to_camera.x, 0.0)).xyz);
+#endif
+#ifdef CONIFER_ROUND_PRISMS
+    // A prism is shaded as the round cylinder it stands for: the normal at
+    // the fragment's offset across the width (CPU reference:
+    // `model::shading::round_prism_normal`), not the facets' interpolated
+    // normal, which a prism of few sides spends twice as long near its rim.
+    axis = round_prism_normal(in.world_normal, in.prism_side, in.prism_toward);
 #endif
 #ifdef CONIFER_BARK
     // The bark's colour at this fragment's height (taken at the vertices,

@@ -1138,6 +1138,13 @@ impl SpecializedRenderPipeline for CompactPipeline {
         }
         if matches!(
             key.kind,
+            PartKind::Prisms | PartKind::PlacedPrisms | PartKind::WoodPrisms
+        ) {
+            // Prisms shaded as the round cylinders they stand for.
+            defs.push("CONIFER_ROUND_PRISMS".into());
+        }
+        if matches!(
+            key.kind,
             PartKind::WoodPrisms | PartKind::WoodLines | PartKind::WoodMesh
         ) {
             // Bark coloured by the height of each fragment.
