@@ -101,7 +101,7 @@ pub fn reference_materials(
     let wood = materials.add(ReferenceMaterial::new(
         LinearRgba::new(r, g, b, 1.0),
         crate::model::needle::BARK_ROUGHNESS,
-        crate::model::needle::BARK_REFLECTANCE,
+        m.reflectance,
     ));
     (needles, wood)
 }

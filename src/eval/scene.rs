@@ -1113,7 +1113,7 @@ pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardM
     let wood = materials.add(StandardMaterial {
         base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], 1.0),
         perceptual_roughness: crate::model::needle::BARK_ROUGHNESS,
-        reflectance: crate::model::needle::BARK_REFLECTANCE,
+        reflectance: m.reflectance,
         ..default()
     });
     (needles, wood)

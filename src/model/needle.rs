@@ -72,12 +72,9 @@ impl WoodSegment {
 }
 
 /// Perceptual roughness of bark (rough and matte beside the needles'
-/// waxy [`FoliageMaterial::roughness`]): the plugin's wood and the
-/// reference's.
+/// waxy [`FoliageMaterial::roughness`]; its reflectance is the
+/// material's): the plugin's wood and the reference's.
 pub const BARK_ROUGHNESS: f32 = 0.9;
-
-/// Specular reflectance of bark (Bevy's default dielectric, `F0` 0.04).
-pub const BARK_REFLECTANCE: f32 = 0.5;
 
 /// Surface appearance of a tree's needles and bark. The paper gives a tree
 /// one material; here needles also take their colour from their age (the

@@ -74,9 +74,8 @@ const IMPOSTOR_SHADOW_LINE: u32 = 0xfffffffeu;
 // `model::shading::BUNDLE_SLOPE` and `ALIGNMENT_STEPS`.
 const BUNDLE_SLOPE: f32 = 1.45;
 const ALIGNMENT_STEPS: f32 = 15.0;
-// `model::needle::BARK_ROUGHNESS` and `BARK_REFLECTANCE`.
+// `model::needle::BARK_ROUGHNESS`.
 const BARK_ROUGHNESS: f32 = 0.9;
-const BARK_REFLECTANCE: f32 = 0.5;
 // `model::wind`'s constants.
 const WOOD_LINE_SECTION_PIXELS: f32 = 2.0;
 const WIND_TRUNK_LEAN: f32 = 0.008;
@@ -1537,11 +1536,10 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
 #endif
 #ifdef CONIFER_BARK
     pbr_input.material.perceptual_roughness = BARK_ROUGHNESS;
-    pbr_input.material.reflectance = vec3<f32>(BARK_REFLECTANCE);
 #else
     pbr_input.material.perceptual_roughness = species.roughness;
-    pbr_input.material.reflectance = vec3<f32>(species.reflectance);
 #endif
+    pbr_input.material.reflectance = vec3<f32>(species.reflectance);
 #ifdef CONIFER_LINES
     pbr_input.material.flags = pbr_types::STANDARD_MATERIAL_FLAGS_FOG_ENABLED_BIT
         | pbr_types::STANDARD_MATERIAL_FLAGS_ALPHA_MODE_BLEND;

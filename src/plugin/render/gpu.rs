@@ -460,7 +460,6 @@ mod tests {
             ("WIND_MAX_REACH_RATIO", wind::MAX_REACH_RATIO),
             ("WIND_NORMAL_STEP", wind::NORMAL_STEP),
             ("BARK_ROUGHNESS", crate::model::needle::BARK_ROUGHNESS),
-            ("BARK_REFLECTANCE", crate::model::needle::BARK_REFLECTANCE),
         ];
         for (name, value) in scalars {
             let line = format!("const {name}: f32 = {value:?};");
