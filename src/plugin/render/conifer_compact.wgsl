@@ -1124,26 +1124,6 @@ fn indirect_node(k: u32, is_sphere: bool) -> vec2<f32> {
     return vec2<f32>(cosines[k], select(cylinder[k], sphere[k], is_sphere));
 }
 
-// The normal in the middle of the part of a cylinder's width that
-// `to_light` reaches: where a line's shadow from that light is fetched
-// (Bevy's normal bias moves the fetch along it). At the normal facing the
-// viewer, a light from behind would be fetched on the line's far side from
-// it, inside the shadow the line casts itself (lines cast their coverage).
-// A sphere's, an unlit cylinder's and an impostor texel's (whose shadows
-// are taken at samples through the crown) is the one facing the viewer.
-fn lit_normal(surface: Surface, to_light: vec3<f32>) -> vec3<f32> {
-#ifdef CONIFER_IMPOSTOR
-    return surface.toward;
-#else
-    let lit = lit_across(surface, to_light);
-    if surface.is_sphere || lit.y <= lit.x {
-        return surface.toward;
-    }
-    let s = 0.5 * (lit.x + lit.y);
-    return sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side;
-#endif
-}
-
 // A sphere's mean diffuse (per unit diffuse colour) and specular over its
 // projected disk, seen from `to_viewer` under a light of unit irradiance
 // from `to_light`: the species' table by the angle between them,
@@ -1350,9 +1330,8 @@ fn spot_shadow(light_id: u32, position: vec4<f32>, toward: vec3<f32>, frag: vec2
 }
 
 // The surface's radiance averaged over what the pixel sees of it; each
-// light's shadow is fetched once, at the middle of the part of the width
-// it lights (`lit_normal`; an impostor texel's is the mean over its
-// samples through the crown).
+// light's shadow is fetched once, at the normal facing the viewer (an
+// impostor texel's is the mean over its samples through the crown).
 fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     let V = in.V;
     let toward = surface.toward;
@@ -1380,7 +1359,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         var shadow = 1.0;
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = point_shadow(light_id, in.world_position, lit_normal(surface, to_light), in.frag_coord.xy);
+            shadow = point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
         direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow;
     }
@@ -1389,7 +1368,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         let to_light = normalize(view_bindings::clustered_lights.data[light_id].position_radius.xyz - in.world_position.xyz);
         var shadow = 1.0;
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = spot_shadow(light_id, in.world_position, lit_normal(surface, to_light), in.frag_coord.xy);
+            shadow = spot_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
         direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow;
     }
@@ -1397,7 +1376,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
         var shadow = 1.0;
         if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = directional_shadow(i, in.world_position, lit_normal(surface, to_light), view_z, in.frag_coord.xy);
+            shadow = directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
         direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
     }
