@@ -762,10 +762,6 @@ mod tests {
         assert!(whole / dense < 0.75, "{}", whole / dense);
     }
 
-    /// `bevy_direct` is the test's independent model of Bevy's BRDF
-    /// (Burley of albedo 0.05 plus GGX, F0 0.04) to 5 % (the model
-    /// leaves out Bevy's multiple-scattering compensation), over random
-    /// normals, viewers and lights.
     proptest! {
         /// Anywhere on a side face of a prism whose ring faces the viewer
         /// (any face not turned away), the round normal is the cylinder's
@@ -866,6 +862,10 @@ mod tests {
         }
     }
 
+    /// `bevy_direct` is the test's independent model of Bevy's BRDF
+    /// (Burley of albedo 0.05 plus GGX, F0 0.04) to 5 % (the model
+    /// leaves out Bevy's multiple-scattering compensation), over random
+    /// normals, viewers and lights.
     #[test]
     fn bevy_direct_is_bevys_brdf() {
         let mut next = xorshift(0x9e37_79b9);
