@@ -82,26 +82,14 @@ impl Plugin for ReferenceMaterialPlugin {
     }
 }
 
-/// The reference's materials of `record`'s needles and wood: the colours,
-/// roughness and reflectance [`super::scene::raw_materials`] gives the raw
-/// tree.
+/// The reference's materials of `record`'s needles and wood, of the
+/// surfaces the raw tree has ([`super::scene::raw_surfaces`]).
 pub fn reference_materials(
     world: &mut World,
     record: &LodRecord,
 ) -> (Handle<ReferenceMaterial>, Handle<ReferenceMaterial>) {
-    let m = &record.material;
     let mut materials = world.resource_mut::<Assets<ReferenceMaterial>>();
-    let [r, g, b, _] = m.needle_color;
-    let needles = materials.add(ReferenceMaterial::new(
-        LinearRgba::new(r, g, b, 1.0),
-        m.roughness,
-        m.reflectance,
-    ));
-    let [r, g, b, _] = m.wood_color;
-    let wood = materials.add(ReferenceMaterial::new(
-        LinearRgba::new(r, g, b, 1.0),
-        crate::model::needle::BARK_ROUGHNESS,
-        m.reflectance,
-    ));
+    let [needles, wood] =
+        super::scene::raw_surfaces(record).map(|surface| materials.add(ReferenceMaterial { surface }));
     (needles, wood)
 }

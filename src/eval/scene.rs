@@ -22,7 +22,7 @@
 //!   lines blended with their opacity as vertex alpha).
 
 use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
-use super::reference::{ReferenceMaterialPlugin, reference_materials};
+use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_materials};
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
 use crate::model::prism::{
@@ -451,8 +451,13 @@ impl EvalScene {
             (&raw.needles, &needle_material, reference_needles),
             (&raw.wood, &wood_material, reference_wood),
         ] {
-            let raw_entity = spawn_mesh(world, mesh, material, Method::Raw.layer());
-            let handle = world.get::<Mesh3d>(raw_entity).map(|m| m.0.clone()).unwrap_or_default();
+            let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
+            world.spawn((
+                Mesh3d(handle.clone()),
+                MeshMaterial3d(material.clone()),
+                Transform::IDENTITY,
+                RenderLayers::layer(Method::Raw.layer()),
+            ));
             world.spawn((
                 Mesh3d(handle),
                 MeshMaterial3d(reference_material),
@@ -1099,22 +1104,34 @@ pub fn visibility_range(enters: &[f32], k: usize, to_range: impl Fn(f32) -> f32)
     }
 }
 
-/// The `StandardMaterial`s of a raw tree: the needles' and the wood's
-/// colours, as the plugin's own materials use them.
-pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardMaterial>, Handle<StandardMaterial>) {
+/// The surfaces of a raw tree, needles and wood: the record's colours, the
+/// needles' roughness and the bark's ([`crate::model::needle::BARK_ROUGHNESS`]),
+/// the material's reflectance, as the plugin's own materials use them. The
+/// raw methods' `StandardMaterial`s ([`raw_materials`]) and the reference's
+/// materials ([`super::reference::reference_materials`]) are made of them.
+pub fn raw_surfaces(record: &LodRecord) -> [ReferenceSurface; 2] {
     let m = &record.material;
+    let surface = |[r, g, b, _]: [f32; 4], perceptual_roughness: f32| ReferenceSurface {
+        base_color: Vec4::new(r, g, b, 1.0),
+        perceptual_roughness,
+        reflectance: m.reflectance,
+    };
+    [
+        surface(m.needle_color, m.roughness),
+        surface(m.wood_color, crate::model::needle::BARK_ROUGHNESS),
+    ]
+}
+
+/// The `StandardMaterial`s of a raw tree's [`raw_surfaces`]: needles, wood.
+pub fn raw_materials(world: &mut World, record: &LodRecord) -> (Handle<StandardMaterial>, Handle<StandardMaterial>) {
     let mut materials = world.resource_mut::<Assets<StandardMaterial>>();
-    let needles = materials.add(StandardMaterial {
-        base_color: Color::linear_rgba(m.needle_color[0], m.needle_color[1], m.needle_color[2], 1.0),
-        perceptual_roughness: m.roughness,
-        reflectance: m.reflectance,
-        ..default()
-    });
-    let wood = materials.add(StandardMaterial {
-        base_color: Color::linear_rgba(m.wood_color[0], m.wood_color[1], m.wood_color[2], 1.0),
-        perceptual_roughness: crate::model::needle::BARK_ROUGHNESS,
-        reflectance: m.reflectance,
-        ..default()
+    let [needles, wood] = raw_surfaces(record).map(|surface| {
+        materials.add(StandardMaterial {
+            base_color: LinearRgba::from_vec4(surface.base_color).into(),
+            perceptual_roughness: surface.perceptual_roughness,
+            reflectance: surface.reflectance,
+            ..default()
+        })
     });
     (needles, wood)
 }
