@@ -4,7 +4,7 @@ use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
 use crate::eval::scene::{EvalSun, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::{read_prototype_record, read_record};
-use crate::plugin::{LineLighting, LineOpacity};
+use crate::plugin::{LineLighting, LineOpacity, LineRaster};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 
@@ -86,6 +86,11 @@ pub struct EvalArgs {
     /// toward the viewer).
     #[arg(long, default_value = "cylinder")]
     pub line_lighting: String,
+    /// How the plugin rasterizes lines: `area` (the default: each pixel
+    /// covered by the line's strip's area in it) or `hardware` (one-pixel
+    /// hardware lines, the paper's).
+    #[arg(long, default_value = "area")]
+    pub line_raster: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`
     /// (`1 − exp(−Σa/A)`).
@@ -138,6 +143,11 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         "facing-strip" => LineLighting::FacingStrip,
         other => bail!("--line-lighting {other:?}: bundle, cylinder or facing-strip"),
     };
+    let line_raster = match args.line_raster.as_str() {
+        "area" => LineRaster::Area,
+        "hardware" => LineRaster::Hardware,
+        other => bail!("--line-raster {other:?}: area or hardware"),
+    };
     let ours_line_opacity = match args.ours_opacity.as_str() {
         "area" => LineOpacity::AreaPreserving,
         "coverage" => LineOpacity::Coverage,
@@ -152,6 +162,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         supersampling,
         sun,
         line_lighting,
+        line_raster,
         ours_line_opacity,
         ours_impostor: !args.ours_no_impostor,
     };

@@ -138,6 +138,7 @@ pub fn evaluate_inside(
         pixel_error: view.pixel_error,
         transition: view.transition,
         line_lighting: view.line_lighting,
+        line_raster: view.line_raster,
         ..ConiferLodSettings::default()
     };
     let world = renderer.world_mut();

@@ -252,6 +252,9 @@ pub struct EvalReport {
     pub sun: String,
     /// How the plugin's methods lit their lines (`Cylinder`, `FacingStrip`).
     pub line_lighting: String,
+    /// How the plugin's methods rasterized their lines (`Area`,
+    /// `Hardware`).
+    pub line_raster: String,
     /// The merged-line opacity `ours` drew with (`AreaPreserving`,
     /// `Coverage`).
     pub ours_line_opacity: String,
@@ -590,6 +593,7 @@ pub fn evaluate(
         transition: options.view.transition,
         sun: options.view.sun.name().into(),
         line_lighting: format!("{:?}", options.view.line_lighting),
+        line_raster: format!("{:?}", options.view.line_raster),
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         ours_impostor: options.view.ours_impostor,
         needles,

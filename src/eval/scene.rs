@@ -33,7 +33,7 @@ use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
     ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind,
-    LineLighting, LineOpacity, triangle_mesh,
+    LineLighting, LineOpacity, LineRaster, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
@@ -123,6 +123,7 @@ pub(super) fn renderer_with_species(
         pixel_error: view.pixel_error,
         transition: view.transition,
         line_lighting: view.line_lighting,
+        line_raster: view.line_raster,
         ..ConiferLodSettings::default()
     };
     let species = ConiferSpecies::from_record(record)?;
@@ -149,6 +150,8 @@ pub struct EvalView {
     pub sun: EvalSun,
     /// How the plugin's methods light their lines.
     pub line_lighting: LineLighting,
+    /// How the plugin's methods rasterize their lines.
+    pub line_raster: LineRaster,
     /// The merged-line opacity `ours` draws with.
     pub ours_line_opacity: LineOpacity,
     /// Whether `ours` fades far trees into the crown impostor (its
@@ -211,6 +214,7 @@ impl EvalView {
             supersampling: 4,
             sun: EvalSun::default(),
             line_lighting: LineLighting::default(),
+            line_raster: LineRaster::default(),
             ours_line_opacity: LineOpacity::default(),
             ours_impostor: true,
         }

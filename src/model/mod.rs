@@ -10,6 +10,7 @@
 //! * [`cut_count`]: the cut's primitive counts at any error without a traversal.
 //! * [`file`](mod@file): the binary record file.
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
+//! * [`raster`]: how a line covers pixels (its strip's area in each).
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
 //! * [`impostor`]: the far representation (a crown impostor of a few views).
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
@@ -30,6 +31,7 @@ pub mod needle;
 pub mod prism;
 pub mod prototype;
 pub mod quantize;
+pub mod raster;
 pub mod record;
 pub mod shading;
 pub mod view;

@@ -232,6 +232,24 @@ pub enum LineLighting {
     FacingStrip,
 }
 
+/// How lines are rasterized.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
+pub enum LineRaster {
+    /// Each line a quad around its segment, every pixel covered by the
+    /// area of the line's strip (its opacity wide) inside the pixel's
+    /// square, as the supersampled reference box-filters a needle
+    /// ([`crate::model::raster`]): a diagonal line splits its coverage
+    /// between the pixels it crosses instead of lighting one pixel a step,
+    /// and MSAA smears nothing. Cameras only: shadow views keep hardware
+    /// lines (their texels keep each fragment with its opacity, hashed).
+    #[default]
+    Area,
+    /// Hardware lines, one pixel wide, every pixel they light taking the
+    /// line's whole opacity (the paper's; half the fragments and a third
+    /// of the vertices of [`LineRaster::Area`]).
+    Hardware,
+}
+
 /// Run-time LOD settings, shared by every tree; change them at any time.
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Reflect)]
 #[reflect(Resource, Default, Debug, Clone)]
@@ -246,6 +264,8 @@ pub struct ConiferLodSettings {
     pub line_opacity: LineOpacity,
     /// How lines are lit.
     pub line_lighting: LineLighting,
+    /// How lines are rasterized in cameras' views.
+    pub line_raster: LineRaster,
     /// `false` draws every needle as a prism of `Lmax` sides (LOD off).
     pub enabled: bool,
     /// Colour needles by representation (prisms blue, original lines green,
@@ -286,6 +306,7 @@ impl Default for ConiferLodSettings {
             transition: 1.0,
             line_opacity: LineOpacity::default(),
             line_lighting: LineLighting::default(),
+            line_raster: LineRaster::default(),
             enabled: true,
             debug_colors: false,
             max_expanded_placements: 1 << 17,
@@ -296,11 +317,13 @@ impl Default for ConiferLodSettings {
 }
 
 impl ConiferLodSettings {
-    /// The paper's configuration: `T = 2/ρ` opacity, one error per tree
-    /// and lines at every distance, everything else as given.
+    /// The paper's configuration: `T = 2/ρ` opacity, one error per tree,
+    /// hardware lines and lines at every distance, everything else as
+    /// given.
     pub fn paper() -> Self {
         Self {
             line_opacity: LineOpacity::Paper,
+            line_raster: LineRaster::Hardware,
             error_scope: ErrorScope::Tree,
             far_impostor: false,
             ..Self::default()

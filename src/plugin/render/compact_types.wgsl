@@ -58,6 +58,8 @@ const IMPOSTOR_STEEP_END: f32 = 1.0;
 // CullView.perspective: bit 0 a perspective view, bit 1 a camera.
 const VIEW_PERSPECTIVE: u32 = 1u;
 const VIEW_CAMERA: u32 = 2u;
+// The view's line draws are quads (`model::raster`), six vertices a line.
+const VIEW_LINE_QUADS: u32 = 4u;
 
 struct SpeciesParams {
     // tree-local crown centre (xyz) and the radius of a sphere round it
@@ -148,7 +150,7 @@ struct CullView {
     world_position: vec4<f32>,
     // spatial error per metre of distance per unit pixel error: 2/(P₁₁·H)
     error_slope: f32,
-    // VIEW_PERSPECTIVE | VIEW_CAMERA
+    // VIEW_PERSPECTIVE | VIEW_CAMERA | VIEW_LINE_QUADS
     perspective: u32,
     layers: u32,
     // expanded placements the view's entry buffers hold

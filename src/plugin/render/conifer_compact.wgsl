@@ -90,6 +90,16 @@ const WIND_NORMAL_STEP: f32 = 0.01;
 const WIND_BRANCH_HZ_OVER_TRUNK: f32 = 3.1;
 const WIND_FLUTTER_HZ: f32 = 3.7;
 const WIND_GUST_HZ: vec2<f32> = vec2<f32>(0.071, 0.173);
+// A line's vertices: a quad of two triangles around its strip, covering
+// each pixel by the strip's area there (`model::raster`), or a hardware
+// line (`LineRaster::Hardware`, and every shadow view).
+#ifdef CONIFER_LINE_QUADS
+const LINE_VERTICES: u32 = 6u;
+// `model::raster::LINE_QUAD_MARGIN`.
+const LINE_QUAD_MARGIN: f32 = 1.25;
+#else
+const LINE_VERTICES: u32 = 2u;
+#endif
 
 struct VertexOutput {
     @builtin(position) position: vec4<f32>,
@@ -132,6 +142,12 @@ struct VertexOutput {
     // normal facing the view its ring was turned to.
     @location(10) @interpolate(flat) prism_side: vec3<f32>,
     @location(11) @interpolate(flat) prism_toward: vec3<f32>,
+#endif
+#ifdef CONIFER_LINE_QUADS
+    // A line's ends in framebuffer pixels (start xy, end xy), as the
+    // vertex stage placed them: the fragment covers its pixel by the
+    // strip's area there.
+    @location(12) @interpolate(flat) line_ends: vec4<f32>,
 #endif
 }
 
@@ -311,6 +327,79 @@ fn swayed_line(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: 
     }
 #endif
     return result;
+}
+
+// Whether line vertex `vertex_index` lies at the line's end (else its
+// start): a hardware line's second vertex, or a quad corner at the end
+// (CPU reference: `model::raster::line_quad_corner_ends`).
+fn line_vertex_at_end(vertex_index: u32) -> bool {
+#ifdef CONIFER_LINE_QUADS
+    let corner = vertex_index % 6u;
+    return corner == 1u || corner == 2u || corner == 4u;
+#else
+    return (vertex_index & 1u) != 0u;
+#endif
+}
+
+#ifdef CONIFER_LINE_QUADS
+// Framebuffer pixel of a clip position in front of the near plane.
+fn clip_to_pixel(clip: vec4<f32>) -> vec2<f32> {
+    let ndc = clip.xy / clip.w;
+    return view.viewport.xy + vec2<f32>(0.5 + 0.5 * ndc.x, 0.5 - 0.5 * ndc.y) * view.viewport.zw;
+}
+#endif
+
+// `out` (the vertex `vertex_index` of a line from `a` to `b`, at the end
+// `line_vertex_at_end` gives, moved by the wind) as a corner of the line's
+// quad: both ends clipped to the near plane and projected to pixels, the
+// corner pushed out along the segment and across it by the strip's half
+// width and `LINE_QUAD_MARGIN` (CPU reference:
+// `model::raster::line_quad_corner`), kept at its end's depth. A hardware
+// line's vertex is `out` itself.
+fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>, vertex_index: u32) -> VertexOutput {
+#ifdef CONIFER_LINE_QUADS
+    var result = out;
+    let corner = vertex_index % 6u;
+    let at_end = line_vertex_at_end(vertex_index);
+    let left = corner == 2u || corner == 4u || corner == 5u;
+    let calm = (world_from_local * vec4<f32>(select(b, a, at_end), 1.0)).xyz;
+    let there_world = calm + wind_displacement(calm);
+    var there = position_world_to_clip(there_world);
+    var here = out.position;
+    // In front of the near plane where w ≥ z (reversed Z; an orthographic
+    // view's near plane is z = 1 = w).
+    let d_here = here.w - here.z;
+    let d_there = there.w - there.z;
+    if !(d_here >= 0.0) && !(d_there >= 0.0) {
+        return culled();
+    }
+    if !(d_here >= 0.0) {
+        let t = d_here / (d_here - d_there);
+        here = mix(here, there, t);
+        result.world_position = vec4<f32>(mix(out.world_position.xyz, there_world, t), 1.0);
+    } else if !(d_there >= 0.0) {
+        there = mix(there, here, d_there / (d_there - d_here));
+    }
+    let p_here = clip_to_pixel(here);
+    let p_there = clip_to_pixel(there);
+    let start = select(p_here, p_there, at_end);
+    let end = select(p_there, p_here, at_end);
+    let d = end - start;
+    let span = sqrt(dot(d, d));
+    var along = vec2<f32>(1.0, 0.0);
+    if span > 1e-6 {
+        along = d / span;
+    }
+    let across = vec2<f32>(-along.y, along.x);
+    let reach = 0.5 * clamp(out.color.a, 0.0, 1.0) + LINE_QUAD_MARGIN;
+    let pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
+    let ndc = 2.0 * (pixel - view.viewport.xy) / view.viewport.zw - vec2<f32>(1.0);
+    result.position = vec4<f32>(vec2<f32>(ndc.x, -ndc.y) * here.w, here.z, here.w);
+    result.line_ends = vec4<f32>(start, end);
+    return result;
+#else
+    return out;
+#endif
 }
 
 // The world normal `normal` of a surface at (calm) world point `world`,
@@ -713,7 +802,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 
 #ifdef CONIFER_ORIGINAL_LINES
-    let line = vertex_index / 2u;
+    let line = vertex_index / LINE_VERTICES;
     var k = line;
     if !original_from_needles {
         k = line_orders[line];
@@ -727,14 +816,15 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let alpha = line_alpha(lod, spatial_error, width, width) * lod.transition;
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
-    let position = select(base, tip, (vertex_index & 1u) != 0u);
+    let at_end = line_vertex_at_end(vertex_index);
+    let position = select(base, tip, at_end);
     var out = finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
     out.alignment = 1.0;
-    return swayed_line(out, base, tip, world_from_local, (vertex_index & 1u) != 0u);
+    return with_line_quad(swayed_line(out, base, tip, world_from_local, at_end), base, tip, world_from_local, vertex_index);
 #endif
 
 #ifdef CONIFER_MERGED_LINES
-    var line = vertex_index / 2u;
+    var line = vertex_index / LINE_VERTICES;
     if merged_by_own {
         line = line_orders[line];
     }
@@ -769,17 +859,18 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
     let start = end_position(grid, a);
     let end = end_position(grid, b);
-    let position = select(start, end, (vertex_index & 1u) != 0u);
+    let at_end = line_vertex_at_end(vertex_index);
+    let position = select(start, end, at_end);
     var out = finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
     // `model::compact::CompactSpecies::merged_alignment`.
     out.alignment = f32(b >> 28u) / ALIGNMENT_STEPS;
-    return swayed_line(out, start, end, world_from_local, (vertex_index & 1u) != 0u);
+    return with_line_quad(swayed_line(out, start, end, world_from_local, at_end), start, end, world_from_local, vertex_index);
 #endif
 
 #ifdef CONIFER_WOOD_LINES
     // In wind a segment is drawn in sections, as its prism is.
     let sections = wood_sections(species.wind.z);
-    let slot = vertex_index / 2u;
+    let slot = vertex_index / LINE_VERTICES;
     let s = slot / sections;
     let ends = decode_wood_segment(wood_segments[s], species.wood_grid);
     let start = ends.start;
@@ -806,12 +897,13 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let a = mix(start.xyz, end.xyz, f32(section) / f32(drawn));
     let b = mix(start.xyz, end.xyz, f32(section + 1u) / f32(drawn));
-    let position = select(a, b, (vertex_index & 1u) != 0u);
+    let at_end = line_vertex_at_end(vertex_index);
+    let position = select(a, b, at_end);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
     var out = finish(position, b - a, world_from_local, color);
     out.alignment = 1.0;
-    return with_height(swayed_line(out, a, b, world_from_local, (vertex_index & 1u) != 0u), position.y);
+    return with_height(with_line_quad(swayed_line(out, a, b, world_from_local, at_end), a, b, world_from_local, vertex_index), position.y);
 #endif
 
 #ifdef CONIFER_IMPOSTOR
@@ -998,6 +1090,67 @@ fn impostor_texel(uv: vec2<f32>, color: vec4<f32>) -> vec4<f32> {
 }
 #endif
 
+#ifdef CONIFER_LINE_QUADS
+// Length of the segment `a`–`b` inside the unit square at `pixel`
+// (Liang–Barsky; CPU reference: `model::raster::segment_length_in_pixel`).
+fn segment_length_in_pixel(a: vec2<f32>, b: vec2<f32>, pixel: vec2<f32>) -> f32 {
+    let d = b - a;
+    let lo = pixel - a;
+    let hi = pixel + vec2<f32>(1.0) - a;
+    var t0 = 0.0;
+    var t1 = 1.0;
+    if abs(d.x) < 1e-12 {
+        if lo.x > 0.0 || hi.x < 0.0 {
+            return 0.0;
+        }
+    } else {
+        let ta = lo.x / d.x;
+        let tb = hi.x / d.x;
+        t0 = max(t0, min(ta, tb));
+        t1 = min(t1, max(ta, tb));
+    }
+    if abs(d.y) < 1e-12 {
+        if lo.y > 0.0 || hi.y < 0.0 {
+            return 0.0;
+        }
+    } else {
+        let ta = lo.y / d.y;
+        let tb = hi.y / d.y;
+        t0 = max(t0, min(ta, tb));
+        t1 = min(t1, max(ta, tb));
+    }
+    return max(t1 - t0, 0.0) * length(d);
+}
+
+// The pixel at `frag` covered by the line of `opacity` (its strip's width
+// in pixels) between `ends` (pixels): the strip's area in the pixel's
+// square, each quarter pixel of width at its two Gauss–Legendre nodes
+// (CPU reference: `model::raster::strip_pixel_coverage`).
+fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32) -> f32 {
+    let a = ends.xy;
+    let b = ends.zw;
+    let d = b - a;
+    let span = sqrt(dot(d, d));
+    if !(span > 1e-6) {
+        return 0.0;
+    }
+    let pixel = floor(frag);
+    let normal = vec2<f32>(-d.y, d.x) / span;
+    let width = clamp(opacity, 0.0, 1.0);
+    let pieces = max(u32(ceil(width * 4.0)), 1u);
+    let piece = width / f32(pieces);
+    let node = piece * 0.28867513;
+    var sum = 0.0;
+    for (var k = 0u; k < pieces; k += 1u) {
+        let middle = -0.5 * width + (f32(k) + 0.5) * piece;
+        let low = normal * (middle - node);
+        let high = normal * (middle + node);
+        sum += segment_length_in_pixel(a + low, b + low, pixel) + segment_length_in_pixel(a + high, b + high, pixel);
+    }
+    return min(opacity * sum / f32(2u * pieces), 1.0);
+}
+#endif
+
 #ifdef CONIFER_MOTION_VECTORS
 
 // Motion vectors (Bevy's prepass convention: this frame's unjittered
@@ -1017,8 +1170,13 @@ struct MotionOutput {
 
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOutput {
+#ifdef CONIFER_LINE_QUADS
+    let opacity = line_coverage(in.position.xy, in.line_ends, in.color.a);
+#else
+    let opacity = in.color.a;
+#endif
 #ifdef CONIFER_LINES
-    if !(in.color.a >= MOTION_MIN_OPACITY) {
+    if !(opacity >= MOTION_MIN_OPACITY) {
         discard;
     }
 #endif
@@ -1026,7 +1184,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
     let now = view.unjittered_clip_from_world * vec4<f32>(in.world_position.xyz, 1.0);
     let before = previous_view_uniforms.clip_from_world * vec4<f32>(in.previous_world_position.xyz, 1.0);
     let motion = (now.xy / now.w - before.xy / before.w) * vec2<f32>(0.5, -0.5);
-    out.motion_vector = vec4<f32>(motion, 0.0, saturate(in.color.a));
+    out.motion_vector = vec4<f32>(motion, 0.0, saturate(opacity));
 #ifdef CONIFER_NORMALS
     let normal = normalize(select(-in.world_normal, in.world_normal, is_front));
     out.normal = vec4<f32>(normal * 0.5 + vec3<f32>(0.5), 1.0);
@@ -1465,6 +1623,15 @@ fn round_prism_normal(normal: vec3<f32>, side: vec3<f32>, toward: vec3<f32>) -> 
 
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
+#ifdef CONIFER_LINE_QUADS
+    // The pixel takes the line's strip's area in it; a quad's corners
+    // reach past the strip (`LINE_QUAD_MARGIN`), and most of its pixels
+    // lie off it.
+    let line_opacity = line_coverage(in.position.xy, in.line_ends, in.color.a);
+    if !(line_opacity > 1.0 / 1024.0) {
+        discard;
+    }
+#endif
     var pbr_input = pbr_types::pbr_input_new();
     pbr_input.material.base_color = in.color;
     var axis = in.world_normal;
@@ -1512,6 +1679,9 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     if species.debug_colors == 0u {
         pbr_input.material.base_color = vec4<f32>(bark_albedo(in.local_height), in.color.a);
     }
+#endif
+#ifdef CONIFER_LINE_QUADS
+    pbr_input.material.base_color.a = line_opacity;
 #endif
 #ifdef CONIFER_BARK
     pbr_input.material.perceptual_roughness = BARK_ROUGHNESS;

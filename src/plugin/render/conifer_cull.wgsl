@@ -21,7 +21,7 @@
     ARRAY_MERGED_BY_OWN,
     placement_band,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
-    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA,
+    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA, VIEW_LINE_QUADS,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale, tree_local_point,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
@@ -153,6 +153,13 @@ fn wood_prefix(e: f32, factor: f32) -> u32 {
         }
     }
     return lo;
+}
+
+// Vertices a line takes in this view's draws: a quad of two triangles
+// where the view draws lines by their strip's area (`VIEW_LINE_QUADS`),
+// else a hardware line's two.
+fn line_vertices() -> u32 {
+    return select(2u, 6u, (cull_view.perspective & VIEW_LINE_QUADS) != 0u);
 }
 
 fn write_args(kind: u32, instance: u32, vertex_count: u32, first_vertex: u32) {
@@ -404,7 +411,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     var original_first = 0u;
     if after_prisms < by_parent {
         original = after_prisms;
-        original_first = 2u * prisms;
+        original_first = line_vertices() * prisms;
         lod_flags = LOD_ORIGINAL_FROM_NEEDLES;
     }
     if species.lod_enabled == 0u {
@@ -419,8 +426,8 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     instance_lods[i].transition = clamp(transition, 0.0, 1.0);
     instance_lods[i].view = view_point;
     write_args(KIND_PRISMS, i, prisms * species.prism_vertices, 0u);
-    write_args(KIND_ORIGINAL_LINES, i, 2u * original, original_first);
-    write_args(KIND_MERGED_LINES, i, 2u * merged, 0u);
+    write_args(KIND_ORIGINAL_LINES, i, line_vertices() * original, original_first);
+    write_args(KIND_MERGED_LINES, i, line_vertices() * merged, 0u);
     // In wind a wood segment is drawn in sections (`wood_sections`).
     let sections = wood_sections(species.wind.z);
     write_args(KIND_WOOD_PRISMS, i, wood_prisms * species.prism_vertices * sections, 0u);
@@ -431,7 +438,7 @@ fn cull(@builtin(global_invocation_id) id: vec3<u32>) {
     if view_point.w > 0.0 {
         wood_lines_first = 0u;
     }
-    write_args(KIND_WOOD_LINES, i, 2u * sections * (wood_lines - wood_lines_first), 2u * sections * wood_lines_first);
+    write_args(KIND_WOOD_LINES, i, line_vertices() * sections * (wood_lines - wood_lines_first), line_vertices() * sections * wood_lines_first);
     write_args(KIND_WOOD_MESH, i, species.wood_index_count, 0u);
     write_args(KIND_IMPOSTOR, i, select(0u, 6u, fade > 0u), 0u);
 }
@@ -584,15 +591,15 @@ fn scan_placements() {
         if after_prisms < by_parent {
             flags |= ENTRY_FROM_NEEDLES;
             let first = prototype.needle_first + prototype.needle_count - after_prisms;
-            write_placed(PLACED_ORIGINAL_LINES, draw, 2u * after_prisms, count, 2u * first, offset);
+            write_placed(PLACED_ORIGINAL_LINES, draw, line_vertices() * after_prisms, count, line_vertices() * first, offset);
         } else {
-            write_placed(PLACED_ORIGINAL_LINES, draw, 2u * by_parent, count, 2u * prototype.original_first, offset);
+            write_placed(PLACED_ORIGINAL_LINES, draw, line_vertices() * by_parent, count, line_vertices() * prototype.original_first, offset);
         }
         if merged_by_own < merged {
             flags |= ENTRY_MERGED_BY_OWN;
-            write_placed(PLACED_MERGED_LINES, draw, 2u * merged_by_own, count, 2u * prototype.merged_by_own_first, offset);
+            write_placed(PLACED_MERGED_LINES, draw, line_vertices() * merged_by_own, count, line_vertices() * prototype.merged_by_own_first, offset);
         } else {
-            write_placed(PLACED_MERGED_LINES, draw, 2u * merged, count, 2u * prototype.merged_first, offset);
+            write_placed(PLACED_MERGED_LINES, draw, line_vertices() * merged, count, line_vertices() * prototype.merged_first, offset);
         }
         atomicStore(&counters[counter_index(ARRAY_FLAGS, draw)], flags);
         offset += count;

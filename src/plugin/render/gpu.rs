@@ -309,6 +309,10 @@ impl SpeciesParams {
 /// never draws impostors).
 pub const VIEW_CAMERA: u32 = 2;
 
+/// [`CullView::perspective`] flag: the view draws its lines as quads, six
+/// vertices a line ([`crate::plugin::LineRaster::Area`]; cameras only).
+pub const VIEW_LINE_QUADS: u32 = 4;
+
 /// A view as the compute pass sees it (`CullView` in WGSL), 144 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
@@ -319,7 +323,8 @@ pub struct CullView {
     pub world_position: [f32; 4],
     /// `2 / (P₁₁ · H)`.
     pub error_slope: f32,
-    /// 1 for a perspective view, plus [`VIEW_CAMERA`] for a camera.
+    /// 1 for a perspective view, plus [`VIEW_CAMERA`] for a camera, plus
+    /// [`VIEW_LINE_QUADS`] where it draws lines as quads.
     pub perspective: u32,
     /// Render layers 0–31 the view sees.
     pub layers: u32,

@@ -31,11 +31,11 @@ use self::gpu::{
     CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE,
     FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES,
     OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES,
-    PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA,
+    PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, VIEW_LINE_QUADS,
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
-    LineOpacity,
+    LineOpacity, LineRaster,
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
@@ -394,6 +394,8 @@ pub struct RenderCompactSpecies {
     max_expanded_placements: u32,
     /// [`ConiferLodSettings::line_lighting`].
     line_lighting: LineLighting,
+    /// [`ConiferLodSettings::line_raster`].
+    line_raster: LineRaster,
     /// The wind's clock at the last extraction ([`ConiferWind::seconds`]),
     /// for the motion vectors' previous positions.
     wind_seconds: Option<f64>,
@@ -529,6 +531,7 @@ fn extract_compact(
     render.wind_seconds = Some(wind_seconds);
     render.max_expanded_placements = settings.max_expanded_placements;
     render.line_lighting = settings.line_lighting;
+    render.line_raster = settings.line_raster;
     let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
     for &id in render.species.keys() {
         if !instances.species.contains_key(&id) || species_assets.get(id).is_none() {
@@ -785,6 +788,9 @@ struct ViewSpecies {
     instance_count: u32,
     /// A perspective view (cameras, point and spot lights).
     perspective: bool,
+    /// Vertices a line takes in the view's draws (6 as a quad, 2 as a
+    /// hardware line).
+    line_vertices: u32,
     placed: PlacedViewBuffers,
     /// Made by `prepare_views` before the view is culled or drawn.
     groups: Option<ViewBindGroups>,
@@ -922,6 +928,10 @@ pub struct CompactPipelineKey {
     pass: CompactPass,
     /// How lines are lit (the default for every other part).
     line_lighting: LineLighting,
+    /// Lines drawn as quads covering each pixel by their strip's area
+    /// ([`LineRaster::Area`]; `false` for every other part and in shadow
+    /// views).
+    line_quads: bool,
 }
 
 /// The passes the compact parts are drawn in.
@@ -1105,7 +1115,7 @@ impl SpecializedRenderPipeline for CompactPipeline {
                 writes_depth,
                 normals,
             } => {
-                return self.motion_descriptor(key.kind, samples, writes_depth, normals);
+                return self.motion_descriptor(key.kind, samples, writes_depth, normals, key.line_quads);
             }
         }
         // A layout with positions never misses an attribute; an error here
@@ -1135,6 +1145,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
         }
         if key.kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
+        }
+        if key.line_quads {
+            defs.push("CONIFER_LINE_QUADS".into());
         }
         if matches!(
             key.kind,
@@ -1177,7 +1190,7 @@ impl CompactPipeline {
         }
         let fragment = (kind.is_lines() || kind == PartKind::Impostor).then(|| self.fragment_state(&defs, Vec::new()));
         let label = format!("conifer compact shadow {kind:?}");
-        self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, None, true)
+        self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, None, true, false)
     }
 
     /// The fragment stage of `conifer_compact.wgsl` with `defs`, writing
@@ -1194,8 +1207,9 @@ impl CompactPipeline {
     /// A pipeline of a part drawn with one of Bevy's prepass view layouts
     /// (`view_layout`, then the prepass's empty group and the species'
     /// draw group): its vertices pulled by `conifer_compact.wgsl` with
-    /// `defs`, lines as line lists, tested against `Depth32Float` (reversed
-    /// Z), writing depth when `writes_depth`, culling `cull_mode`. An empty
+    /// `defs`, lines as line lists (as triangle lists with `line_quads`),
+    /// tested against `Depth32Float` (reversed Z), writing depth when
+    /// `writes_depth`, culling `cull_mode`. An empty
     /// descriptor without Bevy's prepass (the pipeline cache reports it).
     #[allow(clippy::too_many_arguments)] // one descriptor's parts
     fn prepass_layout_descriptor(
@@ -1207,6 +1221,7 @@ impl CompactPipeline {
         fragment: Option<FragmentState>,
         cull_mode: Option<Face>,
         writes_depth: bool,
+        line_quads: bool,
     ) -> RenderPipelineDescriptor {
         let Some((_, empty_layout)) = self.prepass_layouts.clone() else {
             return RenderPipelineDescriptor::default();
@@ -1222,7 +1237,7 @@ impl CompactPipeline {
             },
             fragment,
             primitive: PrimitiveState {
-                topology: if kind.is_lines() {
+                topology: if kind.is_lines() && !line_quads {
                     PrimitiveTopology::LineList
                 } else {
                     PrimitiveTopology::TriangleList
@@ -1263,6 +1278,7 @@ impl CompactPipeline {
         samples: u32,
         writes_depth: bool,
         normals: bool,
+        line_quads: bool,
     ) -> RenderPipelineDescriptor {
         let Some(view_layout) = self.motion_view_layout.clone() else {
             return RenderPipelineDescriptor::default();
@@ -1277,6 +1293,9 @@ impl CompactPipeline {
         }
         if kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
+        }
+        if line_quads {
+            defs.push("CONIFER_LINE_QUADS".into());
         }
         let writes_surface = writes_depth && !kind.is_blended();
         if normals {
@@ -1303,8 +1322,16 @@ impl CompactPipeline {
         let fragment = Some(self.fragment_state(&defs, targets));
         let label = format!("conifer compact motion vectors {kind:?}");
         let cull_mode = (!kind.is_blended()).then_some(Face::Back);
-        let mut descriptor =
-            self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, cull_mode, writes_surface);
+        let mut descriptor = self.prepass_layout_descriptor(
+            label,
+            view_layout,
+            kind,
+            &defs,
+            fragment,
+            cull_mode,
+            writes_surface,
+            line_quads,
+        );
         descriptor.multisample = MultisampleState {
             count: samples,
             ..default()
@@ -1419,7 +1446,13 @@ fn prepare_views(
             planes,
             world_position: view.world_from_view.translation().extend(1.0).to_array(),
             error_slope: slope,
-            perspective: u32::from(perspective) | if camera { VIEW_CAMERA } else { 0 },
+            perspective: u32::from(perspective)
+                | if camera { VIEW_CAMERA } else { 0 }
+                | if camera && render.line_raster == LineRaster::Area {
+                    VIEW_LINE_QUADS
+                } else {
+                    0
+                },
             layers: view_layers(layers),
             entry_capacity: 0,
             budget_origin: budget_origins.get(&view_entity).copied().unwrap_or_default(),
@@ -1538,6 +1571,7 @@ fn prepare_views(
                     capacity,
                     instance_count: 0,
                     perspective,
+                    line_vertices: 2,
                     placed: PlacedViewBuffers::new(&device, placed_capacity(0).unwrap_or(0), draws),
                     groups: None,
                     bound: Vec::new(),
@@ -1561,6 +1595,11 @@ fn prepare_views(
             }
             v.instance_count = n as u32;
             v.perspective = perspective;
+            v.line_vertices = if cull_view.perspective & VIEW_LINE_QUADS != 0 {
+                6
+            } else {
+                2
+            };
             v.used = true;
             // The budget is the setting, however large the buffers grew
             // (they shrink only well below their length).
@@ -1630,9 +1669,14 @@ fn queue_compact(
                 if !drawn || !species.draws(kind) {
                     continue;
                 }
+                let line_quads = kind.is_lines() && render.line_raster == LineRaster::Area;
                 let (topology, blend, mesh_view_key) = if kind.is_lines() {
                     (
-                        PrimitiveTopology::LineList,
+                        if line_quads {
+                            PrimitiveTopology::TriangleList
+                        } else {
+                            PrimitiveTopology::LineList
+                        },
                         MeshPipelineKey::BLEND_ALPHA,
                         line_view_key(view_key),
                     )
@@ -1652,6 +1696,7 @@ fn queue_compact(
                     } else {
                         LineLighting::default()
                     },
+                    line_quads,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 if kind.is_blended() {
@@ -1735,6 +1780,7 @@ fn queue_compact_shadows(
                     kind,
                     pass: CompactPass::Shadow,
                     line_lighting: LineLighting::default(),
+                    line_quads: false,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 phase.add(
@@ -1803,6 +1849,7 @@ fn queue_compact_motion_vectors(
                         kind,
                         pass,
                         line_lighting: LineLighting::default(),
+                        line_quads: kind.is_lines() && render.line_raster == LineRaster::Area,
                     };
                     list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
                 }

@@ -27,6 +27,10 @@ pub struct ViewReadback {
     /// Whether the view is a perspective one (cameras, point and spot
     /// lights; directional cascades are not).
     pub perspective: bool,
+    /// Vertices a line takes in the view's draws: 6 where it draws lines as
+    /// quads ([`crate::plugin::LineRaster::Area`], cameras), 2 as hardware
+    /// lines.
+    pub line_vertices: u32,
     /// Per tree (instance slot): threshold code and flags, spatial error,
     /// pixel error and transition, then the view point (the camera in the
     /// tree's frame and the error per metre of distance, 0 without one) as
@@ -76,7 +80,8 @@ impl ViewReadback {
     /// placed draw (vertices over vertices a primitive, times instances).
     pub fn processed_primitives(&self, max_sides: u8) -> u64 {
         let prism_vertices = u64::from(crate::model::prism::prism_slot_vertices(max_sides));
-        let per_primitive = |part: usize| if part == 0 { prism_vertices } else { 2 };
+        let line_vertices = u64::from(self.line_vertices.max(1));
+        let per_primitive = |part: usize| if part == 0 { prism_vertices } else { line_vertices };
         let count = |draw: &[u32; 4], part: usize| u64::from(draw[0]) / per_primitive(part) * u64::from(draw[1]);
         // The first three blocks (prisms, original lines, merged lines) of
         // `block` draws each.
@@ -105,6 +110,7 @@ pub(super) struct PendingReadbacks {
 struct Staged {
     species: AssetId<ConiferSpecies>,
     perspective: bool,
+    line_vertices: u32,
     buffer: Buffer,
     /// Byte lengths of the lods, tree draws, placed draws, counters and
     /// sorted entries in `buffer`, in that order.
@@ -150,6 +156,7 @@ pub(super) fn stage(
         pending.staged.push(Staged {
             species: *species,
             perspective: view.perspective,
+            line_vertices: view.line_vertices,
             buffer,
             lengths,
             trees: view.instance_count as usize,
@@ -208,6 +215,7 @@ pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingRead
         done.push(ViewReadback {
             species: s.species,
             perspective: s.perspective,
+            line_vertices: s.line_vertices,
             lods: lods
                 .chunks_exact(8)
                 .take(trees)
