@@ -121,6 +121,9 @@ struct Args {
     /// How lines are lit (`ConiferLodSettings::line_lighting`).
     #[arg(long, value_enum, default_value_t = Lighting::Cylinder)]
     line_lighting: Lighting,
+    /// How lines are rasterized (`ConiferLodSettings::line_raster`).
+    #[arg(long, value_enum, default_value_t = Raster::Area)]
+    line_raster: Raster,
     /// Headless: time each render pass on the GPU (Bevy's
     /// `RenderDiagnosticsPlugin`, where the GPU has timestamp queries) and
     /// print the mean of the extra frames (`--frames`) as `gpu_ms`.
@@ -142,6 +145,15 @@ enum Lighting {
     Bundle,
     /// A strip turned toward the viewer.
     FacingStrip,
+}
+
+/// How lines are rasterized (`--line-raster`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum Raster {
+    /// Each pixel covered by the line's strip's area in it (the default).
+    Area,
+    /// One-pixel hardware lines.
+    Hardware,
 }
 
 /// The camera's anti-aliasing (`--aa`).
@@ -482,6 +494,10 @@ fn setup(
         Lighting::Bundle => LineLighting::Bundle,
         Lighting::Cylinder => LineLighting::Cylinder,
         Lighting::FacingStrip => LineLighting::FacingStrip,
+    };
+    settings.line_raster = match args.line_raster {
+        Raster::Area => LineRaster::Area,
+        Raster::Hardware => LineRaster::Hardware,
     };
     if let Some(strength) = args.wind {
         wind.strength = strength;
