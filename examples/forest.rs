@@ -122,7 +122,7 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Lighting::Cylinder)]
     line_lighting: Lighting,
     /// How lines are rasterized (`ConiferLodSettings::line_raster`).
-    #[arg(long, value_enum, default_value_t = Raster::Area)]
+    #[arg(long, value_enum, default_value_t = Raster::Hardware)]
     line_raster: Raster,
     /// Headless: time each render pass on the GPU (Bevy's
     /// `RenderDiagnosticsPlugin`, where the GPU has timestamp queries) and
@@ -150,10 +150,10 @@ enum Lighting {
 /// How lines are rasterized (`--line-raster`).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 enum Raster {
-    /// Each pixel covered by the line's strip's area in it (the default).
-    Area,
-    /// One-pixel hardware lines.
+    /// One-pixel hardware lines (the default).
     Hardware,
+    /// Each pixel covered by the line's strip's area in it.
+    Area,
 }
 
 /// The camera's anti-aliasing (`--aa`).

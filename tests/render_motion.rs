@@ -307,65 +307,70 @@ fn a_camera_move_shows_on_every_pixel_the_tree_covers_and_nowhere_else() {
     let _turn = common::gpu_turn();
     let (mut renderer, target, camera, copy) = scene(tree());
     let (look, distance) = (LOOK, DISTANCE);
-    place_camera(&mut renderer, camera, look, distance, 0.0);
-    let still = renderer.capture(&target, 20).unwrap();
-    save(&still, "motion_still");
-    // A step of 30 cm to the right, and the picture of that frame.
-    let step = 0.3;
-    place_camera(&mut renderer, camera, look, distance, step);
-    let pending = renderer.request_screenshots(std::slice::from_ref(&target));
-    let (motion, _) = motion_of_next_move(&mut renderer, &copy);
-    let moved = renderer.wait_for(&pending, 20).unwrap().remove(0);
-    save(&moved, "motion_moved");
-    // What the CPU says of a point on the tree: its depth sets its motion,
-    // from the nearest shoot (1 m in front of the trunk) to the farthest.
-    let (now, before) = (
-        clip_from_world(look, distance, step),
-        clip_from_world(look, distance, 0.0),
-    );
-    let expected = |z: f32| motion_vector(now, before, Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, z));
-    let (nearest, farthest) = (expected(1.2), expected(-1.2));
-    assert!(nearest.x < farthest.x && farthest.x < 0.0, "{nearest} {farthest}");
-    let mask = covered(&moved);
-    // Pixels the tree covers nearly whole: under 150 grey (the sunlit
-    // bark is 105–145, the background 238, so at least nine tenths bark).
-    let dark = |i: usize| common::grey(moved.get_pixel(i as u32 % SIZE, i as u32 / SIZE)) < 150.0;
-    let (mut tree_pixels, mut solid, mut solid_with_tree_motion, mut share) = (0usize, 0usize, 0usize, 0.0f32);
-    for (i, m) in motion.iter().enumerate() {
-        // No pixel moves faster than the tree's nearest point, none the
-        // other way, none up or down (the camera slid sideways).
-        assert!(
-            m.x >= nearest.x * 1.02 && m.x <= 1e-5 && m.y.abs() < 1e-4,
-            "pixel {i}: {m} (the tree moves {:.4}–{:.4})",
-            nearest.x,
-            farthest.x
+    // Hardware lines, then lines as quads covering each pixel by their
+    // strip's area (their motion pass draws the quads too).
+    for raster in [LineRaster::Hardware, LineRaster::Area] {
+        renderer.world_mut().resource_mut::<ConiferLodSettings>().line_raster = raster;
+        place_camera(&mut renderer, camera, look, distance, 0.0);
+        let still = renderer.capture(&target, 20).unwrap();
+        save(&still, &format!("motion_still_{raster:?}"));
+        // A step of 30 cm to the right, and the picture of that frame.
+        let step = 0.3;
+        place_camera(&mut renderer, camera, look, distance, step);
+        let pending = renderer.request_screenshots(std::slice::from_ref(&target));
+        let (motion, _) = motion_of_next_move(&mut renderer, &copy);
+        let moved = renderer.wait_for(&pending, 20).unwrap().remove(0);
+        save(&moved, &format!("motion_moved_{raster:?}"));
+        // What the CPU says of a point on the tree: its depth sets its motion,
+        // from the nearest shoot (1 m in front of the trunk) to the farthest.
+        let (now, before) = (
+            clip_from_world(look, distance, step),
+            clip_from_world(look, distance, 0.0),
         );
-        if !mask[i] {
-            continue;
+        let expected = |z: f32| motion_vector(now, before, Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, z));
+        let (nearest, farthest) = (expected(1.2), expected(-1.2));
+        assert!(nearest.x < farthest.x && farthest.x < 0.0, "{nearest} {farthest}");
+        let mask = covered(&moved);
+        // Pixels the tree covers nearly whole: under 150 grey (the sunlit
+        // bark is 105–145, the background 238, so at least nine tenths bark).
+        let dark = |i: usize| common::grey(moved.get_pixel(i as u32 % SIZE, i as u32 / SIZE)) < 150.0;
+        let (mut tree_pixels, mut solid, mut solid_with_tree_motion, mut share) = (0usize, 0usize, 0usize, 0.0f32);
+        for (i, m) in motion.iter().enumerate() {
+            // No pixel moves faster than the tree's nearest point, none the
+            // other way, none up or down (the camera slid sideways).
+            assert!(
+                m.x >= nearest.x * 1.02 && m.x <= 1e-5 && m.y.abs() < 1e-4,
+                "pixel {i}: {m} (the tree moves {:.4}–{:.4})",
+                nearest.x,
+                farthest.x
+            );
+            if !mask[i] {
+                continue;
+            }
+            tree_pixels += 1;
+            // A translucent line moves its pixel by its share; where the tree
+            // covers most of the pixel (the trunk, shoots seen on end) the
+            // pixel moves as the tree.
+            share += m.x / (0.5 * (nearest.x + farthest.x));
+            if dark(i) {
+                solid += 1;
+                solid_with_tree_motion += usize::from(m.x <= farthest.x * 0.9);
+            }
         }
-        tree_pixels += 1;
-        // A translucent line moves its pixel by its share; where the tree
-        // covers most of the pixel (the trunk, shoots seen on end) the
-        // pixel moves as the tree.
-        share += m.x / (0.5 * (nearest.x + farthest.x));
-        if dark(i) {
-            solid += 1;
-            solid_with_tree_motion += usize::from(m.x <= farthest.x * 0.9);
-        }
+        let share = share / tree_pixels.max(1) as f32;
+        println!(
+            "{raster:?}: {tree_pixels} pixels covered, moved by {share:.2} of the tree's motion on average; {solid_with_tree_motion} of the {solid} dark ones by the tree's ({:.4}–{:.4} UV)",
+            nearest.x, farthest.x
+        );
+        assert!(tree_pixels > 300 && solid > 100, "{tree_pixels} {solid}");
+        // Without the tree's motion vectors the covered pixels would keep the
+        // sky's (none): TAA would drag the tree's history along with the sky.
+        assert!(
+            solid_with_tree_motion as f32 >= 0.9 * solid as f32,
+            "{solid_with_tree_motion} of {solid}"
+        );
+        assert!(share > 0.3, "{share}");
     }
-    let share = share / tree_pixels.max(1) as f32;
-    println!(
-        "{tree_pixels} pixels covered, moved by {share:.2} of the tree's motion on average; {solid_with_tree_motion} of the {solid} dark ones by the tree's ({:.4}–{:.4} UV)",
-        nearest.x, farthest.x
-    );
-    assert!(tree_pixels > 300 && solid > 100, "{tree_pixels} {solid}");
-    // Without the tree's motion vectors the covered pixels would keep the
-    // sky's (none): TAA would drag the tree's history along with the sky.
-    assert!(
-        solid_with_tree_motion as f32 >= 0.9 * solid as f32,
-        "{solid_with_tree_motion} of {solid}"
-    );
-    assert!(share > 0.3, "{share}");
 }
 
 #[test]

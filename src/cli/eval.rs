@@ -86,10 +86,10 @@ pub struct EvalArgs {
     /// toward the viewer).
     #[arg(long, default_value = "cylinder")]
     pub line_lighting: String,
-    /// How the plugin rasterizes lines: `area` (the default: each pixel
-    /// covered by the line's strip's area in it) or `hardware` (one-pixel
-    /// hardware lines, the paper's).
-    #[arg(long, default_value = "area")]
+    /// How the plugin rasterizes lines: `hardware` (the default: one-pixel
+    /// hardware lines, the paper's) or `area` (each pixel covered by the
+    /// line's strip's area in it).
+    #[arg(long, default_value = "hardware")]
     pub line_raster: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`

@@ -235,19 +235,27 @@ pub enum LineLighting {
 /// How lines are rasterized.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 pub enum LineRaster {
+    /// Hardware lines, one pixel wide, every pixel they light taking the
+    /// line's whole opacity (the paper's).
+    #[default]
+    Hardware,
     /// Each line a quad around its segment, every pixel covered by the
     /// area of the line's strip (its opacity wide) inside the pixel's
     /// square, as the supersampled reference box-filters a needle
     /// ([`crate::model::raster`]): a diagonal line splits its coverage
     /// between the pixels it crosses instead of lighting one pixel a step,
-    /// and MSAA smears nothing. Cameras only: shadow views keep hardware
-    /// lines (their texels keep each fragment with its opacity, hashed).
-    #[default]
+    /// and MSAA smears nothing. Exact for lines that do not overlap; in a
+    /// dense crown it draws more coverage than hardware lines (blending
+    /// treats overlapping lines as independent, and hardware lines snapped
+    /// to the same pixels overlap more), so it is opt-in until the
+    /// opacity rule knows how a bundle's needles overlap (see the README's
+    /// "Lines that cover each pixel by their area"). Cameras only: shadow
+    /// views keep hardware lines (their texels keep each fragment with its
+    /// opacity, hashed). Three times the vertices of
+    /// [`LineRaster::Hardware`] and more fragments (the quad reaches 1.25
+    /// pixels past the strip; the fragments off the strip are discarded
+    /// before lighting).
     Area,
-    /// Hardware lines, one pixel wide, every pixel they light taking the
-    /// line's whole opacity (the paper's; half the fragments and a third
-    /// of the vertices of [`LineRaster::Area`]).
-    Hardware,
 }
 
 /// Run-time LOD settings, shared by every tree; change them at any time.
