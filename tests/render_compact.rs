@@ -424,13 +424,7 @@ fn merged_lines_are_lit_as_their_bundles() {
             .pixels()
             .map(|p| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]))
             .sum();
-        let readback = renderer.world().resource::<CompactReadback>();
-        let lod = readback
-            .views
-            .iter()
-            .find(|v| v.species == handle.id() && v.perspective)
-            .expect("the camera's compute results")
-            .tree_lod(0);
+        let lod = common::camera_readback(renderer.world(), handle.id()).tree_lod(0);
         renderer.world_mut().despawn(tree);
         (light, lod)
     };
@@ -781,13 +775,7 @@ fn lines_cover_each_pixel_by_their_strips_area() {
         picture
             .save(out.join(format!("compact_line_raster_{raster:?}.png")))
             .unwrap();
-        let readback = renderer.world().resource::<CompactReadback>();
-        let view = readback
-            .views
-            .iter()
-            .find(|v| v.species == handle.id() && v.perspective)
-            .expect("the camera's compute results");
-        let (_, spatial_error) = view.tree_lod(0);
+        let (_, spatial_error) = common::camera_readback(renderer.world(), handle.id()).tree_lod(0);
         let opacity = 2.0 * radius / spatial_error;
         assert!(
             opacity > 0.15 && opacity < 0.35,

@@ -100,12 +100,7 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
         for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
             renderer.update().unwrap();
         }
-        let readback = renderer.world().resource::<CompactReadback>();
-        let view = readback
-            .views
-            .iter()
-            .find(|v| v.species == handle.id() && v.perspective)
-            .expect("the camera's compute results");
+        let view = common::camera_readback(renderer.world(), handle.id());
         let (_, e) = view.tree_lod(0);
         let expected = impostor_fade(e, texel, 0.0);
         let fade = view.impostor_fade(0);
@@ -143,12 +138,7 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
             for _ in 0..2 {
                 renderer.update().unwrap();
             }
-            let readback = renderer.world().resource::<CompactReadback>();
-            let above = readback
-                .views
-                .iter()
-                .find(|v| v.species == handle.id() && v.perspective)
-                .expect("the camera's compute results");
+            let above = common::camera_readback(renderer.world(), handle.id());
             assert_eq!(above.impostor_fade(0), 0.0, "no impostor seen from above");
             assert_eq!(above.tree_draw(PartKind::Impostor, 0)[0], 0);
         }

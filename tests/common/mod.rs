@@ -228,3 +228,19 @@ pub fn linear(c: u8) -> f32 {
         ((c + 0.055) / 1.055).powf(2.4)
     }
 }
+
+/// What the compute passes wrote for `species` in the camera's view (the
+/// first perspective view read back; the readback must be enabled,
+/// `CompactReadback::enabled`).
+pub fn camera_readback(
+    world: &World,
+    species: AssetId<bevy_conifer_lod::plugin::ConiferSpecies>,
+) -> bevy_conifer_lod::plugin::ViewReadback {
+    world
+        .resource::<bevy_conifer_lod::plugin::CompactReadback>()
+        .views
+        .iter()
+        .find(|v| v.species == species && v.perspective)
+        .expect("the camera's compute results")
+        .clone()
+}

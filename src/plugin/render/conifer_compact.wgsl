@@ -1099,25 +1099,17 @@ fn segment_length_in_pixel(a: vec2<f32>, b: vec2<f32>, pixel: vec2<f32>) -> f32 
     let hi = pixel + vec2<f32>(1.0) - a;
     var t0 = 0.0;
     var t1 = 1.0;
-    if abs(d.x) < 1e-12 {
-        if lo.x > 0.0 || hi.x < 0.0 {
-            return 0.0;
+    for (var axis = 0u; axis < 2u; axis += 1u) {
+        if abs(d[axis]) < 1e-12 {
+            if lo[axis] > 0.0 || hi[axis] < 0.0 {
+                return 0.0;
+            }
+        } else {
+            let ta = lo[axis] / d[axis];
+            let tb = hi[axis] / d[axis];
+            t0 = max(t0, min(ta, tb));
+            t1 = min(t1, max(ta, tb));
         }
-    } else {
-        let ta = lo.x / d.x;
-        let tb = hi.x / d.x;
-        t0 = max(t0, min(ta, tb));
-        t1 = min(t1, max(ta, tb));
-    }
-    if abs(d.y) < 1e-12 {
-        if lo.y > 0.0 || hi.y < 0.0 {
-            return 0.0;
-        }
-    } else {
-        let ta = lo.y / d.y;
-        let tb = hi.y / d.y;
-        t0 = max(t0, min(ta, tb));
-        t1 = min(t1, max(ta, tb));
     }
     return max(t1 - t0, 0.0) * length(d);
 }
