@@ -401,6 +401,15 @@ pub struct RenderCompactSpecies {
     wind_seconds: Option<f64>,
 }
 
+impl RenderCompactSpecies {
+    /// Whether cameras draw lines as quads ([`LineRaster::Area`]). The cull
+    /// pass's six vertices a line (`VIEW_LINE_QUADS`) and the main and
+    /// motion vector pipelines' triangle lists all follow this one answer.
+    fn camera_line_quads(&self) -> bool {
+        self.line_raster == LineRaster::Area
+    }
+}
+
 /// GPU memory the compact path allocated, summed from the sizes of the
 /// `wgpu` buffers it created (render world; copied to the main world as
 /// [`CompactGpuMemory`]).
@@ -1448,7 +1457,7 @@ fn prepare_views(
             error_slope: slope,
             perspective: u32::from(perspective)
                 | if camera { VIEW_CAMERA } else { 0 }
-                | if camera && render.line_raster == LineRaster::Area {
+                | if camera && render.camera_line_quads() {
                     VIEW_LINE_QUADS
                 } else {
                     0
@@ -1669,7 +1678,7 @@ fn queue_compact(
                 if !drawn || !species.draws(kind) {
                     continue;
                 }
-                let line_quads = kind.is_lines() && render.line_raster == LineRaster::Area;
+                let line_quads = kind.is_lines() && render.camera_line_quads();
                 let (topology, blend, mesh_view_key) = if kind.is_lines() {
                     (
                         if line_quads {
@@ -1849,7 +1858,7 @@ fn queue_compact_motion_vectors(
                         kind,
                         pass,
                         line_lighting: LineLighting::default(),
-                        line_quads: kind.is_lines() && render.line_raster == LineRaster::Area,
+                        line_quads: kind.is_lines() && render.camera_line_quads(),
                     };
                     list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
                 }
