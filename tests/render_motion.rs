@@ -307,6 +307,17 @@ fn a_camera_move_shows_on_every_pixel_the_tree_covers_and_nowhere_else() {
     let _turn = common::gpu_turn();
     let (mut renderer, target, camera, copy) = scene(tree());
     let (look, distance) = (LOOK, DISTANCE);
+    // A step of 30 cm to the right. What the CPU says of a point on the
+    // tree: its depth sets its motion, from the nearest shoot (1 m in
+    // front of the trunk) to the farthest.
+    let step = 0.3;
+    let (now, before) = (
+        clip_from_world(look, distance, step),
+        clip_from_world(look, distance, 0.0),
+    );
+    let expected = |z: f32| motion_vector(now, before, Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, z));
+    let (nearest, farthest) = (expected(1.2), expected(-1.2));
+    assert!(nearest.x < farthest.x && farthest.x < 0.0, "{nearest} {farthest}");
     // Hardware lines, then lines as quads covering each pixel by their
     // strip's area (their motion pass draws the quads too).
     for raster in [LineRaster::Hardware, LineRaster::Area] {
@@ -314,22 +325,12 @@ fn a_camera_move_shows_on_every_pixel_the_tree_covers_and_nowhere_else() {
         place_camera(&mut renderer, camera, look, distance, 0.0);
         let still = renderer.capture(&target, 20).unwrap();
         save(&still, &format!("motion_still_{raster:?}"));
-        // A step of 30 cm to the right, and the picture of that frame.
-        let step = 0.3;
+        // The step, and the picture of that frame.
         place_camera(&mut renderer, camera, look, distance, step);
         let pending = renderer.request_screenshots(std::slice::from_ref(&target));
         let (motion, _) = motion_of_next_move(&mut renderer, &copy);
         let moved = renderer.wait_for(&pending, 20).unwrap().remove(0);
         save(&moved, &format!("motion_moved_{raster:?}"));
-        // What the CPU says of a point on the tree: its depth sets its motion,
-        // from the nearest shoot (1 m in front of the trunk) to the farthest.
-        let (now, before) = (
-            clip_from_world(look, distance, step),
-            clip_from_world(look, distance, 0.0),
-        );
-        let expected = |z: f32| motion_vector(now, before, Vec3::new(0.0, 5.0, z), Vec3::new(0.0, 5.0, z));
-        let (nearest, farthest) = (expected(1.2), expected(-1.2));
-        assert!(nearest.x < farthest.x && farthest.x < 0.0, "{nearest} {farthest}");
         let mask = covered(&moved);
         // Pixels the tree covers nearly whole: under 150 grey (the sunlit
         // bark is 105–145, the background 238, so at least nine tenths bark).
