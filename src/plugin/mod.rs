@@ -245,10 +245,10 @@ pub enum LineRaster {
     /// ([`crate::model::raster`]): a diagonal line splits its coverage
     /// between the pixels it crosses instead of lighting one pixel a step,
     /// and MSAA smears nothing. Exact for lines that do not overlap; in a
-    /// dense crown it draws more coverage than hardware lines (blending
-    /// treats overlapping lines as independent, and hardware lines snapped
-    /// to the same pixels overlap more), so it is opt-in until the
-    /// opacity rule knows how a bundle's needles overlap (see the README's
+    /// dense crown it draws more coverage than the reference and than
+    /// hardware lines (blending treats overlapping lines as independent,
+    /// while a crown's needles clump), so it is opt-in until the opacity
+    /// rule knows how the crown's needles overlap (see the README's
     /// "Lines that cover each pixel by their area"). Cameras only: shadow
     /// views keep hardware lines (their texels keep each fragment with its
     /// opacity, hashed). Three times the vertices of
