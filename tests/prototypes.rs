@@ -336,6 +336,7 @@ fn one_prototype_placed_many_times_is_stored_once() {
     // bytes in both files, is measured in `model::file`).
     let no_impostor = BakeOptions {
         impostor: None,
+        line_calibration: None,
         ..BakeOptions::default()
     };
     let record = bake_prototypes(&input, &no_impostor, &()).unwrap();

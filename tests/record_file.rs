@@ -309,6 +309,7 @@ fn shipped_mature_records_are_the_presets_current_bakes() {
         let input = generate_prototypes(species, &GenerateOptions::default());
         let without_impostor = BakeOptions {
             impostor: None,
+            line_calibration: None,
             ..BakeOptions::default()
         };
         let baked = bake_prototypes(&input, &without_impostor, &()).unwrap();

@@ -701,10 +701,13 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
 /// largest 0.002: 8-bit rounding; alpha summed 5.40 against 5.37). The
 /// hardware lines of `LineRaster::Hardware` (one pixel wide; lavapipe's
 /// are rectangles) keep the sum (5.42) but miss pixel by pixel: mean |Δ|
-/// 0.034 over 48 pixels, largest 0.102.
+/// 0.034 over 48 pixels, largest 0.102. With a line calibration
+/// ([`LineCalibration`]) the area lines' opacity is scaled by the table at
+/// their pixel size, as its CPU reference `scale_at` interpolates it.
 #[test]
 fn lines_cover_each_pixel_by_their_strips_area() {
     use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_conifer_lod::model::calibration::LineCalibration;
     use bevy_conifer_lod::model::raster::strip_pixel_coverage;
     use bevy_conifer_lod::model::{FoliageMaterial, Needle, TreeInput};
     use bevy_conifer_lod::plugin::CompactReadback;
@@ -735,7 +738,9 @@ fn lines_cover_each_pixel_by_their_strips_area() {
         material: FoliageMaterial::default(),
     };
     let record = bake(&input, &BakeOptions::default(), &()).unwrap();
-    let species = ConiferSpecies::from_record(record).unwrap();
+    let mut species = ConiferSpecies::from_record(record).unwrap();
+    // First without a calibration (the five needles' own is about 1).
+    species.line_calibration = None;
     let (mut renderer, target, _sun) = common::sun_lit_renderer(size);
     let world = renderer.world_mut();
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
@@ -765,21 +770,37 @@ fn lines_cover_each_pixel_by_their_strips_area() {
     let ends: Vec<[[f32; 2]; 2]> = needles.iter().map(|n| [pixel(n.base), pixel(n.tip)]).collect();
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
+    // A table of line opacity scales whose pixel sizes bracket this view's
+    // (13 cm): the shader interpolates it between its third and fourth
+    // entries (`LineCalibration::scale_at`).
+    let calibration = LineCalibration {
+        first_pixel: 0.05,
+        last_pixel: 0.5,
+        scales: [0.5, 0.55, 0.6, 0.7, 0.75, 0.8, 0.9, 1.0],
+    };
     let mut errors = Vec::new();
-    for raster in [LineRaster::Area, LineRaster::Hardware] {
+    for (raster, calibrated) in [
+        (LineRaster::Area, None),
+        (LineRaster::Hardware, None),
+        (LineRaster::Area, Some(calibration)),
+    ] {
         renderer.world_mut().resource_mut::<ConiferLodSettings>().line_raster = raster;
+        let mut assets = renderer.world_mut().resource_mut::<Assets<ConiferSpecies>>();
+        assets.get_mut(&handle).unwrap().line_calibration = calibrated;
         for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
             renderer.update().unwrap();
         }
         let picture = renderer.capture(&target, 8).unwrap();
+        let name = if calibrated.is_some() { "_calibrated" } else { "" };
         picture
-            .save(out.join(format!("compact_line_raster_{raster:?}.png")))
+            .save(out.join(format!("compact_line_raster_{raster:?}{name}.png")))
             .unwrap();
         let (_, spatial_error) = common::camera_readback(renderer.world(), handle.id()).tree_lod(0);
-        let opacity = 2.0 * radius / spatial_error;
+        let scale = calibrated.map_or(1.0, |c| c.scale_at(spatial_error));
+        let opacity = 2.0 * radius / spatial_error * scale;
         assert!(
-            opacity > 0.15 && opacity < 0.35,
-            "the needles are lines 0.15–0.35 pixels wide: {opacity}"
+            opacity > 0.1 && opacity < 0.35,
+            "the needles are lines 0.1–0.35 pixels wide: {opacity}"
         );
         let (mut sum, mut worst, mut pixels, mut drawn, mut expected) = (0.0f32, 0.0f32, 0usize, 0.0f32, 0.0f32);
         for y in 0..size {
@@ -802,20 +823,28 @@ fn lines_cover_each_pixel_by_their_strips_area() {
         }
         let mean = sum / pixels.max(1) as f32;
         println!(
-            "{raster:?}: opacity {opacity:.3}; alpha summed {drawn:.2} (reference {expected:.2}); \
+            "{raster:?}, scale {scale:.3}: opacity {opacity:.3}; alpha summed {drawn:.2} (reference {expected:.2}); \
              mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
         );
         assert!(expected > 5.0, "the needles are in the picture: {expected}");
         errors.push((mean, worst, drawn / expected));
     }
-    let [(area_mean, area_worst, area_sum), (hardware_mean, _, _)] = [errors[0], errors[1]];
+    let [
+        (area_mean, area_worst, area_sum),
+        (hardware_mean, _, _),
+        (scaled_mean, scaled_worst, scaled_sum),
+    ] = [errors[0], errors[1], errors[2]];
     assert!(
-        (area_sum - 1.0).abs() < 0.05,
-        "coverage summed {area_sum} of the reference's"
+        (area_sum - 1.0).abs() < 0.05 && (scaled_sum - 1.0).abs() < 0.05,
+        "coverage summed {area_sum} (calibrated: {scaled_sum}) of the reference's"
     );
     assert!(
         area_mean < 0.003 && area_worst < 0.01,
         "area raster: mean {area_mean}, largest {area_worst}"
+    );
+    assert!(
+        scaled_mean < 0.003 && scaled_worst < 0.01,
+        "area raster, calibrated: mean {scaled_mean}, largest {scaled_worst}"
     );
     assert!(
         hardware_mean > 5.0 * area_mean,

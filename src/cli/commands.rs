@@ -27,6 +27,7 @@ struct BakeBars {
     groups: ProgressBar,
     tree: ProgressBar,
     impostor: ProgressBar,
+    calibration: ProgressBar,
 }
 
 impl BakeBars {
@@ -49,10 +50,20 @@ impl BakeBars {
                 )
                 .with_prefix("far"),
         );
+        let calibration = multi.add(
+            ProgressBar::new(1)
+                .with_style(
+                    ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} line opacity ({elapsed})")
+                        .expect("valid template")
+                        .progress_chars("=> "),
+                )
+                .with_prefix("calibration"),
+        );
         Self {
             groups: bar("groups"),
             tree: bar("whole tree"),
             impostor,
+            calibration,
         }
     }
 }
@@ -63,6 +74,7 @@ impl BakeProgress for BakeBars {
             BakeStage::MergeGroups => &self.groups,
             BakeStage::MergeTree => &self.tree,
             BakeStage::Impostor => &self.impostor,
+            BakeStage::LineCalibration => &self.calibration,
         };
         bar.set_length(total as u64);
         bar.set_position(done as u64);
@@ -157,6 +169,7 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
             views: args.impostor_views,
             texel: args.impostor_texel,
         }),
+        line_calibration: (!args.no_line_calibration).then(Default::default),
         ..Default::default()
     };
     options.merge.weights = MergeWeights {
@@ -297,6 +310,10 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         if record.impostor.is_none() && !args.no_impostor {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
+        if record.line_calibration.is_none() && !args.no_line_calibration {
+            record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &Default::default())
+                .with_context(|| format!("{}: cannot calibrate its lines", path.display()))?;
+        }
         let written = write_prototype_record(&record, path)
             .with_context(|| format!("{}: cannot write record", path.display()))?;
         eprintln!(
@@ -361,6 +378,9 @@ pub struct InspectReport {
     pub weights: [f32; 3],
     /// The crown impostor stored in the record, if any.
     pub impostor: Option<ImpostorSummary>,
+    /// The line opacity scales by pixel size stored in the record, if any
+    /// ([`crate::model::calibration::LineCalibration`]).
+    pub line_calibration: Option<crate::model::calibration::LineCalibration>,
 }
 
 /// A record's crown impostor in `conifer inspect`.
@@ -431,6 +451,7 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
             texel: i.texel,
             gpu_bytes: i.byte_size(),
         }),
+        line_calibration: prototypes.line_calibration,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -455,6 +476,15 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
                 i.views, i.columns, i.rows, i.texel, i.gpu_bytes
             ),
             None => println!("  no crown impostor (the plugin bakes one at load)"),
+        }
+        match &report.line_calibration {
+            Some(c) => println!(
+                "  line opacity scales {} at pixels of {:.4} .. {:.4} m",
+                c.scales.map(|s| format!("{s:.3}")).join(" "),
+                c.first_pixel,
+                c.last_pixel
+            ),
+            None => println!("  no line calibration (every line keeps its opacity)"),
         }
         println!("  {} bytes ({:.1} per needle)", report.bytes, report.bytes_per_needle);
     }

@@ -117,6 +117,10 @@ pub struct BakeArgs {
     /// Bake no crown impostor into the record (the plugin then bakes one each time it loads it).
     #[arg(long)]
     pub no_impostor: bool,
+    /// Do not calibrate the lines' opacity against the needles' coverage (every line keeps
+    /// its area-preserving opacity; see `model::calibration`).
+    #[arg(long)]
+    pub no_line_calibration: bool,
     /// Print a JSON summary of the bake on stdout.
     #[arg(long)]
     pub json: bool,
@@ -143,6 +147,10 @@ pub struct UpgradeArgs {
     /// lit its texels along one mean axis, and is baked again).
     #[arg(long)]
     pub no_impostor: bool,
+    /// Leave a record without a line calibration as it is (by default, one older than
+    /// format 9 gains its table of line opacity scales, measured with the default options).
+    #[arg(long)]
+    pub no_line_calibration: bool,
 }
 
 /// How a view is described on the command line.

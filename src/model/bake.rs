@@ -1,5 +1,6 @@
 //! The bake: from a [`TreeInput`] to a [`LodRecord`] (paper, §4–5.1).
 
+use super::calibration::{CalibrationOptions, LineCalibration, calibrate_lines};
 use super::impostor::{CrownImpostor, ImpostorOptions};
 use super::merge::{CostContext, GroupLine, MergeOptions, merge_group_lines, merge_nested_group};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
@@ -26,10 +27,19 @@ pub struct BakeOptions {
     /// each time it loads the record).
     #[serde(default = "default_impostor")]
     pub impostor: Option<ImpostorOptions>,
+    /// How the lines' opacity is calibrated against the needles' coverage
+    /// ([`super::calibration`]), or `None` for no calibration (every line
+    /// keeps its opacity).
+    #[serde(default = "default_line_calibration")]
+    pub line_calibration: Option<CalibrationOptions>,
 }
 
 fn default_impostor() -> Option<ImpostorOptions> {
     Some(ImpostorOptions::default())
+}
+
+fn default_line_calibration() -> Option<CalibrationOptions> {
+    Some(CalibrationOptions::default())
 }
 
 impl Default for BakeOptions {
@@ -38,6 +48,7 @@ impl Default for BakeOptions {
             max_sides: 8,
             merge: MergeOptions::default(),
             impostor: default_impostor(),
+            line_calibration: default_line_calibration(),
         }
     }
 }
@@ -96,6 +107,9 @@ pub enum BakeStage {
     MergeTree,
     /// Baking the crown impostor (`done` 0 when it starts, 1 when it ends).
     Impostor,
+    /// Calibrating the lines' opacity (`done` 0 when it starts, 1 when it
+    /// ends).
+    LineCalibration,
 }
 
 /// Receives progress of a bake.
@@ -117,6 +131,8 @@ pub struct StageTimer<'a> {
     last: std::sync::Mutex<[Option<f64>; 2]>,
     /// When the impostor's bake started and ended.
     impostor: std::sync::Mutex<[Option<f64>; 2]>,
+    /// When the line calibration started and ended.
+    line_calibration: std::sync::Mutex<[Option<f64>; 2]>,
 }
 
 /// Seconds of a bake's stages, from a [`StageTimer`].
@@ -131,6 +147,9 @@ pub struct StageSeconds {
     /// Baking the crown impostor.
     #[serde(default)]
     pub impostor: f64,
+    /// Calibrating the lines' opacity.
+    #[serde(default)]
+    pub line_calibration: f64,
 }
 
 impl<'a> StageTimer<'a> {
@@ -141,6 +160,7 @@ impl<'a> StageTimer<'a> {
             start: Instant::now(),
             last: std::sync::Mutex::new([None, None]),
             impostor: std::sync::Mutex::new([None, None]),
+            line_calibration: std::sync::Mutex::new([None, None]),
         }
     }
 
@@ -151,15 +171,17 @@ impl<'a> StageTimer<'a> {
         let last = *self.last.lock().unwrap_or_else(|e| e.into_inner());
         let groups_end = last[0].unwrap_or(0.0);
         let tree_end = last[1].unwrap_or(groups_end).max(groups_end);
-        let impostor = match *self.impostor.lock().unwrap_or_else(|e| e.into_inner()) {
+        let span = |span: &std::sync::Mutex<[Option<f64>; 2]>| match *span.lock().unwrap_or_else(|e| e.into_inner()) {
             [Some(start), Some(end)] => (end - start).max(0.0),
             _ => 0.0,
         };
+        let (impostor, line_calibration) = (span(&self.impostor), span(&self.line_calibration));
         StageSeconds {
             merge_groups: groups_end,
             merge_tree: tree_end - groups_end,
-            record: (total - tree_end - impostor).max(0.0),
+            record: (total - tree_end - impostor - line_calibration).max(0.0),
             impostor,
+            line_calibration,
         }
     }
 }
@@ -170,8 +192,13 @@ impl BakeProgress for StageTimer<'_> {
         let slot = match stage {
             BakeStage::MergeGroups => 0,
             BakeStage::MergeTree => 1,
-            BakeStage::Impostor => {
-                if let Ok(mut span) = self.impostor.lock() {
+            BakeStage::Impostor | BakeStage::LineCalibration => {
+                let span = if stage == BakeStage::Impostor {
+                    &self.impostor
+                } else {
+                    &self.line_calibration
+                };
+                if let Ok(mut span) = span.lock() {
                     span[done.min(1)] = Some(now);
                 }
                 self.inner.progress(stage, done, total);
@@ -356,8 +383,22 @@ pub fn bake_prototypes(
         record.impostor = bake_impostor(&record, impostor);
         progress.progress(BakeStage::Impostor, 1, 1);
     }
+    if let Some(calibration) = options.line_calibration {
+        progress.progress(BakeStage::LineCalibration, 0, 1);
+        record.line_calibration = calibrate_record_lines(&record, &calibration)?;
+        progress.progress(BakeStage::LineCalibration, 1, 1);
+    }
     record.bake.bake_seconds = Some(start.elapsed().as_secs_f64());
     Ok(record)
+}
+
+/// The line calibration of `record` ([`calibrate_lines`] on the record
+/// flattened; `None` where it gives none).
+pub fn calibrate_record_lines(
+    record: &PrototypeRecord,
+    options: &CalibrationOptions,
+) -> Result<Option<LineCalibration>, RecordInvalid> {
+    Ok(calibrate_lines(&record.flatten()?, options))
 }
 
 /// The crown impostor of `record`'s placed needles and wood, baked with
@@ -389,10 +430,18 @@ mod tests {
         assert!(!record.merged.is_empty());
         assert!(record.impostor.is_some(), "the default bake holds the impostor");
         assert!(
-            s.merge_groups > 0.0 && s.merge_tree > 0.0 && s.record >= 0.0 && s.impostor > 0.0,
+            record.line_calibration.is_some(),
+            "the default bake calibrates the lines"
+        );
+        assert!(
+            s.merge_groups > 0.0
+                && s.merge_tree > 0.0
+                && s.record >= 0.0
+                && s.impostor > 0.0
+                && s.line_calibration > 0.0,
             "{s:?}"
         );
-        assert!((s.merge_groups + s.merge_tree + s.record + s.impostor - total).abs() < 1e-9);
+        assert!((s.merge_groups + s.merge_tree + s.record + s.impostor + s.line_calibration - total).abs() < 1e-9);
         // Nothing reported: everything is the record stage.
         let idle = StageTimer::new(&());
         assert_eq!(
@@ -402,6 +451,7 @@ mod tests {
                 merge_tree: 0.0,
                 record: 2.0,
                 impostor: 0.0,
+                line_calibration: 0.0,
             }
         );
     }

@@ -36,12 +36,18 @@
 //!   as four planes (coverage, wood, and the two lighting shares times
 //!   coverage), deflated (a quarter
 //!   of their size on the mature records; the plugin no longer bakes it at
-//!   load).
+//!   load);
+//! * after that (format 9), the line opacity scales by pixel size the
+//!   record was calibrated with, if any
+//!   ([`super::calibration::LineCalibration`]: two pixel sizes and eight
+//!   scales, f32).
 //!
 //! A flat record ([`LodRecord`], an imported tree) is written as every group
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 9 adds the line calibration (older files read without one:
+//! every line keeps its opacity; `conifer upgrade` calibrates them).
 //! Version 8 stores each impostor texel's lighting as shares of two
 //! cylinders and a sphere where version 7 stored one mean needle axis: a
 //! version 7 file reads without its impostor, as a version 6 file does.
@@ -61,6 +67,7 @@
 //! never a panic or an allocation beyond the file's own size (plus the
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
+use super::calibration::LineCalibration;
 use super::impostor::CrownImpostor;
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
@@ -80,7 +87,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 8;
+pub const FORMAT_VERSION: u32 = 9;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -903,6 +910,7 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
     );
     let impostor = record.impostor.as_deref().map(StoredImpostor::encode).transpose()?;
     body.extend(postcard::to_allocvec(&impostor).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    body.extend(postcard::to_allocvec(&record.line_calibration).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -992,19 +1000,26 @@ pub fn decode_record(bytes: &[u8]) -> Result<LodRecord, RecordError> {
 /// The tree of prototypes a format 3–7 payload holds, with what formats 5
 /// and 7 store after it.
 fn decode_prototypes(version: u32, body: &[u8]) -> Result<PrototypeRecord, RecordError> {
-    let (payload, appearance, impostor) = decode_payload(version, body)?;
-    let mut record = payload_to_prototype_record(payload, appearance)?;
-    record.impostor = impostor.map(Arc::new);
+    let (payload, after) = decode_payload(version, body)?;
+    let mut record = payload_to_prototype_record(payload, after.appearance)?;
+    record.impostor = after.impostor.map(Arc::new);
+    record.line_calibration = after.line_calibration;
     Ok(record)
 }
 
-/// A format 3–7 payload, and what formats 5 and 7 store after it (the
-/// appearance; the impostor).
-#[allow(clippy::type_complexity)] // The payload and the two parts stored after it.
-fn decode_payload(
-    version: u32,
-    body: &[u8],
-) -> Result<(DecodedPayload, Option<StoredAppearance>, Option<CrownImpostor>), RecordError> {
+/// What formats 5, 7 and 9 store after the payload.
+#[derive(Default)]
+struct AfterPayload {
+    /// Format 5: colours by age, side and height, needle ages.
+    appearance: Option<StoredAppearance>,
+    /// Format 7 (read from format 8): the crown impostor.
+    impostor: Option<CrownImpostor>,
+    /// Format 9: the line calibration.
+    line_calibration: Option<LineCalibration>,
+}
+
+/// A format 3–9 payload, and what formats 5, 7 and 9 store after it.
+fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPayload), RecordError> {
     let malformed = |e: postcard::Error| RecordError::Malformed(e.to_string());
     if version == 3 {
         let p: PayloadV3 = postcard::from_bytes(body).map_err(malformed)?;
@@ -1020,7 +1035,7 @@ fn decode_payload(
             |entry| entry,
             StoredMesh::decode,
         )?;
-        return Ok((decoded, None, None));
+        return Ok((decoded, AfterPayload::default()));
     }
     let (p, rest): (Payload, &[u8]) = postcard::take_from_bytes(body).map_err(malformed)?;
     check_placement_codes(version, &p.placements)?;
@@ -1039,6 +1054,17 @@ fn decode_payload(
     } else {
         (None, rest)
     };
+    let (line_calibration, rest) = if version >= 9 {
+        let (stored, rest) = postcard::take_from_bytes::<Option<LineCalibration>>(rest).map_err(malformed)?;
+        if stored.is_some_and(|c| !c.is_valid()) {
+            return Err(RecordError::Malformed(
+                "line calibration: pixel sizes not increasing or a scale out of range".into(),
+            ));
+        }
+        (stored, rest)
+    } else {
+        (None, rest)
+    };
     if !rest.is_empty() {
         return Err(RecordError::Malformed(format!(
             "{} bytes after the payload of a format {version} record",
@@ -1050,7 +1076,14 @@ fn decode_payload(
         |entry| entry.decode(),
         QuantizedMesh::decode,
     )?;
-    Ok((decoded, appearance, impostor))
+    Ok((
+        decoded,
+        AfterPayload {
+            appearance,
+            impostor,
+            line_calibration,
+        },
+    ))
 }
 
 /// Placements on codes came with format 6: an older file holding one is
@@ -1408,6 +1441,58 @@ mod tests {
     }
 
     #[test]
+    fn the_line_calibration_round_trips_and_format_8_files_have_none() {
+        let mut record = PrototypeRecord::from_flat(&three_groups()).unwrap();
+        let calibration = LineCalibration {
+            first_pixel: 0.01,
+            last_pixel: 0.2,
+            scales: [1.0, 0.98, 0.95, 0.9, 0.86, 0.8, 0.78, 0.75],
+        };
+        record.line_calibration = Some(calibration);
+        let bytes = encode_prototype_record(&record).unwrap();
+        assert_eq!(
+            decode_prototype_record(&bytes).unwrap().line_calibration,
+            Some(calibration)
+        );
+        assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
+        // Format 8 stops after the impostor: read without a calibration.
+        let body = &bytes[HEADER_BYTES..];
+        let stored = postcard::to_allocvec(&Some(calibration)).unwrap();
+        let v8 = &body[..body.len() - stored.len()];
+        let old = decode_prototype_record(&file_of_version(8, v8)).unwrap();
+        assert!(old.line_calibration.is_none());
+        assert_eq!(old.impostor, record.impostor);
+        assert_eq!(old.placements, record.placements);
+        // A scale out of range, sizes not increasing, a NaN or a cut-off
+        // calibration: malformed, never a panic.
+        let mut truncated = v8.to_vec();
+        truncated.extend_from_slice(&stored[..stored.len() - 3]);
+        let bad = [
+            LineCalibration {
+                scales: [3.0; 8],
+                ..calibration
+            },
+            LineCalibration {
+                last_pixel: 0.001,
+                ..calibration
+            },
+            LineCalibration {
+                first_pixel: f32::NAN,
+                ..calibration
+            },
+        ];
+        let bodies = bad.iter().map(|c| {
+            let mut body = v8.to_vec();
+            body.extend(postcard::to_allocvec(&Some(*c)).unwrap());
+            body
+        });
+        for body in bodies.chain([truncated]) {
+            let error = decode_prototype_record(&file_of_version(9, &body)).unwrap_err();
+            assert!(matches!(error, RecordError::Malformed(_)), "{error}");
+        }
+    }
+
+    #[test]
     fn the_impostor_round_trips_and_format_6_and_7_files_have_none() {
         let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         let impostor = record.impostor.clone().expect("the default bake holds an impostor");
@@ -1423,12 +1508,14 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one, format 8 stores a single byte for it.
+        // Without one (and without a line calibration), format 9 stores a
+        // single byte for each.
         let mut bare = record.clone();
         bare.impostor = None;
+        bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 1
+            HEADER_BYTES + v6.len() + 2
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.

@@ -248,6 +248,17 @@ impl SampleBits {
         self.bits[index / 64] & (1 << (index % 64)) != 0
     }
 
+    /// Calls `f(index)` for every set sample, in row-major order.
+    pub fn for_each_set(&self, mut f: impl FnMut(usize)) {
+        for (word, &bits) in self.bits.iter().enumerate() {
+            let mut rest = bits;
+            while rest != 0 {
+                f(word * 64 + rest.trailing_zeros() as usize);
+                rest &= rest - 1;
+            }
+        }
+    }
+
     /// Sets every sample whose centre lies in the piece from `a` to `b`
     /// (sample units) whose half width runs from `ra` at `a` to `rb` at
     /// `b`, and calls `f(index, t)` for each (`index` row-major, `t` in

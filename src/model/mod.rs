@@ -12,6 +12,7 @@
 //! * [`compact`]: the compact GPU arrays the plugin draws and the CPU reference of its passes.
 //! * [`raster`]: how a line covers pixels (its strip's area in each).
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
+//! * [`calibration`]: line opacity calibrated against the needles' coverage, by pixel size.
 //! * [`impostor`]: the far representation (a crown impostor of a few views).
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
 //! * [`color`]: colour within a tree (needles by age and side, bark by height).
@@ -19,6 +20,7 @@
 //! * [`wind`]: wind, one displacement field per tree that every representation shares.
 
 pub mod bake;
+pub mod calibration;
 pub mod color;
 pub mod compact;
 pub mod cut_count;

@@ -364,6 +364,10 @@ pub struct PrototypeRecord {
     /// ([`super::impostor::CrownImpostor`], the far representation), if
     /// any: the plugin bakes one at load where it is `None`.
     pub impostor: Option<std::sync::Arc<super::impostor::CrownImpostor>>,
+    /// The line opacity scales by pixel size the record was calibrated
+    /// with ([`super::calibration::LineCalibration`]), if any: without
+    /// one every line keeps its opacity (scale 1).
+    pub line_calibration: Option<super::calibration::LineCalibration>,
     // Derived by `from_parts`, never stored.
     /// Placed needles before placement `p` (`placements + 1` entries).
     needle_offset: Vec<u64>,
@@ -474,6 +478,7 @@ impl PrototypeRecord {
             max_sides,
             bake,
             impostor: None,
+            line_calibration: None,
             needle_offset,
             merged_offset,
             needle_bounds,
@@ -757,6 +762,7 @@ impl PrototypeRecord {
         )
         .map(|mut flat| {
             flat.impostor = self.impostor.clone();
+            flat.line_calibration = self.line_calibration;
             flat
         })
     }
@@ -939,6 +945,7 @@ impl PrototypeRecord {
         )
         .map(|mut prototypes| {
             prototypes.impostor = record.impostor.clone();
+            prototypes.line_calibration = record.line_calibration;
             prototypes
         })
     }

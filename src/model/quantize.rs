@@ -608,6 +608,7 @@ impl PrototypeRecord {
         )?;
         // Baked from the needles as stored: quantizing keeps it.
         record.impostor = self.impostor.clone();
+        record.line_calibration = self.line_calibration;
         Ok(QuantizedRecord {
             record,
             prototype_grids,

@@ -99,6 +99,10 @@ pub struct LodRecord {
     /// ([`super::impostor::CrownImpostor`], the far representation), if
     /// any: the plugin bakes one at load where it is `None`.
     pub impostor: Option<std::sync::Arc<super::impostor::CrownImpostor>>,
+    /// The line opacity scales by pixel size the record was calibrated
+    /// with ([`super::calibration::LineCalibration`]), if any: without
+    /// one every line keeps its opacity (scale 1).
+    pub line_calibration: Option<super::calibration::LineCalibration>,
     // Derived from the above by `from_parts`, never stored.
     parent: Vec<u32>,
     merged_needles: Vec<u32>,
@@ -324,6 +328,7 @@ impl LodRecord {
             max_sides,
             bake,
             impostor: None,
+            line_calibration: None,
             parent,
             merged_needles,
             merged_area,

@@ -1,5 +1,6 @@
 //! The species asset: a `.conifer` record and its compact GPU layout.
 
+use crate::model::calibration::LineCalibration;
 use crate::model::compact::{CompactError, CompactSpecies};
 use crate::model::impostor::{CrownImpostor, ImpostorOptions};
 use crate::model::metric::line_error;
@@ -52,6 +53,12 @@ pub struct ConiferSpecies {
     /// else baked from the needles and wood when the record loads (`None`
     /// when they have no extent).
     pub impostor: Option<Arc<CrownImpostor>>,
+    /// The lines' opacity scales by pixel size the record was calibrated
+    /// with ([`crate::model::calibration`]; `None` for a record baked
+    /// without or before format 9: every line keeps its opacity). The
+    /// plugin applies them to lines drawn by their area
+    /// ([`super::LineRaster::Area`]) under the area-preserving opacity.
+    pub line_calibration: Option<LineCalibration>,
     /// The tree as the wind sees it ([`crate::model::wind::WindShape`]):
     /// its box; its trunk stands where its lowest wood starts, or under the
     /// crown centre for a tree without wood.
@@ -147,6 +154,7 @@ impl ConiferSpecies {
                 line_errors: (line_error(min_radius), line_error(max_radius)),
                 compact: CompactSpecies::build_placed(record)?,
                 impostor,
+                line_calibration: record.line_calibration,
             },
             Some(Arc::new(record.clone())),
             OnceLock::new(),
@@ -215,6 +223,7 @@ impl ConiferSpecies {
             line_errors: (ranges.original_lines.min, ranges.original_lines.max),
             compact: CompactSpecies::build(&record)?,
             impostor,
+            line_calibration: record.line_calibration,
         };
         let species = Self::new(parts, None, OnceLock::new())?;
         let _ = species.flat.set(Arc::new(record));
@@ -250,6 +259,7 @@ impl ConiferSpecies {
             min_line_error: parts.line_errors.0,
             compact: Arc::new(parts.compact),
             impostor: parts.impostor,
+            line_calibration: parts.line_calibration,
         })
     }
 }
@@ -266,6 +276,7 @@ struct SpeciesParts<'a> {
     line_errors: (f32, f32),
     compact: CompactSpecies,
     impostor: Option<Arc<CrownImpostor>>,
+    line_calibration: Option<LineCalibration>,
 }
 
 /// Trunk and branches as one ordinary mesh: the wood segments as open

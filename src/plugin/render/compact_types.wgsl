@@ -138,7 +138,14 @@ struct SpeciesParams {
     // heights from its bottom to its top, four a row
     // (`model::impostor::CrownImpostor::crown_radii`)
     crown_radii: array<vec4<f32>, 8>,
+    // the lines' opacity scales by pixel size, four a row
+    // (`model::calibration::LineCalibration`; all 1 without one)
+    line_scales: array<vec4<f32>, 2>,
+    // log2 of the first pixel size (x) and entries per doubling (y)
+    line_scale_range: vec4<f32>,
 }
+
+const LINE_SCALE_STEPS: u32 = 8u;
 
 const CROWN_PROFILE_STEPS: u32 = 32u;
 

@@ -693,6 +693,29 @@ fn merged_line_alpha(lod: InstanceLod, spatial_error: f32, width: f32, paper_wid
     return line_alpha(lod, spatial_error, width, paper_width);
 }
 
+// The record's calibrated scale of a needle line's opacity at
+// `spatial_error` (its pixel size in metres is the spatial error over the
+// pixel error), interpolated in log size and clamped to the table's ends
+// (CPU reference: `model::calibration::LineCalibration::scale_at`). Lines
+// drawn by their area under the area-preserving rule only: the table is
+// measured for them.
+fn line_calibration(lod: InstanceLod, spatial_error: f32) -> f32 {
+#ifdef CONIFER_LINE_QUADS
+    if ((lod.code >> LOD_OPACITY_SHIFT) & 3u) != 1u {
+        return 1.0;
+    }
+    let pixel = max(spatial_error, 1e-12) / max(lod.pixel_error, 1e-6);
+    let last = f32(LINE_SCALE_STEPS - 1u);
+    let t = clamp((log2(pixel) - species.line_scale_range.x) * species.line_scale_range.y, 0.0, last);
+    let k = min(u32(t), LINE_SCALE_STEPS - 2u);
+    let below = species.line_scales[k / 4u][k % 4u];
+    let above = species.line_scales[(k + 1u) / 4u][(k + 1u) % 4u];
+    return mix(below, above, t - f32(k));
+#else
+    return 1.0;
+#endif
+}
+
 // How far a tree has faded into its impostor, in [0, 1].
 fn impostor_fade(lod: InstanceLod) -> f32 {
     return f32(lod.code >> LOD_FADE_SHIFT) / 255.0;
@@ -813,7 +836,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let width = log_decode(own);
-    let alpha = line_alpha(lod, spatial_error, width, width) * lod.transition;
+    let alpha = min(line_alpha(lod, spatial_error, width, width) * line_calibration(lod, spatial_error), 1.0) * lod.transition;
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let at_end = line_vertex_at_end(vertex_index);
@@ -854,7 +877,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     // The width code's top 12 bits (`model::compact::CompactSpecies::merged_width_code`).
     let width = log_decode(((a >> 24u) | (((b >> 24u) & 0xfu) << 8u)) << 4u);
-    let alpha = merged_line_alpha(lod, line_error, width, log_decode(own));
+    let alpha = min(merged_line_alpha(lod, line_error, width, log_decode(own)) * line_calibration(lod, line_error), 1.0);
     let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
     let start = end_position(grid, a);

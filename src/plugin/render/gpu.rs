@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 1,008 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 1,056 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -256,7 +256,19 @@ pub struct SpeciesParams {
     /// row ([`crate::model::impostor::CrownImpostor::crown_radii`]): where
     /// a texel's ray enters the crown, for its shadow samples.
     pub crown_radii: [[f32; 4]; CROWN_RADII_ROWS],
+    /// The lines' opacity scales by pixel size
+    /// ([`crate::model::calibration::LineCalibration::scales`], four a
+    /// row; all 1 without a calibration).
+    pub line_scales: [[f32; 4]; LINE_SCALE_ROWS],
+    /// Where a pixel size falls in them
+    /// ([`crate::model::calibration::LineCalibration::log_range`]); z, w
+    /// unused.
+    pub line_scale_range: [f32; 4],
 }
+
+/// Rows of four scales that hold a
+/// [`crate::model::calibration::LineCalibration`].
+pub const LINE_SCALE_ROWS: usize = crate::model::calibration::CALIBRATION_STEPS / 4;
 
 /// Rows of four heights that hold a
 /// [`crate::model::impostor::CrownImpostor::crown_radii`] profile.
@@ -274,6 +286,19 @@ impl SpeciesParams {
             self.sphere_diffuse[k / 4][k % 4] = table.diffuse[k];
             self.sphere_specular[k / 4][k % 4] = table.specular[k];
         }
+    }
+
+    /// Sets the lines' opacity scales by pixel size (`None`: every scale
+    /// 1).
+    pub fn set_line_calibration(&mut self, calibration: Option<&crate::model::calibration::LineCalibration>) {
+        let (scales, range) = match calibration {
+            Some(c) => (c.scales, c.log_range()),
+            None => ([1.0; crate::model::calibration::CALIBRATION_STEPS], [0.0, 1.0]),
+        };
+        for (k, &scale) in scales.iter().enumerate() {
+            self.line_scales[k / 4][k % 4] = scale;
+        }
+        self.line_scale_range = [range[0], range[1], 0.0, 0.0];
     }
 
     /// Sets the impostor's crown radius by height
@@ -511,8 +536,17 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_1008_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 1008);
+    fn species_params_is_1056_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 1056);
+    }
+
+    /// The shader's line scale table is as long as `model::calibration`'s.
+    #[test]
+    fn the_shader_has_the_line_calibrations_length() {
+        let types = include_str!("compact_types.wgsl");
+        let steps = crate::model::calibration::CALIBRATION_STEPS;
+        assert!(types.contains(&format!("const LINE_SCALE_STEPS: u32 = {steps}u;")));
+        assert!(types.contains(&format!("line_scales: array<vec4<f32>, {}>", super::LINE_SCALE_ROWS)));
     }
 
     /// The shader's crown profile is as long as `model::impostor`'s.

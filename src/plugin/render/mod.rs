@@ -515,6 +515,7 @@ fn species_params(
     };
     params.set_wind(&wind.model(), &species.wind_shape, wind.seconds(seconds), wind_step);
     params.set_sphere_light(sphere_light);
+    params.set_line_calibration(species.line_calibration.as_ref());
     params
 }
 
