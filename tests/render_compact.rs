@@ -703,7 +703,9 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
 /// are rectangles) keep the sum (5.42) but miss pixel by pixel: mean |Δ|
 /// 0.034 over 48 pixels, largest 0.102. With a line calibration
 /// ([`LineCalibration`]) the area lines' opacity is scaled by the table at
-/// their pixel size, as its CPU reference `scale_at` interpolates it.
+/// their pixel size, as its CPU reference `scale_at` interpolates it
+/// (0.689 here: mean |Δ| 0.0010 over 34 pixels, largest 0.002; alpha
+/// summed 3.73 against 3.70).
 #[test]
 fn lines_cover_each_pixel_by_their_strips_area() {
     use bevy::core_pipeline::tonemapping::Tonemapping;
@@ -826,7 +828,7 @@ fn lines_cover_each_pixel_by_their_strips_area() {
             "{raster:?}, scale {scale:.3}: opacity {opacity:.3}; alpha summed {drawn:.2} (reference {expected:.2}); \
              mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
         );
-        assert!(expected > 5.0, "the needles are in the picture: {expected}");
+        assert!(expected > 3.0, "the needles are in the picture: {expected}");
         errors.push((mean, worst, drawn / expected));
     }
     let [

@@ -244,12 +244,16 @@ pub enum LineRaster {
     /// square, as the supersampled reference box-filters a needle
     /// ([`crate::model::raster`]): a diagonal line splits its coverage
     /// between the pixels it crosses instead of lighting one pixel a step,
-    /// and MSAA smears nothing. Exact for lines that do not overlap; in a
-    /// dense crown it draws more coverage than the reference and than
-    /// hardware lines (blending treats overlapping lines as independent,
-    /// while a crown's needles clump), so it is opt-in until the opacity
-    /// rule knows how the crown's needles overlap (see the README's
-    /// "Lines that cover each pixel by their area"). Cameras only: shadow
+    /// and MSAA smears nothing. Exact for lines that do not overlap. In a
+    /// dense crown, blending composes overlapping lines as if they fell
+    /// independently while a crown's needles clump in depth: under the
+    /// area-preserving opacity, the record's line calibration
+    /// ([`ConiferSpecies::line_calibration`], measured at bake time by
+    /// [`crate::model::calibration`]; a record older than format 9 has
+    /// none until `conifer upgrade`) scales each line's opacity by its
+    /// pixel size, so the crown's lines cover what its needles do. Opt-in
+    /// (see the README's "Lines that cover each pixel by their area" for
+    /// how it measures against hardware lines). Cameras only: shadow
     /// views keep hardware lines (their texels keep each fragment with its
     /// opacity, hashed). Three times the vertices of
     /// [`LineRaster::Hardware`] and more fragments (the quad reaches 1.25

@@ -41,7 +41,7 @@
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
-    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS,
+    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, LINE_SCALE_STEPS,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
