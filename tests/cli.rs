@@ -427,6 +427,11 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     assert!((10..=120).contains(&prototypes), "{prototypes} prototypes");
     assert!(inspect["prototype_needles"].as_u64().unwrap() * 5 < needles);
     assert!(inspect["groups"].as_u64().unwrap() > prototypes);
+    // The bake calibrated its lines: eight scales, none above 1.05 (a
+    // crown's lines over-cover, never under-cover, by much).
+    let scales = inspect["line_calibration"]["scales"].as_array().expect("a line calibration");
+    assert_eq!(scales.len(), 8);
+    assert!(scales.iter().all(|s| (0.25..=1.05).contains(&s.as_f64().unwrap())), "{scales:?}");
 
     // The flat generator: every group its own prototype.
     let flat = dir.path().join("flat.conifer");
@@ -439,11 +444,13 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         "--needles",
         "20000",
         "--flat",
+        "--no-line-calibration",
         "-o",
         flat.to_str().unwrap(),
     ]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     let flat_inspect = json(&conifer(&["inspect", flat.to_str().unwrap(), "--json"]));
+    assert!(flat_inspect["line_calibration"].is_null());
     assert_eq!(flat_inspect["prototypes"], flat_inspect["groups"]);
     assert_eq!(flat_inspect["prototype_needles"], flat_inspect["needles"]);
     assert!(flat_inspect["bytes"].as_u64().unwrap() > 4 * inspect["bytes"].as_u64().unwrap());
@@ -467,13 +474,13 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
             .collect()
     };
     let before = cuts(path);
+    assert!(json(&conifer(&["inspect", path, "--json"]))["line_calibration"].is_null());
     let output = conifer(&["upgrade", path]);
     assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
     assert!(String::from_utf8_lossy(&output.stderr).contains(&format!("format 2 → {FORMAT_VERSION}")));
-    assert_eq!(
-        json(&conifer(&["inspect", path, "--json"]))["format_version"].as_u64(),
-        Some(u64::from(FORMAT_VERSION))
-    );
+    let upgraded = json(&conifer(&["inspect", path, "--json"]));
+    assert_eq!(upgraded["format_version"].as_u64(), Some(u64::from(FORMAT_VERSION)));
+    assert!(upgraded["line_calibration"]["scales"].is_array(), "upgrade calibrates the lines");
     // The same cuts; only the opacity moves with the radii's quantization,
     // and the lines the GPU processes with the band limits (which follow
     // the rounded-up errors).
