@@ -429,9 +429,14 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     assert!(inspect["groups"].as_u64().unwrap() > prototypes);
     // The bake calibrated its lines: eight scales, none above 1.05 (a
     // crown's lines over-cover, never under-cover, by much).
-    let scales = inspect["line_calibration"]["scales"].as_array().expect("a line calibration");
+    let scales = inspect["line_calibration"]["scales"]
+        .as_array()
+        .expect("a line calibration");
     assert_eq!(scales.len(), 8);
-    assert!(scales.iter().all(|s| (0.25..=1.05).contains(&s.as_f64().unwrap())), "{scales:?}");
+    assert!(
+        scales.iter().all(|s| (0.25..=1.05).contains(&s.as_f64().unwrap())),
+        "{scales:?}"
+    );
 
     // The flat generator: every group its own prototype.
     let flat = dir.path().join("flat.conifer");
@@ -480,7 +485,10 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     assert!(String::from_utf8_lossy(&output.stderr).contains(&format!("format 2 → {FORMAT_VERSION}")));
     let upgraded = json(&conifer(&["inspect", path, "--json"]));
     assert_eq!(upgraded["format_version"].as_u64(), Some(u64::from(FORMAT_VERSION)));
-    assert!(upgraded["line_calibration"]["scales"].is_array(), "upgrade calibrates the lines");
+    assert!(
+        upgraded["line_calibration"]["scales"].is_array(),
+        "upgrade calibrates the lines"
+    );
     // The same cuts; only the opacity moves with the radii's quantization,
     // and the lines the GPU processes with the band limits (which follow
     // the rounded-up errors).
