@@ -128,8 +128,10 @@ pub struct CalibrationOptions {
     /// would be narrower than four samples (up to 256, within
     /// `max_samples`).
     pub samples: u32,
-    /// Most samples one view takes (default 2²⁶, 8 MiB of bits): a larger
-    /// picture takes fewer a pixel, at least 2 along each axis.
+    /// Most samples one view takes (default 2²⁴, 2 MiB of bits): a larger
+    /// picture takes fewer a pixel, at least 2 along each axis (the young
+    /// trees' pictures never reach it; at 2²⁶ an imported 48,607-needle
+    /// pine, 1,024 rows at its first size, spent most of its bake here).
     pub max_samples: u64,
     /// The pixel error the cut is taken at: a pixel of `s` metres draws
     /// the cut at spatial error `s · pixel_error` (default 1, the plugin's).
@@ -141,7 +143,7 @@ impl Default for CalibrationOptions {
         Self {
             views: 4,
             samples: 16,
-            max_samples: 1 << 26,
+            max_samples: 1 << 24,
             pixel_error: 1.0,
         }
     }
