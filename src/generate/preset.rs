@@ -9,8 +9,8 @@ use crate::model::{BakeError, BakeOptions, PrototypeRecord, bake_prototypes};
 
 /// A preset tree: one of the [`Species`] at an [`Age`] (mature unless
 /// asked), grown from a seed, optionally with a needle count, as shared
-/// shoot prototypes baked with [`BakeOptions::default`] (what `conifer bake
-/// --preset` writes).
+/// shoot prototypes baked with [`Preset::bake_options`] (what `conifer bake
+/// --preset` writes, without the line calibration).
 ///
 /// Its text form is `species[?seed=S][&needles=N][&age=young]`, e.g.
 /// `norway-spruce?seed=3`; [`Preset`]'s `Display` writes it back.
@@ -76,7 +76,19 @@ impl Preset {
     /// seconds for mature ones; merges run on the current rayon pool).
     pub fn bake(&self) -> Result<PrototypeRecord, BakeError> {
         let input = generate_prototypes(self.species, &self.options());
-        bake_prototypes(&input, &BakeOptions::default(), &())
+        bake_prototypes(&input, &Self::bake_options(), &())
+    }
+
+    /// What a preset is baked with at run time: [`BakeOptions::default`]
+    /// without the line calibration ([`crate::model::calibration`]), which
+    /// only `LineRaster::Area` uses and which took 111 s of a mature
+    /// spruce's bake in a debug build (`conifer upgrade`, two cores shared);
+    /// bake a preset with `conifer bake --preset` for a calibrated record.
+    pub fn bake_options() -> BakeOptions {
+        BakeOptions {
+            line_calibration: None,
+            ..BakeOptions::default()
+        }
     }
 
     /// A 64-bit fingerprint of everything the baked record depends on
@@ -87,7 +99,7 @@ impl Preset {
         let inputs = format!(
             "{:?}|{:?}|{}|{}",
             self.species.params(self.age),
-            BakeOptions::default(),
+            Self::bake_options(),
             crate::model::file::FORMAT_VERSION,
             env!("CARGO_PKG_VERSION")
         );
