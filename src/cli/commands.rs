@@ -41,24 +41,22 @@ impl BakeBars {
             bar.enable_steady_tick(Duration::from_millis(200));
             bar
         };
-        let impostor = multi.add(
-            ProgressBar::new(1)
-                .with_style(
-                    ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} impostor ({elapsed})")
-                        .expect("valid template")
-                        .progress_chars("=> "),
-                )
-                .with_prefix("far"),
-        );
-        let calibration = multi.add(
-            ProgressBar::new(1)
-                .with_style(
-                    ProgressStyle::with_template("{prefix:>14} [{bar:40}] {pos}/{len} line opacity ({elapsed})")
-                        .expect("valid template")
-                        .progress_chars("=> "),
-                )
-                .with_prefix("calibration"),
-        );
+        // A stage of one step (0 when it starts, 1 when it ends).
+        let one_step = |prefix: &'static str, what: &str| {
+            let template = format!("{{prefix:>14}} [{{bar:40}}] {{pos}}/{{len}} {what} ({{elapsed}})");
+            multi.add(
+                ProgressBar::new(1)
+                    .with_style(
+                        ProgressStyle::with_template(&template)
+                            .expect("valid template")
+                            .progress_chars("=> "),
+                    )
+                    .with_prefix(prefix),
+            )
+        };
+        // Added in this order, as before: the one-step bars above the merges'.
+        let impostor = one_step("far", "impostor");
+        let calibration = one_step("calibration", "line opacity");
         Self {
             groups: bar("groups"),
             tree: bar("whole tree"),

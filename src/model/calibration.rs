@@ -267,7 +267,6 @@ impl SideComposition {
             return None;
         }
         let right = Vec3::new(view.azimuth.cos(), 0.0, view.azimuth.sin());
-        needle_bounds(record)?;
         let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
         for n in record.needles.iter().filter(|n| n.is_valid()) {
             for p in [n.base, n.tip] {
@@ -275,6 +274,10 @@ impl SideComposition {
                 lo = lo.min(q - n.radius);
                 hi = hi.max(q + n.radius);
             }
+        }
+        if !(lo.is_finite() && hi.is_finite()) {
+            // No valid needle.
+            return None;
         }
         // Two pixels of margin: a line's strip reaches half a pixel past
         // its segment.
@@ -284,12 +287,8 @@ impl SideComposition {
         let height = ((hi.y - lo.y) / pixel).ceil().max(1.0) as u32;
         let pixels = u64::from(width) * u64::from(height);
         let most = ((view.max_samples as f64 / pixels as f64).sqrt().floor() as u32).max(2);
-        let thinnest = record
-            .needles
-            .iter()
-            .filter(|n| n.is_valid())
-            .map(|n| n.radius)
-            .fold(f32::INFINITY, f32::min);
+        // The smallest original-line error is the thinnest needle's `2R`.
+        let thinnest = 0.5 * record.part_ranges().original_lines.min;
         let wanted = view.samples.max((pixel / (0.5 * thinnest)).ceil().min(256.0) as u32);
         let samples = wanted.clamp(1, most);
         // Picture metres to pixel units (x right, y down from the top).

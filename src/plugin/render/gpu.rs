@@ -278,14 +278,23 @@ pub const CROWN_RADII_ROWS: usize = crate::model::impostor::CROWN_PROFILE_STEPS 
 /// table.
 pub const SPHERE_LIGHT_ROWS: usize = crate::model::shading::SPHERE_LIGHT_STEPS / 4;
 
+/// `values` four a row, as the shader's `array<vec4<f32>, ROWS>` tables
+/// hold them (entry `k` at row `k / 4`, lane `k % 4`); lanes past the end
+/// of `values` stay 0.
+fn four_a_row<const ROWS: usize>(values: &[f32]) -> [[f32; 4]; ROWS] {
+    let mut rows = [[0.0; 4]; ROWS];
+    for (k, &value) in values.iter().take(4 * ROWS).enumerate() {
+        rows[k / 4][k % 4] = value;
+    }
+    rows
+}
+
 impl SpeciesParams {
     /// Sets the sphere light table: how the needles an impostor texel or a
     /// merged line lights as a sphere send each light toward the viewer.
     pub fn set_sphere_light(&mut self, table: &crate::model::shading::SphereLight) {
-        for k in 0..crate::model::shading::SPHERE_LIGHT_STEPS {
-            self.sphere_diffuse[k / 4][k % 4] = table.diffuse[k];
-            self.sphere_specular[k / 4][k % 4] = table.specular[k];
-        }
+        self.sphere_diffuse = four_a_row(&table.diffuse);
+        self.sphere_specular = four_a_row(&table.specular);
     }
 
     /// Sets the lines' opacity scales by pixel size (`None`: every scale
@@ -295,18 +304,14 @@ impl SpeciesParams {
             Some(c) => (c.scales, c.log_range()),
             None => ([1.0; crate::model::calibration::CALIBRATION_STEPS], [0.0, 1.0]),
         };
-        for (k, &scale) in scales.iter().enumerate() {
-            self.line_scales[k / 4][k % 4] = scale;
-        }
+        self.line_scales = four_a_row(&scales);
         self.line_scale_range = [range[0], range[1], 0.0, 0.0];
     }
 
     /// Sets the impostor's crown radius by height
     /// ([`crate::model::impostor::CrownImpostor::crown_radii`]).
     pub fn set_crown_radii(&mut self, radii: &[f32; crate::model::impostor::CROWN_PROFILE_STEPS]) {
-        for (k, &radius) in radii.iter().enumerate() {
-            self.crown_radii[k / 4][k % 4] = radius;
-        }
+        self.crown_radii = four_a_row(radii);
     }
 
     /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`,
@@ -540,21 +545,36 @@ mod tests {
         assert_eq!(size_of::<super::SpeciesParams>(), 1056);
     }
 
+    /// The shader declares `constant` as `steps` and `field` as `rows`
+    /// rows of four.
+    fn assert_shader_table(constant: &str, steps: usize, field: &str, rows: usize) {
+        let types = include_str!("compact_types.wgsl");
+        assert!(types.contains(&format!("const {constant}: u32 = {steps}u;")));
+        assert!(types.contains(&format!("{field}: array<vec4<f32>, {rows}>")));
+    }
+
     /// The shader's line scale table is as long as `model::calibration`'s.
     #[test]
     fn the_shader_has_the_line_calibrations_length() {
-        let types = include_str!("compact_types.wgsl");
         let steps = crate::model::calibration::CALIBRATION_STEPS;
-        assert!(types.contains(&format!("const LINE_SCALE_STEPS: u32 = {steps}u;")));
-        assert!(types.contains(&format!("line_scales: array<vec4<f32>, {}>", super::LINE_SCALE_ROWS)));
+        assert_shader_table("LINE_SCALE_STEPS", steps, "line_scales", super::LINE_SCALE_ROWS);
     }
 
     /// The shader's crown profile is as long as `model::impostor`'s.
     #[test]
     fn the_shader_has_the_crown_profiles_length() {
-        let types = include_str!("compact_types.wgsl");
         let steps = crate::model::impostor::CROWN_PROFILE_STEPS;
-        assert!(types.contains(&format!("const CROWN_PROFILE_STEPS: u32 = {steps}u;")));
-        assert!(types.contains(&format!("crown_radii: array<vec4<f32>, {}>", super::CROWN_RADII_ROWS)));
+        assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_radii", super::CROWN_RADII_ROWS);
+    }
+
+    /// Tables go into the shader's rows four a row, entry `k` at row
+    /// `k / 4`, lane `k % 4`.
+    #[test]
+    fn tables_are_packed_four_a_row() {
+        let values: Vec<f32> = (0..8).map(|k| k as f32).collect();
+        assert_eq!(
+            super::four_a_row::<2>(&values),
+            [[0.0, 1.0, 2.0, 3.0], [4.0, 5.0, 6.0, 7.0]]
+        );
     }
 }
