@@ -26,7 +26,7 @@ use bevy::anti_alias::fxaa::Fxaa;
 use bevy::anti_alias::smaa::Smaa;
 use bevy::anti_alias::taa::TemporalAntiAliasing;
 use bevy::asset::RenderAssetUsages;
-use bevy::camera::RenderTarget;
+use bevy::camera::{Hdr, RenderTarget};
 use bevy::input::mouse::AccumulatedMouseMotion;
 use bevy::light::CascadeShadowConfigBuilder;
 use bevy::mesh::{Indices, PrimitiveTopology};
@@ -114,6 +114,12 @@ struct Args {
     /// or TAA (the last three with MSAA off, as Bevy requires).
     #[arg(long, value_enum, default_value_t = AntiAliasing::Msaa)]
     aa: AntiAliasing,
+    /// Render into Bevy's 8-bit main texture instead of the 16-bit float
+    /// one (`Hdr`, the default here): every blend of a translucent line is
+    /// then rounded to 8 bits, and the default `--line-raster auto` draws
+    /// hardware lines.
+    #[arg(long)]
+    ldr: bool,
     /// Headless: move the camera by `x,y,z` metres before each extra frame
     /// (`--frames`), looking the same way (a pan: what TAA's history sees).
     #[arg(long, value_parser = parse_vec3)]
@@ -122,7 +128,7 @@ struct Args {
     #[arg(long, value_enum, default_value_t = Lighting::Cylinder)]
     line_lighting: Lighting,
     /// How lines are rasterized (`ConiferLodSettings::line_raster`).
-    #[arg(long, value_enum, default_value_t = Raster::Hardware)]
+    #[arg(long, value_enum, default_value_t = Raster::Auto)]
     line_raster: Raster,
     /// Headless: time each render pass on the GPU (Bevy's
     /// `RenderDiagnosticsPlugin`, where the GPU has timestamp queries) and
@@ -150,7 +156,10 @@ enum Lighting {
 /// How lines are rasterized (`--line-raster`).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 enum Raster {
-    /// One-pixel hardware lines (the default).
+    /// Area lines in a camera with `Hdr`, hardware lines without (the
+    /// default).
+    Auto,
+    /// One-pixel hardware lines.
     Hardware,
     /// Each pixel covered by the line's strip's area in it.
     Area,
@@ -496,6 +505,7 @@ fn setup(
         Lighting::FacingStrip => LineLighting::FacingStrip,
     };
     settings.line_raster = match args.line_raster {
+        Raster::Auto => LineRaster::Auto,
         Raster::Area => LineRaster::Area,
         Raster::Hardware => LineRaster::Hardware,
     };
@@ -626,6 +636,9 @@ fn setup(
     ));
     // The stats panel draws on this camera, also when it renders to an image.
     camera.insert(IsDefaultUiCamera);
+    if !args.ldr {
+        camera.insert(Hdr);
+    }
     match args.aa {
         AntiAliasing::Msaa => {}
         AntiAliasing::None => {

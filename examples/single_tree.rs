@@ -48,6 +48,12 @@ struct Args {
     /// Overlay off at start (it is on by default here).
     #[arg(long)]
     no_overlay: bool,
+    /// Render into Bevy's 8-bit main texture instead of the 16-bit float
+    /// one (`Hdr`, the default here): every blend of a translucent line is
+    /// then rounded to 8 bits, and lines are drawn as hardware lines
+    /// (`LineRaster::Auto`).
+    #[arg(long)]
+    ldr: bool,
     /// Render one picture without a window and exit.
     #[arg(long)]
     headless: bool,
@@ -222,6 +228,9 @@ fn setup(
     ));
     // The stats panel draws on this camera, also when it renders to an image.
     camera.insert(IsDefaultUiCamera);
+    if !args.ldr {
+        camera.insert(bevy::camera::Hdr);
+    }
     if let Some(target) = target {
         camera.insert(bevy::camera::RenderTarget::from(target.0.clone()));
     }

@@ -750,14 +750,16 @@ fn lines_cover_each_pixel_by_their_strips_area() {
     let eye = Vec3::new(0.0, 0.0, 20.0);
     let fov = 45f32.to_radians();
     let transform = Transform::from_translation(eye).looking_at(Vec3::ZERO, Vec3::Y);
-    world.spawn((
-        HeadlessRenderer::camera_bundle(&target, transform, fov),
-        Camera {
-            clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
-            ..default()
-        },
-        Tonemapping::None,
-    ));
+    let camera = world
+        .spawn((
+            HeadlessRenderer::camera_bundle(&target, transform, fov),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
+                ..default()
+            },
+            Tonemapping::None,
+        ))
+        .id();
     world.resource_mut::<CompactReadback>().enabled = true;
     // Lines only: this small tree would fade into its crown impostor here.
     world.resource_mut::<ConiferLodSettings>().far_impostor = false;
@@ -781,22 +783,37 @@ fn lines_cover_each_pixel_by_their_strips_area() {
         scales: [0.5, 0.55, 0.6, 0.7, 0.75, 0.8, 0.9, 1.0],
     };
     let mut errors = Vec::new();
-    for (raster, calibrated) in [
-        (LineRaster::Area, None),
-        (LineRaster::Hardware, None),
-        (LineRaster::Area, Some(calibration)),
+    let mut alphas = Vec::new();
+    // The last two: `LineRaster::Auto` draws hardware lines into the
+    // camera's 8-bit main texture and quads into a 16-bit float one (`Hdr`).
+    for (raster, calibrated, hdr) in [
+        (LineRaster::Area, None, false),
+        (LineRaster::Hardware, None, false),
+        (LineRaster::Area, Some(calibration), false),
+        (LineRaster::Auto, None, false),
+        (LineRaster::Auto, None, true),
     ] {
         renderer.world_mut().resource_mut::<ConiferLodSettings>().line_raster = raster;
         let mut assets = renderer.world_mut().resource_mut::<Assets<ConiferSpecies>>();
         assets.get_mut(&handle).unwrap().line_calibration = calibrated;
+        if hdr {
+            renderer.world_mut().entity_mut(camera).insert(bevy::camera::Hdr);
+        } else {
+            renderer.world_mut().entity_mut(camera).remove::<bevy::camera::Hdr>();
+        }
         for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
             renderer.update().unwrap();
         }
         let picture = renderer.capture(&target, 8).unwrap();
-        let name = if calibrated.is_some() { "_calibrated" } else { "" };
+        let name = match (calibrated.is_some(), hdr) {
+            (true, _) => "_calibrated",
+            (false, true) => "_hdr",
+            (false, false) => "",
+        };
         picture
             .save(out.join(format!("compact_line_raster_{raster:?}{name}.png")))
             .unwrap();
+        alphas.push(picture.pixels().map(|p| p[3]).collect::<Vec<u8>>());
         let (_, spatial_error) = common::camera_readback(renderer.world(), handle.id()).tree_lod(0);
         let scale = calibrated.map_or(1.0, |c| c.scale_at(spatial_error));
         let opacity = 2.0 * radius / spatial_error * scale;
@@ -835,7 +852,14 @@ fn lines_cover_each_pixel_by_their_strips_area() {
         (area_mean, area_worst, area_sum),
         (hardware_mean, _, _),
         (scaled_mean, scaled_worst, scaled_sum),
-    ] = [errors[0], errors[1], errors[2]];
+        _,
+        (hdr_mean, hdr_worst, hdr_sum),
+    ] = [errors[0], errors[1], errors[2], errors[3], errors[4]];
+    assert_eq!(alphas[3], alphas[1], "auto draws hardware lines into an 8-bit texture");
+    assert!(
+        hdr_mean < 0.003 && hdr_worst < 0.01 && (hdr_sum - 1.0).abs() < 0.05,
+        "auto draws quads into a float texture: mean {hdr_mean}, largest {hdr_worst}, summed {hdr_sum}"
+    );
     assert!(
         (area_sum - 1.0).abs() < 0.05 && (scaled_sum - 1.0).abs() < 0.05,
         "coverage summed {area_sum} (calibrated: {scaled_sum}) of the reference's"

@@ -52,6 +52,15 @@ pub struct EvalArgs {
     /// `ours` keeps its lines at every distance (no crown impostor).
     #[arg(long)]
     pub ours_no_impostor: bool,
+    /// Every camera renders into Bevy's 16-bit float main texture (`Hdr`)
+    /// instead of the default 8-bit sRGB one.
+    #[arg(long)]
+    pub hdr: bool,
+    /// The cameras write linear light clamped to [0, 1] instead of
+    /// tone-mapping it (Bevy's default, TonyMcMapface): the background stays
+    /// the clear colour with `--hdr` too.
+    #[arg(long)]
+    pub no_tonemapping: bool,
     /// Shimmer under camera motion: an orbit (the camera circles the
     /// crown) and a lateral pan at each of these distances, metres (e.g.
     /// 12,56,250); reports each method's flicker_mean and flicker_p99.
@@ -86,10 +95,11 @@ pub struct EvalArgs {
     /// toward the viewer).
     #[arg(long, default_value = "cylinder")]
     pub line_lighting: String,
-    /// How the plugin rasterizes lines: `hardware` (the default: one-pixel
-    /// hardware lines, the paper's) or `area` (each pixel covered by the
-    /// line's strip's area in it).
-    #[arg(long, default_value = "hardware")]
+    /// How the plugin rasterizes lines: `auto` (the default: `area` with
+    /// `--hdr`, `hardware` without), `hardware` (one-pixel hardware lines,
+    /// the paper's) or `area` (each pixel covered by the line's strip's
+    /// area in it).
+    #[arg(long, default_value = "auto")]
     pub line_raster: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`
@@ -144,9 +154,10 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         other => bail!("--line-lighting {other:?}: bundle, cylinder or facing-strip"),
     };
     let line_raster = match args.line_raster.as_str() {
+        "auto" => LineRaster::Auto,
         "area" => LineRaster::Area,
         "hardware" => LineRaster::Hardware,
-        other => bail!("--line-raster {other:?}: area or hardware"),
+        other => bail!("--line-raster {other:?}: auto, area or hardware"),
     };
     let ours_line_opacity = match args.ours_opacity.as_str() {
         "area" => LineOpacity::AreaPreserving,
@@ -165,6 +176,8 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         line_raster,
         ours_line_opacity,
         ours_impostor: !args.ours_no_impostor,
+        hdr: args.hdr,
+        tonemapping: !args.no_tonemapping,
     };
     if args.inside {
         let record = read_prototype_record(&args.file)

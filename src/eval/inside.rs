@@ -167,7 +167,7 @@ pub fn evaluate_inside(
     for (layer, scale, order) in [(0usize, 1u32, 0isize), (1, s, 1)] {
         let image = renderer.render_target(view.width * scale, view.height * scale);
         let [r, g, b] = super::scene::BACKGROUND;
-        renderer.world_mut().spawn((
+        let mut camera = renderer.world_mut().spawn((
             HeadlessRenderer::camera_bundle(&image, transform, view.fov_deg.to_radians()),
             Camera {
                 clear_color: ClearColorConfig::Custom(Color::srgba(r, g, b, 0.0)),
@@ -176,6 +176,12 @@ pub fn evaluate_inside(
             },
             RenderLayers::layer(layer),
         ));
+        if view.hdr {
+            camera.insert(bevy::camera::Hdr);
+        }
+        if !view.tonemapping {
+            camera.insert(bevy::core_pipeline::tonemapping::Tonemapping::None);
+        }
         targets.push(image);
     }
     for _ in 0..3 {

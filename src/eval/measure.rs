@@ -274,6 +274,21 @@ pub fn crown_shade_error(
     })
 }
 
+/// The background `image` shows: the mean colour, sRGB in `[0, 1]`, of its
+/// pixels nothing covers (alpha 0). A camera that renders into a high
+/// dynamic range texture tone-maps its clear colour with the picture, so
+/// the background is read from the picture rather than taken from the
+/// clear colour. `None` when every pixel is covered.
+pub fn background_color(image: &RgbaImage) -> Option<[f32; 3]> {
+    let (sum, count) = image
+        .pixels()
+        .filter(|p| p.0[3] == 0)
+        .fold(([0u64; 3], 0u64), |(sum, count), p| {
+            (std::array::from_fn(|c| sum[c] + u64::from(p.0[c])), count + 1)
+        });
+    (count > 0).then(|| sum.map(|s| s as f32 / (255.0 * count as f32)))
+}
+
 /// The crown's see-through on `image` (its alpha as coverage) within
 /// `crown`, the needles' screen box: [`crate::model::look::crown_see_through`].
 /// `None` for a blank crown.
@@ -481,6 +496,23 @@ mod tests {
             linear_to_srgb(alpha * own[2] + (1.0 - alpha) * b[2]),
             (alpha * 255.0).round() as u8,
         ])
+    }
+
+    #[test]
+    fn background_is_read_from_uncovered_pixels() {
+        let image = RgbaImage::from_fn(4, 1, |x, _| match x {
+            0 => Rgba([10, 20, 30, 255]),
+            1 => Rgba([200, 100, 50, 0]),
+            2 => Rgba([100, 50, 0, 0]),
+            _ => Rgba([0, 0, 0, 128]),
+        });
+        let background = background_color(&image).unwrap();
+        let expected = [150.0 / 255.0, 75.0 / 255.0, 25.0 / 255.0];
+        assert!(
+            background.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-6),
+            "{background:?}"
+        );
+        assert_eq!(background_color(&flat(2, 2, [9, 9, 9, 1])), None);
     }
 
     #[test]

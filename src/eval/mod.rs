@@ -252,14 +252,21 @@ pub struct EvalReport {
     pub sun: String,
     /// How the plugin's methods lit their lines (`Cylinder`, `FacingStrip`).
     pub line_lighting: String,
-    /// How the plugin's methods rasterized their lines (`Area`,
-    /// `Hardware`).
+    /// How the plugin's methods rasterized their lines in the cameras'
+    /// main texture (`Area`, `Hardware`; `--line-raster auto` reports the
+    /// one it drew).
     pub line_raster: String,
     /// The merged-line opacity `ours` drew with (`AreaPreserving`,
     /// `Coverage`).
     pub ours_line_opacity: String,
     /// Whether `ours` faded far trees into their crown impostor.
     pub ours_impostor: bool,
+    /// Whether the cameras rendered into a 16-bit float main texture
+    /// (Bevy's `Hdr`) rather than the default 8-bit sRGB one.
+    pub hdr: bool,
+    /// Whether the cameras tone-mapped (TonyMcMapface) or wrote linear
+    /// light clamped (`--no-tonemapping`).
+    pub tonemapping: bool,
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -415,6 +422,7 @@ pub fn evaluate(
         let label = format_distance(distance);
         write(&frame.reference, format!("ref_{label}.png"), &mut files)?;
         let mut row = vec![crop(&frame.reference, &rect)];
+        let background = measure::background_color(&frame.reference).unwrap_or(scene::BACKGROUND);
         for (method, picture) in &frame.methods {
             write(picture, format!("{}_{label}.png", method.name()), &mut files)?;
             row.push(crop(picture, &rect));
@@ -428,7 +436,7 @@ pub fn evaluate(
                 coverage_error: measure::coverage_error(&frame.reference, picture, &rect)?,
                 color_error: measure::color_error(&frame.reference, picture, &rect)?,
                 crown_color_error: measure::crown_color_error(&frame.reference, picture, &rect)?,
-                crown_shade: measure::crown_shade_error(&frame.reference, picture, &rect, scene::BACKGROUND)?,
+                crown_shade: measure::crown_shade_error(&frame.reference, picture, &rect, background)?,
                 perceptual: flip_error(&frame.reference, picture, &rect)?,
                 triangles: counts.triangles,
                 lines: counts.lines,
@@ -593,9 +601,11 @@ pub fn evaluate(
         transition: options.view.transition,
         sun: options.view.sun.name().into(),
         line_lighting: format!("{:?}", options.view.line_lighting),
-        line_raster: format!("{:?}", options.view.line_raster),
+        line_raster: format!("{:?}", options.view.drawn_line_raster()),
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         ours_impostor: options.view.ours_impostor,
+        hdr: options.view.hdr,
+        tonemapping: options.view.tonemapping,
         needles,
         dolly_distances: dolly,
         wind: wind.unwrap_or(0.0),

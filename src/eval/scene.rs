@@ -36,7 +36,9 @@ use crate::plugin::{
     LineLighting, LineOpacity, LineRaster, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
+use bevy::camera::Hdr;
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
+use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::mesh::PrimitiveTopology;
 use bevy::prelude::*;
 use image::RgbaImage;
@@ -157,6 +159,15 @@ pub struct EvalView {
     /// Whether `ours` fades far trees into the crown impostor (its
     /// default); `false` keeps its lines at every distance.
     pub ours_impostor: bool,
+    /// Whether every camera renders into Bevy's high dynamic range main
+    /// texture (`Hdr`: 16-bit float) instead of the 8-bit sRGB one a
+    /// camera gets by default, where each blend of a translucent line is
+    /// rounded to 8 bits.
+    pub hdr: bool,
+    /// Whether the cameras tone-map (Bevy's default, TonyMcMapface);
+    /// `false` writes linear light clamped to [0, 1] (`Tonemapping::None`),
+    /// leaving the background the clear colour in both main textures.
+    pub tonemapping: bool,
 }
 
 /// Where the sun of `conifer eval`'s scene stands (the camera looks at the
@@ -217,6 +228,24 @@ impl EvalView {
             line_raster: LineRaster::default(),
             ours_line_opacity: LineOpacity::default(),
             ours_impostor: true,
+            hdr: false,
+            tonemapping: true,
+        }
+    }
+
+    /// The raster the plugin's methods draw their lines with in these
+    /// cameras ([`LineRaster::Auto`] resolved by the main texture [`Self::hdr`]
+    /// picks).
+    pub fn drawn_line_raster(&self) -> LineRaster {
+        let main_format = if self.hdr {
+            bevy::render::render_resource::TextureFormat::Rgba16Float
+        } else {
+            bevy::render::render_resource::TextureFormat::Rgba8UnormSrgb
+        };
+        if self.line_raster.draws_quads(main_format) {
+            LineRaster::Area
+        } else {
+            LineRaster::Hardware
         }
     }
 
@@ -560,6 +589,12 @@ impl EvalScene {
                     RenderLayers::layer(layer),
                 ))
                 .id();
+            if view.hdr {
+                renderer.world_mut().entity_mut(camera).insert(Hdr);
+            }
+            if !view.tonemapping {
+                renderer.world_mut().entity_mut(camera).insert(Tonemapping::None);
+            }
             View { camera, target }
         };
         for (k, &method) in methods.iter().enumerate() {

@@ -222,6 +222,9 @@ impl ShadowScene {
                     RenderLayers::layer(ground_layer),
                 ))
                 .id();
+            if view.hdr {
+                renderer.world_mut().entity_mut(camera).insert(bevy::camera::Hdr);
+            }
             views.push(ShadowView {
                 method,
                 camera,

@@ -65,6 +65,7 @@ pub use wind::ConiferWind;
 use bevy::asset::AssetApp;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::prelude::*;
+use bevy::render::render_resource::TextureFormat;
 use bevy::transform::TransformSystems;
 
 /// Adds continuous conifer LOD: the `.conifer` asset loader, species
@@ -235,9 +236,17 @@ pub enum LineLighting {
 /// How lines are rasterized.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 pub enum LineRaster {
+    /// [`LineRaster::Area`] in views whose main texture blends in 16-bit
+    /// float or wider (a camera with Bevy's `Hdr`), [`LineRaster::Hardware`]
+    /// in 8-bit ones (a camera without it): an 8-bit main texture rounds
+    /// every blend to 8 bits, and an area line's many faint fragments (the
+    /// pixels its strip only touches) then darken the picture without
+    /// adding to its coverage (see the README's "Cameras: give them
+    /// `Hdr`"). Shadow views draw hardware lines whatever the setting.
+    #[default]
+    Auto,
     /// Hardware lines, one pixel wide, every pixel they light taking the
     /// line's whole opacity (the paper's).
-    #[default]
     Hardware,
     /// Each line a quad around its segment, every pixel covered by the
     /// area of the line's strip (its opacity wide) inside the pixel's
@@ -251,15 +260,41 @@ pub enum LineRaster {
     /// ([`ConiferSpecies::line_calibration`], measured at bake time by
     /// [`crate::model::calibration`]; a record older than format 9 has
     /// none until `conifer upgrade`) scales each line's opacity by its
-    /// pixel size, so the crown's lines cover what its needles do. Opt-in
-    /// (see the README's "Lines that cover each pixel by their area" for
-    /// how it measures against hardware lines). Cameras only: shadow
+    /// pixel size, so the crown's lines cover what its needles do. The
+    /// default in `Hdr` cameras ([`LineRaster::Auto`]; see the README's
+    /// "Lines that cover each pixel by their area" for how it measures
+    /// against hardware lines). Cameras only: shadow
     /// views keep hardware lines (their texels keep each fragment with its
     /// opacity, hashed). Three times the vertices of
     /// [`LineRaster::Hardware`] and more fragments (the quad reaches 1.25
     /// pixels past the strip; the fragments off the strip are discarded
     /// before lighting).
     Area,
+}
+
+impl LineRaster {
+    /// Whether a camera rendering into a main texture of `main_format`
+    /// draws its lines as quads: always for [`LineRaster::Area`], never for
+    /// [`LineRaster::Hardware`], and for [`LineRaster::Auto`] where the
+    /// texture blends with at least 16 bits a channel
+    /// ([`blends_precisely`]).
+    pub fn draws_quads(self, main_format: TextureFormat) -> bool {
+        match self {
+            LineRaster::Area => true,
+            LineRaster::Hardware => false,
+            LineRaster::Auto => blends_precisely(main_format),
+        }
+    }
+}
+
+/// Whether a main texture of `format` keeps at least 16 bits a colour and
+/// alpha channel through blending (Bevy's `Hdr` texture, `Rgba16Float`,
+/// and the wider RGBA formats), where an 8-bit one rounds every blend.
+pub fn blends_precisely(format: TextureFormat) -> bool {
+    matches!(
+        format,
+        TextureFormat::Rgba16Float | TextureFormat::Rgba32Float | TextureFormat::Rgba16Unorm
+    )
 }
 
 /// Run-time LOD settings, shared by every tree; change them at any time.
@@ -420,4 +455,31 @@ pub fn spawn_forest(
             )
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `LineRaster::Auto` draws quads in float main textures only; the two
+    /// others whatever the texture.
+    #[test]
+    fn auto_raster_draws_quads_where_blending_keeps_precision() {
+        let float = [TextureFormat::Rgba16Float, TextureFormat::Rgba32Float];
+        let eight_bit = [
+            TextureFormat::Rgba8UnormSrgb,
+            TextureFormat::Rgba8Unorm,
+            TextureFormat::Bgra8UnormSrgb,
+            TextureFormat::Rgb10a2Unorm,
+        ];
+        for format in float.into_iter().chain(eight_bit) {
+            assert!(LineRaster::Area.draws_quads(format));
+            assert!(!LineRaster::Hardware.draws_quads(format));
+            assert_eq!(
+                LineRaster::Auto.draws_quads(format),
+                float.contains(&format),
+                "{format:?}"
+            );
+        }
+    }
 }

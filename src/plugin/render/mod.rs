@@ -402,11 +402,12 @@ pub struct RenderCompactSpecies {
 }
 
 impl RenderCompactSpecies {
-    /// Whether cameras draw lines as quads ([`LineRaster::Area`]). The cull
-    /// pass's six vertices a line (`VIEW_LINE_QUADS`) and the main and
-    /// motion vector pipelines' triangle lists all follow this one answer.
-    fn camera_line_quads(&self) -> bool {
-        self.line_raster == LineRaster::Area
+    /// Whether a camera whose main texture is `main_format` draws lines as
+    /// quads ([`LineRaster::draws_quads`]). The cull pass's six vertices a line
+    /// (`VIEW_LINE_QUADS`) and the main and motion vector pipelines'
+    /// triangle lists all follow this one answer.
+    fn camera_line_quads(&self, main_format: TextureFormat) -> bool {
+        self.line_raster.draws_quads(main_format)
     }
 }
 
@@ -1458,7 +1459,7 @@ fn prepare_views(
             error_slope: slope,
             perspective: u32::from(perspective)
                 | if camera { VIEW_CAMERA } else { 0 }
-                | if camera && render.camera_line_quads() {
+                | if camera && render.camera_line_quads(view.target_format) {
                     VIEW_LINE_QUADS
                 } else {
                     0
@@ -1679,7 +1680,7 @@ fn queue_compact(
                 if !drawn || !species.draws(kind) {
                     continue;
                 }
-                let line_quads = kind.is_lines() && render.camera_line_quads();
+                let line_quads = kind.is_lines() && render.camera_line_quads(view.target_format);
                 let (topology, blend, mesh_view_key) = if kind.is_lines() {
                     (
                         if line_quads {
@@ -1829,16 +1830,13 @@ fn queue_compact_motion_vectors(
     pipeline_cache: Res<PipelineCache>,
     render: Res<RenderCompactSpecies>,
     mut draws: ResMut<CompactMotionDraws>,
-    views: Query<
-        (Entity, &Msaa, Has<DepthPrepass>, Has<NormalPrepass>),
-        (With<ExtractedView>, With<MotionVectorPrepass>),
-    >,
+    views: Query<(Entity, &ExtractedView, &Msaa, Has<DepthPrepass>, Has<NormalPrepass>), With<MotionVectorPrepass>>,
 ) {
     draws.views.clear();
     if pipeline.motion_view_layout.is_none() || !pipeline.supported {
         return;
     }
-    for (view, msaa, depth_prepass, normal_prepass) in &views {
+    for (view, extracted, msaa, depth_prepass, normal_prepass) in &views {
         let pass = CompactPass::MotionVectors {
             samples: msaa.samples(),
             writes_depth: depth_prepass,
@@ -1859,7 +1857,7 @@ fn queue_compact_motion_vectors(
                         kind,
                         pass,
                         line_lighting: LineLighting::default(),
-                        line_quads: kind.is_lines() && render.camera_line_quads(),
+                        line_quads: kind.is_lines() && render.camera_line_quads(extracted.target_format),
                     };
                     list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
                 }
