@@ -614,7 +614,15 @@ fn setup(
         brightness: 350.0,
         ..default()
     });
-    let sky = Color::srgb(0.55, 0.66, 0.8);
+    // With `Hdr` Bevy tone-maps the sky with the picture (TonyMcMapface):
+    // this linear colour comes out as the 8-bit texture's untouched sRGB
+    // (0.55, 0.66, 0.8), found by inverting Bevy's TonyMcMapface LUT on
+    // the CPU (to within 0.3 of 255 per channel).
+    let sky = if args.ldr {
+        Color::srgb(0.55, 0.66, 0.8)
+    } else {
+        Color::linear_rgb(0.3512, 0.5861, 1.0147)
+    };
     let mut camera = commands.spawn((
         Camera3d::default(),
         Camera {

@@ -216,7 +216,15 @@ fn setup(
     let mut camera = commands.spawn((
         Camera3d::default(),
         Camera {
-            clear_color: ClearColorConfig::Custom(Color::srgb(0.62, 0.72, 0.82)),
+            // With `Hdr` Bevy tone-maps the clear colour with the picture:
+            // this linear colour comes out as the 8-bit texture's sRGB
+            // (0.62, 0.72, 0.82) (Bevy's TonyMcMapface LUT, inverted on the
+            // CPU).
+            clear_color: ClearColorConfig::Custom(if args.ldr {
+                Color::srgb(0.62, 0.72, 0.82)
+            } else {
+                Color::linear_rgb(0.5072, 0.801, 1.1887)
+            }),
             ..default()
         },
         Projection::Perspective(PerspectiveProjection {
