@@ -614,12 +614,15 @@ fn setup(
         brightness: 350.0,
         ..default()
     });
-    // With `Hdr` Bevy tone-maps the sky with the picture (TonyMcMapface):
-    // this linear colour comes out as the 8-bit texture's untouched sRGB
-    // (0.55, 0.66, 0.8), found by inverting Bevy's TonyMcMapface LUT on
-    // the CPU (to within 0.3 of 255 per channel).
+    let haze = Color::srgb(0.55, 0.66, 0.8);
+    // With `Hdr` Bevy tone-maps the clear colour with the picture
+    // (TonyMcMapface): this linear colour comes out as the 8-bit texture's
+    // untouched sRGB haze, found by inverting Bevy's TonyMcMapface LUT on
+    // the CPU (to within 0.3 of 255 per channel). The fog keeps the haze:
+    // mixed with dark crowns before the tone mapping, the brighter blue
+    // would come out saturated.
     let sky = if args.ldr {
-        Color::srgb(0.55, 0.66, 0.8)
+        haze
     } else {
         Color::linear_rgb(0.3512, 0.5861, 1.0147)
     };
@@ -636,9 +639,9 @@ fn setup(
         }),
         Transform::from_translation(eye).looking_at(look_at, Vec3::Y),
         DistanceFog {
-            color: sky,
+            color: haze,
             // Aerial perspective: grey-blue haze, half gone at ~1 km.
-            falloff: FogFalloff::from_visibility_colors(2500.0, Color::srgb(0.5, 0.53, 0.56), sky),
+            falloff: FogFalloff::from_visibility_colors(2500.0, Color::srgb(0.5, 0.53, 0.56), haze),
             ..default()
         },
     ));
