@@ -176,12 +176,7 @@ pub fn evaluate_inside(
             },
             RenderLayers::layer(layer),
         ));
-        if view.hdr {
-            camera.insert(bevy::camera::Hdr);
-        }
-        if !view.tonemapping {
-            camera.insert(bevy::core_pipeline::tonemapping::Tonemapping::None);
-        }
+        view.configure_camera(&mut camera);
         targets.push(image);
     }
     for _ in 0..3 {

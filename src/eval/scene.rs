@@ -233,6 +233,17 @@ impl EvalView {
         }
     }
 
+    /// Gives `camera` this view's main texture (`Hdr` where [`Self::hdr`])
+    /// and tone mapping (`Tonemapping::None` where not [`Self::tonemapping`]).
+    pub fn configure_camera(&self, camera: &mut EntityWorldMut) {
+        if self.hdr {
+            camera.insert(Hdr);
+        }
+        if !self.tonemapping {
+            camera.insert(Tonemapping::None);
+        }
+    }
+
     /// The raster the plugin's methods draw their lines with in these
     /// cameras ([`LineRaster::Auto`] resolved by the main texture [`Self::hdr`]
     /// picks).
@@ -589,12 +600,7 @@ impl EvalScene {
                     RenderLayers::layer(layer),
                 ))
                 .id();
-            if view.hdr {
-                renderer.world_mut().entity_mut(camera).insert(Hdr);
-            }
-            if !view.tonemapping {
-                renderer.world_mut().entity_mut(camera).insert(Tonemapping::None);
-            }
+            view.configure_camera(&mut renderer.world_mut().entity_mut(camera));
             View { camera, target }
         };
         for (k, &method) in methods.iter().enumerate() {

@@ -222,9 +222,7 @@ impl ShadowScene {
                     RenderLayers::layer(ground_layer),
                 ))
                 .id();
-            if view.hdr {
-                renderer.world_mut().entity_mut(camera).insert(bevy::camera::Hdr);
-            }
+            view.configure_camera(&mut renderer.world_mut().entity_mut(camera));
             views.push(ShadowView {
                 method,
                 camera,
