@@ -72,23 +72,14 @@ impl Preset {
         }
     }
 
-    /// Grows and bakes the tree (tens of milliseconds for young trees,
-    /// seconds for mature ones; merges run on the current rayon pool).
+    /// Grows and bakes the tree with [`BakeOptions::default`], the line
+    /// calibration and crown impostor included (tens of milliseconds for
+    /// young trees; 6.7–9.2 s for the 2 M-needle mature ones in a release
+    /// build on two cores, half of it the calibration: `BENCHMARKS.md`;
+    /// merges run on the current rayon pool).
     pub fn bake(&self) -> Result<PrototypeRecord, BakeError> {
         let input = generate_prototypes(self.species, &self.options());
-        bake_prototypes(&input, &Self::bake_options(), &())
-    }
-
-    /// What a preset is baked with at run time: [`BakeOptions::default`]
-    /// without the line calibration ([`crate::model::calibration`]), which
-    /// only `LineRaster::Area` uses and which took 111 s of a mature
-    /// spruce's bake in a debug build (`conifer upgrade`, two cores shared);
-    /// bake a preset with `conifer bake --preset` for a calibrated record.
-    pub fn bake_options() -> BakeOptions {
-        BakeOptions {
-            line_calibration: None,
-            ..BakeOptions::default()
-        }
+        bake_prototypes(&input, &BakeOptions::default(), &())
     }
 
     /// A 64-bit fingerprint of everything the baked record depends on
@@ -99,7 +90,7 @@ impl Preset {
         let inputs = format!(
             "{:?}|{:?}|{}|{}",
             self.species.params(self.age),
-            Self::bake_options(),
+            BakeOptions::default(),
             crate::model::file::FORMAT_VERSION,
             env!("CARGO_PKG_VERSION")
         );
