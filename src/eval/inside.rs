@@ -149,9 +149,12 @@ pub fn evaluate_inside(
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY, RenderLayers::layer(0)));
     let (needle_material, wood_material) = reference_materials(world, &flat);
-    let raw = RawTree::new(&flat);
-    let reference_triangles = (raw.needles.triangle_count() + raw.wood.triangle_count()) as u64;
-    for (mesh, material) in [(&raw.needles, &needle_material), (&raw.wood, &wood_material)] {
+    let reference = RawTree::reference(&flat);
+    let reference_triangles = (reference.needles.triangle_count() + reference.wood.triangle_count()) as u64;
+    for (mesh, material) in [
+        (&reference.needles, &needle_material),
+        (&reference.wood, &wood_material),
+    ] {
         let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
         world.spawn((
             Mesh3d(handle),
@@ -160,7 +163,7 @@ pub fn evaluate_inside(
             RenderLayers::layer(1),
         ));
     }
-    drop(raw);
+    drop(reference);
     let transform = Transform::from_translation(camera).looking_at(target, Vec3::Y);
     let s = view.supersampling.max(1);
     let mut targets = Vec::new();

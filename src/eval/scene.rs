@@ -25,8 +25,10 @@ use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
 use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_materials};
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
+use crate::model::needle::{Needle, WoodSegment};
 use crate::model::prism::{
-    TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, wood_segment_error,
+    TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, round_silhouette_scale,
+    wood_segment_error,
 };
 use crate::model::wind::{TreeWindPhase, Wind, WindClock, WindShape, wind_offset};
 use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
@@ -469,7 +471,7 @@ impl EvalScene {
             }
         }
 
-        // Raw geometry (always: the reference draws it).
+        // Raw geometry, and the reference's (round silhouettes).
         let (needle_material, wood_material) = raw_materials(world, &record);
         let raw = RawTree::new(&record);
         let raw_counts = DrawCounts {
@@ -488,27 +490,29 @@ impl EvalScene {
                 ))
                 .id()
         };
-        // The reference draws the raw meshes (the same handles: they sway
-        // together) with its own material, on its own layer.
+        if methods.contains(&Method::Raw) {
+            for (mesh, material) in [(&raw.needles, &needle_material), (&raw.wood, &wood_material)] {
+                spawn_mesh(world, mesh, material, Method::Raw.layer());
+            }
+        }
+        // The reference draws its own geometry (`RawTree::reference`: each
+        // prism as wide as its needle on average) with its own material, on
+        // its own layer; in wind it sways as every mesh of the scene does.
         let (reference_needles, reference_wood) = reference_materials(world, &record);
-        for (mesh, material, reference_material) in [
-            (&raw.needles, &needle_material, reference_needles),
-            (&raw.wood, &wood_material, reference_wood),
+        let reference = RawTree::reference(&record);
+        for (mesh, material) in [
+            (&reference.needles, reference_needles),
+            (&reference.wood, reference_wood),
         ] {
             let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
             world.spawn((
-                Mesh3d(handle.clone()),
-                MeshMaterial3d(material.clone()),
-                Transform::IDENTITY,
-                RenderLayers::layer(Method::Raw.layer()),
-            ));
-            world.spawn((
                 Mesh3d(handle),
-                MeshMaterial3d(reference_material),
+                MeshMaterial3d(material),
                 Transform::IDENTITY,
                 RenderLayers::layer(REFERENCE_LAYER),
             ));
         }
+        drop(reference);
 
         // bevy-lod: the raw level and four simplifications.
         let params = view.params();
@@ -1062,7 +1066,8 @@ pub struct RawTree {
 }
 
 impl RawTree {
-    /// The raw geometry of `record`.
+    /// The raw geometry of `record`: each prism the polygon inscribed in
+    /// its circle, as a mesh exporter writes it.
     pub fn new(record: &LodRecord) -> Self {
         let mut wood = record.wood_mesh.clone();
         for segment in &record.wood {
@@ -1072,6 +1077,35 @@ impl RawTree {
             needles: raw_needle_mesh(record),
             wood,
         }
+    }
+
+    /// The reference's geometry of `record`: as [`Self::new`], but each
+    /// needle's prism and wood segment's cone with its corners
+    /// [`round_silhouette_scale`] radii from the axis (1.026 at 8 sides),
+    /// so that its silhouette is on average as wide as the round needle or
+    /// branch it stands for (`2R`, the width lines and the line calibration
+    /// take; the inscribed octagon is 2.55 % narrower). The shadow
+    /// reference (`super::shadow::reference_darkening`) is round already.
+    pub fn reference(record: &LodRecord) -> Self {
+        let scale = round_silhouette_scale(record.max_sides);
+        let mut needles = TriangleMesh::default();
+        for needle in &record.needles {
+            let round = Needle {
+                radius: needle.radius * scale,
+                ..*needle
+            };
+            append_prism(&mut needles, &round, record.max_sides);
+        }
+        let mut wood = record.wood_mesh.clone();
+        for segment in &record.wood {
+            let round = WoodSegment {
+                start_radius: segment.start_radius * scale,
+                end_radius: segment.end_radius * scale,
+                ..*segment
+            };
+            append_wood_segment(&mut wood, &round, u32::from(record.max_sides));
+        }
+        Self { needles, wood }
     }
 }
 

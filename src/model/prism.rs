@@ -79,6 +79,18 @@ impl TriangleMesh {
     }
 }
 
+/// How far an `m`-sided prism's corners must lie from its axis, in radii,
+/// for its silhouette to be as wide as its cylinder's `2R` on average over
+/// the turns about the axis: `π / (m · sin(π/m))`. A convex polygon's
+/// width averaged over directions is its perimeter over π (Cauchy), and
+/// the polygon inscribed in the circle (corners at `R`) is narrower: its
+/// mean width is `2R · m·sin(π/m)/π`, 2.55 % short at 8 sides, 17 % at 3.
+/// 1 for a circle (`m` → ∞); `sides` below 3 counts as 3.
+pub fn round_silhouette_scale(sides: u8) -> f32 {
+    let m = f32::from(sides.max(MIN_PRISM_SIDES));
+    std::f32::consts::PI / (m * (std::f32::consts::PI / m).sin())
+}
+
 /// Appends the open truncated cone of a wood segment with `sides` sides
 /// (at least 3) and smooth normals tilted by the taper. A degenerate
 /// segment appends nothing.
@@ -226,6 +238,30 @@ mod tests {
             let out = (a + b + c) / 3.0 - centre;
             assert!(face.dot(out) > 0.0);
         }
+    }
+
+    /// A prism whose corners lie `round_silhouette_scale` radii out has
+    /// the cylinder's silhouette width on average: measured by projecting
+    /// its corners across 3,600 turns about the axis.
+    #[test]
+    fn scaled_prisms_are_as_wide_as_their_cylinder_on_average() {
+        for sides in [3u8, 4, 5, 8, 16] {
+            let scale = round_silhouette_scale(sides);
+            let m = u32::from(sides);
+            let turns = 3_600;
+            let mean_width: f32 = (0..turns)
+                .map(|t| {
+                    let direction = TAU * t as f32 / turns as f32;
+                    let across = (0..m).map(|k| scale * (TAU * k as f32 / m as f32 - direction).cos());
+                    let (lo, hi) = across.fold((f32::MAX, f32::MIN), |(lo, hi), x| (lo.min(x), hi.max(x)));
+                    hi - lo
+                })
+                .sum::<f32>()
+                / turns as f32;
+            assert!((mean_width - 2.0).abs() < 1e-3, "{sides} sides: {mean_width}");
+        }
+        assert!((round_silhouette_scale(8) - 1.0262).abs() < 1e-4);
+        assert_eq!(round_silhouette_scale(0), round_silhouette_scale(3));
     }
 
     #[test]
