@@ -344,3 +344,67 @@ fn the_reference_shades_sub_pixel_needles_where_they_are() {
     assert!((reference_far / reference_near - 1.0).abs() < 0.05);
     assert!(standard_far / standard_near > 1.3);
 }
+
+/// The reference's CPU tone map against Bevy's own pass: cameras with
+/// `Hdr` and TonyMcMapface clear to linear colours from a dark needle's to
+/// brighter than white, and each pixel is within one level of
+/// `ToneMap::map` of its colour.
+#[test]
+fn the_cpu_tone_map_is_bevys() {
+    use bevy::camera::{Hdr, RenderTarget};
+    use bevy::core_pipeline::tonemapping::DebandDither;
+    use bevy::prelude::*;
+    use bevy_conifer_lod::eval::tonemap::ToneMap;
+    use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+
+    let colours: [[f32; 3]; 6] = [
+        [0.83, 0.85, 0.89],
+        [0.02, 0.04, 0.015],
+        [0.1, 0.3, 0.05],
+        [0.5, 0.2, 0.9],
+        [1.0, 1.0, 1.0],
+        [2.5, 0.7, 0.3],
+    ];
+    let mut renderer = HeadlessRenderer::new(concat!(env!("CARGO_MANIFEST_DIR"), "/assets"));
+    let mut targets = Vec::new();
+    for (k, [r, g, b]) in colours.into_iter().enumerate() {
+        let target = renderer.render_target(4, 4);
+        renderer.world_mut().spawn((
+            Camera3d::default(),
+            RenderTarget::from(target.clone()),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::linear_rgb(r, g, b)),
+                order: k as isize,
+                ..default()
+            },
+            Hdr,
+            DebandDither::Disabled,
+        ));
+        targets.push(target);
+    }
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        renderer.update().unwrap();
+    }
+    let pictures = renderer.capture_all(&targets, 10).unwrap();
+    let tone = ToneMap::from_world(renderer.world_mut()).expect("Bevy's TonyMcMapface LUT");
+    let encode = |linear: f32| {
+        let c = linear.clamp(0.0, 1.0);
+        let encoded = if c <= 0.003_130_8 {
+            c * 12.92
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        encoded * 255.0
+    };
+    for (colour, picture) in colours.iter().zip(&pictures) {
+        let gpu = picture.get_pixel(2, 2).0;
+        let cpu = tone.map(*colour).map(encode);
+        println!("{colour:?}: GPU {gpu:?}, CPU {cpu:?}");
+        for k in 0..3 {
+            assert!(
+                (f32::from(gpu[k]) - cpu[k]).abs() <= 1.0,
+                "{colour:?}: GPU {gpu:?}, CPU {cpu:?}"
+            );
+        }
+    }
+}

@@ -14,7 +14,8 @@
 
 use super::measure::{self, PixelRect};
 use super::reference::{ReferenceMaterialPlugin, reference_materials};
-use super::scene::{EvalError, EvalView, RawTree, wood_counts, wood_counts_by};
+use super::scene::{EvalError, EvalView, RawTree, resolve_reference, wood_counts, wood_counts_by};
+use super::tonemap::ToneMap;
 use super::{EvaluateError, flip_error};
 use crate::model::{Cut, LodRecord, PrototypeRecord, Sphere, ViewPoint};
 use crate::plugin::headless::HeadlessRenderer;
@@ -179,9 +180,18 @@ pub fn evaluate_inside(
             },
             RenderLayers::layer(layer),
         ));
-        view.configure_camera(&mut camera);
+        if layer == 1 {
+            view.configure_reference_camera(&mut camera);
+        } else {
+            view.configure_camera(&mut camera);
+        }
         targets.push(image);
     }
+    let reference_tone = if view.reference_tone_maps_on_cpu() {
+        Some(ToneMap::from_world(renderer.world_mut()).ok_or(EvalError::NoToneMapLut)?)
+    } else {
+        None
+    };
     for _ in 0..3 {
         renderer.update().map_err(EvalError::from)?;
     }
@@ -213,7 +223,7 @@ pub fn evaluate_inside(
         renderer.world_mut().resource_mut::<ConiferLodSettings>().error_scope = scope;
         renderer.update().map_err(EvalError::from)?;
         let mut images = renderer.capture_all(&targets, 10).map_err(EvalError::from)?;
-        let reference = measure::downsample(&images.pop().expect("reference"), s);
+        let reference = resolve_reference(&images.pop().expect("reference"), s, reference_tone.as_ref());
         let picture = images.pop().expect("picture");
         if methods.is_empty() {
             write(&reference, "ref_inside.png", &mut files)?;

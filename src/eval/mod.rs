@@ -6,6 +6,7 @@
 //! * [`decimate`]: the raw needle mesh and meshoptimizer LODs.
 //! * [`scene`]: every method and the reference in one Bevy app.
 //! * [`plot`]: PNG plots and the contact sheet.
+//! * [`tonemap`]: Bevy's tone mapping on the CPU, for the reference.
 //!
 //! [`evaluate`] runs it all and returns an [`EvalReport`], the JSON that
 //! `conifer eval --json` prints.
@@ -17,6 +18,7 @@ pub mod plot;
 pub mod reference;
 pub mod scene;
 pub mod shadow;
+pub mod tonemap;
 
 use measure::{PixelRect, Popping};
 use scene::{CameraPath, DrawCounts, EvalError, EvalScene, EvalView, LodLevelInfo, Method};

@@ -23,6 +23,7 @@
 
 use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
 use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_materials};
+use super::tonemap::ToneMap;
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
 use crate::model::needle::{Needle, WoodSegment};
@@ -40,7 +41,7 @@ use crate::plugin::{
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::Hdr;
 use bevy::camera::visibility::{RenderLayers, VisibilityRange};
-use bevy::core_pipeline::tonemapping::Tonemapping;
+use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::mesh::PrimitiveTopology;
 use bevy::prelude::*;
 use image::RgbaImage;
@@ -246,6 +247,23 @@ impl EvalView {
         }
     }
 
+    /// Whether the reference renders linear light and is tone-mapped on
+    /// the CPU after its box filter ([`super::tonemap`]): where the
+    /// methods' cameras have `Hdr` and tone mapping.
+    pub fn reference_tone_maps_on_cpu(&self) -> bool {
+        self.hdr && self.tonemapping
+    }
+
+    /// Gives the reference's camera its main texture: this view's, but
+    /// writing linear light (`Tonemapping::None`, no deband dither) where
+    /// [`Self::reference_tone_maps_on_cpu`].
+    pub fn configure_reference_camera(&self, camera: &mut EntityWorldMut) {
+        self.configure_camera(camera);
+        if self.reference_tone_maps_on_cpu() {
+            camera.insert((Tonemapping::None, DebandDither::Disabled));
+        }
+    }
+
     /// The raster the plugin's methods draw their lines with in these
     /// cameras ([`LineRaster::Auto`] resolved by the main texture [`Self::hdr`]
     /// picks).
@@ -349,6 +367,21 @@ pub enum EvalError {
     /// A zero-sized picture.
     #[error("the picture has no pixels ({0}×{1})")]
     EmptyPicture(u32, u32),
+    /// Tone mapping is on but Bevy's TonyMcMapface LUT is not loaded.
+    #[error("Bevy's TonyMcMapface LUT is not loaded (Bevy's `tonemapping_luts` feature); run with --no-tonemapping")]
+    NoToneMapLut,
+}
+
+/// The reference's picture at the methods' size: `supersampled`
+/// box-filtered in linear light by `factor`, then tone-mapped by `tone`
+/// where the reference rendered linear light
+/// ([`EvalView::reference_tone_maps_on_cpu`]).
+pub fn resolve_reference(supersampled: &RgbaImage, factor: u32, tone: Option<&ToneMap>) -> RgbaImage {
+    let mut picture = super::measure::downsample(supersampled, factor);
+    if let Some(tone) = tone {
+        tone.apply(&mut picture);
+    }
+    picture
 }
 
 /// Pictures of one frame: each method's and the reference (box-filtered
@@ -384,6 +417,8 @@ pub struct EvalScene {
     wind_rest: std::collections::HashMap<AssetId<Mesh>, Mesh>,
     /// The wind's clock, seconds.
     wind_seconds: f64,
+    /// Tone mapping applied to the reference after its box filter.
+    reference_tone: Option<ToneMap>,
 }
 
 /// Background of every picture (alpha 0: the alpha channel is coverage).
@@ -621,6 +656,12 @@ impl EvalScene {
             REFERENCE_LAYER,
             methods.len() as isize,
         );
+        view.configure_reference_camera(&mut renderer.world_mut().entity_mut(reference.camera));
+        let reference_tone = if view.reference_tone_maps_on_cpu() {
+            Some(ToneMap::from_world(renderer.world_mut()).ok_or(EvalError::NoToneMapLut)?)
+        } else {
+            None
+        };
         // The reference keeps Bevy's 4× MSAA on top of its supersampling:
         // needles a hundredth of a pixel wide need many samples per pixel
         // before the coverage converges (see `conifer eval`'s docs).
@@ -652,6 +693,7 @@ impl EvalScene {
             wind,
             wind_shape,
             wind_rest,
+            reference_tone,
             wind_seconds: 0.0,
         };
         scene.set_wind_time(0.0);
@@ -958,7 +1000,11 @@ impl EvalScene {
         let mut targets: Vec<Handle<Image>> = self.views.iter().map(|(_, v)| v.target.clone()).collect();
         targets.push(self.reference.target.clone());
         let mut images = self.renderer.capture_all(&targets, 10)?;
-        let reference = super::measure::downsample(&images.pop().expect("reference"), self.view.supersampling.max(1));
+        let reference = resolve_reference(
+            &images.pop().expect("reference"),
+            self.view.supersampling.max(1),
+            self.reference_tone.as_ref(),
+        );
         Ok(EvalFrame {
             reference,
             methods: self.methods.iter().copied().zip(images).collect(),
@@ -1001,8 +1047,11 @@ impl EvalScene {
                     let Some(mut images) = request.take()? else {
                         break;
                     };
-                    let reference =
-                        super::measure::downsample(&images.pop().expect("reference"), scene.view.supersampling.max(1));
+                    let reference = resolve_reference(
+                        &images.pop().expect("reference"),
+                        scene.view.supersampling.max(1),
+                        scene.reference_tone.as_ref(),
+                    );
                     on_frame(
                         *step,
                         EvalFrame {
