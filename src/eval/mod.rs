@@ -586,8 +586,13 @@ pub fn evaluate(
         methods: method_reports,
         reference: ReferenceReport {
             description: format!(
-                "every needle an Lmax-sided prism (Lmax = {}), wood as cones, rendered at {s}x{s} pixels per pixel with 4x MSAA and box-filtered",
+                "every needle an Lmax-sided prism (Lmax = {}) as wide as the round needle on average, wood as cones, rendered at {s}x{s} pixels per pixel with 4x MSAA and box-filtered in linear light{}",
                 scene.record().max_sides,
+                if options.view.reference_tone_maps_on_cpu() {
+                    ", then tone-mapped (TonyMcMapface, on the CPU)"
+                } else {
+                    ""
+                },
                 s = options.view.supersampling
             ),
             supersampling: options.view.supersampling,
