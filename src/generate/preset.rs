@@ -9,8 +9,8 @@ use crate::model::{BakeError, BakeOptions, PrototypeRecord, bake_prototypes};
 
 /// A preset tree: one of the [`Species`] at an [`Age`] (mature unless
 /// asked), grown from a seed, optionally with a needle count, as shared
-/// shoot prototypes baked with [`Preset::bake_options`] (what `conifer bake
-/// --preset` writes, without the line calibration).
+/// shoot prototypes baked with [`BakeOptions::default`] (what `conifer bake
+/// --preset` writes).
 ///
 /// Its text form is `species[?seed=S][&needles=N][&age=young]`, e.g.
 /// `norway-spruce?seed=3`; [`Preset`]'s `Display` writes it back.
