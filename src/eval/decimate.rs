@@ -4,6 +4,7 @@
 //! `VisibilityRange`.
 
 use crate::model::LodRecord;
+use crate::model::needle::Needle;
 use crate::model::prism::{TriangleMesh, append_prism};
 use glam::Vec3;
 use meshopt::SimplifyOptions;
@@ -11,9 +12,20 @@ use meshopt::SimplifyOptions;
 /// Every needle of `record` as a capped prism of `Lmax` sides: the raw
 /// geometry (what loading the tree as an ordinary mesh draws).
 pub fn raw_needle_mesh(record: &LodRecord) -> TriangleMesh {
+    needle_mesh_with_corners_at(record, 1.0)
+}
+
+/// Every needle of `record` as a capped prism of `Lmax` sides whose
+/// corners lie `scale` radii from its axis (1: [`raw_needle_mesh`]; the
+/// eval's reference takes the round needle's mean width).
+pub fn needle_mesh_with_corners_at(record: &LodRecord, scale: f32) -> TriangleMesh {
     let mut mesh = TriangleMesh::default();
     for needle in &record.needles {
-        append_prism(&mut mesh, needle, record.max_sides);
+        let scaled = Needle {
+            radius: needle.radius * scale,
+            ..*needle
+        };
+        append_prism(&mut mesh, &scaled, record.max_sides);
     }
     mesh
 }

@@ -21,12 +21,12 @@
 //!   CPU for each distance as ordinary meshes (`StandardMaterial`, the
 //!   lines blended with their opacity as vertex alpha).
 
-use super::decimate::{DecimatedLevel, decimate, raw_needle_mesh};
+use super::decimate::{DecimatedLevel, decimate, needle_mesh_with_corners_at};
 use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_materials};
 use super::tonemap::ToneMap;
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
-use crate::model::needle::{Needle, WoodSegment};
+use crate::model::needle::WoodSegment;
 use crate::model::prism::{
     TriangleMesh, WOOD_LINE_FADE, append_prism, append_wood_segment, prism_triangle_count, round_silhouette_scale,
     wood_segment_error,
@@ -506,14 +506,17 @@ impl EvalScene {
             }
         }
 
-        // Raw geometry, and the reference's (round silhouettes).
+        // The reference's geometry (round silhouettes), and the raw one
+        // only where `raw` or `bevy-lod` draws it: the same prisms, so the
+        // reference's counts are raw's (a mature tree's mesh is large).
         let (needle_material, wood_material) = raw_materials(world, &record);
-        let raw = RawTree::new(&record);
+        let reference = RawTree::reference(&record);
         let raw_counts = DrawCounts {
-            triangles: (raw.needles.triangle_count() + raw.wood.triangle_count()) as u64,
+            triangles: (reference.needles.triangle_count() + reference.wood.triangle_count()) as u64,
             lines: 0,
-            needle_primitives: raw.needles.triangle_count() as u64,
+            needle_primitives: reference.needles.triangle_count() as u64,
         };
+        let raw = (methods.contains(&Method::Raw) || methods.contains(&Method::BevyLod)).then(|| RawTree::new(&record));
         let spawn_mesh = |world: &mut World, mesh: &TriangleMesh, material: &Handle<StandardMaterial>, layer: usize| {
             let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
             world
@@ -525,7 +528,7 @@ impl EvalScene {
                 ))
                 .id()
         };
-        if methods.contains(&Method::Raw) {
+        if let Some(raw) = raw.as_ref().filter(|_| methods.contains(&Method::Raw)) {
             for (mesh, material) in [(&raw.needles, &needle_material), (&raw.wood, &wood_material)] {
                 spawn_mesh(world, mesh, material, Method::Raw.layer());
             }
@@ -534,7 +537,6 @@ impl EvalScene {
         // prism as wide as its needle on average) with its own material, on
         // its own layer; in wind it sways as every mesh of the scene does.
         let (reference_needles, reference_wood) = reference_materials(world, &record);
-        let reference = RawTree::reference(&record);
         for (mesh, material) in [
             (&reference.needles, reference_needles),
             (&reference.wood, reference_wood),
@@ -553,8 +555,8 @@ impl EvalScene {
         let params = view.params();
         let crown = record.crown_center();
         let mut levels = Vec::new();
-        if methods.contains(&Method::BevyLod) {
-            let chain = bevy_lod_chain(&raw);
+        if let Some(raw) = raw.as_ref().filter(|_| methods.contains(&Method::BevyLod)) {
+            let chain = bevy_lod_chain(raw);
             let enters = enter_distances(&chain, params.error_per_distance());
             // VisibilityRange measures from the camera to the entity's origin
             // (the tree's foot); eval's camera looks at the crown along +Z.
@@ -1118,43 +1120,38 @@ impl RawTree {
     /// The raw geometry of `record`: each prism the polygon inscribed in
     /// its circle, as a mesh exporter writes it.
     pub fn new(record: &LodRecord) -> Self {
-        let mut wood = record.wood_mesh.clone();
-        for segment in &record.wood {
-            append_wood_segment(&mut wood, segment, u32::from(record.max_sides));
-        }
-        Self {
-            needles: raw_needle_mesh(record),
-            wood,
-        }
+        Self::with_corners_at(record, 1.0)
     }
 
-    /// The reference's geometry of `record`: as [`Self::new`], but each
-    /// needle's prism and wood segment's cone with its corners
-    /// [`round_silhouette_scale`] radii from the axis (1.026 at 8 sides),
-    /// so that its silhouette is on average as wide as the round needle or
-    /// branch it stands for (`2R`, the width lines and the line calibration
-    /// take; the inscribed octagon is 2.55 % narrower). The shadow
-    /// reference (`super::shadow::reference_darkening`) is round already.
+    /// The reference's geometry of `record`: as [`Self::new`], the same
+    /// triangles, but each needle's prism and wood segment's cone with its
+    /// corners [`round_silhouette_scale`] radii from the axis (1.026 at 8
+    /// sides), so that its silhouette is on average as wide as the round
+    /// needle or branch it stands for (`2R`, the width lines and the line
+    /// calibration take; the inscribed octagon is 2.55 % narrower). The
+    /// shadow reference (`super::shadow::reference_darkening`) is round
+    /// already.
     pub fn reference(record: &LodRecord) -> Self {
-        let scale = round_silhouette_scale(record.max_sides);
-        let mut needles = TriangleMesh::default();
-        for needle in &record.needles {
-            let round = Needle {
-                radius: needle.radius * scale,
-                ..*needle
-            };
-            append_prism(&mut needles, &round, record.max_sides);
-        }
+        Self::with_corners_at(record, round_silhouette_scale(record.max_sides))
+    }
+
+    /// Every needle's prism and wood segment's cone of `Lmax` sides with
+    /// its corners `scale` radii from the axis (imported wood triangles as
+    /// they are).
+    fn with_corners_at(record: &LodRecord, scale: f32) -> Self {
         let mut wood = record.wood_mesh.clone();
         for segment in &record.wood {
-            let round = WoodSegment {
+            let scaled = WoodSegment {
                 start_radius: segment.start_radius * scale,
                 end_radius: segment.end_radius * scale,
                 ..*segment
             };
-            append_wood_segment(&mut wood, &round, u32::from(record.max_sides));
+            append_wood_segment(&mut wood, &scaled, u32::from(record.max_sides));
         }
-        Self { needles, wood }
+        Self {
+            needles: needle_mesh_with_corners_at(record, scale),
+            wood,
+        }
     }
 }
 
