@@ -175,6 +175,7 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         distance,
         needle_count,
     };
+    options.merge.error_bound = args.merge_error;
     options.merge.tree_search = if args.exhaustive {
         PartnerSearch::Exhaustive
     } else {

@@ -1,5 +1,6 @@
 //! `conifer eval`: every method against the supersampled reference, headless.
 
+use super::parse_merge_error;
 use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
 use crate::eval::scene::{EvalSun, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
@@ -52,6 +53,11 @@ pub struct EvalArgs {
     /// `ours` keeps its lines at every distance (no crown impostor).
     #[arg(long)]
     pub ours_no_impostor: bool,
+    /// Recompute the record's merged-line errors under this bound before
+    /// measuring (`needles` or `nested`, the paper's; default: the record's
+    /// own). The `paper` method always draws with `nested`.
+    #[arg(long, value_name = "BOUND", value_parser = parse_merge_error)]
+    pub merge_error: Option<crate::model::MergeErrorBound>,
     /// Every camera renders into Bevy's 16-bit float main texture (`Hdr`)
     /// instead of the default 8-bit sRGB one.
     #[arg(long)]
@@ -195,7 +201,12 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
+    let mut record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
+    if let Some(bound) = args.merge_error {
+        record = record
+            .with_error_bound(bound)
+            .with_context(|| format!("{}: cannot recompute its merge errors", args.file.display()))?;
+    }
     let options = EvalOptions {
         methods,
         distances,

@@ -63,6 +63,12 @@ fn parse_age(text: &str) -> Result<crate::generate::Age, String> {
     crate::generate::Age::from_name(text).ok_or_else(|| format!("unknown age `{text}` (expected `young` or `mature`)"))
 }
 
+/// `--merge-error`: a name of [`crate::model::MergeErrorBound`].
+pub(crate) fn parse_merge_error(text: &str) -> Result<crate::model::MergeErrorBound, String> {
+    crate::model::MergeErrorBound::from_name(text)
+        .ok_or_else(|| format!("unknown merge error `{text}` (expected `needles` or `nested`)"))
+}
+
 /// Arguments of `conifer bake`.
 #[derive(Debug, clap::Args)]
 pub struct BakeArgs {
@@ -107,6 +113,11 @@ pub struct BakeArgs {
     /// Search every live line for the whole-tree merge (exact, quadratic: small trees only).
     #[arg(long)]
     pub exhaustive: bool,
+    /// How a merged line's error is bounded: `needles` (the thinnest capsule around the line
+    /// holding its needles) or `nested` (the paper's: a capsule holding its two children's
+    /// capsules, which grows with every level, so merged lines are drawn later).
+    #[arg(long, default_value = "needles", value_parser = parse_merge_error)]
+    pub merge_error: crate::model::MergeErrorBound,
     /// Side of a crown impostor texel, metres: the far representation baked into the
     /// record (the tree turns into it where the pixel error spans 0.8–1.6 texels).
     #[arg(long, default_value_t = 0.10, value_name = "METRES")]

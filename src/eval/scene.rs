@@ -135,6 +135,17 @@ pub(super) fn renderer_with_species(
     Ok((renderer, species))
 }
 
+/// The species the `paper` method draws: `species`' record with its
+/// merged lines' errors under the paper's nested bound
+/// ([`crate::model::MergeErrorBound::Nested`]; the record's own are ours).
+pub(super) fn paper_species(species: &ConiferSpecies) -> Result<ConiferSpecies, EvalError> {
+    let record = species
+        .record()
+        .with_error_bound(crate::model::MergeErrorBound::Nested)
+        .map_err(|invalid| ConiferLoadError::Record(invalid.into()))?;
+    Ok(ConiferSpecies::from_record(record)?)
+}
+
 /// The picture every method is rendered at.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EvalView {
@@ -486,14 +497,25 @@ impl EvalScene {
         world.entity_mut(sun).insert((all_layers, view.sun.transform()));
 
         // The plugin's methods.
-        let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species.clone());
+        let paper = if methods.contains(&Method::Paper) {
+            Some(paper_species(&species)?)
+        } else {
+            None
+        };
+        let mut species_assets = world.resource_mut::<Assets<ConiferSpecies>>();
+        let species_handle = species_assets.add(species.clone());
+        let paper_handle = paper.map(|paper| species_assets.add(paper));
         for method in [Method::Paper, Method::Ours] {
             if let Some(opacity) = method
                 .line_opacity(view.ours_line_opacity)
                 .filter(|_| methods.contains(&method))
             {
+                let handle = match (method, &paper_handle) {
+                    (Method::Paper, Some(paper)) => paper.clone(),
+                    _ => species_handle.clone(),
+                };
                 world.spawn((
-                    ConiferFoliage(species_handle.clone()),
+                    ConiferFoliage(handle),
                     ConiferLodOverride {
                         line_opacity: Some(opacity),
                         // The paper draws lines at every distance.

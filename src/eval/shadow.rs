@@ -139,7 +139,14 @@ impl ShadowScene {
             brightness: AMBIENT,
             ..default()
         });
-        let species_handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+        let paper = if methods.contains(&Method::Paper) {
+            Some(super::scene::paper_species(&species)?)
+        } else {
+            None
+        };
+        let mut species_assets = world.resource_mut::<Assets<ConiferSpecies>>();
+        let species_handle = species_assets.add(species);
+        let paper_handle = paper.map(|paper| species_assets.add(paper));
         let (needle_material, wood_material) = raw_materials(world, &record);
         let raw = RawTree::new(&record);
         let raw_meshes = {
@@ -167,7 +174,10 @@ impl ShadowScene {
                 Some(opacity) => vec![
                     world
                         .spawn((
-                            ConiferFoliage(species_handle.clone()),
+                            ConiferFoliage(match (method, &paper_handle) {
+                                (Method::Paper, Some(paper)) => paper.clone(),
+                                _ => species_handle.clone(),
+                            }),
                             ConiferLodOverride {
                                 line_opacity: Some(opacity),
                                 ..default()

@@ -2,10 +2,14 @@
 
 use super::calibration::{CalibrationOptions, LineCalibration, calibrate_lines};
 use super::impostor::{CrownImpostor, ImpostorOptions};
-use super::merge::{CostContext, GroupLine, MergeOptions, merge_group_lines, merge_nested_group};
+use super::merge::{
+    CostContext, GroupLine, MergeErrorBound, MergeOptions, merge_group_lines, merge_nested_group, tighten_group_errors,
+};
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
-use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord};
+use super::prototype::{
+    MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord, tighten_tree_errors,
+};
 use super::quantize::{prototype_grid, quantize_needle};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Quat;
@@ -325,7 +329,10 @@ pub fn bake_prototypes(
             let context = CostContext::new(options.merge.weights, diagonal / mean_scale, total);
             // A twig's shoots and fascicles are merged first, then across it.
             let groups: Vec<u32> = original.iter().map(|n| n.group).collect();
-            let merged = merge_nested_group(&needles, &groups, &context, &options.merge);
+            let mut merged = merge_nested_group(&needles, &groups, &context, &options.merge);
+            if options.merge.error_bound == MergeErrorBound::Needles {
+                tighten_group_errors(&needles, &mut merged);
+            }
             let so_far = done.fetch_add(merged.len(), Ordering::Relaxed) + merged.len();
             progress.progress(BakeStage::MergeGroups, so_far, group_total);
             Prototype { needles, merged }
@@ -353,11 +360,14 @@ pub fn bake_prototypes(
         .collect();
     let tree_total = group_lines.len().saturating_sub(1);
     let context = CostContext::new(options.merge.weights, diagonal, total);
-    let tree_merged = merge_group_lines(&group_lines, &context, options.merge.tree_search, |k| {
+    let mut tree_merged = merge_group_lines(&group_lines, &context, options.merge.tree_search, |k| {
         if k % 1024 == 0 || k == tree_total {
             progress.progress(BakeStage::MergeTree, k, tree_total)
         }
     });
+    if options.merge.error_bound == MergeErrorBound::Needles {
+        tighten_tree_errors(&prototypes, &placements, &mut tree_merged);
+    }
 
     let info = BakeInfo {
         weights: options.merge.weights,

@@ -94,6 +94,52 @@ pub struct MergeOptions {
     pub exhaustive_group_limit: usize,
     /// Partner search across the tree (level 2).
     pub tree_search: PartnerSearch,
+    /// How a merged line's error is bounded (the paper's nested capsules,
+    /// or the capsule of the needles themselves).
+    #[serde(default)]
+    pub error_bound: MergeErrorBound,
+}
+
+/// How the error of a merged line `X` is bounded. Both are the diameter of
+/// a capsule around `X` that holds every needle `X` stands for (each needle
+/// as the capsule of radius `R` around its axis), so either makes a cut
+/// whose lines lie within the spatial error of their needles; the
+/// choice changes only how tight that capsule is, hence how soon a merged
+/// line is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum MergeErrorBound {
+    /// The paper's recursive bound (§4.3): `e(X) = 2 · max_i { D(Yi, X) +
+    /// e(Yi)/2 }`, `D(Y, X)` the larger distance of `Y`'s two ends to `X`:
+    /// `X`'s capsule holds its children's capsules. Each level adds its own
+    /// distance, so the bound grows with the depth of the forest even where
+    /// the needles stay close to `X`.
+    Nested,
+    /// The smallest capsule around `X` that holds its needles: `e(X) =
+    /// max(max_n {2 · D(n, X) + 2R_n}, e(Y1), e(Y2))` over the needles `n`
+    /// below `X` ([`tighten_group_errors`]; the children's errors keep the
+    /// forest monotone). Never above [`MergeErrorBound::Nested`].
+    #[default]
+    Needles,
+}
+
+impl MergeErrorBound {
+    /// Both bounds.
+    pub const ALL: [Self; 2] = [Self::Needles, Self::Nested];
+
+    /// The bound's name on the command line: `needles` or `nested`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Needles => "needles",
+            Self::Nested => "nested",
+        }
+    }
+
+    /// The bound named `name` ([`MergeErrorBound::name`], any case).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|bound| bound.name().eq_ignore_ascii_case(name))
+    }
 }
 
 impl MergeOptions {
@@ -115,6 +161,7 @@ impl Default for MergeOptions {
             group_search: PartnerSearch::Exhaustive,
             exhaustive_group_limit: 256,
             tree_search: PartnerSearch::Nearest { neighbours: 12 },
+            error_bound: MergeErrorBound::default(),
         }
     }
 }
@@ -756,6 +803,141 @@ pub fn merge_group_lines(
     MergeSet::new(context, search, lines).run(progress).0
 }
 
+/// The needles below every node of a merge forest, as contiguous runs of
+/// one leaf order (a depth-first order of the forest's leaves).
+#[derive(Clone, Debug)]
+pub struct LeafRuns {
+    order: Vec<u32>,
+    start: Vec<u32>,
+    len: Vec<u32>,
+}
+
+impl LeafRuns {
+    /// The runs of a forest over `leaves` leaves (ids `0..leaves`) and
+    /// `merged` lines (ids `leaves + k`, children before parents, each
+    /// child merged once: [`crate::model::record`]'s forest checks).
+    pub fn new(leaves: usize, merged: &[MergedLine]) -> Self {
+        let nodes = leaves + merged.len();
+        let mut len = vec![1u32; nodes];
+        let mut has_parent = vec![false; nodes];
+        for (k, line) in merged.iter().enumerate() {
+            let [c0, c1] = line.children.map(|c| c as usize);
+            len[leaves + k] = len[c0] + len[c1];
+            has_parent[c0] = true;
+            has_parent[c1] = true;
+        }
+        let mut start = vec![0u32; nodes];
+        let mut next = 0u32;
+        for node in 0..nodes {
+            if !has_parent[node] {
+                start[node] = next;
+                next += len[node];
+            }
+        }
+        // Parents before children: a node's children split its run.
+        for (k, line) in merged.iter().enumerate().rev() {
+            let [c0, c1] = line.children.map(|c| c as usize);
+            start[c0] = start[leaves + k];
+            start[c1] = start[leaves + k] + len[c0];
+        }
+        let mut order = vec![0u32; leaves];
+        for (leaf, &at) in start.iter().take(leaves).enumerate() {
+            order[at as usize] = leaf as u32;
+        }
+        Self { order, start, len }
+    }
+
+    /// The leaves below node `node` (the node itself for a leaf).
+    pub fn leaves(&self, node: u32) -> &[u32] {
+        let start = self.start[node as usize] as usize;
+        &self.order[start..start + self.len[node as usize] as usize]
+    }
+}
+
+/// How far a needle reaches from the segment `a`–`b`, as an error: the
+/// diameter `2 · (D + R)` of the thinnest capsule around the segment that
+/// holds the needle's capsule, `D` the larger distance of its two ends.
+pub fn needle_reach(needle: &Needle, a: Vec3, b: Vec3) -> f32 {
+    let distance = point_segment_distance(needle.base, a, b).max(point_segment_distance(needle.tip, a, b));
+    2.0 * distance + super::metric::line_error(needle.radius)
+}
+
+/// Makes errors monotone up a forest: each merged line's error becomes at
+/// least its children's (`leaf_error` for leaves), in creation order.
+pub fn make_errors_monotone(leaves: usize, merged: &mut [MergedLine], leaf_error: impl Fn(usize) -> f32) {
+    for k in 0..merged.len() {
+        let floor = merged[k]
+            .children
+            .map(|c| {
+                let c = c as usize;
+                if c < leaves {
+                    leaf_error(c)
+                } else {
+                    merged[c - leaves].error
+                }
+            })
+            .into_iter()
+            .fold(0.0f32, f32::max);
+        merged[k].error = merged[k].error.max(floor);
+    }
+}
+
+/// Replaces the errors of a group's merge forest (level 1, as
+/// [`merge_group`] numbers it) by [`MergeErrorBound::Needles`]: each merged
+/// line's error is the largest [`needle_reach`] of the needles below it,
+/// raised to its children's errors. The forest's shape and ends are kept.
+pub fn tighten_group_errors(needles: &[Needle], merged: &mut [MergedLine]) {
+    let leaves = needles.len();
+    let runs = LeafRuns::new(leaves, merged);
+    let reach: Vec<f32> = merged
+        .par_iter()
+        .enumerate()
+        .map(|(k, line)| {
+            let (a, b) = (
+                endpoint_position(needles, line.ends[0]),
+                endpoint_position(needles, line.ends[1]),
+            );
+            runs.leaves((leaves + k) as u32)
+                .iter()
+                .map(|&n| needle_reach(&needles[n as usize], a, b))
+                .fold(0.0f32, f32::max)
+        })
+        .collect();
+    for (line, reach) in merged.iter_mut().zip(reach) {
+        line.error = reach;
+    }
+    make_errors_monotone(leaves, merged, |n| super::metric::line_error(needles[n].radius));
+}
+
+/// Recomputes the errors of a forest over `needles` (as [`merge_group`]
+/// numbers it) under the paper's [`MergeErrorBound::Nested`], children
+/// before parents: what the merge gave those lines under that bound. The
+/// forest's shape and ends are kept.
+pub fn nest_errors(needles: &[Needle], merged: &mut [MergedLine]) {
+    let leaves = needles.len();
+    for k in 0..merged.len() {
+        let line = merged[k];
+        let (a, b) = (
+            endpoint_position(needles, line.ends[0]),
+            endpoint_position(needles, line.ends[1]),
+        );
+        let spread = |child: u32| {
+            let child = child as usize;
+            let (ends, error) = if child < leaves {
+                (
+                    [2 * child as u32, 2 * child as u32 + 1],
+                    super::metric::line_error(needles[child].radius),
+                )
+            } else {
+                (merged[child - leaves].ends, merged[child - leaves].error)
+            };
+            let [p, q] = ends.map(|end| endpoint_position(needles, end));
+            point_segment_distance(p, a, b).max(point_segment_distance(q, a, b)) + error / 2.0
+        };
+        merged[k].error = 2.0 * spread(line.children[0]).max(spread(line.children[1]));
+    }
+}
+
 /// Position of a needle end.
 pub fn endpoint_position(needles: &[Needle], end: EndpointId) -> Vec3 {
     let needle = &needles[(end / 2) as usize];
@@ -973,5 +1155,137 @@ mod tests {
             }
         }
         assert_eq!(seen.iter().filter(|s| !**s).count(), 1, "only the root is never merged");
+    }
+
+    /// Random needles from a seed: `shoots` clumps of `per_shoot` needles
+    /// fanning out from a shoot, as a twig's.
+    fn random_needles(shoots: usize, per_shoot: usize, seed: u64) -> Vec<Needle> {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut needles = Vec::new();
+        for _ in 0..shoots {
+            let origin = Vec3::new(next(), next(), next()) * 0.4;
+            let axis = Vec3::new(next() - 0.5, 1.0, next() - 0.5).normalize();
+            for k in 0..per_shoot {
+                let base = origin + axis * (k as f32 * 0.01);
+                let spread = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+                let direction = (axis + spread * 1.5).normalize_or(Vec3::X);
+                needles.push(Needle {
+                    base,
+                    tip: base + direction * (0.02 + 0.04 * next()),
+                    radius: 0.0004 + 0.0008 * next(),
+                    normal: direction.any_orthonormal_vector(),
+                    group: 0,
+                });
+            }
+        }
+        needles
+    }
+
+    #[test]
+    fn leaf_runs_hold_each_nodes_needles() {
+        let needles = random_needles(6, 9, 3);
+        let context = CostContext::new(MergeWeights::default(), 1.0, needles.len());
+        let merged = merge_group(&needles, &context, &MergeOptions::default());
+        let n = needles.len();
+        let runs = LeafRuns::new(n, &merged);
+        // Each node's needles by brute force, children before parents.
+        let mut below: Vec<Vec<u32>> = (0..n as u32).map(|i| vec![i]).collect();
+        for line in &merged {
+            let mut union: Vec<u32> = line.children.iter().flat_map(|&c| below[c as usize].clone()).collect();
+            union.sort_unstable();
+            below.push(union);
+        }
+        for (node, expected) in below.iter().enumerate() {
+            let mut got = runs.leaves(node as u32).to_vec();
+            got.sort_unstable();
+            assert_eq!(&got, expected, "node {node}");
+        }
+        let root = runs.leaves((n + merged.len() - 1) as u32);
+        assert_eq!(root.len(), n, "the root's run is every needle");
+    }
+
+    proptest::proptest! {
+        /// The needles' bound keeps the forest, holds every needle below a
+        /// line inside its capsule, stays monotone and is never above the
+        /// paper's nested bound.
+        #[test]
+        fn the_needles_bound_is_tight_monotone_and_below_the_papers(
+            seed in 1u64..10_000,
+            shoots in 1usize..8,
+            per_shoot in 1usize..12,
+        ) {
+            let needles = random_needles(shoots, per_shoot, seed);
+            let n = needles.len();
+            let context = CostContext::new(MergeWeights::default(), 1.0, n);
+            let nested = merge_group(&needles, &context, &MergeOptions::default());
+            let mut tight = nested.clone();
+            tighten_group_errors(&needles, &mut tight);
+            let error = |forest: &[MergedLine], node: u32| {
+                if (node as usize) < n {
+                    crate::model::metric::line_error(needles[node as usize].radius)
+                } else {
+                    forest[node as usize - n].error
+                }
+            };
+            let runs = LeafRuns::new(n, &tight);
+            for (k, (ours, paper)) in tight.iter().zip(&nested).enumerate() {
+                proptest::prop_assert_eq!(ours.children, paper.children);
+                proptest::prop_assert_eq!(ours.ends, paper.ends);
+                proptest::prop_assert!(ours.error <= paper.error * (1.0 + 1e-5), "node {}: {} > {}", k, ours.error, paper.error);
+                for c in ours.children {
+                    proptest::prop_assert!(ours.error >= error(&tight, c));
+                }
+                let (a, b) = (endpoint_position(&needles, ours.ends[0]), endpoint_position(&needles, ours.ends[1]));
+                let reach = runs
+                    .leaves((n + k) as u32)
+                    .iter()
+                    .map(|&i| needle_reach(&needles[i as usize], a, b))
+                    .fold(0.0f32, f32::max);
+                let floor = ours.children.map(|c| error(&tight, c)).into_iter().fold(reach, f32::max);
+                // Exactly the needles' reach, raised to the children's errors.
+                proptest::prop_assert!((ours.error - floor).abs() <= 1e-6, "node {}: {} vs {}", k, ours.error, floor);
+            }
+        }
+    }
+
+    #[test]
+    fn errors_recomputed_under_either_bound_are_the_merges() {
+        let needles = random_needles(9, 14, 5);
+        let context = CostContext::new(MergeWeights::default(), 1.0, needles.len());
+        let nested = merge_group(&needles, &context, &MergeOptions::default());
+        let mut tight = nested.clone();
+        tighten_group_errors(&needles, &mut tight);
+        // Back to the paper's bound: the merge's own errors, bit for bit.
+        let mut again = tight.clone();
+        nest_errors(&needles, &mut again);
+        assert_eq!(again, nested);
+        // And tightened once more: the same tight errors.
+        tighten_group_errors(&needles, &mut again);
+        assert_eq!(again, tight);
+    }
+
+    #[test]
+    fn on_a_twig_the_needles_bound_is_well_below_the_papers() {
+        // A twig of fanning shoots: deep in the forest the nested bound adds
+        // each level's distance; the needles' bound does not.
+        let needles = random_needles(12, 20, 11);
+        let n = needles.len();
+        let context = CostContext::new(MergeWeights::default(), 1.0, n);
+        let nested = merge_group(&needles, &context, &MergeOptions::default());
+        let mut tight = nested.clone();
+        tighten_group_errors(&needles, &mut tight);
+        let root = n + nested.len() - 1;
+        let (paper_root, our_root) = (nested[root - n].error, tight[root - n].error);
+        // The root's capsule holds the whole twig: at least as wide as the
+        // farthest needle end from the root line, and well under the paper's.
+        assert!(our_root < 0.8 * paper_root, "{our_root} vs {paper_root}");
+        let mean = |forest: &[MergedLine]| forest.iter().map(|m| m.error as f64).sum::<f64>() / forest.len() as f64;
+        assert!(mean(&tight) < mean(&nested), "{} vs {}", mean(&tight), mean(&nested));
     }
 }

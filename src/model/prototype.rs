@@ -102,6 +102,16 @@ impl Placement {
         }
     }
 
+    /// A tree point in the prototype's frame (the inverse of
+    /// [`Placement::place_point`]).
+    pub fn unplace_point(&self, point: Vec3) -> Vec3 {
+        if self.is_identity() {
+            point
+        } else {
+            (self.rotation.inverse() * (point - self.translation)) / self.scale
+        }
+    }
+
     /// A prototype needle in the tree, as group `group`.
     pub fn place_needle(&self, needle: &Needle, group: u32) -> Needle {
         Needle {
@@ -320,6 +330,96 @@ impl PrototypeExtent {
 /// as a scaled matrix (the flattened tree places them through the
 /// quaternion: the two differ by float rounding, a few ulps of the tree's
 /// size).
+/// Replaces the errors of a tree's level-2 forest (`tree_merged`, over the
+/// placements' root lines as [`PrototypeRecord::tree_merged`] numbers it)
+/// by [`crate::model::merge::MergeErrorBound::Needles`]: each merged line's
+/// error is the largest [`crate::model::merge::needle_reach`] of the placed
+/// needles below it, raised to its children's errors (a placement's: its
+/// prototype's root error times its scale). The prototypes' own forests
+/// must be final. Exact: a placement is searched needle by needle only where
+/// its bounding sphere could reach farther than the needles found so far.
+pub fn tighten_tree_errors(prototypes: &[Prototype], placements: &[Placement], tree_merged: &mut [MergedLine]) {
+    use rayon::prelude::*;
+    let leaves = placements.len();
+    // Each prototype's centre and reach from it (`max |end − c| + R`), in
+    // its frame.
+    let spheres: Vec<(Vec3, f32)> = prototypes
+        .iter()
+        .map(|prototype| {
+            let ends = prototype.needles.iter().flat_map(|n| [n.base, n.tip]);
+            let (lo, hi) = ends.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p), hi.max(p))
+            });
+            let centre = (lo + hi) * 0.5;
+            let reach = prototype
+                .needles
+                .iter()
+                .map(|n| centre.distance(n.base).max(centre.distance(n.tip)) + n.radius)
+                .fold(0.0f32, f32::max);
+            (centre, reach)
+        })
+        .collect();
+    let mut first_needle = Vec::with_capacity(leaves + 1);
+    let mut total = 0u64;
+    for placement in placements {
+        first_needle.push(total);
+        total += prototypes[placement.prototype as usize].needles.len() as u64;
+    }
+    first_needle.push(total);
+    let endpoint = |end: EndpointId| {
+        let needle = u64::from(end / 2);
+        let p = first_needle.partition_point(|&first| first <= needle) - 1;
+        let placement = &placements[p];
+        let local = (needle - first_needle[p]) as u32;
+        let prototype = &prototypes[placement.prototype as usize];
+        placement.place_point(prototype.endpoint(2 * local + end % 2))
+    };
+    let runs = super::merge::LeafRuns::new(leaves, tree_merged);
+    let reach: Vec<f32> = tree_merged
+        .par_iter()
+        .enumerate()
+        .map(|(k, line)| {
+            let (a, b) = (endpoint(line.ends[0]), endpoint(line.ends[1]));
+            // Farthest-reaching spheres first, so that the rest are skipped.
+            let mut bounds: Vec<(f32, u32)> = runs
+                .leaves((leaves + k) as u32)
+                .iter()
+                .map(|&p| {
+                    let placement = &placements[p as usize];
+                    let (centre, radius) = spheres[placement.prototype as usize];
+                    let centre = placement.place_point(centre);
+                    let bound = 2.0 * (super::merge::point_segment_distance(centre, a, b) + radius * placement.scale);
+                    (bound, p)
+                })
+                .collect();
+            bounds.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+            let mut farthest = 0.0f32;
+            for (bound, p) in bounds {
+                if bound <= farthest {
+                    break;
+                }
+                let placement = &placements[p as usize];
+                let (la, lb) = (placement.unplace_point(a), placement.unplace_point(b));
+                let local = prototypes[placement.prototype as usize]
+                    .needles
+                    .iter()
+                    .map(|n| super::merge::needle_reach(n, la, lb))
+                    .fold(0.0f32, f32::max);
+                farthest = farthest.max(local * placement.scale);
+            }
+            farthest
+        })
+        .collect();
+    for (line, reach) in tree_merged.iter_mut().zip(reach) {
+        line.error = reach;
+    }
+    super::merge::make_errors_monotone(leaves, tree_merged, |p| {
+        let placement = &placements[p];
+        let prototype = &prototypes[placement.prototype as usize];
+        prototype.node_error(prototype.root()) * placement.scale
+    });
+}
+
 fn placed_point_bounds(needles: &[Needle], placement: &Placement) -> (Vec3, Vec3) {
     let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
     if placement.is_identity() {
@@ -962,6 +1062,97 @@ fn placed_error(prototype: &Prototype, node: u32, scale: f32) -> f32 {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    proptest! {
+        /// The tree's needles' bound is exact (the pruned search finds the
+        /// brute-force reach over every placed needle), monotone, and never
+        /// above the paper's nested bound on the same forest.
+        #[test]
+        fn tree_errors_hold_every_placed_needle(seed in 0u64..1_000, placements in 2usize..40) {
+            use crate::model::merge::{
+                CostContext, GroupLine, MergeOptions, MergeWeights, PartnerSearch, merge_group, merge_group_lines, needle_reach,
+                tighten_group_errors,
+            };
+            let mut rng = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let mut next = move || {
+                rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (rng >> 40) as f32 / (1u64 << 24) as f32
+            };
+            // Two prototypes: a fan of needles and a straight shoot.
+            let prototypes: Vec<Prototype> = (0..2)
+                .map(|kind| {
+                    let needles: Vec<Needle> = (0..6 + 3 * kind)
+                        .map(|i| {
+                            let base = Vec3::new(0.0, i as f32 * 0.01, 0.0);
+                            let direction = Vec3::new(next() - 0.5, 1.0 - kind as f32 * 0.8, next() - 0.5).normalize();
+                            Needle { base, tip: base + direction * 0.03, radius: 5e-4, normal: direction.any_orthonormal_vector(), group: 0 }
+                        })
+                        .collect();
+                    let context = CostContext::new(MergeWeights::default(), 1.0, needles.len());
+                    let mut merged = merge_group(&needles, &context, &MergeOptions::default());
+                    tighten_group_errors(&needles, &mut merged);
+                    Prototype { needles, merged }
+                })
+                .collect();
+            let placements: Vec<Placement> = (0..placements)
+                .map(|k| Placement {
+                    prototype: (k % 2) as u32,
+                    rotation: Quat::from_euler(glam::EulerRot::YXZ, next() * 6.3, next() - 0.5, next() - 0.5),
+                    translation: Vec3::new(next(), next() * 2.0, next()),
+                    scale: 0.5 + next(),
+                    ..Placement::identity(0)
+                })
+                .collect();
+            let mut first = 0u32;
+            let lines: Vec<GroupLine> = placements
+                .iter()
+                .map(|p| {
+                    let prototype = &prototypes[p.prototype as usize];
+                    let ends = prototype.node_ends(prototype.root());
+                    let line = GroupLine {
+                        a: p.place_point(prototype.endpoint(ends[0])),
+                        b: p.place_point(prototype.endpoint(ends[1])),
+                        ends: ends.map(|e| 2 * first + e),
+                        error: prototype.node_error(prototype.root()) * p.scale,
+                        needles: prototype.needles.len() as u32,
+                    };
+                    first += prototype.needles.len() as u32;
+                    line
+                })
+                .collect();
+            let context = CostContext::new(MergeWeights::default(), 3.0, first as usize);
+            let nested = merge_group_lines(&lines, &context, PartnerSearch::Exhaustive, |_| {});
+            let mut tight = nested.clone();
+            tighten_tree_errors(&prototypes, &placements, &mut tight);
+            // Brute force: the placed needles below each node.
+            let placed: Vec<Vec<Needle>> = placements
+                .iter()
+                .map(|p| prototypes[p.prototype as usize].needles.iter().map(|n| p.place_needle(n, 0)).collect())
+                .collect();
+            let all: Vec<Needle> = placed.iter().flatten().copied().collect();
+            let count = placements.len();
+            let mut below: Vec<Vec<usize>> = (0..count).map(|p| vec![p]).collect();
+            let mut errors: Vec<f32> = lines.iter().map(|l| l.error).collect();
+            for (k, (ours, paper)) in tight.iter().zip(&nested).enumerate() {
+                prop_assert_eq!(ours.children, paper.children);
+                let union: Vec<usize> = ours.children.iter().flat_map(|&c| below[c as usize].clone()).collect();
+                let (a, b) = (
+                    crate::model::merge::endpoint_position(&all, ours.ends[0]),
+                    crate::model::merge::endpoint_position(&all, ours.ends[1]),
+                );
+                let reach = union
+                    .iter()
+                    .flat_map(|&p| placed[p].iter())
+                    .map(|n| needle_reach(n, a, b))
+                    .fold(0.0f32, f32::max);
+                let expected = ours.children.map(|c| errors[c as usize]).into_iter().fold(reach, f32::max);
+                prop_assert!((ours.error - expected).abs() <= 1e-5 * expected.max(1e-3), "node {}: {} vs {}", k, ours.error, expected);
+                prop_assert!(ours.error <= paper.error * (1.0 + 1e-4), "node {}: {} > {}", k, ours.error, paper.error);
+                below.push(union);
+                errors.push(ours.error);
+            }
+        }
+    }
 
     proptest! {
         /// The quick check never passes a placement under which a needle

@@ -17,7 +17,7 @@
 //! its children's, node `k` is in the cut iff
 //! `error(k) ≤ e < parent_error(k)`: a per-node interval test.
 
-use super::merge::{EndpointId, MergeWeights, MergedLine, endpoint_position};
+use super::merge::{EndpointId, MergeErrorBound, MergeWeights, MergedLine, endpoint_position};
 use super::metric::{NeedleForm, line_error, needle_form, prism_error, relative_error};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::{TriangleMesh, prism_triangle_count};
@@ -241,6 +241,32 @@ pub(crate) fn check_appearance(
 }
 
 impl LodRecord {
+    /// The record with its merged lines' errors recomputed under `bound`
+    /// (every other part kept: forest, ends, needles, impostor,
+    /// calibration). `conifer eval` draws its `paper` method with the
+    /// paper's [`MergeErrorBound::Nested`] this way, beside ours from the
+    /// same record.
+    pub fn with_error_bound(&self, bound: MergeErrorBound) -> Result<Self, RecordInvalid> {
+        let mut merged = self.merged.clone();
+        match bound {
+            MergeErrorBound::Needles => super::merge::tighten_group_errors(&self.needles, &mut merged),
+            MergeErrorBound::Nested => super::merge::nest_errors(&self.needles, &mut merged),
+        }
+        let mut record = Self::from_parts(
+            self.name.clone(),
+            self.needles.clone(),
+            merged,
+            self.wood.clone(),
+            self.wood_mesh.clone(),
+            self.material,
+            self.max_sides,
+            self.bake.clone(),
+        )?;
+        record.impostor = self.impostor.clone();
+        record.line_calibration = self.line_calibration;
+        Ok(record)
+    }
+
     /// Builds a record from its stored parts, checking every invariant the
     /// cut relies on (see [`RecordInvalid`]) and deriving parents, needle
     /// counts, areas and the part ranges.
