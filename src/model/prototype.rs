@@ -326,10 +326,6 @@ impl PrototypeExtent {
     }
 }
 
-/// Bounds of `needles`' ends placed by `placement`, through the placement
-/// as a scaled matrix (the flattened tree places them through the
-/// quaternion: the two differ by float rounding, a few ulps of the tree's
-/// size).
 /// Replaces the errors of a tree's level-2 forest (`tree_merged`, over the
 /// placements' root lines as [`PrototypeRecord::tree_merged`] numbers it)
 /// by [`crate::model::merge::MergeErrorBound::Needles`]: each merged line's
@@ -420,6 +416,10 @@ pub fn tighten_tree_errors(prototypes: &[Prototype], placements: &[Placement], t
     });
 }
 
+/// Bounds of `needles`' ends placed by `placement`, through the placement
+/// as a scaled matrix (the flattened tree places them through the
+/// quaternion: the two differ by float rounding, a few ulps of the tree's
+/// size).
 fn placed_point_bounds(needles: &[Needle], placement: &Placement) -> (Vec3, Vec3) {
     let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
     if placement.is_identity() {
