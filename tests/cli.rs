@@ -331,6 +331,22 @@ fn export_refuses_bad_arguments() {
 }
 
 #[test]
+fn unknown_merge_errors_are_named() {
+    let output = conifer(&[
+        "bake",
+        "--preset",
+        "scots-pine",
+        "--merge-error",
+        "tightest",
+        "-o",
+        "/tmp/never.conifer",
+    ]);
+    let stderr = assert_fails_naming(&output, "tightest");
+    assert!(stderr.contains("needles") && stderr.contains("nested"), "{stderr}");
+    assert!(!std::path::Path::new("/tmp/never.conifer").exists());
+}
+
+#[test]
 fn unknown_preset_lists_the_valid_ones() {
     let output = conifer(&["bake", "--preset", "oak", "-o", "/tmp/never.conifer"]);
     let stderr = assert_fails_naming(&output, "oak");

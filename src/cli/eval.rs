@@ -186,6 +186,12 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         tonemapping: !args.no_tonemapping,
     };
     if args.inside {
+        if let Some(bound) = args.merge_error {
+            bail!(
+                "--merge-error {} recomputes a flattened record's errors; --inside draws the record's own",
+                bound.name()
+            );
+        }
         let record = read_prototype_record(&args.file)
             .with_context(|| format!("{}: cannot load record", args.file.display()))?;
         let options = InsideOptions {
