@@ -51,7 +51,9 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Method {
     /// The paper's configuration: its line opacity `T = 2/ρ`, δ as given,
-    /// the paper's merge weights (the bake's default).
+    /// the paper's merge weights (the bake's default) and its nested merge
+    /// error ([`crate::model::MergeErrorBound::Nested`], recomputed from
+    /// the record's forest).
     Paper,
     /// The plugin's defaults (area-preserving merged-line opacity, wood LOD).
     Ours,
