@@ -137,15 +137,41 @@ pub(super) fn renderer_with_species(
     Ok((renderer, species))
 }
 
-/// The species the `paper` method draws: `species`' record with its
-/// merged lines' errors under the paper's nested bound
-/// ([`crate::model::MergeErrorBound::Nested`]; the record's own are ours).
-pub(super) fn paper_species(species: &ConiferSpecies) -> Result<ConiferSpecies, EvalError> {
-    let record = species
-        .record()
-        .with_error_bound(crate::model::MergeErrorBound::Nested)
-        .map_err(|invalid| ConiferLoadError::Record(invalid.into()))?;
-    Ok(ConiferSpecies::from_record(record)?)
+/// The species the plugin's methods draw, in the app's assets: ours (the
+/// record's own merge errors) and, where `paper` is measured, the paper's
+/// (the record's merged lines' errors under the paper's nested bound,
+/// [`crate::model::MergeErrorBound::Nested`]).
+pub(super) struct MethodSpecies {
+    ours: Handle<ConiferSpecies>,
+    paper: Option<Handle<ConiferSpecies>>,
+}
+
+impl MethodSpecies {
+    /// Adds `species`, and the paper's where `methods` has `paper`.
+    pub(super) fn add(world: &mut World, species: ConiferSpecies, methods: &[Method]) -> Result<Self, EvalError> {
+        let paper = if methods.contains(&Method::Paper) {
+            let record = species
+                .record()
+                .with_error_bound(crate::model::MergeErrorBound::Nested)
+                .map_err(|invalid| ConiferLoadError::Record(invalid.into()))?;
+            Some(ConiferSpecies::from_record(record)?)
+        } else {
+            None
+        };
+        let mut assets = world.resource_mut::<Assets<ConiferSpecies>>();
+        Ok(Self {
+            ours: assets.add(species),
+            paper: paper.map(|paper| assets.add(paper)),
+        })
+    }
+
+    /// The species `method` draws.
+    pub(super) fn handle(&self, method: Method) -> Handle<ConiferSpecies> {
+        match (method, &self.paper) {
+            (Method::Paper, Some(paper)) => paper.clone(),
+            _ => self.ours.clone(),
+        }
+    }
 }
 
 /// The picture every method is rendered at.
@@ -499,25 +525,14 @@ impl EvalScene {
         world.entity_mut(sun).insert((all_layers, view.sun.transform()));
 
         // The plugin's methods.
-        let paper = if methods.contains(&Method::Paper) {
-            Some(paper_species(&species)?)
-        } else {
-            None
-        };
-        let mut species_assets = world.resource_mut::<Assets<ConiferSpecies>>();
-        let species_handle = species_assets.add(species.clone());
-        let paper_handle = paper.map(|paper| species_assets.add(paper));
+        let method_species = MethodSpecies::add(world, species, &methods)?;
         for method in [Method::Paper, Method::Ours] {
             if let Some(opacity) = method
                 .line_opacity(view.ours_line_opacity)
                 .filter(|_| methods.contains(&method))
             {
-                let handle = match (method, &paper_handle) {
-                    (Method::Paper, Some(paper)) => paper.clone(),
-                    _ => species_handle.clone(),
-                };
                 world.spawn((
-                    ConiferFoliage(handle),
+                    ConiferFoliage(method_species.handle(method)),
                     ConiferLodOverride {
                         line_opacity: Some(opacity),
                         // The paper draws lines at every distance.

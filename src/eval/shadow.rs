@@ -24,10 +24,12 @@
 //! reference shadow's screen box.
 
 use super::measure::PixelRect;
-use super::scene::{EvalError, EvalView, Method, RawTree, raw_materials, renderer_with_species, sway_at};
+use super::scene::{
+    EvalError, EvalView, Method, MethodSpecies, RawTree, raw_materials, renderer_with_species, sway_at,
+};
 use crate::model::LodRecord;
 use crate::plugin::headless::HeadlessRenderer;
-use crate::plugin::{ConiferFoliage, ConiferLodOverride, ConiferSpecies, ConiferWind, triangle_mesh};
+use crate::plugin::{ConiferFoliage, ConiferLodOverride, ConiferWind, triangle_mesh};
 use bevy::camera::CameraProjection;
 use bevy::camera::visibility::RenderLayers;
 use bevy::core_pipeline::tonemapping::Tonemapping;
@@ -139,14 +141,7 @@ impl ShadowScene {
             brightness: AMBIENT,
             ..default()
         });
-        let paper = if methods.contains(&Method::Paper) {
-            Some(super::scene::paper_species(&species)?)
-        } else {
-            None
-        };
-        let mut species_assets = world.resource_mut::<Assets<ConiferSpecies>>();
-        let species_handle = species_assets.add(species);
-        let paper_handle = paper.map(|paper| species_assets.add(paper));
+        let method_species = MethodSpecies::add(world, species, methods)?;
         let (needle_material, wood_material) = raw_materials(world, &record);
         let raw = RawTree::new(&record);
         let raw_meshes = {
@@ -174,10 +169,7 @@ impl ShadowScene {
                 Some(opacity) => vec![
                     world
                         .spawn((
-                            ConiferFoliage(match (method, &paper_handle) {
-                                (Method::Paper, Some(paper)) => paper.clone(),
-                                _ => species_handle.clone(),
-                            }),
+                            ConiferFoliage(method_species.handle(method)),
                             ConiferLodOverride {
                                 line_opacity: Some(opacity),
                                 ..default()

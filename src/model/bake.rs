@@ -7,9 +7,7 @@ use super::merge::{
 };
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
-use super::prototype::{
-    MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord, tighten_tree_errors,
-};
+use super::prototype::{MAX_PLACED_NEEDLES, Placement, Prototype, PrototypeInput, PrototypeRecord};
 use super::quantize::{prototype_grid, quantize_needle};
 use super::record::{BakeInfo, LodRecord, RecordInvalid};
 use glam::Quat;
@@ -360,14 +358,11 @@ pub fn bake_prototypes(
         .collect();
     let tree_total = group_lines.len().saturating_sub(1);
     let context = CostContext::new(options.merge.weights, diagonal, total);
-    let mut tree_merged = merge_group_lines(&group_lines, &context, options.merge.tree_search, |k| {
+    let tree_merged = merge_group_lines(&group_lines, &context, options.merge.tree_search, |k| {
         if k % 1024 == 0 || k == tree_total {
             progress.progress(BakeStage::MergeTree, k, tree_total)
         }
     });
-    if options.merge.error_bound == MergeErrorBound::Needles {
-        tighten_tree_errors(&prototypes, &placements, &mut tree_merged);
-    }
 
     let info = BakeInfo {
         weights: options.merge.weights,
@@ -385,6 +380,9 @@ pub fn bake_prototypes(
         options.max_sides,
         info,
     )?;
+    if options.merge.error_bound == MergeErrorBound::Needles {
+        record.tighten_tree_errors();
+    }
     // What the record file stores (needles, errors and placements on their
     // codes): writing and reading the bake's record is exact.
     record = record.quantized()?;

@@ -335,15 +335,25 @@ fn merge_lines(y1: &Line, y2: &Line) -> Line {
         }
     }
     let (a, b) = (points[best.0], points[best.1]);
-    let spread =
-        |y: &Line| point_segment_distance(y.a, a.0, b.0).max(point_segment_distance(y.b, a.0, b.0)) + y.error / 2.0;
+    let reach = |y: &Line| capsule_reach([y.a, y.b], y.error, a.0, b.0);
     Line {
         a: a.0,
         b: b.0,
         ends: [a.1, b.1],
-        error: 2.0 * spread(y1).max(spread(y2)),
+        error: reach(y1).max(reach(y2)),
         needles: y1.needles + y2.needles,
     }
+}
+
+/// How far the capsule of diameter `error` around the segment `ends`
+/// reaches from the segment `a`–`b`, as an error: the diameter
+/// `2 · (D + error/2)` of the thinnest capsule around `a`–`b` that holds
+/// it, `D` the larger distance of the two ends to `a`–`b` (the capsule is
+/// convex, so its ends bound it). The paper's merge error is the larger of
+/// its two children's; [`needle_reach`] is a needle's.
+pub fn capsule_reach(ends: [Vec3; 2], error: f32, a: Vec3, b: Vec3) -> f32 {
+    let distance = point_segment_distance(ends[0], a, b).max(point_segment_distance(ends[1], a, b));
+    2.0 * (distance + error / 2.0)
 }
 
 /// A heap entry: line `line`'s best known partner `partner` at `cost`.
@@ -858,8 +868,12 @@ impl LeafRuns {
 /// diameter `2 · (D + R)` of the thinnest capsule around the segment that
 /// holds the needle's capsule, `D` the larger distance of its two ends.
 pub fn needle_reach(needle: &Needle, a: Vec3, b: Vec3) -> f32 {
-    let distance = point_segment_distance(needle.base, a, b).max(point_segment_distance(needle.tip, a, b));
-    2.0 * distance + super::metric::line_error(needle.radius)
+    capsule_reach(
+        [needle.base, needle.tip],
+        super::metric::line_error(needle.radius),
+        a,
+        b,
+    )
 }
 
 /// Makes errors monotone up a forest: each merged line's error becomes at
@@ -921,20 +935,16 @@ pub fn nest_errors(needles: &[Needle], merged: &mut [MergedLine]) {
             endpoint_position(needles, line.ends[0]),
             endpoint_position(needles, line.ends[1]),
         );
-        let spread = |child: u32| {
+        let reach = |child: u32| {
             let child = child as usize;
-            let (ends, error) = if child < leaves {
-                (
-                    [2 * child as u32, 2 * child as u32 + 1],
-                    super::metric::line_error(needles[child].radius),
-                )
+            if child < leaves {
+                needle_reach(&needles[child], a, b)
             } else {
-                (merged[child - leaves].ends, merged[child - leaves].error)
-            };
-            let [p, q] = ends.map(|end| endpoint_position(needles, end));
-            point_segment_distance(p, a, b).max(point_segment_distance(q, a, b)) + error / 2.0
+                let child = &merged[child - leaves];
+                capsule_reach(child.ends.map(|end| endpoint_position(needles, end)), child.error, a, b)
+            }
         };
-        merged[k].error = 2.0 * spread(line.children[0]).max(spread(line.children[1]));
+        merged[k].error = reach(line.children[0]).max(reach(line.children[1]));
     }
 }
 

@@ -326,96 +326,6 @@ impl PrototypeExtent {
     }
 }
 
-/// Replaces the errors of a tree's level-2 forest (`tree_merged`, over the
-/// placements' root lines as [`PrototypeRecord::tree_merged`] numbers it)
-/// by [`crate::model::merge::MergeErrorBound::Needles`]: each merged line's
-/// error is the largest [`crate::model::merge::needle_reach`] of the placed
-/// needles below it, raised to its children's errors (a placement's: its
-/// prototype's root error times its scale). The prototypes' own forests
-/// must be final. Exact: a placement is searched needle by needle only where
-/// its bounding sphere could reach farther than the needles found so far.
-pub fn tighten_tree_errors(prototypes: &[Prototype], placements: &[Placement], tree_merged: &mut [MergedLine]) {
-    use rayon::prelude::*;
-    let leaves = placements.len();
-    // Each prototype's centre and reach from it (`max |end − c| + R`), in
-    // its frame.
-    let spheres: Vec<(Vec3, f32)> = prototypes
-        .iter()
-        .map(|prototype| {
-            let ends = prototype.needles.iter().flat_map(|n| [n.base, n.tip]);
-            let (lo, hi) = ends.fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p), hi.max(p))
-            });
-            let centre = (lo + hi) * 0.5;
-            let reach = prototype
-                .needles
-                .iter()
-                .map(|n| centre.distance(n.base).max(centre.distance(n.tip)) + n.radius)
-                .fold(0.0f32, f32::max);
-            (centre, reach)
-        })
-        .collect();
-    let mut first_needle = Vec::with_capacity(leaves + 1);
-    let mut total = 0u64;
-    for placement in placements {
-        first_needle.push(total);
-        total += prototypes[placement.prototype as usize].needles.len() as u64;
-    }
-    first_needle.push(total);
-    let endpoint = |end: EndpointId| {
-        let needle = u64::from(end / 2);
-        let p = first_needle.partition_point(|&first| first <= needle) - 1;
-        let placement = &placements[p];
-        let local = (needle - first_needle[p]) as u32;
-        let prototype = &prototypes[placement.prototype as usize];
-        placement.place_point(prototype.endpoint(2 * local + end % 2))
-    };
-    let runs = super::merge::LeafRuns::new(leaves, tree_merged);
-    let reach: Vec<f32> = tree_merged
-        .par_iter()
-        .enumerate()
-        .map(|(k, line)| {
-            let (a, b) = (endpoint(line.ends[0]), endpoint(line.ends[1]));
-            // Farthest-reaching spheres first, so that the rest are skipped.
-            let mut bounds: Vec<(f32, u32)> = runs
-                .leaves((leaves + k) as u32)
-                .iter()
-                .map(|&p| {
-                    let placement = &placements[p as usize];
-                    let (centre, radius) = spheres[placement.prototype as usize];
-                    let centre = placement.place_point(centre);
-                    let bound = 2.0 * (super::merge::point_segment_distance(centre, a, b) + radius * placement.scale);
-                    (bound, p)
-                })
-                .collect();
-            bounds.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
-            let mut farthest = 0.0f32;
-            for (bound, p) in bounds {
-                if bound <= farthest {
-                    break;
-                }
-                let placement = &placements[p as usize];
-                let (la, lb) = (placement.unplace_point(a), placement.unplace_point(b));
-                let local = prototypes[placement.prototype as usize]
-                    .needles
-                    .iter()
-                    .map(|n| super::merge::needle_reach(n, la, lb))
-                    .fold(0.0f32, f32::max);
-                farthest = farthest.max(local * placement.scale);
-            }
-            farthest
-        })
-        .collect();
-    for (line, reach) in tree_merged.iter_mut().zip(reach) {
-        line.error = reach;
-    }
-    super::merge::make_errors_monotone(leaves, tree_merged, |p| {
-        let placement = &placements[p];
-        let prototype = &prototypes[placement.prototype as usize];
-        prototype.node_error(prototype.root()) * placement.scale
-    });
-}
-
 /// Bounds of `needles`' ends placed by `placement`, through the placement
 /// as a scaled matrix (the flattened tree places them through the
 /// quaternion: the two differ by float rounding, a few ulps of the tree's
@@ -786,6 +696,63 @@ impl PrototypeRecord {
         placed_error(prototype, prototype.root(), pl.scale)
     }
 
+    /// Replaces the errors of the level-2 forest by
+    /// [`crate::model::merge::MergeErrorBound::Needles`]: each merged line's
+    /// error becomes the largest [`crate::model::merge::needle_reach`] of the
+    /// placed needles below it, raised to its children's errors (a
+    /// placement's: [`PrototypeRecord::placed_root_error`]). The prototypes'
+    /// own forests must be final; the forest's shape and ends are kept.
+    /// Exact: a placement is searched needle by needle only where its
+    /// bounding sphere ([`PrototypeRecord::node_sphere`]) could reach farther
+    /// than the needles found so far.
+    pub fn tighten_tree_errors(&mut self) {
+        use rayon::prelude::*;
+        let leaves = self.placements.len();
+        let runs = super::merge::LeafRuns::new(leaves, &self.tree_merged);
+        let reach: Vec<f32> = self
+            .tree_merged
+            .par_iter()
+            .enumerate()
+            .map(|(k, line)| {
+                let [a, b] = line.ends.map(|end| {
+                    self.endpoint_position(end)
+                        .expect("a valid record's lines end at its placed needles' ends")
+                });
+                // Farthest-reaching spheres first, so that the rest are skipped.
+                let mut bounds: Vec<(f32, u32)> = runs
+                    .leaves((leaves + k) as u32)
+                    .iter()
+                    .map(|&p| {
+                        let sphere = self.node_sphere(p);
+                        let bound = 2.0 * (super::merge::point_segment_distance(sphere.center, a, b) + sphere.radius);
+                        (bound, p)
+                    })
+                    .collect();
+                bounds.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+                let mut farthest = 0.0f32;
+                for (bound, p) in bounds {
+                    if bound <= farthest {
+                        break;
+                    }
+                    let placement = &self.placements[p as usize];
+                    let (la, lb) = (placement.unplace_point(a), placement.unplace_point(b));
+                    let local = self.prototypes[placement.prototype as usize]
+                        .needles
+                        .iter()
+                        .map(|n| super::merge::needle_reach(n, la, lb))
+                        .fold(0.0f32, f32::max);
+                    farthest = farthest.max(local * placement.scale);
+                }
+                farthest
+            })
+            .collect();
+        for (line, reach) in self.tree_merged.iter_mut().zip(reach) {
+            line.error = reach;
+        }
+        let root_errors: Vec<f32> = (0..leaves).map(|p| self.placed_root_error(p)).collect();
+        super::merge::make_errors_monotone(leaves, &mut self.tree_merged, |p| root_errors[p]);
+    }
+
     /// Parent of level-2 node `node` (placements, then merged lines), or [`NO_PARENT`].
     pub fn tree_parent(&self, node: u32) -> u32 {
         self.tree_parent[node as usize]
@@ -1122,8 +1089,20 @@ mod tests {
                 .collect();
             let context = CostContext::new(MergeWeights::default(), 3.0, first as usize);
             let nested = merge_group_lines(&lines, &context, PartnerSearch::Exhaustive, |_| {});
-            let mut tight = nested.clone();
-            tighten_tree_errors(&prototypes, &placements, &mut tight);
+            let mut record = PrototypeRecord::from_parts(
+                String::new(),
+                prototypes.clone(),
+                placements.clone(),
+                nested.clone(),
+                Vec::new(),
+                TriangleMesh::default(),
+                FoliageMaterial::default(),
+                8,
+                BakeInfo::default(),
+            )
+            .unwrap();
+            record.tighten_tree_errors();
+            let tight = &record.tree_merged;
             // Brute force: the placed needles below each node.
             let placed: Vec<Vec<Needle>> = placements
                 .iter()
