@@ -176,6 +176,7 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         needle_count,
     };
     options.merge.error_bound = args.merge_error;
+    options.merge.cost_rule = args.merge_cost;
     options.merge.tree_search = if args.exhaustive {
         PartnerSearch::Exhaustive
     } else {

@@ -69,6 +69,12 @@ pub(crate) fn parse_merge_error(text: &str) -> Result<crate::model::MergeErrorBo
         .ok_or_else(|| format!("unknown merge error `{text}` (expected `needles` or `nested`)"))
 }
 
+/// `--merge-cost`: a name of [`crate::model::MergeCostRule`].
+fn parse_merge_cost(text: &str) -> Result<crate::model::MergeCostRule, String> {
+    crate::model::MergeCostRule::from_name(text)
+        .ok_or_else(|| format!("unknown merge cost `{text}` (expected `error` or `weighted`)"))
+}
+
 /// Arguments of `conifer bake`.
 #[derive(Debug, clap::Args)]
 pub struct BakeArgs {
@@ -104,7 +110,12 @@ pub struct BakeArgs {
     /// Lmax: most sides of a needle prism (3..=64).
     #[arg(long, default_value_t = 8)]
     pub max_sides: u8,
-    /// Merge cost weights k1,k2,k3 (direction, distance, needle count).
+    /// Which pair of lines merges first: `error` (the pair whose merged line is thinnest)
+    /// or `weighted` (the paper's weighted cost of direction, distance and needle count,
+    /// with --weights).
+    #[arg(long, default_value = "error", value_parser = parse_merge_cost)]
+    pub merge_cost: crate::model::MergeCostRule,
+    /// Merge cost weights k1,k2,k3 (direction, distance, needle count) of `--merge-cost weighted`.
     #[arg(long, value_name = "K1,K2,K3", value_delimiter = ',', default_values_t = [0.25f32, 0.25, 0.5])]
     pub weights: Vec<f32>,
     /// Partner candidates per line in the whole-tree merge (nearest neighbours).

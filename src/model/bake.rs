@@ -324,7 +324,7 @@ pub fn bake_prototypes(
         .zip(input.prototypes.par_iter())
         .map(|((needles, &(sum, count)), original)| {
             let mean_scale = if count == 0 { 1.0 } else { (sum / count as f64) as f32 };
-            let context = CostContext::new(options.merge.weights, diagonal / mean_scale, total);
+            let context = CostContext::for_options(&options.merge, diagonal / mean_scale, total);
             // A twig's shoots and fascicles are merged first, then across it.
             let groups: Vec<u32> = original.iter().map(|n| n.group).collect();
             let mut merged = merge_nested_group(&needles, &groups, &context, &options.merge);
@@ -357,7 +357,7 @@ pub fn bake_prototypes(
         })
         .collect();
     let tree_total = group_lines.len().saturating_sub(1);
-    let context = CostContext::new(options.merge.weights, diagonal, total);
+    let context = CostContext::for_options(&options.merge, diagonal, total);
     let tree_merged = merge_group_lines(&group_lines, &context, options.merge.tree_search, |k| {
         if k % 1024 == 0 || k == tree_total {
             progress.progress(BakeStage::MergeTree, k, tree_total)

@@ -2009,7 +2009,6 @@ mod tests {
             let ranges = flat.part_ranges();
             let top = ranges.merged_lines.map_or(ranges.original_lines.max, |r| r.max);
             let mut e = ranges.cylinders.min * 0.3;
-            let mut worst = 0.0f64;
             let mut expanded_at_some = false;
             while e < top * 3.0 {
                 for threshold in [threshold_code as fn(f32) -> u16, shader_threshold_code] {
@@ -2033,13 +2032,19 @@ mod tests {
                     }
                     let primitives =
                         (drawn.prisms.len() + drawn.original_lines.len() + drawn.merged_lines.len()) as f64;
-                    worst = worst.max(processed as f64 / primitives.max(1.0));
-                    expanded_at_some |= compact.expanded_placements(code) > 0;
+                    // A prefix processes the cut and the nodes above it: in a
+                    // binary forest fewer than the cut, plus one level-2
+                    // ancestor chain per expanded placement.
+                    let expanded = compact.expanded_placements(code);
+                    assert!(
+                        processed as f64 <= 2.0 * primitives + expanded as f64,
+                        "{species:?} e = {e}: {processed} processed for {primitives} drawn, {expanded} expanded"
+                    );
+                    expanded_at_some |= expanded > 0;
                 }
                 e *= 1.17;
             }
             assert!(expanded_at_some);
-            assert!(worst <= 2.0, "{species:?}: processed / drawn = {worst}");
         }
     }
 

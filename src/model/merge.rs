@@ -98,6 +98,53 @@ pub struct MergeOptions {
     /// or the capsule of the needles themselves).
     #[serde(default)]
     pub error_bound: MergeErrorBound,
+    /// Which pair is merged first: the paper's weighted cost (with
+    /// [`MergeOptions::weights`]) or the error of the line the merge makes.
+    #[serde(default)]
+    pub cost_rule: MergeCostRule,
+}
+
+/// Which pair of live lines a merge takes first (the cheapest by this rule).
+///
+/// The rule decides the shape of the merge forest, hence how many lines a
+/// cut at a given error draws: a cut draws a node once its error is within
+/// the spatial error, so a forest whose low nodes stay thin reaches a small
+/// count sooner.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum MergeCostRule {
+    /// The paper's weighted sum (§4.2) of the direction difference, the
+    /// distance over the crown's diagonal and the larger needle count
+    /// ([`MergeWeights`]). Direction dominates it: two parallel lines a metre
+    /// apart cost less than two crossing lines a centimetre apart, and the
+    /// line merging them is a metre thick.
+    Weighted,
+    /// The error of the line the merge would make, the paper's nested bound
+    /// of the pair (`e(X) = 2 · max_i { D(Yi, X) + e(Yi)/2 }`, from the two
+    /// lines alone): the pair whose merged line is thinnest goes first, the
+    /// greedy agglomeration that keeps every level of the forest as thin as
+    /// its neighbours allow.
+    #[default]
+    Error,
+}
+
+impl MergeCostRule {
+    /// Both rules.
+    pub const ALL: [Self; 2] = [Self::Error, Self::Weighted];
+
+    /// The rule's name on the command line: `error` or `weighted`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Error => "error",
+            Self::Weighted => "weighted",
+        }
+    }
+
+    /// The rule named `name` ([`MergeCostRule::name`], any case).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|rule| rule.name().eq_ignore_ascii_case(name))
+    }
 }
 
 /// How the error of a merged line `X` is bounded. Both are the diameter of
@@ -162,6 +209,7 @@ impl Default for MergeOptions {
             exhaustive_group_limit: 256,
             tree_search: PartnerSearch::Nearest { neighbours: 12 },
             error_bound: MergeErrorBound::default(),
+            cost_rule: MergeCostRule::default(),
         }
     }
 }
@@ -219,6 +267,7 @@ pub struct CostContext {
     weights: MergeWeights,
     inv_diagonal: f32,
     inv_needles: f32,
+    rule: MergeCostRule,
 }
 
 impl CostContext {
@@ -233,7 +282,21 @@ impl CostContext {
                 0.0
             },
             inv_needles: 1.0 / needles.max(1) as f32,
+            rule: MergeCostRule::Weighted,
         }
+    }
+
+    /// The context of a tree for `options` (its weights and cost rule).
+    pub fn for_options(options: &MergeOptions, crown_diagonal: f32, needles: usize) -> Self {
+        Self {
+            rule: options.cost_rule,
+            ..Self::new(options.weights, crown_diagonal, needles)
+        }
+    }
+
+    /// The rule this context costs pairs by.
+    pub fn rule(&self) -> MergeCostRule {
+        self.rule
     }
 }
 
@@ -254,7 +317,10 @@ pub fn merge_cost(
 }
 
 fn line_cost(context: &CostContext, x: &Line, y: &Line) -> f32 {
-    merge_cost(context, (x.a, x.b, x.needles), (y.a, y.b, y.needles))
+    match context.rule {
+        MergeCostRule::Weighted => merge_cost(context, (x.a, x.b, x.needles), (y.a, y.b, y.needles)),
+        MergeCostRule::Error => merge_lines(x, y).error,
+    }
 }
 
 /// Distance from `p` to the segment `a`–`b`.

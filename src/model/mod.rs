@@ -47,7 +47,7 @@ pub use file::{
     RecordError, decode_prototype_record, decode_record, encode_prototype_record, encode_record, read_prototype_record,
     read_record, write_prototype_record, write_record,
 };
-pub use merge::{MergeErrorBound, MergeOptions, MergeWeights, PartnerSearch};
+pub use merge::{MergeCostRule, MergeErrorBound, MergeOptions, MergeWeights, PartnerSearch};
 pub use metric::{PixelError, ViewParams, spatial_error};
 pub use needle::*;
 pub use prototype::{Placement, Prototype, PrototypeInput, PrototypeRecord};
