@@ -1,8 +1,9 @@
 //! The LOD levels of a preset at the paper's Table 1 distances, like the
 //! paper's Fig. 6: bakes the tree, prints what the cut draws at 12.22,
 //! 26.71, 56.15 and 118.40 m (45° vertical FOV, 1536 px, ε = 1) next to the
-//! paper's counts and those of the paper's nested merge error
-//! (`MergeErrorBound::Nested`, baked beside ours), and renders each of our
+//! paper's counts, those of the paper's weighted merge cost
+//! (`MergeCostRule::Weighted`) and those of its cost and nested merge error
+//! together (`MergeErrorBound::Nested`), baked beside ours, and renders each of our
 //! cuts framed at a common size, side by
 //! side, with the CPU preview rasterizer (merged lines drawn at the width
 //! that keeps their needles' area); the second row colours the same cuts by
@@ -13,7 +14,7 @@
 //! ```
 
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
-use bevy_conifer_lod::model::{BakeOptions, MergeErrorBound, PixelError, ViewParams, bake};
+use bevy_conifer_lod::model::{BakeOptions, MergeCostRule, MergeErrorBound, PixelError, ViewParams, bake};
 use bevy_conifer_lod::preview::{PreviewCamera, PreviewOptions, cut_primitives, render_preview};
 use std::path::PathBuf;
 
@@ -36,9 +37,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let tree = generate(species, &young);
     let record = bake(&tree, &BakeOptions::default(), &())?;
-    let mut nested_options = BakeOptions::default();
-    nested_options.merge.error_bound = MergeErrorBound::Nested;
-    let nested = bake(&tree, &nested_options, &())?;
+    let mut weighted_options = BakeOptions::default();
+    weighted_options.merge.cost_rule = MergeCostRule::Weighted;
+    let weighted = bake(&tree, &weighted_options, &())?;
+    let mut paper_options = weighted_options;
+    paper_options.merge.error_bound = MergeErrorBound::Nested;
+    let paper_record = bake(&tree, &paper_options, &())?;
     let view = ViewParams {
         vertical_fov: 45f32.to_radians(),
         viewport_height_px: 1536.0,
@@ -53,16 +57,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         record.group_count()
     );
     println!(
-        "| distance | spatial error | prisms | original lines | merged lines | lines | lines, nested error | paper's lines |"
+        "| distance | spatial error | prisms | original lines | merged lines | lines | lines, weighted cost | lines, weighted cost and nested error | paper's lines |"
     );
-    println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (i, (distance, paper)) in DISTANCES.into_iter().zip(PAPER_LINES).enumerate() {
         let e = view.spatial_error(distance);
         let cut = record.cut(e);
         let stats = record.cut_stats(&cut);
-        let nested_lines = nested.cut_stats(&nested.cut(e)).line_segments;
+        let weighted_lines = weighted.cut_stats(&weighted.cut(e)).line_segments;
+        let paper_model_lines = paper_record.cut_stats(&paper_record.cut(e)).line_segments;
         println!(
-            "| {distance:.2} m | {:.1} mm | {} | {} | {} | {} | {nested_lines} | {paper} |",
+            "| {distance:.2} m | {:.1} mm | {} | {} | {} | {} | {weighted_lines} | {paper_model_lines} | {paper} |",
             e * 1e3,
             stats.prisms,
             stats.lines_original,

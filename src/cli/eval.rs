@@ -55,7 +55,8 @@ pub struct EvalArgs {
     pub ours_no_impostor: bool,
     /// Recompute the record's merged-line errors under this bound before
     /// measuring (`needles` or `nested`, the paper's; default: the record's
-    /// own). The `paper` method always draws with `nested`.
+    /// own). The `paper` method always draws the record's needles merged again
+    /// with the paper's weighted cost and `nested` error.
     #[arg(long, value_name = "BOUND", value_parser = parse_merge_error)]
     pub merge_error: Option<crate::model::MergeErrorBound>,
     /// Every camera renders into Bevy's 16-bit float main texture (`Hdr`)

@@ -51,9 +51,8 @@ use std::time::Instant;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Method {
     /// The paper's configuration: its line opacity `T = 2/ρ`, δ as given,
-    /// the paper's merge weights (the bake's default) and its nested merge
-    /// error ([`crate::model::MergeErrorBound::Nested`], recomputed from
-    /// the record's forest).
+    /// and its merge forest: the record's needles merged again with the
+    /// paper's weighted cost and nested error ([`crate::model::paper_model`]).
     Paper,
     /// The plugin's defaults (area-preserving merged-line opacity, wood LOD).
     Ours,
@@ -138,9 +137,9 @@ pub(super) fn renderer_with_species(
 }
 
 /// The species the plugin's methods draw, in the app's assets: ours (the
-/// record's own merge errors) and, where `paper` is measured, the paper's
-/// (the record's merged lines' errors under the paper's nested bound,
-/// [`crate::model::MergeErrorBound::Nested`]).
+/// record as baked) and, where `paper` is measured, the paper's (the
+/// record's needles merged again with the paper's weighted cost and nested
+/// error, [`crate::model::paper_model`]).
 pub(super) struct MethodSpecies {
     ours: Handle<ConiferSpecies>,
     paper: Option<Handle<ConiferSpecies>>,
@@ -150,10 +149,7 @@ impl MethodSpecies {
     /// Adds `species`, and the paper's where `methods` has `paper`.
     pub(super) fn add(world: &mut World, species: ConiferSpecies, methods: &[Method]) -> Result<Self, EvalError> {
         let paper = if methods.contains(&Method::Paper) {
-            let record = species
-                .record()
-                .with_error_bound(crate::model::MergeErrorBound::Nested)
-                .map_err(|invalid| ConiferLoadError::Record(invalid.into()))?;
+            let record = crate::model::paper_model(species.record()).map_err(EvalError::PaperModel)?;
             Some(ConiferSpecies::from_record(record)?)
         } else {
             None
@@ -400,6 +396,9 @@ pub enum EvalError {
     /// The record has no needles.
     #[error("the record has no needles")]
     NoNeedles,
+    /// The paper's model of the record could not be baked.
+    #[error("the paper's model of the record: {0}")]
+    PaperModel(crate::model::BakeError),
     /// A picture could not be written.
     #[error("{0}: {1}")]
     Picture(String, String),

@@ -3,7 +3,8 @@
 use super::calibration::{CalibrationOptions, LineCalibration, calibrate_lines};
 use super::impostor::{CrownImpostor, ImpostorOptions};
 use super::merge::{
-    CostContext, GroupLine, MergeErrorBound, MergeOptions, merge_group_lines, merge_nested_group, tighten_group_errors,
+    CostContext, GroupLine, MergeCostRule, MergeErrorBound, MergeOptions, merge_group_lines, merge_nested_group,
+    tighten_group_errors,
 };
 use super::metric::{MAX_PRISM_SIDES, MIN_PRISM_SIDES};
 use super::needle::{Needle, TreeInput, bounds};
@@ -228,6 +229,36 @@ pub fn bake(input: &TreeInput, options: &BakeOptions, progress: &dyn BakeProgres
     Ok(flat)
 }
 
+/// The paper's model of a baked tree (§4): `record`'s needles merged again,
+/// over the record's groups as [`bake`] merges a flat tree, with the
+/// paper's weighted cost ([`MergeCostRule::Weighted`], the record's
+/// weights) and nested error ([`MergeErrorBound::Nested`]); the wood,
+/// material, crown impostor and line calibration are `record`'s.
+/// `conifer eval` draws its `paper` method from it, beside ours from
+/// `record` itself.
+pub fn paper_model(record: &LodRecord) -> Result<LodRecord, BakeError> {
+    let input = TreeInput {
+        name: record.name.clone(),
+        needles: record.needles.clone(),
+        wood: record.wood.clone(),
+        wood_mesh: record.wood_mesh.clone(),
+        material: record.material,
+    };
+    let mut options = BakeOptions {
+        max_sides: record.max_sides,
+        impostor: None,
+        line_calibration: None,
+        ..BakeOptions::default()
+    };
+    options.merge.weights = record.bake.weights;
+    options.merge.cost_rule = MergeCostRule::Weighted;
+    options.merge.error_bound = MergeErrorBound::Nested;
+    let mut paper = bake(&input, &options, &())?;
+    paper.impostor = record.impostor.clone();
+    paper.line_calibration = record.line_calibration;
+    Ok(paper)
+}
+
 /// Bakes a tree of prototypes: validates the needles and placements, snaps
 /// normals to the record's storage precision, merges each prototype down to
 /// one line once (level 1, prototypes in parallel), then the placed
@@ -420,6 +451,33 @@ pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Opti
 mod tests {
     use super::*;
     use crate::generate::{GenerateOptions, Species, generate};
+
+    #[test]
+    fn the_paper_model_is_the_papers_bake_of_the_same_needles() {
+        let tree = generate(
+            Species::ScotsPine,
+            &GenerateOptions {
+                seed: 5,
+                target_needles: Some(3000),
+                age: crate::generate::Age::Young,
+            },
+        );
+        let bare = BakeOptions {
+            impostor: None,
+            line_calibration: None,
+            ..BakeOptions::default()
+        };
+        let ours = bake(&tree, &bare, &()).unwrap();
+        let paper = paper_model(&ours).unwrap();
+        let mut options = bare;
+        options.merge.cost_rule = MergeCostRule::Weighted;
+        options.merge.error_bound = MergeErrorBound::Nested;
+        let direct = bake(&tree, &options, &()).unwrap();
+        assert_eq!(paper.needles, ours.needles);
+        assert_eq!(paper.merged, direct.merged);
+        assert_ne!(paper.merged, ours.merged, "the paper's cost builds another forest");
+        assert_eq!(paper.wood, ours.wood);
+    }
 
     #[test]
     fn stage_timer_splits_the_bake_in_order() {

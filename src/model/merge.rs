@@ -1205,14 +1205,93 @@ mod tests {
 
     #[test]
     fn exhaustive_search_is_the_exact_greedy() {
-        for seed in 1..6 {
-            let lines = random_lines(60, seed);
-            let context = CostContext::new(MergeWeights::default(), 3f32.sqrt(), 60);
-            let reference = naive_greedy(&context, lines.clone());
-            let (merges, root) = MergeSet::new(&context, PartnerSearch::Exhaustive, lines).run(|_| {});
-            let ours: Vec<_> = merges.iter().map(|m| (m.children, m.ends, m.error)).collect();
-            assert_eq!(ours, reference, "seed {seed}");
-            assert_eq!(root, 60 + 59 - 1);
+        for rule in MergeCostRule::ALL {
+            let options = MergeOptions {
+                cost_rule: rule,
+                ..MergeOptions::default()
+            };
+            for seed in 1..6 {
+                let lines = random_lines(60, seed);
+                let context = CostContext::for_options(&options, 3f32.sqrt(), 60);
+                assert_eq!(context.rule(), rule);
+                let reference = naive_greedy(&context, lines.clone());
+                let (merges, root) = MergeSet::new(&context, PartnerSearch::Exhaustive, lines).run(|_| {});
+                let ours: Vec<_> = merges.iter().map(|m| (m.children, m.ends, m.error)).collect();
+                assert_eq!(ours, reference, "{rule:?}, seed {seed}");
+                assert_eq!(root, 60 + 59 - 1);
+            }
+        }
+    }
+
+    #[test]
+    fn the_error_rule_merges_the_thinnest_pair_first() {
+        let lines = random_lines(40, 3);
+        let context = CostContext::for_options(&MergeOptions::default(), 3f32.sqrt(), 40);
+        let (merges, _) = MergeSet::new(&context, PartnerSearch::Exhaustive, lines.clone()).run(|_| {});
+        let thinnest = (0..lines.len())
+            .flat_map(|i| (i + 1..lines.len()).map(move |j| (i, j)))
+            .map(|(i, j)| merge_lines(&lines[i], &lines[j]).error)
+            .fold(f32::INFINITY, f32::min);
+        assert_eq!(merges[0].error, thinnest);
+        // The weighted cost's first merge is another pair, and thicker.
+        let weighted = CostContext::new(MergeWeights::default(), 3f32.sqrt(), 40);
+        let (paper, _) = MergeSet::new(&weighted, PartnerSearch::Exhaustive, lines).run(|_| {});
+        assert!(paper[0].error > thinnest, "{} vs {thinnest}", paper[0].error);
+    }
+
+    /// Lines a cut of a merge forest over `leaves` leaves draws at error `e`
+    /// (the nodes with `own ≤ e < parent`; leaves' own error `leaf_error`).
+    fn cut_count(leaves: usize, merged: &[MergedLine], leaf_error: f32, e: f32) -> usize {
+        let mut parent_error = vec![f32::INFINITY; leaves + merged.len()];
+        for m in merged {
+            for c in m.children {
+                parent_error[c as usize] = m.error;
+            }
+        }
+        let own = |node: usize| {
+            if node < leaves {
+                leaf_error
+            } else {
+                merged[node - leaves].error
+            }
+        };
+        (0..parent_error.len())
+            .filter(|&node| own(node) <= e && e < parent_error[node])
+            .count()
+    }
+
+    #[test]
+    fn on_twigs_the_error_rule_cuts_fewer_lines_than_the_weighted_cost() {
+        for seed in [11, 12, 13] {
+            let mut needles = random_needles(12, 20, seed);
+            for needle in &mut needles {
+                needle.radius = 0.0005;
+            }
+            let n = needles.len();
+            let forest = |rule| {
+                let options = MergeOptions {
+                    cost_rule: rule,
+                    ..MergeOptions::default()
+                };
+                let mut merged = merge_group(&needles, &CostContext::for_options(&options, 1.0, n), &options);
+                tighten_group_errors(&needles, &mut merged);
+                merged
+            };
+            let (ours, paper) = (forest(MergeCostRule::Error), forest(MergeCostRule::Weighted));
+            // From a needle's width (1 mm) to half the twig: never more lines,
+            // and past the shoots' spacing (2 cm) a tenth fewer or better
+            // (measured: 682 / 974, 778 / 958, 753 / 932 over those errors).
+            let mut far = [0usize; 2];
+            for step in 0..24 {
+                let e = 0.001 * 1.25f32.powi(step);
+                let counts = [&ours, &paper].map(|forest| cut_count(n, forest, 0.001, e));
+                assert!(counts[0] <= counts[1], "seed {seed}, e = {e}: {counts:?}");
+                if e > 0.02 {
+                    far[0] += counts[0];
+                    far[1] += counts[1];
+                }
+            }
+            assert!(10 * far[0] <= 9 * far[1], "seed {seed}: {far:?}");
         }
     }
 

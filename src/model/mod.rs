@@ -41,6 +41,7 @@ pub mod wind;
 
 pub use bake::{
     BakeError, BakeOptions, BakeProgress, BakeStage, StageSeconds, StageTimer, bake, bake_impostor, bake_prototypes,
+    paper_model,
 };
 pub use cut_count::{CutCounter, CutCounts};
 pub use file::{

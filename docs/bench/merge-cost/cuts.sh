@@ -17,7 +17,7 @@ for tree in scots-pine norway-spruce eastern-white-pine lawson-cypress douglas-f
   for rule in error weighted; do
     if [ "$rule" = error ]; then record=assets/trees/mature/$tree.conifer; else record=$WEIGHTED/$tree.conifer; fi
     for eps in 3 1; do
-      for d in 25 50 100 200 400; do
+      for d in 2 10 25 50 100 200 400; do
         "$CONIFER" cut "$record" --distance "$d" --pixel-error "$eps" --json |
           python3 -c "import json,sys; j=json.load(sys.stdin); j.update(tree='$tree', rule='$rule', record_baked_by='conifer bake --preset $tree --merge-cost $rule', pixel_error=$eps, height_px=1080, fov_deg=45, command='conifer cut RECORD --distance $d --pixel-error $eps --json'); print(json.dumps(j))" >> "$out"
       done
