@@ -90,6 +90,14 @@ fn bake_inspect_and_cut_a_preset() {
             .map(|v| v.as_u64().unwrap())
             .sum();
         assert_eq!(prism_total, cut["prisms"].as_u64().unwrap());
+        // The placed layout the plugin loads walks at least what it draws
+        // (a prism or a line a primitive).
+        let drawn = cut["prisms"].as_u64().unwrap() + segments;
+        let processed = cut["gpu_placed_primitives_processed"].as_u64().unwrap();
+        assert!(
+            drawn <= processed,
+            "at {distance} m: {processed} processed, {drawn} drawn"
+        );
         assert!(triangles + segments <= previous_primitives, "cost grew at {distance} m");
         previous_primitives = triangles + segments;
     }

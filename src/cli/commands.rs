@@ -519,9 +519,17 @@ pub struct CutReport {
     /// Mean opacity of the original lines drawn, `δ · 2/ρ` (paper), or null.
     pub mean_original_line_opacity: Option<f32>,
     /// Lines (original, merged and wood) in the prefixes the plugin's
-    /// indirect draws cover at this error: what its vertex shaders run on
-    /// (null when the record does not fit the GPU layout).
+    /// indirect draws cover at this error in the flat layout (a record made
+    /// in code and handed to `ConiferSpecies::from_record`): what its vertex
+    /// shaders run on (null when the record does not fit the GPU layout).
     pub gpu_lines_processed: Option<u64>,
+    /// Primitives (prisms and needle lines) the plugin processes at this
+    /// error in the layout its asset loader builds for this file (the
+    /// record's prototypes placed, `CompactSpecies::build_placed`), every
+    /// placement at the view's error: the level-2 prefix and each expanded
+    /// placement's prototype prefixes (null when the record does not fit
+    /// that layout, or for `conifer preview`).
+    pub gpu_placed_primitives_processed: Option<u64>,
     /// All lines of the plugin's GPU arrays (null as above).
     pub gpu_lines_total: Option<u64>,
 }
@@ -535,8 +543,16 @@ pub(super) fn view_params(view: &ViewArgs) -> ViewParams {
 }
 
 /// The cut report of `record` seen from `view`.
-pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
+pub(crate) fn cut_report(record: &LodRecord, prototypes: Option<&PrototypeRecord>, view: &ViewArgs) -> CutReport {
     let e = view_params(view).spatial_error(view.distance);
+    let placed_processed = prototypes.and_then(|prototypes| {
+        let compact = CompactSpecies::build_placed(prototypes).ok()?;
+        Some(
+            compact
+                .placed_drawn(prototypes, threshold_code(e), e, threshold_code, None)
+                .1,
+        )
+    });
     let cut = record.cut(e);
     let stats = record.cut_stats(&cut);
     let compact = CompactSpecies::build(record).ok();
@@ -566,13 +582,18 @@ pub(crate) fn cut_report(record: &LodRecord, view: &ViewArgs) -> CutReport {
         gpu_lines_total: compact
             .as_ref()
             .map(|c| (c.needles.len() + c.merged_lines.len() + c.wood_segments.len()) as u64),
+        gpu_placed_primitives_processed: placed_processed,
     }
 }
 
 pub(super) fn cut(args: &CutArgs) -> anyhow::Result<()> {
     check_view(&args.view)?;
-    let record = load(&args.file)?;
-    let report = cut_report(&record, &args.view);
+    let prototypes = crate::model::read_prototype_record(&args.file)
+        .with_context(|| format!("{}: cannot load record", args.file.display()))?;
+    let record = prototypes
+        .flatten()
+        .with_context(|| format!("{}: cannot load record", args.file.display()))?;
+    let report = cut_report(&record, Some(&prototypes), &args.view);
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -657,7 +678,7 @@ pub(super) fn preview(args: &PreviewArgs) -> anyhow::Result<()> {
     image
         .save(&args.output)
         .with_context(|| format!("{}: cannot write PNG", args.output.display()))?;
-    let report = cut_report(&record, &view);
+    let report = cut_report(&record, None, &view);
     println!(
         "{}",
         serde_json::json!({
