@@ -524,7 +524,13 @@ pub fn evaluate(
 
     // Shadows, in a scene of their own.
     progress("shadows on the ground");
-    let mut shadow_scene = shadow::ShadowScene::new(scene.record().clone(), &methods, options.view, conifer_wind)?;
+    let mut shadow_scene = shadow::ShadowScene::new(
+        scene.record().clone(),
+        scene.paper_record().cloned(),
+        &methods,
+        options.view,
+        conifer_wind,
+    )?;
     let mut shadow_rows: Vec<Vec<image::RgbaImage>> = Vec::new();
     for (k, &distance) in distances.iter().enumerate() {
         let frame = shadow_scene.capture(distance)?;

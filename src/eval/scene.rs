@@ -143,22 +143,41 @@ pub(super) fn renderer_with_species(
 pub(super) struct MethodSpecies {
     ours: Handle<ConiferSpecies>,
     paper: Option<Handle<ConiferSpecies>>,
+    /// The paper's model the `paper` species draws.
+    paper_record: Option<std::sync::Arc<LodRecord>>,
 }
 
 impl MethodSpecies {
-    /// Adds `species`, and the paper's where `methods` has `paper`.
-    pub(super) fn add(world: &mut World, species: ConiferSpecies, methods: &[Method]) -> Result<Self, EvalError> {
+    /// Adds `species`, and the paper's where `methods` has `paper`: from
+    /// `paper_record` when a scene of the same record already baked it,
+    /// else baked here.
+    pub(super) fn add(
+        world: &mut World,
+        species: ConiferSpecies,
+        methods: &[Method],
+        paper_record: Option<std::sync::Arc<LodRecord>>,
+    ) -> Result<Self, EvalError> {
         let paper = if methods.contains(&Method::Paper) {
-            let record = crate::model::paper_model(species.record()).map_err(EvalError::PaperModel)?;
+            let record = match paper_record {
+                Some(record) => LodRecord::clone(&record),
+                None => crate::model::paper_model(species.record()).map_err(EvalError::PaperModel)?,
+            };
             Some(ConiferSpecies::from_record(record)?)
         } else {
             None
         };
+        let paper_record = paper.as_ref().map(|paper| paper.record().clone());
         let mut assets = world.resource_mut::<Assets<ConiferSpecies>>();
         Ok(Self {
             ours: assets.add(species),
             paper: paper.map(|paper| assets.add(paper)),
+            paper_record,
         })
+    }
+
+    /// The paper's model the `paper` species draws (`None` without it).
+    pub(super) fn paper_record(&self) -> Option<&std::sync::Arc<LodRecord>> {
+        self.paper_record.as_ref()
     }
 
     /// The species `method` draws.
@@ -435,6 +454,8 @@ pub struct EvalFrame {
 pub struct EvalScene {
     renderer: HeadlessRenderer,
     record: std::sync::Arc<LodRecord>,
+    /// The paper's model the `paper` method draws (`None` without it).
+    paper_record: Option<std::sync::Arc<LodRecord>>,
     view: EvalView,
     methods: Vec<Method>,
     views: Vec<(Method, View)>,
@@ -524,7 +545,7 @@ impl EvalScene {
         world.entity_mut(sun).insert((all_layers, view.sun.transform()));
 
         // The plugin's methods.
-        let method_species = MethodSpecies::add(world, species, &methods)?;
+        let method_species = MethodSpecies::add(world, species, &methods, None)?;
         for method in [Method::Paper, Method::Ours] {
             if let Some(opacity) = method
                 .line_opacity(view.ours_line_opacity)
@@ -721,6 +742,7 @@ impl EvalScene {
         let mut scene = Self {
             renderer,
             record,
+            paper_record: method_species.paper_record().cloned(),
             view,
             methods,
             views,
@@ -748,6 +770,12 @@ impl EvalScene {
     /// The record drawn.
     pub fn record(&self) -> &LodRecord {
         &self.record
+    }
+
+    /// The paper's model of the record, which the `paper` method draws
+    /// ([`crate::model::paper_model`]; `None` without that method).
+    pub fn paper_record(&self) -> Option<&std::sync::Arc<LodRecord>> {
+        self.paper_record.as_ref()
     }
 
     /// The methods drawn, in report order.

@@ -117,9 +117,13 @@ impl ShadowScene {
     /// [`SHADOW_METHODS`] lists, and lets it reach the GPU. In `wind` (not
     /// calm) the scene stands at [`SHADOW_WIND_SECONDS`] on the wind's
     /// clock: the plugin's trees sway on the GPU, the raw tree and the
-    /// exact shadow by the CPU reference of the same field.
+    /// exact shadow by the CPU reference of the same field. `paper_record`
+    /// is the paper's model of `record` where a scene already baked it
+    /// ([`super::scene::EvalScene::paper_record`]); `None` bakes it here
+    /// when `methods` has `paper`.
     pub fn new(
         record: LodRecord,
+        paper_record: Option<Arc<LodRecord>>,
         methods: &[Method],
         view: EvalView,
         wind: Option<ConiferWind>,
@@ -141,7 +145,7 @@ impl ShadowScene {
             brightness: AMBIENT,
             ..default()
         });
-        let method_species = MethodSpecies::add(world, species, methods)?;
+        let method_species = MethodSpecies::add(world, species, methods, paper_record)?;
         let (needle_material, wood_material) = raw_materials(world, &record);
         let raw = RawTree::new(&record);
         let raw_meshes = {
