@@ -272,7 +272,9 @@ pub struct CostContext {
 
 impl CostContext {
     /// The context of a tree whose crown bounding box has diagonal
-    /// `crown_diagonal` metres and which has `needles` needles.
+    /// `crown_diagonal` metres and which has `needles` needles, costing
+    /// pairs by the paper's weighted rule ([`MergeCostRule::Weighted`]; a
+    /// bake's options pick theirs through [`CostContext::for_options`]).
     pub fn new(weights: MergeWeights, crown_diagonal: f32, needles: usize) -> Self {
         Self {
             weights,
