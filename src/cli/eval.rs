@@ -249,15 +249,17 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
 /// The report as a Markdown table (the README's form).
 pub fn print_table(report: &EvalReport) {
     println!(
-        "| method | distance (m) | coverage error | colour error | crown colour error | crown shade error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
+        "| method | distance (m) | coverage error | coverage bias, crown / fringe | colour error | crown colour error | crown shade error | FLIP | shadow error | triangles | lines | primitives | frame ms |"
     );
-    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, method) in &report.methods {
         for d in &method.distances {
             println!(
-                "| {name} | {:.2} | {:.4} | {:.2} | {:.2} | {:.2} ({:.0} %) | {:.3} | {} | {} | {} | {} | {:.1} |",
+                "| {name} | {:.2} | {:.4} | {:+.4} / {:+.4} | {:.2} | {:.2} | {:.2} ({:.0} %) | {:.3} | {} | {} | {} | {} | {:.1} |",
                 d.distance,
                 d.coverage_error,
+                d.coverage_bias.crown,
+                d.coverage_bias.fringe,
                 d.color_error,
                 d.crown_color_error,
                 d.crown_shade.error,

@@ -274,6 +274,59 @@ pub fn crown_shade_error(
     })
 }
 
+/// [`coverage_bias`]: where a picture covers more or less than the
+/// reference, signed, split at the crown's outline.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct CoverageBias {
+    /// Mean of test coverage minus reference coverage, in [−1, 1], over the
+    /// crown's pixels (reference coverage ≥ [`CROWN_COVERAGE`], the pixels
+    /// [`crown_color_error`] reads); 0 when there are none.
+    pub crown: f64,
+    /// The same over the fringe: the pixels of the box the reference covers
+    /// by less than [`CROWN_COVERAGE`] where either picture covers anything;
+    /// 0 when there are none.
+    pub fringe: f64,
+    /// Pixels in the crown.
+    pub crown_pixels: u64,
+    /// Pixels in the fringe.
+    pub fringe_pixels: u64,
+}
+
+/// The signed coverage difference (test − reference, alpha as coverage)
+/// inside the crown's outline and on its fringe ([`CoverageBias`]).
+/// [`coverage_error`] is unsigned over the whole box, so a method that
+/// over-covers a crown's inside and under-covers its edges can score the
+/// same as one that errs at random; a crown pixel's composited colour moves
+/// with its coverage on a light background (by ~10 of 255 for 0.05 on a dark
+/// crown), so `crown` tells how much of [`crown_color_error`] is coverage
+/// and which way.
+pub fn coverage_bias(reference: &RgbaImage, test: &RgbaImage, rect: &PixelRect) -> Result<CoverageBias, MeasureError> {
+    check_sizes(reference, test, rect)?;
+    let (mut crown, mut fringe) = ((0i64, 0u64), (0i64, 0u64));
+    for (x, y) in rect.pixels() {
+        let (a, b) = (reference.get_pixel(x, y).0[3], test.get_pixel(x, y).0[3]);
+        let difference = i64::from(b) - i64::from(a);
+        if a >= CROWN_COVERAGE {
+            crown = (crown.0 + difference, crown.1 + 1);
+        } else if a > 0 || b > 0 {
+            fringe = (fringe.0 + difference, fringe.1 + 1);
+        }
+    }
+    let mean = |(sum, count): (i64, u64)| {
+        if count == 0 {
+            0.0
+        } else {
+            sum as f64 / (255.0 * count as f64)
+        }
+    };
+    Ok(CoverageBias {
+        crown: mean(crown),
+        fringe: mean(fringe),
+        crown_pixels: crown.1,
+        fringe_pixels: fringe.1,
+    })
+}
+
 /// The background `image` shows: the mean colour, sRGB in `[0, 1]`, of its
 /// pixels nothing covers (alpha 0). A camera that renders into a high
 /// dynamic range texture tone-maps its clear colour with the picture, so
@@ -561,6 +614,59 @@ mod tests {
             crown_shade_error(&reference, &flat(3, 1, [0; 4]), &rect, background),
             Err(MeasureError::SizeMismatch((4, 1), (3, 1)))
         );
+    }
+
+    #[test]
+    fn coverage_bias_splits_at_the_crowns_outline() {
+        let rect = PixelRect::full(5, 1);
+        // Crown (≥ 26), crown, fringe, fringe, background.
+        let reference = RgbaImage::from_fn(5, 1, |x, _| Rgba([0, 0, 0, [200, 100, 20, 10, 0][x as usize]]));
+        // Over-covers the crown by 51 and 0, under-covers the fringe by 20
+        // and covers a background pixel nothing covered by 10.
+        let test = RgbaImage::from_fn(5, 1, |x, _| Rgba([0, 0, 0, [251, 100, 0, 10, 10][x as usize]]));
+        let bias = coverage_bias(&reference, &test, &rect).unwrap();
+        assert_eq!((bias.crown_pixels, bias.fringe_pixels), (2, 3));
+        assert!((bias.crown - 51.0 / (2.0 * 255.0)).abs() < 1e-12, "{bias:?}");
+        assert!(
+            (bias.fringe - (-20.0 + 0.0 + 10.0) / (3.0 * 255.0)).abs() < 1e-12,
+            "{bias:?}"
+        );
+        // Against itself: no bias; the background's pixels are in neither part.
+        let same = coverage_bias(&reference, &reference, &rect).unwrap();
+        assert_eq!(
+            same,
+            CoverageBias {
+                crown: 0.0,
+                fringe: 0.0,
+                crown_pixels: 2,
+                fringe_pixels: 2
+            }
+        );
+        let blank = flat(5, 1, [0; 4]);
+        assert_eq!(coverage_bias(&blank, &blank, &rect).unwrap(), CoverageBias::default());
+        assert_eq!(
+            coverage_bias(&reference, &flat(3, 1, [0; 4]), &rect),
+            Err(MeasureError::SizeMismatch((5, 1), (3, 1)))
+        );
+    }
+
+    proptest::proptest! {
+        /// The crown's and the fringe's biases, weighted by their pixels,
+        /// sum to the mean signed coverage difference over the box.
+        #[test]
+        fn coverage_bias_parts_sum_to_the_box(
+            pairs in proptest::collection::vec((0u8..=255, 0u8..=255), 1..64),
+        ) {
+            let width = pairs.len() as u32;
+            let rect = PixelRect::full(width, 1);
+            let reference = RgbaImage::from_fn(width, 1, |x, _| Rgba([0, 0, 0, pairs[x as usize].0]));
+            let test = RgbaImage::from_fn(width, 1, |x, _| Rgba([0, 0, 0, pairs[x as usize].1]));
+            let bias = coverage_bias(&reference, &test, &rect).unwrap();
+            let signed: f64 = pairs.iter().map(|&(a, b)| (f64::from(b) - f64::from(a)) / 255.0).sum();
+            let parts = bias.crown * bias.crown_pixels as f64 + bias.fringe * bias.fringe_pixels as f64;
+            proptest::prop_assert!((parts - signed).abs() < 1e-9, "{:?} against {}", bias, signed);
+            proptest::prop_assert!(bias.crown.abs() <= 1.0 && bias.fringe.abs() <= 1.0);
+        }
     }
 
     proptest::proptest! {

@@ -144,6 +144,10 @@ pub struct DistanceReport {
     /// ([`measure::crown_shade_error`]), 0–255, with the share of the crown's
     /// pixels it compared.
     pub crown_shade: measure::CrownShade,
+    /// Signed coverage difference from the reference inside the crown's
+    /// outline and on its fringe ([`measure::coverage_bias`]): which way,
+    /// and where, `coverage_error` errs.
+    pub coverage_bias: measure::CoverageBias,
     /// Mean FLIP error (NVIDIA's perceptual difference, `nv-flip`) over the
     /// same box, in [0, 1].
     pub perceptual: f64,
@@ -439,6 +443,7 @@ pub fn evaluate(
                 color_error: measure::color_error(&frame.reference, picture, &rect)?,
                 crown_color_error: measure::crown_color_error(&frame.reference, picture, &rect)?,
                 crown_shade: measure::crown_shade_error(&frame.reference, picture, &rect, background)?,
+                coverage_bias: measure::coverage_bias(&frame.reference, picture, &rect)?,
                 perceptual: flip_error(&frame.reference, picture, &rect)?,
                 triangles: counts.triangles,
                 lines: counts.lines,
