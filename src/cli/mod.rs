@@ -165,8 +165,9 @@ pub struct UpgradeArgs {
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
     /// Leave a record without a crown impostor as it is (by default, one older than
-    /// format 8 gains its impostor, baked with the default options; format 7's
-    /// lit its texels along one mean axis, and is baked again).
+    /// format 10 gains its impostor, baked with the default options; format 7's
+    /// lit its texels along one mean axis, and formats 8 and 9 lack its wood
+    /// visibility: theirs is baked again).
     #[arg(long)]
     pub no_impostor: bool,
     /// Leave a record without a line calibration as it is (by default, one older than

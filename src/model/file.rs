@@ -41,11 +41,17 @@
 //!   record was calibrated with, if any
 //!   ([`super::calibration::LineCalibration`]: two pixel sizes and eight
 //!   scales, f32).
+//! * after that (format 10), with the impostor, how much of its wood the
+//!   needles leave in sight by height and depth in the crown
+//!   ([`super::impostor::WoodVisibility`], a byte a share).
 //!
 //! A flat record ([`LodRecord`], an imported tree) is written as every group
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 10 adds the impostor's wood visibility: an older file's
+//! impostor is dropped (the plugin bakes it at load, `conifer upgrade`
+//! into the file).
 //! Version 9 adds the line calibration (older files read without one:
 //! every line keeps its opacity; `conifer upgrade` calibrates them).
 //! Version 8 stores each impostor texel's lighting as shares of two
@@ -68,7 +74,7 @@
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
 use super::calibration::LineCalibration;
-use super::impostor::CrownImpostor;
+use super::impostor::{CrownImpostor, WoodVisibility};
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
@@ -87,7 +93,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 9;
+pub const FORMAT_VERSION: u32 = 10;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -351,6 +357,7 @@ impl StoredImpostor {
             bottom: self.bottom,
             texel: self.texel,
             texels,
+            wood_visibility: Default::default(),
         })
     }
 }
@@ -911,6 +918,8 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
     let impostor = record.impostor.as_deref().map(StoredImpostor::encode).transpose()?;
     body.extend(postcard::to_allocvec(&impostor).map_err(|e| RecordError::Malformed(e.to_string()))?);
     body.extend(postcard::to_allocvec(&record.line_calibration).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    let wood_visibility = record.impostor.as_deref().map(|i| i.wood_visibility.to_bytes());
+    body.extend(postcard::to_allocvec(&wood_visibility).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -1007,7 +1016,7 @@ fn decode_prototypes(version: u32, body: &[u8]) -> Result<PrototypeRecord, Recor
     Ok(record)
 }
 
-/// What formats 5, 7 and 9 store after the payload.
+/// What formats 5, 7, 9 and 10 store after the payload.
 #[derive(Default)]
 struct AfterPayload {
     /// Format 5: colours by age, side and height, needle ages.
@@ -1018,7 +1027,7 @@ struct AfterPayload {
     line_calibration: Option<LineCalibration>,
 }
 
-/// A format 3–9 payload, and what formats 5, 7 and 9 store after it.
+/// A format 3–10 payload, and what formats 5, 7, 9 and 10 store after it.
 fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPayload), RecordError> {
     let malformed = |e: postcard::Error| RecordError::Malformed(e.to_string());
     if version == 3 {
@@ -1062,6 +1071,27 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
             ));
         }
         (stored, rest)
+    } else {
+        (None, rest)
+    };
+    // Format 10: the impostor's wood visibility, which older impostors
+    // lack: they are dropped (the plugin bakes the impostor at load).
+    let (impostor, rest) = if version >= 10 {
+        let (stored, rest) = postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(malformed)?;
+        let impostor = match (impostor, stored) {
+            (Some(mut impostor), Some(bytes)) => {
+                impostor.wood_visibility = WoodVisibility::from_bytes(&bytes)
+                    .ok_or_else(|| RecordError::Malformed("impostor: a wood visibility of another size".into()))?;
+                Some(impostor)
+            }
+            (None, None) => None,
+            _ => {
+                return Err(RecordError::Malformed(
+                    "impostor: a wood visibility without its impostor, or the other way".into(),
+                ));
+            }
+        };
+        (impostor, rest)
     } else {
         (None, rest)
     };
@@ -1455,13 +1485,16 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
-        // Format 8 stops after the impostor: read without a calibration.
+        // Format 8 stops after the impostor: read without a calibration
+        // (and without the impostor, which lacks its wood visibility).
         let body = &bytes[HEADER_BYTES..];
         let stored = postcard::to_allocvec(&Some(calibration)).unwrap();
-        let v8 = &body[..body.len() - stored.len()];
+        let visibility =
+            postcard::to_allocvec(&record.impostor.as_deref().map(|i| i.wood_visibility.to_bytes())).unwrap();
+        let v8 = &body[..body.len() - stored.len() - visibility.len()];
         let old = decode_prototype_record(&file_of_version(8, v8)).unwrap();
         assert!(old.line_calibration.is_none());
-        assert_eq!(old.impostor, record.impostor);
+        assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
         // A scale out of range, sizes not increasing, a NaN or a cut-off
         // calibration: malformed, never a panic.
@@ -1508,25 +1541,47 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one (and without a line calibration), format 9 stores a
-        // single byte for each.
+        // Without one (and without a line calibration), format 10 stores a
+        // single byte for each and for the wood visibility.
         let mut bare = record.clone();
         bare.impostor = None;
         bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 2
+            HEADER_BYTES + v6.len() + 3
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
-        let with = |edit: &dyn Fn(&mut StoredImpostor)| {
+        let file = |version: u32, edit: &dyn Fn(&mut StoredImpostor), visibility: Option<Vec<u8>>| {
             let mut s = StoredImpostor::encode(&impostor).unwrap();
             edit(&mut s);
             let mut body = v6.to_vec();
             body.extend(postcard::to_allocvec(&Some(s)).unwrap());
-            decode_prototype_record(&file_of_version(8, &body))
+            if version >= 9 {
+                body.extend(postcard::to_allocvec(&None::<LineCalibration>).unwrap());
+            }
+            if version >= 10 {
+                body.extend(postcard::to_allocvec(&visibility).unwrap());
+            }
+            decode_prototype_record(&file_of_version(version, &body))
         };
+        let with = |edit: &dyn Fn(&mut StoredImpostor)| file(10, edit, Some(impostor.wood_visibility.to_bytes()));
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
+        // Formats 8 and 9 stored no wood visibility: read without the
+        // impostor (the plugin bakes it at load).
+        for version in [8, 9] {
+            let old = file(version, &|_| {}, None).unwrap();
+            assert!(old.impostor.is_none());
+            assert_eq!(old.placements, record.placements);
+        }
+        // Format 10's wood visibility comes with the impostor, at its size.
+        for visibility in [None, Some(vec![255; 10])] {
+            let error = file(10, &|_| {}, visibility).unwrap_err();
+            assert!(
+                matches!(&error, RecordError::Malformed(m) if m.starts_with("impostor")),
+                "{error}"
+            );
+        }
         // Format 7 stored mean axes in the last two planes: read without it.
         let mut v7 = v6.to_vec();
         v7.extend(postcard::to_allocvec(&Some(StoredImpostor::encode(&impostor).unwrap())).unwrap());

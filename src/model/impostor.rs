@@ -131,6 +131,168 @@ pub const SHADOW_SAMPLES: usize = 3;
 /// Heights a [`CrownImpostor::crown_radii`] profile holds, bottom to top.
 pub const CROWN_PROFILE_STEPS: usize = 32;
 
+/// Bins of a [`WoodVisibility`] across the crown, from its far side to its
+/// near side at each height.
+pub const WOOD_NEARNESS_BINS: usize = 8;
+
+/// Finer bins the bake counts wood samples in across the pictures' width,
+/// before the crown's radius at each height is known.
+const WOOD_COUNT_BINS: usize = 64;
+
+/// How many fully covered wood samples' worth a [`WoodVisibility`] bin's
+/// fit is drawn toward its height's by (a texel's samples).
+const WOOD_FIT_PRIOR: f64 = (SAMPLES_PER_TEXEL * SAMPLES_PER_TEXEL) as f64;
+
+/// Per height and [`WOOD_COUNT_BINS`] nearness, the sums of the wood
+/// samples' least-squares fit ([`WoodVisibility`]): `Σ (seen − t)(1 − t)`
+/// and `Σ (1 − t)²`.
+type WoodCounts = [[[f64; 2]; WOOD_COUNT_BINS]; CROWN_PROFILE_STEPS];
+
+/// How much of the wood its needles leave in sight where they cover the
+/// picture, by where the wood lies in the crown: at each of
+/// [`CROWN_PROFILE_STEPS`] heights (bottom to top, as
+/// [`CrownImpostor::crown_radii`]) and [`WOOD_NEARNESS_BINS`] nearnesses
+/// toward the camera (from one crown radius behind the axis to one in
+/// front), a share `g`.
+///
+/// Blended lines are not sorted one by one, so the order of a species'
+/// draws decides what lies on top in a pixel. The plugin draws a tree's
+/// wood lines twice: before its foliage lines at their opacity `a`, and
+/// after them at `a·g`, `g` this table's at the line's midpoint
+/// ([`WoodVisibility::at`]). In a pixel whose needle lines let `t`
+/// through, the wood then takes `a·(g + (1 − g)·t)` of it (to first order
+/// in `a`): all of its opacity where no needle covers the pixel, `g` of it
+/// where they cover it all. The bake fits `g` on the impostor's binary
+/// samples: per height and nearness, the least-squares fit of `seen ≈ g +
+/// (1 − g)·t` over the wood's samples in every view, `seen` 1 where no
+/// needle lies in front of the wood (the texels' `wood`) and `t` the
+/// share of the sample's texel no needle covers. Drawn only before the
+/// needles, the young Scots pine's branches took `a·t` (its densest crown
+/// pixels 7.7 of 255 short in red), drawn only after them `a` (11.0
+/// over), and drawn after at the mean share of the wood in sight, 8.5
+/// over: the wood is hidden most where the needles are densest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WoodVisibility {
+    /// The shares `g`, `[height][nearness]`, each in `[0, 1]` in steps of
+    /// 1/255.
+    pub shares: [[f32; WOOD_NEARNESS_BINS]; CROWN_PROFILE_STEPS],
+}
+
+impl Default for WoodVisibility {
+    /// The wood in sight wherever it is (a tree without needles).
+    fn default() -> Self {
+        Self {
+            shares: [[1.0; WOOD_NEARNESS_BINS]; CROWN_PROFILE_STEPS],
+        }
+    }
+}
+
+/// The opacities of a camera's two draws of a wood line of opacity
+/// `opacity` whose share in sight where the needles cover the pixel is
+/// `in_sight` ([`WoodVisibility`]): `(under, over)`, drawn before the
+/// foliage lines and after them, `a·(1 − g)/(1 − a·g)` and `a·g`. Blended
+/// over a pixel that lets `b` through, needle lines that let `t` through
+/// between them, the wood takes `a·(g + (1 − g)·t)` of the pixel and `b`
+/// keeps `t·(1 − a)`, as with the wood among the needles. Inputs are
+/// clamped to `[0, 1]`. CPU reference of the wood lines' vertex shader
+/// (`CONIFER_WOOD_LAYERS`).
+pub fn wood_layer_opacities(opacity: f32, in_sight: f32) -> (f32, f32) {
+    let (a, g) = (clamp_share(opacity), clamp_share(in_sight));
+    (a * (1.0 - g) / (1.0 - a * g).max(1e-6), a * g)
+}
+
+/// `value` in `[0, 1]`, 0 for NaN.
+fn clamp_share(value: f32) -> f32 {
+    if value.is_nan() { 0.0 } else { value.clamp(0.0, 1.0) }
+}
+
+impl WoodVisibility {
+    /// The shares as bytes (`share · 255`), heights major.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        self.shares
+            .iter()
+            .flatten()
+            .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect()
+    }
+
+    /// The table [`WoodVisibility::to_bytes`] gave; `None` for another
+    /// length.
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        if bytes.len() != CROWN_PROFILE_STEPS * WOOD_NEARNESS_BINS {
+            return None;
+        }
+        let mut visibility = Self::default();
+        for (k, &byte) in bytes.iter().enumerate() {
+            visibility.shares[k / WOOD_NEARNESS_BINS][k % WOOD_NEARNESS_BINS] = f32::from(byte) / 255.0;
+        }
+        Some(visibility)
+    }
+
+    /// The share `g` at tree-local `height` and `nearness`
+    /// (metres toward the camera from the axis, horizontally), for a crown
+    /// of profile `radii` between `bottom` and `top`
+    /// ([`CrownImpostor::crown_radius_at`]): bilinear between the bins'
+    /// middles, the end bins' outside them. 1 for inputs that are not
+    /// finite. CPU reference of the wood lines' `wood_visibility_at` in
+    /// the plugin's vertex shader.
+    pub fn at(&self, radii: &[f32; CROWN_PROFILE_STEPS], bottom: f32, top: f32, height: f32, nearness: f32) -> f32 {
+        if !(height.is_finite() && nearness.is_finite() && bottom.is_finite() && top > bottom && top.is_finite()) {
+            return 1.0;
+        }
+        let radius = CrownImpostor::crown_radius_at(radii, bottom, top, height).max(1e-6);
+        let steps = CROWN_PROFILE_STEPS as f32;
+        let bins = WOOD_NEARNESS_BINS as f32;
+        let fh = ((height - bottom) / (top - bottom) * steps - 0.5).clamp(0.0, steps - 1.0);
+        let fn_ = ((nearness / radius + 1.0) * 0.5 * bins - 0.5).clamp(0.0, bins - 1.0);
+        let (k, b) = (
+            (fh as usize).min(CROWN_PROFILE_STEPS - 2),
+            (fn_ as usize).min(WOOD_NEARNESS_BINS - 2),
+        );
+        let (th, tn) = (fh - k as f32, fn_ - b as f32);
+        let row = |k: usize| self.shares[k][b] * (1.0 - tn) + self.shares[k][b + 1] * tn;
+        (row(k) * (1.0 - th) + row(k + 1) * th).clamp(0.0, 1.0)
+    }
+
+    /// The shares from per-height fit sums ([`WoodCounts`]) in
+    /// [`WOOD_COUNT_BINS`] nearness bins across `[-half_width,
+    /// half_width]`, regrouped by each height's crown radius. A bin's fit
+    /// is drawn toward its height's by [`WOOD_FIT_PRIOR`] samples' worth,
+    /// and a height's toward the whole tree's, so that a bin of a few
+    /// samples does not swing from 0 to 1 beside its neighbours; a tree
+    /// whose needles cover none of its wood is in sight wherever it is.
+    fn from_counts(counts: &WoodCounts, radii: &[f32; CROWN_PROFILE_STEPS], half_width: f32) -> Self {
+        let mut visibility = Self::default();
+        let mut by_height = [[[0.0f64; 2]; WOOD_NEARNESS_BINS]; CROWN_PROFILE_STEPS];
+        for (step, by_nearness) in counts.iter().enumerate() {
+            let radius = radii[step].max(1e-6);
+            for (bin, fit) in by_nearness.iter().enumerate() {
+                let nearness = ((bin as f32 + 0.5) / WOOD_COUNT_BINS as f32 * 2.0 - 1.0) * half_width;
+                let u = ((nearness / radius + 1.0) * 0.5 * WOOD_NEARNESS_BINS as f32).floor();
+                let target = u.clamp(0.0, (WOOD_NEARNESS_BINS - 1) as f32) as usize;
+                by_height[step][target][0] += fit[0];
+                by_height[step][target][1] += fit[1];
+            }
+        }
+        let sum = |fits: &mut dyn Iterator<Item = &[f64; 2]>| fits.fold([0.0, 0.0], |s, f| [s[0] + f[0], s[1] + f[1]]);
+        let tree = sum(&mut by_height.iter().flatten());
+        if tree[1] <= 0.0 {
+            return visibility;
+        }
+        let fit = |s: [f64; 2], prior: f64| (s[0] + WOOD_FIT_PRIOR * prior) / (s[1] + WOOD_FIT_PRIOR);
+        let tree_share = (tree[0] / tree[1]).clamp(0.0, 1.0);
+        for (step, bins) in by_height.iter().enumerate() {
+            let height_share = fit(sum(&mut bins.iter()), tree_share).clamp(0.0, 1.0);
+            for (bin, s) in bins.iter().enumerate() {
+                let share = fit(*s, height_share).clamp(0.0, 1.0) as f32;
+                // In steps of 1/255, as record files store it.
+                visibility.shares[step][bin] = (share * 255.0).round() / 255.0;
+            }
+        }
+        visibility
+    }
+}
+
 /// Where an impostor texel takes the shadows it receives: depths (tree
 /// metres, toward the camera from the card) of [`SHADOW_SAMPLES`] points
 /// on the view ray through the crown, which the shader averages. The ray
@@ -245,6 +407,9 @@ pub struct CrownImpostor {
     /// `views × rows × columns` texels: coverage, wood, vertical share ×
     /// coverage, across share × coverage (module docs).
     pub texels: Vec<[u8; 4]>,
+    /// How much of the wood the needles leave in sight, by height and
+    /// depth in the crown.
+    pub wood_visibility: WoodVisibility,
 }
 
 /// One texel decoded.
@@ -490,11 +655,12 @@ impl CrownImpostor {
             bottom: lo.y,
             texel,
             texels: Vec::new(),
+            wood_visibility: WoodVisibility::default(),
         };
         // Views are independent: each rasterizes every piece (in parallel,
         // on the caller's rayon pool), wood first, so that each needle
         // sample can tell whether it lies in front of the wood there.
-        let texels: Vec<Vec<[u8; 4]>> = (0..options.views)
+        let views: Vec<(Vec<[u8; 4]>, Box<WoodCounts>)> = (0..options.views)
             .into_par_iter()
             .map(|k| {
                 let mut canvas = ViewCanvas::new(&impostor, k);
@@ -507,10 +673,18 @@ impl CrownImpostor {
                 for needle in &needles {
                     impostor.splat_needle(&mut canvas, needle);
                 }
-                impostor.resolve(&canvas)
+                (impostor.resolve(&canvas), impostor.count_wood(&canvas))
             })
             .collect();
-        impostor.texels = texels.concat();
+        let mut counts: Box<WoodCounts> = Box::new([[[0.0; 2]; WOOD_COUNT_BINS]; CROWN_PROFILE_STEPS]);
+        for (_, view) in &views {
+            for (sum, add) in counts.iter_mut().flatten().zip(view.iter().flatten()) {
+                sum[0] += add[0];
+                sum[1] += add[1];
+            }
+        }
+        impostor.texels = views.into_iter().flat_map(|(texels, _)| texels).collect();
+        impostor.wood_visibility = WoodVisibility::from_counts(&counts, &impostor.crown_radii(), impostor.half_width);
         Some(impostor)
     }
 
@@ -792,6 +966,48 @@ impl CrownImpostor {
         );
     }
 
+    /// The view's sums of the wood samples' fit ([`WoodVisibility`]) by
+    /// height and nearness (the front-most wood's, [`WOOD_COUNT_BINS`]
+    /// across the pictures' width).
+    fn count_wood(&self, canvas: &ViewCanvas) -> Box<WoodCounts> {
+        let mut counts: Box<WoodCounts> = Box::new([[[0.0; 2]; WOOD_COUNT_BINS]; CROWN_PROFILE_STEPS]);
+        let n = SAMPLES_PER_TEXEL;
+        let (width, height) = (self.columns * n, self.rows * n);
+        // What the needles let through, per texel.
+        let mut through = vec![0.0f64; (self.columns * self.rows) as usize];
+        for row in 0..self.rows {
+            for column in 0..self.columns {
+                let covered = (row * n..(row + 1) * n)
+                    .flat_map(|j| (column * n..(column + 1) * n).map(move |i| (i, j)))
+                    .filter(|&(i, j)| canvas.needles.get(i, j))
+                    .count();
+                through[(row * self.columns + column) as usize] = 1.0 - covered as f64 / f64::from(n * n);
+            }
+        }
+        let (steps, bins) = (CROWN_PROFILE_STEPS as f32, WOOD_COUNT_BINS as f32);
+        for j in 0..height {
+            // Rows run from the top; a sample row's share of the height.
+            let up = 1.0 - (j as f32 + 0.5) / height as f32;
+            let step = ((up * steps) as usize).min(CROWN_PROFILE_STEPS - 1);
+            for i in 0..width {
+                let index = (j * width + i) as usize;
+                if !canvas.wood.is_set(index) {
+                    continue;
+                }
+                let nearness = canvas.wood_front[index];
+                let bin = ((nearness / self.half_width + 1.0) * 0.5 * bins)
+                    .floor()
+                    .clamp(0.0, bins - 1.0) as usize;
+                let t = through[((j / n) * self.columns + i / n) as usize];
+                let seen = if canvas.wood_hidden.is_set(index) { 0.0 } else { 1.0 };
+                let fit = &mut counts[step][bin];
+                fit[0] += (seen - t) * (1.0 - t);
+                fit[1] += (1.0 - t) * (1.0 - t);
+            }
+        }
+        counts
+    }
+
     /// The view's texels from its samples: coverage is the samples the
     /// needles or the wood cover; wood is seen where no needle lies in
     /// front of it.
@@ -878,6 +1094,7 @@ mod tests {
             bottom: 1.0,
             texel,
             texels,
+            wood_visibility: WoodVisibility::default(),
         };
         let radii = impostor.crown_radii();
         for (step, radius) in radii.iter().enumerate() {
@@ -1525,5 +1742,116 @@ mod tests {
         let d = Vec2::new(0.5 / size.x, 0.0);
         let e = Vec2::new(0.0, 0.5 / size.y);
         assert_eq!(mips.footprint(0, uv, d, e), mips.sample_grad(0, uv, d, e));
+    }
+
+    /// The wood's share in sight where the needles cover the picture, by
+    /// height and depth: a trunk inside a dense ring of needles (radius
+    /// 0.6 m, its lower half) is hidden from both views; two poles outside
+    /// the ring, one on each side, are each in sight from the view it
+    /// stands in front of the crown for, and hidden behind the ring from
+    /// the other.
+    #[test]
+    fn wood_visibility_counts_the_needles_in_front() {
+        let needles: Vec<Needle> = (0..400)
+            .map(|k| {
+                let angle = std::f32::consts::TAU * k as f32 / 400.0;
+                let at = Vec3::new(0.6 * angle.sin(), 0.0, 0.6 * angle.cos());
+                needle(at, at + Vec3::new(0.0, 1.0, 0.0), 0.01)
+            })
+            .collect();
+        let trunk = WoodSegment {
+            start: Vec3::ZERO,
+            end: Vec3::new(0.0, 2.0, 0.0),
+            start_radius: 0.05,
+            end_radius: 0.05,
+        };
+        let pole = |x: f32, z: f32| WoodSegment {
+            start: Vec3::new(x, 0.2, z),
+            end: Vec3::new(x, 0.8, z),
+            start_radius: 0.02,
+            end_radius: 0.02,
+        };
+        // The cameras on +z (view 0) and on −z (view 1); texels small
+        // enough that every bin's samples outweigh the fit's prior.
+        let options = ImpostorOptions { views: 2, texel: 0.02 };
+        let wood = [trunk, pole(0.3, 0.9), pole(-0.3, -0.9)];
+        let impostor = CrownImpostor::bake(&needles, &wood, &TriangleMesh::default(), options).expect("needles");
+        assert!(impostor.axis.length() < 0.02, "the axis: {}", impostor.axis);
+        let radii = impostor.crown_radii();
+        let visibility = &impostor.wood_visibility;
+        let at = |height: f32, nearness: f32| visibility.at(&radii, impostor.bottom, impostor.top(), height, nearness);
+        assert!(at(0.5, 0.05) < 0.1, "the trunk in the ring: {}", at(0.5, 0.05));
+        assert!(at(0.5, 0.9) > 0.9, "a pole in front: {}", at(0.5, 0.9));
+        assert!(at(0.5, -0.9) < 0.1, "a pole behind: {}", at(0.5, -0.9));
+        for share in visibility.shares.iter().flatten() {
+            assert!((0.0..=1.0).contains(share));
+        }
+        // A tree without wood has nothing to hide: every share 1.
+        let bare = CrownImpostor::bake(&needles, &[], &TriangleMesh::default(), options).expect("needles");
+        assert_eq!(bare.wood_visibility, WoodVisibility::default());
+    }
+
+    /// The table is bilinear between its bins' middles and takes the end
+    /// bins' outside them; inputs that are not finite read 1.
+    #[test]
+    fn wood_visibility_is_bilinear_in_its_table() {
+        let mut visibility = WoodVisibility::default();
+        for (step, row) in visibility.shares.iter_mut().enumerate() {
+            for (bin, share) in row.iter_mut().enumerate() {
+                *share = (step as f32 / 31.0) * (bin as f32 / 7.0);
+            }
+        }
+        let radii = [2.0; CROWN_PROFILE_STEPS];
+        let (bottom, top) = (0.0, 32.0);
+        // Bin b's middle lies at nearness (2(b + 0.5)/8 − 1)·radius.
+        let middle = |bin: f32| ((bin + 0.5) / 4.0 - 1.0) * 2.0;
+        let at = |height: f32, nearness: f32| visibility.at(&radii, bottom, top, height, nearness);
+        assert!((at(10.5, middle(3.0)) - 10.0 / 31.0 * 3.0 / 7.0).abs() < 1e-5);
+        assert!((at(10.5, middle(3.5)) - 10.0 / 31.0 * 3.5 / 7.0).abs() < 1e-5);
+        assert!((at(11.0, middle(3.0)) - 10.5 / 31.0 * 3.0 / 7.0).abs() < 1e-5);
+        assert!((at(40.0, 10.0) - 1.0).abs() < 1e-5);
+        assert_eq!(at(-5.0, -10.0), 0.0);
+        assert_eq!(at(f32::NAN, 0.0), 1.0);
+        assert_eq!(at(1.0, f32::INFINITY), 1.0);
+    }
+
+    proptest::proptest! {
+        /// The two draws of a wood line, blended over a background with
+        /// needle lines between them, give the wood `a·(g + (1 − g)·t)` of
+        /// the pixel and the background `t·(1 − a)`, and each opacity lies
+        /// in [0, 1].
+        #[test]
+        fn wood_layers_split_the_wood_by_its_share_in_sight(
+            a in 0.0f32..=1.0,
+            g in 0.0f32..=1.0,
+            t in 0.0f32..=1.0,
+        ) {
+            let (under, over) = wood_layer_opacities(a, g);
+            proptest::prop_assert!((0.0..=1.0).contains(&under) && (0.0..=1.0).contains(&over));
+            // Weights of the wood and the background after each "over".
+            let (mut wood, mut background) = (under, 1.0 - under);
+            (wood, background) = (wood * t, background * t);
+            (wood, background) = (over + wood * (1.0 - over), background * (1.0 - over));
+            // At a = 1 and g = 1 the under draw divides 0 by 1e-6.
+            let tolerance = 1e-4;
+            proptest::prop_assert!((wood - a * (g + (1.0 - g) * t)).abs() < tolerance, "wood {wood}");
+            proptest::prop_assert!((background - t * (1.0 - a)).abs() < tolerance, "background {background}");
+        }
+
+        /// Whatever the table and the point, the share lies in [0, 1].
+        #[test]
+        fn wood_visibility_is_a_share(
+            shares in proptest::collection::vec(0.0f32..=1.0, CROWN_PROFILE_STEPS * WOOD_NEARNESS_BINS),
+            radius in 0.0f32..5.0,
+            height in -10.0f32..40.0,
+            nearness in -20.0f32..20.0,
+        ) {
+            let mut visibility = WoodVisibility::default();
+            for (k, share) in shares.iter().enumerate() {
+                visibility.shares[k / WOOD_NEARNESS_BINS][k % WOOD_NEARNESS_BINS] = *share;
+            }
+            let v = visibility.at(&[radius; CROWN_PROFILE_STEPS], 0.0, 30.0, height, nearness);
+            proptest::prop_assert!((0.0..=1.0).contains(&v));
+        }
     }
 }

@@ -143,11 +143,17 @@ struct SpeciesParams {
     line_scales: array<vec4<f32>, 2>,
     // log2 of the first pixel size (x) and entries per doubling (y)
     line_scale_range: vec4<f32>,
+    // the share of the wood the needles leave in sight where they cover
+    // the picture, by height (CROWN_PROFILE_STEPS) and nearness
+    // (WOOD_NEARNESS_BINS), four a row (`model::impostor::WoodVisibility`)
+    wood_visibility: array<vec4<f32>, 64>,
 }
 
 const LINE_SCALE_STEPS: u32 = 8u;
 
 const CROWN_PROFILE_STEPS: u32 = 32u;
+
+const WOOD_NEARNESS_BINS: u32 = 8u;
 
 const SPHERE_LIGHT_STEPS: u32 = 64u;
 

@@ -41,7 +41,7 @@
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
-    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, LINE_SCALE_STEPS,
+    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -904,7 +904,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     if lod.view.w > 0.0 && (wood_error < line_from || !(wood_error < species.wood_line_fade * line_from)) {
         return culled();
     }
-    let alpha = line_alpha(lod, wood_error, width, width);
+    var alpha = line_alpha(lod, wood_error, width, width);
     // Sections at least two pixels long: a line shorter than a pixel may
     // light none (CPU reference: `model::wind::wood_line_sections`); the
     // segment's slots past them are not drawn.
@@ -920,6 +920,28 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     let a = mix(start.xyz, end.xyz, f32(section) / f32(drawn));
     let b = mix(start.xyz, end.xyz, f32(section + 1u) / f32(drawn));
+#ifdef CONIFER_WOOD_LAYERS
+    // A camera draws the wood lines twice, under the foliage lines and
+    // over them: at `a·(1 − g)/(1 − a·g)` and `a·g`, `g` the share of the
+    // wood the needles leave in sight where they cover the pixel
+    // (`model::impostor::WoodVisibility`), so that the wood takes `a·(g +
+    // (1 − g)·t)` of a pixel the needle lines let `t` through and what lies
+    // behind it `t·(1 − a)` (CPU reference:
+    // `model::impostor::wood_layer_opacities`).
+    let middle = 0.5 * (a + b);
+    let camera = tree_local_point(world_from_local, length(world_from_local[0].xyz), view.world_position);
+    var toward = camera.xz - species.impostor_box.xy;
+    var in_sight = 0.0;
+    if dot(toward, toward) > 1e-12 {
+        toward = normalize(toward);
+        in_sight = wood_visibility_at(middle.y, dot(middle.xz - species.impostor_box.xy, toward) + max(start.w, end.w));
+    }
+#ifdef CONIFER_WOOD_OVER_FOLIAGE
+    alpha = alpha * in_sight;
+#else
+    alpha = alpha * (1.0 - in_sight) / max(1.0 - alpha * in_sight, 1e-6);
+#endif
+#endif
     let at_end = line_vertex_at_end(vertex_index);
     let position = select(a, b, at_end);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
@@ -1600,6 +1622,7 @@ fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> 
     let q = vec3<f32>(1.0 / 6.0, 0.5, 5.0 / 6.0);
     return vec3<f32>(half_chord) - 2.0 * half_chord * log(vec3<f32>(1.0) - q * c) / through;
 }
+#endif
 
 // The crown's radius at tree-local `height`: linear between the profile's
 // steps (CPU reference: `model::impostor::CrownImpostor::crown_radius_at`).
@@ -1616,7 +1639,37 @@ fn crown_radius_at(height: f32) -> f32 {
     let b = species.crown_radii[(k + 1u) / 4u][(k + 1u) % 4u];
     return mix(a, b, t);
 }
-#endif
+
+// The share of the wood the needles leave in sight where they cover the
+// picture, at tree-local `height` and `nearness` (metres toward the
+// camera from the crown's axis): bilinear in the impostor's table, 1
+// without an impostor (CPU reference: `model::impostor::WoodVisibility::at`).
+fn wood_visibility_at(height: f32, nearness: f32) -> f32 {
+    let span = species.impostor_span;
+    if !(span.w > 0.0 && span.y > span.x) {
+        return 1.0;
+    }
+    let radius = max(crown_radius_at(height), 1e-6);
+    let steps = f32(CROWN_PROFILE_STEPS);
+    let bins = f32(WOOD_NEARNESS_BINS);
+    let fh = clamp((height - span.x) / (span.y - span.x) * steps - 0.5, 0.0, steps - 1.0);
+    let fb = clamp((nearness / radius + 1.0) * 0.5 * bins - 0.5, 0.0, bins - 1.0);
+    if !(fh == fh && fb == fb) {
+        return 1.0;
+    }
+    let k = min(u32(fh), CROWN_PROFILE_STEPS - 2u);
+    let b = min(u32(fb), WOOD_NEARNESS_BINS - 2u);
+    let th = fh - f32(k);
+    let tb = fb - f32(b);
+    let low = mix(wood_visibility_entry(k, b), wood_visibility_entry(k, b + 1u), tb);
+    let high = mix(wood_visibility_entry(k + 1u, b), wood_visibility_entry(k + 1u, b + 1u), tb);
+    return clamp(mix(low, high, th), 0.0, 1.0);
+}
+
+fn wood_visibility_entry(step: u32, bin: u32) -> f32 {
+    let k = step * WOOD_NEARNESS_BINS + bin;
+    return species.wood_visibility[k / 4u][k % 4u];
+}
 
 #ifdef CONIFER_ROUND_PRISMS
 // The normal of a round cylinder where a prism's fragment lies: `normal`

@@ -149,8 +149,8 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 1,056 bytes.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+/// A species' constants (`SpeciesParams` in WGSL), 2,080 bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
     /// Crown centre (xyz) and the radius round it that holds the tree (w).
@@ -264,7 +264,25 @@ pub struct SpeciesParams {
     /// ([`crate::model::calibration::LineCalibration::log_range`]); z, w
     /// unused.
     pub line_scale_range: [f32; 4],
+    /// The share of the wood the needles leave in sight where they cover
+    /// the picture, by height and nearness, four a row
+    /// ([`crate::model::impostor::WoodVisibility::shares`], heights
+    /// major): the opacity of the wood lines' second draw, after the
+    /// foliage lines.
+    pub wood_visibility: [[f32; 4]; WOOD_VISIBILITY_ROWS],
 }
+
+impl Default for SpeciesParams {
+    /// Every field zero (the tables are too long to derive it).
+    fn default() -> Self {
+        Zeroable::zeroed()
+    }
+}
+
+/// Rows of four shares that hold a
+/// [`crate::model::impostor::WoodVisibility`].
+pub const WOOD_VISIBILITY_ROWS: usize =
+    crate::model::impostor::CROWN_PROFILE_STEPS * crate::model::impostor::WOOD_NEARNESS_BINS / 4;
 
 /// Rows of four scales that hold a
 /// [`crate::model::calibration::LineCalibration`].
@@ -312,6 +330,13 @@ impl SpeciesParams {
     /// ([`crate::model::impostor::CrownImpostor::crown_radii`]).
     pub fn set_crown_radii(&mut self, radii: &[f32; crate::model::impostor::CROWN_PROFILE_STEPS]) {
         self.crown_radii = four_a_row(radii);
+    }
+
+    /// Sets the share of the wood the needles leave in sight where they
+    /// cover the picture ([`crate::model::impostor::WoodVisibility`]).
+    pub fn set_wood_visibility(&mut self, visibility: &crate::model::impostor::WoodVisibility) {
+        let shares: Vec<f32> = visibility.shares.iter().flatten().copied().collect();
+        self.wood_visibility = four_a_row(&shares);
     }
 
     /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`,
@@ -541,8 +566,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_1056_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 1056);
+    fn species_params_is_2080_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 2080);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`
@@ -565,6 +590,20 @@ mod tests {
     fn the_shader_has_the_crown_profiles_length() {
         let steps = crate::model::impostor::CROWN_PROFILE_STEPS;
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_radii", super::CROWN_RADII_ROWS);
+    }
+
+    /// The shader's wood visibility table is as long as `model::impostor`'s.
+    #[test]
+    fn the_shader_has_the_wood_visibilitys_length() {
+        let types = include_str!("compact_types.wgsl");
+        let bins = crate::model::impostor::WOOD_NEARNESS_BINS;
+        assert!(types.contains(&format!("const WOOD_NEARNESS_BINS: u32 = {bins}u;")));
+        assert_shader_table(
+            "CROWN_PROFILE_STEPS",
+            crate::model::impostor::CROWN_PROFILE_STEPS,
+            "wood_visibility",
+            super::WOOD_VISIBILITY_ROWS,
+        );
     }
 
     /// Tables go into the shader's rows four a row, entry `k` at row

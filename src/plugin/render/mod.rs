@@ -39,7 +39,7 @@ use super::{
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
-use crate::model::impostor::CrownImpostor;
+use crate::model::impostor::{CrownImpostor, WoodVisibility};
 use crate::model::prism::WOOD_LINE_FADE;
 use crate::model::shading::SphereLight;
 use bevy::asset::{embedded_asset, embedded_path};
@@ -308,12 +308,20 @@ struct RenderSpecies {
     draw_entities: [Entity; PART_KINDS],
     /// The main-world entities that key them there.
     phase_keys: [MainEntity; PART_KINDS],
+    /// A second render-world entity for the wood lines: a phase keys its
+    /// items by (render, main) entity, and the wood lines are two items,
+    /// drawn under and over the foliage lines ([`WoodLineLayer`]).
+    wood_over_entity: Entity,
     /// The sphere light table and the material's roughness and reflectance
     /// (bits) it was made for.
     sphere_light: ([u32; 2], SphereLight),
     /// The impostor's crown radius by height
     /// ([`CrownImpostor::crown_radii`]; zeros without one).
     crown_radii: [f32; crate::model::impostor::CROWN_PROFILE_STEPS],
+    /// The share of the wood the needles leave in sight where they cover
+    /// the picture ([`CrownImpostor::wood_visibility`]; all 1 without
+    /// one).
+    wood_visibility: WoodVisibility,
 }
 
 impl RenderSpecies {
@@ -521,6 +529,10 @@ fn species_params(
 }
 
 /// An impostor's crown radius by height (zeros without one).
+fn wood_visibility(impostor: Option<&CrownImpostor>) -> WoodVisibility {
+    impostor.map(|i| i.wood_visibility.clone()).unwrap_or_default()
+}
+
 fn crown_radii(impostor: Option<&CrownImpostor>) -> [f32; crate::model::impostor::CROWN_PROFILE_STEPS] {
     impostor.map(CrownImpostor::crown_radii).unwrap_or_default()
 }
@@ -552,7 +564,7 @@ fn extract_compact(
     for id in gone {
         if let Some(species) = render.species.remove(&id) {
             render.retired.extend(species.phase_keys);
-            for entity in species.draw_entities {
+            for entity in species.draw_entities.into_iter().chain([species.wood_over_entity]) {
                 commands.entity(entity).despawn();
             }
         }
@@ -578,8 +590,15 @@ fn extract_compact(
             gpu: None,
             draw_entities: PartKind::ALL.map(|kind| commands.spawn(CompactDrawItem { species: id, kind }).id()),
             phase_keys: keys.map(MainEntity::from),
+            wood_over_entity: commands
+                .spawn(CompactDrawItem {
+                    species: id,
+                    kind: PartKind::WoodLines,
+                })
+                .id(),
             sphere_light: (material_key, sphere_light()),
             crown_radii: crown_radii(asset.impostor.as_deref()),
+            wood_visibility: wood_visibility(asset.impostor.as_deref()),
         });
         if entry.sphere_light.0 != material_key {
             entry.sphere_light = (material_key, sphere_light());
@@ -589,6 +608,7 @@ fn extract_compact(
             entry.compact = compact.clone();
             entry.impostor = asset.impostor.clone();
             entry.crown_radii = crown_radii(asset.impostor.as_deref());
+            entry.wood_visibility = wood_visibility(asset.impostor.as_deref());
             entry.gpu = None;
             entry.instances_dirty = true;
         }
@@ -611,6 +631,7 @@ fn extract_compact(
             &entry.sphere_light.1,
         );
         entry.params.set_crown_radii(&entry.crown_radii);
+        entry.params.set_wood_visibility(&entry.wood_visibility);
         entry.params.instance_count = entry.instances.len() as u32;
     }
 }
@@ -943,6 +964,34 @@ pub struct CompactPipelineKey {
     /// ([`LineRaster::Area`]; `false` for every other part and in shadow
     /// views).
     line_quads: bool,
+    /// Which of the wood lines' draws this is ([`WoodLineLayer::Whole`]
+    /// for every other part and pass).
+    wood_layer: WoodLineLayer,
+}
+
+/// The wood lines' draws. Blended lines are not sorted one by one, so the
+/// order of a species' draws decides what lies on top in a pixel both
+/// cover. A camera draws a tree's wood lines twice, before its foliage
+/// lines and after them, at opacities that split the wood's `a` by the
+/// share `g` of the wood the needles leave in sight where they cover the
+/// picture ([`WoodVisibility`], measured by the impostor's bake;
+/// [`crate::model::impostor::wood_layer_opacities`]): in a pixel the
+/// needle lines let `t` through, the wood then takes `a·(g + (1 − g)·t)`
+/// and what lies behind the tree `t·(1 − a)`, as among the needles. Drawn
+/// only before the foliage lines, the crown hid its branches (the young
+/// Scots pine's densest crown pixels 7.7 of 255 short in red,
+/// `docs/eval/wood-layers/`); drawn only after, it showed them through
+/// its needles (11.0 over).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum WoodLineLayer {
+    /// One draw at the wood's opacity (every other part, and the shadow
+    /// and motion vector passes).
+    #[default]
+    Whole,
+    /// A camera's draw before the foliage lines.
+    UnderFoliage,
+    /// Its draw after them.
+    OverFoliage,
 }
 
 /// The passes the compact parts are drawn in.
@@ -1159,6 +1208,12 @@ impl SpecializedRenderPipeline for CompactPipeline {
         }
         if key.line_quads {
             defs.push("CONIFER_LINE_QUADS".into());
+        }
+        if key.wood_layer != WoodLineLayer::Whole {
+            defs.push("CONIFER_WOOD_LAYERS".into());
+        }
+        if key.wood_layer == WoodLineLayer::OverFoliage {
+            defs.push("CONIFER_WOOD_OVER_FOLIAGE".into());
         }
         if matches!(
             key.kind,
@@ -1696,39 +1751,50 @@ fn queue_compact(
                 } else {
                     (PrimitiveTopology::TriangleList, MeshPipelineKey::empty(), view_key)
                 };
-                let key = CompactPipelineKey {
-                    mesh_key: mesh_view_key
-                        | blend
-                        | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
-                    kind,
-                    pass: CompactPass::Main,
-                    line_lighting: if kind.is_blended() {
-                        render.line_lighting
-                    } else {
-                        LineLighting::default()
-                    },
-                    line_quads,
-                };
-                let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
-                if kind.is_blended() {
-                    transparent.add_transient(Transparent3d {
-                        sorting_info: TransparentSortingInfo3d::Sorted {
-                            mesh_center: species.center,
-                            // A species' wood lines are drawn before its
-                            // foliage lines (as if a millimetre farther):
-                            // trunk and branches stand inside the crown, so
-                            // needles blend over them, not wood over needles.
-                            depth_bias: if kind == PartKind::WoodLines { -1e-3 } else { 0.0 },
-                        },
-                        entity: (entity, main_entity),
-                        pipeline: pipeline_id,
-                        draw_function: draw_transparent,
-                        distance: 0.0,
-                        batch_range: 0..1,
-                        extra_index: PhaseItemExtraIndex::None,
-                        indexed: false,
-                    });
+                // A species' wood lines are drawn twice, under its foliage
+                // lines (as if a millimetre farther) and over them (a
+                // millimetre nearer) ([`WoodLineLayer`]); every other part
+                // once.
+                let layers: &[(WoodLineLayer, f32, Entity)] = if kind == PartKind::WoodLines {
+                    &[
+                        (WoodLineLayer::UnderFoliage, -1e-3, entity),
+                        (WoodLineLayer::OverFoliage, 1e-3, species.wood_over_entity),
+                    ]
                 } else {
+                    &[(WoodLineLayer::Whole, 0.0, entity)]
+                };
+                for &(wood_layer, depth_bias, entity) in layers {
+                    let key = CompactPipelineKey {
+                        mesh_key: mesh_view_key
+                            | blend
+                            | MeshPipelineKey::from_primitive_topology_and_strip_index(topology, None),
+                        kind,
+                        pass: CompactPass::Main,
+                        line_lighting: if kind.is_blended() {
+                            render.line_lighting
+                        } else {
+                            LineLighting::default()
+                        },
+                        line_quads,
+                        wood_layer,
+                    };
+                    let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
+                    if kind.is_blended() {
+                        transparent.add_transient(Transparent3d {
+                            sorting_info: TransparentSortingInfo3d::Sorted {
+                                mesh_center: species.center,
+                                depth_bias,
+                            },
+                            entity: (entity, main_entity),
+                            pipeline: pipeline_id,
+                            draw_function: draw_transparent,
+                            distance: 0.0,
+                            batch_range: 0..1,
+                            extra_index: PhaseItemExtraIndex::None,
+                            indexed: false,
+                        });
+                        continue;
+                    }
                     opaque.add(
                         Opaque3dBatchSetKey {
                             draw_function: draw_opaque,
@@ -1792,6 +1858,7 @@ fn queue_compact_shadows(
                     pass: CompactPass::Shadow,
                     line_lighting: LineLighting::default(),
                     line_quads: false,
+                    wood_layer: WoodLineLayer::Whole,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 phase.add(
@@ -1858,6 +1925,7 @@ fn queue_compact_motion_vectors(
                         pass,
                         line_lighting: LineLighting::default(),
                         line_quads: kind.is_lines() && render.camera_line_quads(extracted.target_format),
+                        wood_layer: WoodLineLayer::Whole,
                     };
                     list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
                 }
