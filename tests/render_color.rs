@@ -14,6 +14,7 @@ mod common;
 use bevy::core_pipeline::tonemapping::Tonemapping;
 use bevy::prelude::*;
 use bevy_conifer_lod::model::color::{bark_color, needle_color};
+use bevy_conifer_lod::model::impostor::ImpostorOptions;
 use bevy_conifer_lod::model::{
     BakeOptions, FoliageMaterial, Needle, Placement, PrototypeInput, WoodSegment, bake_prototypes,
 };
@@ -160,4 +161,126 @@ fn needles_take_their_age_and_side_and_bark_its_height() {
         let measured = chroma(&image, |x, y| x.abs_diff(half) <= 2 && y.abs_diff(r) <= 3);
         assert_chroma(&format!("bark at {height} m"), measured, bark_color(&m, height));
     }
+}
+
+/// Where a trunk stands among the needles decides how much of it shows.
+/// A wall of needles 0.3 m in front of a trunk, seen 25 m away from either
+/// side, where both are lines: drawn under every needle line
+/// (`WoodLineOrder::UnderFoliage`), the trunk keeps the share `t` of its
+/// own picture that the wall's lines let through; layered (the default),
+/// `g + (1 − g)·t`, `g` the CPU reference's share in sight
+/// (`WoodVisibility::at` of the species' impostor, at the trunk's height
+/// and nearness from that camera), which is high where the trunk stands
+/// in front of the wall and low behind it. Shares are read in linear red
+/// (the bark's, ten times the needles'): the trunk's columns less the
+/// wall's beside them, over the trunk's own above the wall.
+#[test]
+fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
+    let _turn = common::gpu_turn();
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    let wall = common::side_by_side_needles(34, 0.018, 1.0, 0.008);
+    // Green needles with hardly any red (every age and side), red bark.
+    let uniform = FoliageMaterial::uniform([0.01, 0.25, 0.08, 1.0], [0.4, 0.2, 0.08, 1.0], 0.6, 0.0);
+    let input = PrototypeInput {
+        name: "wood among needles".into(),
+        prototypes: vec![wall],
+        placements: vec![Placement {
+            translation: Vec3::new(-0.3, 0.0, 0.3),
+            ..Placement::identity(0)
+        }],
+        wood: vec![WoodSegment {
+            start: Vec3::ZERO,
+            end: Vec3::new(0.0, 1.2, 0.0),
+            start_radius: 0.015,
+            end_radius: 0.015,
+        }],
+        wood_mesh: Default::default(),
+        material: uniform,
+    };
+    let record = bake_prototypes(&input, &BakeOptions::default(), &())
+        .unwrap()
+        .quantized()
+        .unwrap();
+    // Texels of 2 cm: the trunk's few samples outweigh the fit's prior.
+    let species = ConiferSpecies::from_prototype_record(&record)
+        .unwrap()
+        .with_impostor(ImpostorOptions { views: 8, texel: 0.02 });
+    let impostor = species.impostor.clone().expect("the layers take the impostor's table");
+    let radii = impostor.crown_radii();
+    let axis = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+    // The trunk's share in sight seen from `side` (+1: the camera on +z,
+    // the wall in front of the trunk; −1 on −z, the trunk in front).
+    let in_sight = |side: f32| {
+        let nearness = (Vec3::ZERO - axis).dot(Vec3::Z * side) + 0.015;
+        impostor
+            .wood_visibility
+            .at(&radii, impostor.bottom, impostor.top(), 0.5, nearness)
+    };
+    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
+    renderer.world_mut().entity_mut(camera).insert((
+        Tonemapping::None,
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::BLACK),
+            ..default()
+        },
+    ));
+    let mut shot = |side: f32, order: WoodLineOrder, name: &str| {
+        let world = renderer.world_mut();
+        // Lines: with 2 cm texels the tree would be its impostor here.
+        world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+        world.resource_mut::<ConiferLodSettings>().wood_line_order = order;
+        let centre = Vec3::new(0.0, 0.5, 0.0);
+        *world.get_mut::<Transform>(camera).unwrap() =
+            Transform::from_translation(centre + Vec3::Z * 25.0 * side).looking_at(centre, Vec3::Y);
+        *world.get_mut::<Projection>(camera).unwrap() = Projection::Perspective(PerspectiveProjection {
+            fov: 15f32.to_radians(),
+            ..default()
+        });
+        for _ in 0..3 {
+            renderer.update().unwrap();
+        }
+        let image = renderer.capture(&target, 20).unwrap();
+        image.save(out.join(format!("wood_layers_{name}.png"))).unwrap();
+        image
+    };
+    // A metre is 160 / (2·25·tan 7.5°) = 24.3 pixels: the wall's rows are
+    // 68–92, the trunk above it 63–68; the trunk's two columns are 79 and
+    // 80, the wall's beside them 75–77 and 82–84.
+    let red = |image: &image::RgbaImage, columns: &[u32], rows: std::ops::Range<u32>| {
+        let n = rows.len() as f32;
+        rows.map(|y| {
+            columns
+                .iter()
+                .map(|&x| srgb_to_linear(image.get_pixel(x, y)[0]))
+                .sum::<f32>()
+        })
+        .sum::<f32>()
+            / n
+    };
+    let share = |image: &image::RgbaImage| {
+        let trunk = red(image, &[79, 80], 72..89);
+        // Six columns of the wall: two columns' worth is a third.
+        let beside = red(image, &[75, 76, 77, 82, 83, 84], 72..89) / 3.0;
+        let alone = red(image, &[79, 80], 64..67);
+        (trunk - beside) / alone.max(1e-6)
+    };
+    let mut gap = [0.0f32; 2];
+    for (k, (side, name)) in [(-1.0f32, "in_front"), (1.0, "behind")].into_iter().enumerate() {
+        let layered = share(&shot(side, WoodLineOrder::Layered, &format!("{name}_layered")));
+        let under = share(&shot(side, WoodLineOrder::UnderFoliage, &format!("{name}_under")));
+        let g = in_sight(side);
+        let want = under + g * (1.0 - under);
+        println!(
+            "trunk {name}: share {layered:.3} layered, {under:.3} under the needles; in sight {g:.3}: want {want:.3}"
+        );
+        assert!(
+            (layered - want).abs() < 0.1,
+            "{name}: the trunk's share {layered:.3} layered, the CPU reference's {want:.3} (under {under:.3}, g {g:.3})"
+        );
+        gap[k] = layered - under;
+    }
+    // In front of the wall the layers show the trunk; behind it, hardly.
+    assert!(in_sight(-1.0) > in_sight(1.0) + 0.3);
+    assert!(gap[0] > 0.2 && gap[1] < gap[0] - 0.15, "layered less under: {gap:?}");
 }

@@ -5,7 +5,7 @@ use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
 use crate::eval::scene::{EvalSun, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::{read_prototype_record, read_record};
-use crate::plugin::{LineLighting, LineOpacity, LineRaster};
+use crate::plugin::{LineLighting, LineOpacity, LineRaster, WoodLineOrder};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 
@@ -108,6 +108,12 @@ pub struct EvalArgs {
     /// area in it).
     #[arg(long, default_value = "auto")]
     pub line_raster: String,
+    /// Where the plugin draws each tree's wood lines among its foliage
+    /// lines: `layered` (the default: before and after them, split by the
+    /// share of the wood the needles leave in sight) or `under-foliage`
+    /// (once, before them).
+    #[arg(long, default_value = "layered")]
+    pub wood_lines: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`
     /// (`1 − exp(−Σa/A)`).
@@ -166,6 +172,11 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         "hardware" => LineRaster::Hardware,
         other => bail!("--line-raster {other:?}: auto, area or hardware"),
     };
+    let wood_line_order = match args.wood_lines.as_str() {
+        "layered" => WoodLineOrder::Layered,
+        "under-foliage" => WoodLineOrder::UnderFoliage,
+        other => bail!("--wood-lines {other:?}: layered or under-foliage"),
+    };
     let ours_line_opacity = match args.ours_opacity.as_str() {
         "area" => LineOpacity::AreaPreserving,
         "coverage" => LineOpacity::Coverage,
@@ -181,6 +192,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         sun,
         line_lighting,
         line_raster,
+        wood_line_order,
         ours_line_opacity,
         ours_impostor: !args.ours_no_impostor,
         hdr: args.hdr,

@@ -140,6 +140,7 @@ pub fn evaluate_inside(
         transition: view.transition,
         line_lighting: view.line_lighting,
         line_raster: view.line_raster,
+        wood_line_order: view.wood_line_order,
         ..ConiferLodSettings::default()
     };
     let world = renderer.world_mut();

@@ -262,6 +262,9 @@ pub struct EvalReport {
     /// main texture (`Area`, `Hardware`; `--line-raster auto` reports the
     /// one it drew).
     pub line_raster: String,
+    /// Where the plugin's methods drew the wood lines among the foliage
+    /// lines (`Layered`, `UnderFoliage`).
+    pub wood_line_order: String,
     /// The merged-line opacity `ours` drew with (`AreaPreserving`,
     /// `Coverage`).
     pub ours_line_opacity: String,
@@ -620,6 +623,7 @@ pub fn evaluate(
         sun: options.view.sun.name().into(),
         line_lighting: format!("{:?}", options.view.line_lighting),
         line_raster: format!("{:?}", options.view.drawn_line_raster()),
+        wood_line_order: format!("{:?}", options.view.wood_line_order),
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         ours_impostor: options.view.ours_impostor,
         hdr: options.view.hdr,

@@ -36,7 +36,7 @@ use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
     ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind,
-    LineLighting, LineOpacity, LineRaster, triangle_mesh,
+    LineLighting, LineOpacity, LineRaster, WoodLineOrder, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::Hdr;
@@ -130,6 +130,7 @@ pub(super) fn renderer_with_species(
         transition: view.transition,
         line_lighting: view.line_lighting,
         line_raster: view.line_raster,
+        wood_line_order: view.wood_line_order,
         ..ConiferLodSettings::default()
     };
     let species = ConiferSpecies::from_record(record)?;
@@ -211,6 +212,9 @@ pub struct EvalView {
     pub line_lighting: LineLighting,
     /// How the plugin's methods rasterize their lines.
     pub line_raster: LineRaster,
+    /// Where the plugin's methods draw the wood lines among the foliage
+    /// lines.
+    pub wood_line_order: WoodLineOrder,
     /// The merged-line opacity `ours` draws with.
     pub ours_line_opacity: LineOpacity,
     /// Whether `ours` fades far trees into the crown impostor (its
@@ -283,6 +287,7 @@ impl EvalView {
             sun: EvalSun::default(),
             line_lighting: LineLighting::default(),
             line_raster: LineRaster::default(),
+            wood_line_order: WoodLineOrder::default(),
             ours_line_opacity: LineOpacity::default(),
             ours_impostor: true,
             hdr: false,

@@ -233,6 +233,26 @@ pub enum LineLighting {
     FacingStrip,
 }
 
+/// Where a camera draws each tree's wood lines among its foliage lines.
+/// Blended lines are not sorted one by one, so the order of a species'
+/// draws decides what lies on top in a pixel both cover.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
+pub enum WoodLineOrder {
+    /// Once, before the foliage lines: the needles blend over every
+    /// branch, the ones behind it too, and the crown hides its branches
+    /// (the order until record format 10).
+    UnderFoliage,
+    /// Twice, before the foliage lines and after them, the wood's opacity
+    /// split by the share of it the needles leave in sight where they
+    /// cover the picture ([`crate::model::impostor::WoodVisibility`],
+    /// measured by the impostor's bake; a species without an impostor
+    /// draws its wood lines under the foliage): a pixel's wood and what
+    /// lies behind the tree take what they take among the needles. Shadow
+    /// views draw the wood lines once.
+    #[default]
+    Layered,
+}
+
 /// How lines are rasterized.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 pub enum LineRaster {
@@ -313,6 +333,8 @@ pub struct ConiferLodSettings {
     pub line_lighting: LineLighting,
     /// How lines are rasterized in cameras' views.
     pub line_raster: LineRaster,
+    /// Where cameras draw the wood lines among the foliage lines.
+    pub wood_line_order: WoodLineOrder,
     /// `false` draws every needle as a prism of `Lmax` sides (LOD off).
     pub enabled: bool,
     /// Colour needles by representation (prisms blue, original lines green,
@@ -354,6 +376,7 @@ impl Default for ConiferLodSettings {
             line_opacity: LineOpacity::default(),
             line_lighting: LineLighting::default(),
             line_raster: LineRaster::default(),
+            wood_line_order: WoodLineOrder::default(),
             enabled: true,
             debug_colors: false,
             max_expanded_placements: 1 << 17,

@@ -35,7 +35,7 @@ use self::gpu::{
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
-    LineOpacity, LineRaster,
+    LineOpacity, LineRaster, WoodLineOrder,
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
@@ -404,6 +404,8 @@ pub struct RenderCompactSpecies {
     line_lighting: LineLighting,
     /// [`ConiferLodSettings::line_raster`].
     line_raster: LineRaster,
+    /// [`ConiferLodSettings::wood_line_order`].
+    wood_line_order: WoodLineOrder,
     /// The wind's clock at the last extraction ([`ConiferWind::seconds`]),
     /// for the motion vectors' previous positions.
     wind_seconds: Option<f64>,
@@ -554,6 +556,7 @@ fn extract_compact(
     render.wind_seconds = Some(wind_seconds);
     render.max_expanded_placements = settings.max_expanded_placements;
     render.line_lighting = settings.line_lighting;
+    render.wood_line_order = settings.wood_line_order;
     render.line_raster = settings.line_raster;
     let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
     for &id in render.species.keys() {
@@ -1751,17 +1754,18 @@ fn queue_compact(
                 } else {
                     (PrimitiveTopology::TriangleList, MeshPipelineKey::empty(), view_key)
                 };
-                // A species' wood lines are drawn twice, under its foliage
-                // lines (as if a millimetre farther) and over them (a
-                // millimetre nearer) ([`WoodLineLayer`]); every other part
-                // once.
-                let layers: &[(WoodLineLayer, f32, Entity)] = if kind == PartKind::WoodLines {
-                    &[
+                // A species' wood lines are drawn under its foliage lines
+                // (as if a millimetre farther) and, layered, over them too
+                // (a millimetre nearer) ([`WoodLineLayer`]), which takes
+                // the impostor's wood visibility; every other part once.
+                let layered = render.wood_line_order == WoodLineOrder::Layered && species.impostor.is_some();
+                let layers: &[(WoodLineLayer, f32, Entity)] = match (kind, layered) {
+                    (PartKind::WoodLines, true) => &[
                         (WoodLineLayer::UnderFoliage, -1e-3, entity),
                         (WoodLineLayer::OverFoliage, 1e-3, species.wood_over_entity),
-                    ]
-                } else {
-                    &[(WoodLineLayer::Whole, 0.0, entity)]
+                    ],
+                    (PartKind::WoodLines, false) => &[(WoodLineLayer::Whole, -1e-3, entity)],
+                    _ => &[(WoodLineLayer::Whole, 0.0, entity)],
                 };
                 for &(wood_layer, depth_bias, entity) in layers {
                     let key = CompactPipelineKey {
