@@ -42,6 +42,26 @@ fn flat_shoot() -> Vec<Needle> {
     common::side_by_side_needles(20, 0.018, 0.3, 0.008)
 }
 
+/// One tree of `species` before a camera that clears to black and does
+/// not tone-map: a pixel's linear colour is its albedo times the light.
+fn black_scene(
+    species: ConiferSpecies,
+) -> (
+    bevy_conifer_lod::plugin::headless::HeadlessRenderer,
+    Handle<Image>,
+    Entity,
+) {
+    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
+    renderer.world_mut().entity_mut(camera).insert((
+        Tonemapping::None,
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::BLACK),
+            ..default()
+        },
+    ));
+    (renderer, target, camera)
+}
+
 /// Mean linear chroma (R/G, B/G) of the pixels of `image` that are not
 /// black and pass `keep` (column, row), and how many there were.
 fn chroma(image: &image::RgbaImage, keep: impl Fn(u32, u32) -> bool) -> (f32, f32, usize) {
@@ -103,14 +123,7 @@ fn needles_take_their_age_and_side_and_bark_its_height() {
         .quantized()
         .unwrap();
     let species = ConiferSpecies::from_prototype_record(&record).unwrap();
-    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
-    renderer.world_mut().entity_mut(camera).insert((
-        Tonemapping::None,
-        Camera {
-            clear_color: ClearColorConfig::Custom(Color::BLACK),
-            ..default()
-        },
-    ));
+    let (mut renderer, target, camera) = black_scene(species);
     let mut shot = |transform: Transform, fov_deg: f32, name: &str| {
         let world = renderer.world_mut();
         *world.get_mut::<Transform>(camera).unwrap() = transform;
@@ -217,14 +230,7 @@ fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
             .wood_visibility
             .at(&radii, impostor.bottom, impostor.top(), 0.5, nearness)
     };
-    let (mut renderer, target, camera) = common::one_tree_scene(species, SIZE);
-    renderer.world_mut().entity_mut(camera).insert((
-        Tonemapping::None,
-        Camera {
-            clear_color: ClearColorConfig::Custom(Color::BLACK),
-            ..default()
-        },
-    ));
+    let (mut renderer, target, camera) = black_scene(species);
     let mut shot = |side: f32, order: WoodLineOrder, name: &str| {
         let world = renderer.world_mut();
         // Lines: with 2 cm texels the tree would be its impostor here.
