@@ -157,11 +157,11 @@ type WoodCounts = [[[f64; 2]; WOOD_COUNT_BINS]; CROWN_PROFILE_STEPS];
 ///
 /// Blended lines are not sorted one by one, so the order of a species'
 /// draws decides what lies on top in a pixel. The plugin draws a tree's
-/// wood lines twice: before its foliage lines at their opacity `a`, and
-/// after them at `a·g`, `g` this table's at the line's midpoint
-/// ([`WoodVisibility::at`]). In a pixel whose needle lines let `t`
-/// through, the wood then takes `a·(g + (1 − g)·t)` of it (to first order
-/// in `a`): all of its opacity where no needle covers the pixel, `g` of it
+/// wood lines twice, before its foliage lines and after them, their
+/// opacity `a` split by `g`, this table's at the line's midpoint
+/// ([`WoodVisibility::at`], [`wood_layer_opacities`]). In a pixel whose
+/// needle lines let `t` through, the wood then takes `a·(g + (1 − g)·t)`
+/// of it: all of its opacity where no needle covers the pixel, `g` of it
 /// where they cover it all. The bake fits `g` on the impostor's binary
 /// samples: per height and nearness, the least-squares fit of `seen ≈ g +
 /// (1 − g)·t` over the wood's samples in every view, `seen` 1 where no

@@ -530,11 +530,12 @@ fn species_params(
     params
 }
 
-/// An impostor's crown radius by height (zeros without one).
+/// An impostor's share of the wood in sight (all 1 without one).
 fn wood_visibility(impostor: Option<&CrownImpostor>) -> WoodVisibility {
     impostor.map(|i| i.wood_visibility.clone()).unwrap_or_default()
 }
 
+/// An impostor's crown radius by height (zeros without one).
 fn crown_radii(impostor: Option<&CrownImpostor>) -> [f32; crate::model::impostor::CROWN_PROFILE_STEPS] {
     impostor.map(CrownImpostor::crown_radii).unwrap_or_default()
 }
