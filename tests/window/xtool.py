@@ -7,6 +7,7 @@ close as a window manager's close button does (WM_DELETE_WINDOW).
   xtool.py png DUMP.xwd OUT.png
   xtool.py differ A.xwd B.xwd X Y W H      # share of pixels that differ in a region
   xtool.py brightness DUMP.xwd X Y W H     # mean of a region's channels, 0-1
+  xtool.py spread DUMP.xwd X Y W H         # standard deviation of its pixels' brightness
   xtool.py close WINDOW_ID                 # WM_DELETE_WINDOW to the window
 """
 import ctypes
@@ -65,6 +66,15 @@ def brightness(rows, x, y, w, h):
     return sum(values) / (255 * max(len(values), 1))
 
 
+def spread(rows, x, y, w, h):
+    """Standard deviation of the region's pixels' brightness (mean channel,
+    0-1): 0 for one flat colour, such as a window's clear colour before its
+    first frame."""
+    values = [sum(pixel[:3]) / (3 * 255) for row in rows[y:y + h] for pixel in row[x:x + w]]
+    mean = sum(values) / max(len(values), 1)
+    return (sum((v - mean) ** 2 for v in values) / max(len(values), 1)) ** 0.5
+
+
 class XClientMessageEvent(ctypes.Structure):
     _fields_ = [("type", ctypes.c_int), ("serial", ctypes.c_ulong), ("send_event", ctypes.c_int),
                 ("display", ctypes.c_void_p), ("window", ctypes.c_ulong), ("message_type", ctypes.c_ulong),
@@ -113,6 +123,9 @@ if __name__ == "__main__":
     elif command == "brightness":
         _, _, rows = read_xwd(sys.argv[2])
         print(f"{brightness(rows, *(int(v) for v in sys.argv[3:7])):.6f}")
+    elif command == "spread":
+        _, _, rows = read_xwd(sys.argv[2])
+        print(f"{spread(rows, *(int(v) for v in sys.argv[3:7])):.6f}")
     elif command == "close":
         close(int(sys.argv[2], 0))
     else:
