@@ -1056,10 +1056,11 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     };
     let (impostor, rest) = if version >= 7 {
         let (stored, rest) = postcard::take_from_bytes::<Option<StoredImpostor>>(rest).map_err(malformed)?;
-        // Format 7's last two planes are mean axes, not shares: checked,
-        // then dropped (the plugin bakes the impostor at load).
+        // Checked; before format 10 dropped below (format 7's last two
+        // planes are mean axes, not shares, and formats 8 and 9 lack the
+        // wood visibility): the plugin bakes the impostor at load.
         let impostor = stored.map(StoredImpostor::decode).transpose()?;
-        (impostor.filter(|_| version >= 8), rest)
+        (impostor, rest)
     } else {
         (None, rest)
     };

@@ -335,8 +335,7 @@ impl SpeciesParams {
     /// Sets the share of the wood the needles leave in sight where they
     /// cover the picture ([`crate::model::impostor::WoodVisibility`]).
     pub fn set_wood_visibility(&mut self, visibility: &crate::model::impostor::WoodVisibility) {
-        let shares: Vec<f32> = visibility.shares.iter().flatten().copied().collect();
-        self.wood_visibility = four_a_row(&shares);
+        self.wood_visibility = four_a_row(visibility.shares.as_flattened());
     }
 
     /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`,

@@ -39,7 +39,7 @@ use super::{
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
-use crate::model::impostor::{CrownImpostor, WoodVisibility};
+use crate::model::impostor::CrownImpostor;
 use crate::model::prism::WOOD_LINE_FADE;
 use crate::model::shading::SphereLight;
 use bevy::asset::{embedded_asset, embedded_path};
@@ -318,10 +318,6 @@ struct RenderSpecies {
     /// The impostor's crown radius by height
     /// ([`CrownImpostor::crown_radii`]; zeros without one).
     crown_radii: [f32; crate::model::impostor::CROWN_PROFILE_STEPS],
-    /// The share of the wood the needles leave in sight where they cover
-    /// the picture ([`CrownImpostor::wood_visibility`]; all 1 without
-    /// one).
-    wood_visibility: WoodVisibility,
 }
 
 impl RenderSpecies {
@@ -530,11 +526,6 @@ fn species_params(
     params
 }
 
-/// An impostor's share of the wood in sight (all 1 without one).
-fn wood_visibility(impostor: Option<&CrownImpostor>) -> WoodVisibility {
-    impostor.map(|i| i.wood_visibility.clone()).unwrap_or_default()
-}
-
 /// An impostor's crown radius by height (zeros without one).
 fn crown_radii(impostor: Option<&CrownImpostor>) -> [f32; crate::model::impostor::CROWN_PROFILE_STEPS] {
     impostor.map(CrownImpostor::crown_radii).unwrap_or_default()
@@ -602,7 +593,6 @@ fn extract_compact(
                 .id(),
             sphere_light: (material_key, sphere_light()),
             crown_radii: crown_radii(asset.impostor.as_deref()),
-            wood_visibility: wood_visibility(asset.impostor.as_deref()),
         });
         if entry.sphere_light.0 != material_key {
             entry.sphere_light = (material_key, sphere_light());
@@ -612,7 +602,6 @@ fn extract_compact(
             entry.compact = compact.clone();
             entry.impostor = asset.impostor.clone();
             entry.crown_radii = crown_radii(asset.impostor.as_deref());
-            entry.wood_visibility = wood_visibility(asset.impostor.as_deref());
             entry.gpu = None;
             entry.instances_dirty = true;
         }
@@ -635,7 +624,10 @@ fn extract_compact(
             &entry.sphere_light.1,
         );
         entry.params.set_crown_radii(&entry.crown_radii);
-        entry.params.set_wood_visibility(&entry.wood_visibility);
+        // Without an impostor the wood lines are drawn once, unlayered.
+        if let Some(impostor) = &entry.impostor {
+            entry.params.set_wood_visibility(&impostor.wood_visibility);
+        }
         entry.params.instance_count = entry.instances.len() as u32;
     }
 }
@@ -978,7 +970,7 @@ pub struct CompactPipelineKey {
 /// cover. A camera draws a tree's wood lines twice, before its foliage
 /// lines and after them, at opacities that split the wood's `a` by the
 /// share `g` of the wood the needles leave in sight where they cover the
-/// picture ([`WoodVisibility`], measured by the impostor's bake;
+/// picture ([`crate::model::impostor::WoodVisibility`], measured by the impostor's bake;
 /// [`crate::model::impostor::wood_layer_opacities`]): in a pixel the
 /// needle lines let `t` through, the wood then takes `a·(g + (1 − g)·t)`
 /// and what lies behind the tree `t·(1 − a)`, as among the needles. Drawn
