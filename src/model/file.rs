@@ -44,11 +44,17 @@
 //! * after that (format 10), with the impostor, how much of its wood the
 //!   needles leave in sight by height and depth in the crown
 //!   ([`super::impostor::WoodVisibility`], a byte a share).
+//! * after that (format 11), with the line calibration, the wood lines'
+//!   opacity scales at its pixel sizes
+//!   ([`super::calibration::LineCalibration::wood_scales`], eight f32).
 //!
 //! A flat record ([`LodRecord`], an imported tree) is written as every group
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 11 adds the wood lines' scales to the line calibration (an
+//! older file's reads with every wood scale 1, as it was drawn;
+//! `conifer upgrade` calibrates the file again).
 //! Version 10 adds the impostor's wood visibility: an older file's
 //! impostor is dropped (the plugin bakes it at load, `conifer upgrade`
 //! into the file).
@@ -73,7 +79,7 @@
 //! never a panic or an allocation beyond the file's own size (plus the
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
-use super::calibration::LineCalibration;
+use super::calibration::{CALIBRATION_STEPS, LineCalibration};
 use super::impostor::{CrownImpostor, WoodVisibility};
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
@@ -93,7 +99,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 10;
+pub const FORMAT_VERSION: u32 = 11;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -917,9 +923,12 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
     );
     let impostor = record.impostor.as_deref().map(StoredImpostor::encode).transpose()?;
     body.extend(postcard::to_allocvec(&impostor).map_err(|e| RecordError::Malformed(e.to_string()))?);
-    body.extend(postcard::to_allocvec(&record.line_calibration).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    let calibration = record.line_calibration.as_ref().map(StoredLineCalibration::from);
+    body.extend(postcard::to_allocvec(&calibration).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let wood_visibility = record.impostor.as_deref().map(|i| i.wood_visibility.to_bytes());
     body.extend(postcard::to_allocvec(&wood_visibility).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    let wood_scales = record.line_calibration.as_ref().map(|c| c.wood_scales);
+    body.extend(postcard::to_allocvec(&wood_scales).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -1016,7 +1025,27 @@ fn decode_prototypes(version: u32, body: &[u8]) -> Result<PrototypeRecord, Recor
     Ok(record)
 }
 
-/// What formats 5, 7, 9 and 10 store after the payload.
+/// A line calibration as formats 9 and later store it in place: the
+/// needle lines' table (format 11 adds the wood's after the wood
+/// visibility).
+#[derive(Serialize, Deserialize)]
+struct StoredLineCalibration {
+    first_pixel: f32,
+    last_pixel: f32,
+    scales: [f32; CALIBRATION_STEPS],
+}
+
+impl From<&LineCalibration> for StoredLineCalibration {
+    fn from(c: &LineCalibration) -> Self {
+        Self {
+            first_pixel: c.first_pixel,
+            last_pixel: c.last_pixel,
+            scales: c.scales,
+        }
+    }
+}
+
+/// What formats 5, 7, 9, 10 and 11 store after the payload.
 #[derive(Default)]
 struct AfterPayload {
     /// Format 5: colours by age, side and height, needle ages.
@@ -1065,13 +1094,15 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
         (None, rest)
     };
     let (line_calibration, rest) = if version >= 9 {
-        let (stored, rest) = postcard::take_from_bytes::<Option<LineCalibration>>(rest).map_err(malformed)?;
-        if stored.is_some_and(|c| !c.is_valid()) {
-            return Err(RecordError::Malformed(
-                "line calibration: pixel sizes not increasing or a scale out of range".into(),
-            ));
-        }
-        (stored, rest)
+        let (stored, rest) = postcard::take_from_bytes::<Option<StoredLineCalibration>>(rest).map_err(malformed)?;
+        // Wood scales 1 until format 11's are read below.
+        let calibration = stored.map(|c| LineCalibration {
+            first_pixel: c.first_pixel,
+            last_pixel: c.last_pixel,
+            scales: c.scales,
+            wood_scales: [1.0; CALIBRATION_STEPS],
+        });
+        (calibration, rest)
     } else {
         (None, rest)
     };
@@ -1096,6 +1127,30 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     } else {
         (None, rest)
     };
+    // Format 11: the wood lines' scales, with the line calibration.
+    let (line_calibration, rest) = if version >= 11 {
+        let (stored, rest) = postcard::take_from_bytes::<Option<[f32; CALIBRATION_STEPS]>>(rest).map_err(malformed)?;
+        let calibration = match (line_calibration, stored) {
+            (Some(calibration), Some(wood_scales)) => Some(LineCalibration {
+                wood_scales,
+                ..calibration
+            }),
+            (None, None) => None,
+            _ => {
+                return Err(RecordError::Malformed(
+                    "line calibration: wood scales without the table, or the other way".into(),
+                ));
+            }
+        };
+        (calibration, rest)
+    } else {
+        (line_calibration, rest)
+    };
+    if line_calibration.is_some_and(|c| !c.is_valid()) {
+        return Err(RecordError::Malformed(
+            "line calibration: pixel sizes not increasing or a scale out of range".into(),
+        ));
+    }
     if !rest.is_empty() {
         return Err(RecordError::Malformed(format!(
             "{} bytes after the payload of a format {version} record",
@@ -1472,12 +1527,13 @@ mod tests {
     }
 
     #[test]
-    fn the_line_calibration_round_trips_and_format_8_files_have_none() {
+    fn the_line_calibration_round_trips_and_older_files_have_less() {
         let mut record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         let calibration = LineCalibration {
             first_pixel: 0.01,
             last_pixel: 0.2,
             scales: [1.0, 0.98, 0.95, 0.9, 0.86, 0.8, 0.78, 0.75],
+            wood_scales: [0.9, 0.85, 0.8, 0.7, 0.6, 0.6, 0.65, 0.7],
         };
         record.line_calibration = Some(calibration);
         let bytes = encode_prototype_record(&record).unwrap();
@@ -1486,19 +1542,40 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
+        // Format 11 ends with the wood scales: format 10 stops before
+        // them, read with every wood scale 1.
+        let body = &bytes[HEADER_BYTES..];
+        let wood_scales = postcard::to_allocvec(&Some(calibration.wood_scales)).unwrap();
+        let v10 = &body[..body.len() - wood_scales.len()];
+        let read = decode_prototype_record(&file_of_version(10, v10)).unwrap();
+        assert_eq!(
+            read.line_calibration,
+            Some(LineCalibration {
+                wood_scales: [1.0; CALIBRATION_STEPS],
+                ..calibration
+            })
+        );
+        assert!(read.impostor.is_some());
         // Format 8 stops after the impostor: read without a calibration
         // (and without the impostor, which lacks its wood visibility).
-        let body = &bytes[HEADER_BYTES..];
-        let stored = postcard::to_allocvec(&Some(calibration)).unwrap();
+        let stored = postcard::to_allocvec(&Some(StoredLineCalibration::from(&calibration))).unwrap();
         let visibility =
             postcard::to_allocvec(&record.impostor.as_deref().map(|i| i.wood_visibility.to_bytes())).unwrap();
-        let v8 = &body[..body.len() - stored.len() - visibility.len()];
+        let v8 = &v10[..v10.len() - stored.len() - visibility.len()];
         let old = decode_prototype_record(&file_of_version(8, v8)).unwrap();
         assert!(old.line_calibration.is_none());
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // A scale out of range, sizes not increasing, a NaN or a cut-off
-        // calibration: malformed, never a panic.
+        // A scale out of range (the needles' or the wood's), sizes not
+        // increasing, a NaN, a cut-off calibration, or wood scales without
+        // the table: malformed, never a panic.
+        let with_calibration = |c: &LineCalibration, wood: Option<[f32; CALIBRATION_STEPS]>| {
+            let mut body = v8.to_vec();
+            body.extend(postcard::to_allocvec(&Some(StoredLineCalibration::from(c))).unwrap());
+            body.extend_from_slice(&visibility);
+            body.extend(postcard::to_allocvec(&wood).unwrap());
+            body
+        };
         let mut truncated = v8.to_vec();
         truncated.extend_from_slice(&stored[..stored.len() - 3]);
         let bad = [
@@ -1514,16 +1591,24 @@ mod tests {
                 first_pixel: f32::NAN,
                 ..calibration
             },
+            LineCalibration {
+                wood_scales: [0.1; 8],
+                ..calibration
+            },
         ];
-        let bodies = bad.iter().map(|c| {
-            let mut body = v8.to_vec();
-            body.extend(postcard::to_allocvec(&Some(*c)).unwrap());
-            body
-        });
-        for body in bodies.chain([truncated]) {
-            let error = decode_prototype_record(&file_of_version(9, &body)).unwrap_err();
+        let mut bodies: Vec<Vec<u8>> = bad.iter().map(|c| with_calibration(c, Some(c.wood_scales))).collect();
+        let mut without_table = v8.to_vec();
+        without_table.extend(postcard::to_allocvec(&None::<StoredLineCalibration>).unwrap());
+        without_table.extend_from_slice(&visibility);
+        without_table.extend(postcard::to_allocvec(&Some(calibration.wood_scales)).unwrap());
+        bodies.push(without_table);
+        bodies.push(with_calibration(&calibration, None));
+        for body in bodies {
+            let error = decode_prototype_record(&file_of_version(11, &body)).unwrap_err();
             assert!(matches!(error, RecordError::Malformed(_)), "{error}");
         }
+        let error = decode_prototype_record(&file_of_version(9, &truncated)).unwrap_err();
+        assert!(matches!(error, RecordError::Malformed(_)), "{error}");
     }
 
     #[test]
@@ -1542,14 +1627,15 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one (and without a line calibration), format 10 stores a
-        // single byte for each and for the wood visibility.
+        // Without one (and without a line calibration), format 11 stores a
+        // single byte for each, for the wood visibility and for the wood
+        // scales.
         let mut bare = record.clone();
         bare.impostor = None;
         bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 3
+            HEADER_BYTES + v6.len() + 4
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
@@ -1559,10 +1645,13 @@ mod tests {
             let mut body = v6.to_vec();
             body.extend(postcard::to_allocvec(&Some(s)).unwrap());
             if version >= 9 {
-                body.extend(postcard::to_allocvec(&None::<LineCalibration>).unwrap());
+                body.extend(postcard::to_allocvec(&None::<StoredLineCalibration>).unwrap());
             }
             if version >= 10 {
                 body.extend(postcard::to_allocvec(&visibility).unwrap());
+            }
+            if version >= 11 {
+                body.extend(postcard::to_allocvec(&None::<[f32; CALIBRATION_STEPS]>).unwrap());
             }
             decode_prototype_record(&file_of_version(version, &body))
         };

@@ -248,6 +248,16 @@ impl SampleBits {
         self.bits[index / 64] & (1 << (index % 64)) != 0
     }
 
+    /// The samples set in `self` or in `other`; `None` where the two are
+    /// not of one size.
+    pub fn union(&self, other: &Self) -> Option<Self> {
+        ((self.width, self.height) == (other.width, other.height)).then(|| Self {
+            width: self.width,
+            height: self.height,
+            bits: self.bits.iter().zip(&other.bits).map(|(a, b)| a | b).collect(),
+        })
+    }
+
     /// Calls `f(index)` for every set sample, in row-major order.
     pub fn for_each_set(&self, mut f: impl FnMut(usize)) {
         for (word, &bits) in self.bits.iter().enumerate() {
