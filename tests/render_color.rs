@@ -231,11 +231,12 @@ fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
             .at(&radii, impostor.bottom, impostor.top(), 0.5, nearness)
     };
     let (mut renderer, target, camera) = black_scene(species);
-    let mut shot = |side: f32, order: WoodLineOrder, name: &str| {
+    let mut shot = |side: f32, order: WoodLineOrder, name: &str, setup: &dyn Fn(&mut World)| {
         let world = renderer.world_mut();
         // Lines: with 2 cm texels the tree would be its impostor here.
         world.resource_mut::<ConiferLodSettings>().far_impostor = false;
         world.resource_mut::<ConiferLodSettings>().wood_line_order = order;
+        setup(world);
         let centre = Vec3::new(0.0, 0.5, 0.0);
         *world.get_mut::<Transform>(camera).unwrap() =
             Transform::from_translation(centre + Vec3::Z * 25.0 * side).looking_at(centre, Vec3::Y);
@@ -273,8 +274,13 @@ fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
     };
     let mut gap = [0.0f32; 2];
     for (k, (side, name)) in [(-1.0f32, "in_front"), (1.0, "behind")].into_iter().enumerate() {
-        let layered = share(&shot(side, WoodLineOrder::Layered, &format!("{name}_layered")));
-        let under = share(&shot(side, WoodLineOrder::UnderFoliage, &format!("{name}_under")));
+        let layered = share(&shot(side, WoodLineOrder::Layered, &format!("{name}_layered"), &|_| {}));
+        let under = share(&shot(
+            side,
+            WoodLineOrder::UnderFoliage,
+            &format!("{name}_under"),
+            &|_| {},
+        ));
         let g = in_sight(side);
         let want = under + g * (1.0 - under);
         println!(
@@ -289,4 +295,28 @@ fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
     // In front of the wall the layers show the trunk; behind it, hardly.
     assert!(in_sight(-1.0) > in_sight(1.0) + 0.3);
     assert!(gap[0] > 0.2 && gap[1] < gap[0] - 0.15, "layered less under: {gap:?}");
+    // Lines drawn by their area take the calibration's wood scale (CPU
+    // reference: `LineCalibration::wood_scale_at`): the trunk's line
+    // alone above the wall (0.73 of a pixel wide) keeps half its light at
+    // half its scale.
+    let mut alone = [0.0f32; 2];
+    for (k, wood_scale) in [1.0f32, 0.5].into_iter().enumerate() {
+        let calibrate = move |world: &mut World| {
+            world.resource_mut::<ConiferLodSettings>().line_raster = LineRaster::Area;
+            for (_, species) in world.resource_mut::<Assets<ConiferSpecies>>().iter_mut() {
+                let calibration = species.line_calibration.as_mut().expect("baked with a calibration");
+                calibration.wood_scales = [[wood_scale; 4]; 8];
+            }
+        };
+        let image = shot(
+            -1.0,
+            WoodLineOrder::UnderFoliage,
+            &format!("wood_scale_{k}"),
+            &calibrate,
+        );
+        alone[k] = red(&image, &[79, 80], 64..67);
+    }
+    let ratio = alone[1] / alone[0].max(1e-6);
+    println!("trunk alone, area lines: red {alone:?}, at half the wood scale {ratio:.3} of it");
+    assert!(alone[0] > 0.05 && (ratio - 0.5).abs() < 0.05, "{alone:?}: {ratio}");
 }

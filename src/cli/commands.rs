@@ -310,7 +310,10 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         if record.impostor.is_none() && !args.no_impostor {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
-        if record.line_calibration.is_none() && !args.no_line_calibration {
+        // Format 11 measured the wood lines' scales: an older calibration
+        // is measured again (the needles' table comes out the same).
+        let calibration_outdated = version.is_none_or(|v| v < 11);
+        if (record.line_calibration.is_none() || calibration_outdated) && !args.no_line_calibration {
             record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &Default::default())
                 .with_context(|| format!("{}: cannot calibrate its lines", path.display()))?;
         }
@@ -479,10 +482,13 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
         }
         match &report.line_calibration {
             Some(c) => println!(
-                "  line opacity scales {} at pixels of {:.4} .. {:.4} m",
+                "  line opacity scales {} at pixels of {:.4} .. {:.4} m; wood lines' by size at opacities 1/64, 1/16, 1/4, 1: {}",
                 c.scales.map(|s| format!("{s:.3}")).join(" "),
                 c.first_pixel,
-                c.last_pixel
+                c.last_pixel,
+                c.wood_scales
+                    .map(|row| row.map(|s| format!("{s:.2}")).join(" "))
+                    .join(" | "),
             ),
             None => println!("  no line calibration (every line keeps its opacity)"),
         }

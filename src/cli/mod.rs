@@ -170,8 +170,9 @@ pub struct UpgradeArgs {
     /// visibility: theirs is baked again).
     #[arg(long)]
     pub no_impostor: bool,
-    /// Leave a record without a line calibration as it is (by default, one older than
-    /// format 9 gains its table of line opacity scales, measured with the default options).
+    /// Leave a record's line calibration as it is (by default, one older than format 11 is
+    /// calibrated again with the default options: format 9 added the table of line opacity
+    /// scales, format 11 the wood lines' scales in it).
     #[arg(long)]
     pub no_line_calibration: bool,
 }

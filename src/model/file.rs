@@ -45,8 +45,8 @@
 //!   needles leave in sight by height and depth in the crown
 //!   ([`super::impostor::WoodVisibility`], a byte a share).
 //! * after that (format 11), with the line calibration, the wood lines'
-//!   opacity scales at its pixel sizes
-//!   ([`super::calibration::LineCalibration::wood_scales`], eight f32).
+//!   opacity scales at its pixel sizes and four opacities
+//!   ([`super::calibration::LineCalibration::wood_scales`], 32 f32).
 //!
 //! A flat record ([`LodRecord`], an imported tree) is written as every group
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
@@ -79,7 +79,7 @@
 //! never a panic or an allocation beyond the file's own size (plus the
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
-use super::calibration::{CALIBRATION_STEPS, LineCalibration};
+use super::calibration::{CALIBRATION_STEPS, LineCalibration, WOOD_OPACITY_NODES};
 use super::impostor::{CrownImpostor, WoodVisibility};
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
@@ -1100,7 +1100,7 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
             first_pixel: c.first_pixel,
             last_pixel: c.last_pixel,
             scales: c.scales,
-            wood_scales: [1.0; CALIBRATION_STEPS],
+            wood_scales: [[1.0; WOOD_OPACITY_NODES]; CALIBRATION_STEPS],
         });
         (calibration, rest)
     } else {
@@ -1129,7 +1129,8 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     };
     // Format 11: the wood lines' scales, with the line calibration.
     let (line_calibration, rest) = if version >= 11 {
-        let (stored, rest) = postcard::take_from_bytes::<Option<[f32; CALIBRATION_STEPS]>>(rest).map_err(malformed)?;
+        let (stored, rest) = postcard::take_from_bytes::<Option<[[f32; WOOD_OPACITY_NODES]; CALIBRATION_STEPS]>>(rest)
+            .map_err(malformed)?;
         let calibration = match (line_calibration, stored) {
             (Some(calibration), Some(wood_scales)) => Some(LineCalibration {
                 wood_scales,
@@ -1533,7 +1534,7 @@ mod tests {
             first_pixel: 0.01,
             last_pixel: 0.2,
             scales: [1.0, 0.98, 0.95, 0.9, 0.86, 0.8, 0.78, 0.75],
-            wood_scales: [0.9, 0.85, 0.8, 0.7, 0.6, 0.6, 0.65, 0.7],
+            wood_scales: [0.9, 0.85, 0.8, 0.7, 0.6, 0.6, 0.65, 0.7].map(|s| [s, s + 0.1, s + 0.2, 1.0]),
         };
         record.line_calibration = Some(calibration);
         let bytes = encode_prototype_record(&record).unwrap();
@@ -1551,7 +1552,7 @@ mod tests {
         assert_eq!(
             read.line_calibration,
             Some(LineCalibration {
-                wood_scales: [1.0; CALIBRATION_STEPS],
+                wood_scales: [[1.0; WOOD_OPACITY_NODES]; CALIBRATION_STEPS],
                 ..calibration
             })
         );
@@ -1569,7 +1570,7 @@ mod tests {
         // A scale out of range (the needles' or the wood's), sizes not
         // increasing, a NaN, a cut-off calibration, or wood scales without
         // the table: malformed, never a panic.
-        let with_calibration = |c: &LineCalibration, wood: Option<[f32; CALIBRATION_STEPS]>| {
+        let with_calibration = |c: &LineCalibration, wood: Option<[[f32; WOOD_OPACITY_NODES]; CALIBRATION_STEPS]>| {
             let mut body = v8.to_vec();
             body.extend(postcard::to_allocvec(&Some(StoredLineCalibration::from(c))).unwrap());
             body.extend_from_slice(&visibility);
@@ -1592,7 +1593,7 @@ mod tests {
                 ..calibration
             },
             LineCalibration {
-                wood_scales: [0.1; 8],
+                wood_scales: [[0.1; WOOD_OPACITY_NODES]; CALIBRATION_STEPS],
                 ..calibration
             },
         ];
@@ -1651,7 +1652,7 @@ mod tests {
                 body.extend(postcard::to_allocvec(&visibility).unwrap());
             }
             if version >= 11 {
-                body.extend(postcard::to_allocvec(&None::<[f32; CALIBRATION_STEPS]>).unwrap());
+                body.extend(postcard::to_allocvec(&None::<[[f32; WOOD_OPACITY_NODES]; CALIBRATION_STEPS]>).unwrap());
             }
             decode_prototype_record(&file_of_version(version, &body))
         };

@@ -258,6 +258,16 @@ impl SampleBits {
         })
     }
 
+    /// The samples set in `self` and not in `other`; `None` where the two
+    /// are not of one size.
+    pub fn minus(&self, other: &Self) -> Option<Self> {
+        ((self.width, self.height) == (other.width, other.height)).then(|| Self {
+            width: self.width,
+            height: self.height,
+            bits: self.bits.iter().zip(&other.bits).map(|(a, b)| a & !b).collect(),
+        })
+    }
+
     /// Calls `f(index)` for every set sample, in row-major order.
     pub fn for_each_set(&self, mut f: impl FnMut(usize)) {
         for (word, &bits) in self.bits.iter().enumerate() {

@@ -147,9 +147,15 @@ struct SpeciesParams {
     // the picture, by height (CROWN_PROFILE_STEPS) and nearness
     // (WOOD_NEARNESS_BINS), four a row (`model::impostor::WoodVisibility`)
     wood_visibility: array<vec4<f32>, 64>,
+    // the wood lines' opacity scales at the pixel sizes of `line_scales`
+    // (rows) and WOOD_OPACITY_NODES opacities (lanes)
+    // (`model::calibration::LineCalibration::wood_scales`)
+    wood_line_scales: array<vec4<f32>, 8>,
 }
 
 const LINE_SCALE_STEPS: u32 = 8u;
+
+const WOOD_OPACITY_NODES: u32 = 4u;
 
 const CROWN_PROFILE_STEPS: u32 = 32u;
 

@@ -704,12 +704,40 @@ fn line_calibration(lod: InstanceLod, spatial_error: f32) -> f32 {
     if ((lod.code >> LOD_OPACITY_SHIFT) & 3u) != 1u {
         return 1.0;
     }
-    let pixel = max(spatial_error, 1e-12) / max(lod.pixel_error, 1e-6);
-    let last = f32(LINE_SCALE_STEPS - 1u);
-    let t = clamp((log2(pixel) - species.line_scale_range.x) * species.line_scale_range.y, 0.0, last);
+    let t = line_scale_step(lod, spatial_error);
     let k = min(u32(t), LINE_SCALE_STEPS - 2u);
     let below = species.line_scales[k / 4u][k % 4u];
     let above = species.line_scales[(k + 1u) / 4u][(k + 1u) % 4u];
+    return mix(below, above, t - f32(k));
+#else
+    return 1.0;
+#endif
+}
+
+// Where the line scale tables hold a line of `spatial_error`: its pixel
+// size's step, fractional, clamped to the tables' ends.
+fn line_scale_step(lod: InstanceLod, spatial_error: f32) -> f32 {
+    let pixel = max(spatial_error, 1e-12) / max(lod.pixel_error, 1e-6);
+    let last = f32(LINE_SCALE_STEPS - 1u);
+    return clamp((log2(pixel) - species.line_scale_range.x) * species.line_scale_range.y, 0.0, last);
+}
+
+// The record's calibrated scale of a wood line of opacity `opacity` at
+// `spatial_error`: the wood table bilinear in log size and in log opacity
+// between its nodes at 1/64, 1/16, 1/4 and 1 (CPU reference:
+// `model::calibration::LineCalibration::wood_scale_at`); area lines
+// under the area-preserving rule only, as `line_calibration`.
+fn wood_line_calibration(lod: InstanceLod, spatial_error: f32, opacity: f32) -> f32 {
+#ifdef CONIFER_LINE_QUADS
+    if ((lod.code >> LOD_OPACITY_SHIFT) & 3u) != 1u {
+        return 1.0;
+    }
+    let t = line_scale_step(lod, spatial_error);
+    let k = min(u32(t), LINE_SCALE_STEPS - 2u);
+    let node = clamp(0.5 * (log2(max(opacity, 1e-12)) + 6.0), 0.0, f32(WOOD_OPACITY_NODES - 1u));
+    let j = min(u32(node), WOOD_OPACITY_NODES - 2u);
+    let below = mix(species.wood_line_scales[k][j], species.wood_line_scales[k][j + 1u], node - f32(j));
+    let above = mix(species.wood_line_scales[k + 1u][j], species.wood_line_scales[k + 1u][j + 1u], node - f32(j));
     return mix(below, above, t - f32(k));
 #else
     return 1.0;
@@ -904,7 +932,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     if lod.view.w > 0.0 && (wood_error < line_from || !(wood_error < species.wood_line_fade * line_from)) {
         return culled();
     }
-    var alpha = line_alpha(lod, wood_error, width, width);
+    // Scaled as the calibration measured, by the line's size and opacity:
+    // a twig's line blends with the needle lines around it as if they fell
+    // independently, where the twig lies inside its own needles.
+    let unscaled = line_alpha(lod, wood_error, width, width);
+    var alpha = min(unscaled * wood_line_calibration(lod, wood_error, unscaled), 1.0);
     // Sections at least two pixels long: a line shorter than a pixel may
     // light none (CPU reference: `model::wind::wood_line_sections`); the
     // segment's slots past them are not drawn.

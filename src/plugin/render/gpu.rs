@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 2,080 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 2,208 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -270,6 +270,13 @@ pub struct SpeciesParams {
     /// major): the opacity of the wood lines' second draw, after the
     /// foliage lines.
     pub wood_visibility: [[f32; 4]; WOOD_VISIBILITY_ROWS],
+    /// The wood lines' opacity scales at the pixel sizes of
+    /// `line_scales` (rows) and
+    /// [`crate::model::calibration::WOOD_OPACITY_NODES`] opacities
+    /// ([`crate::model::calibration::LineCalibration::wood_scales`]; all 1
+    /// without a calibration).
+    pub wood_line_scales:
+        [[f32; crate::model::calibration::WOOD_OPACITY_NODES]; crate::model::calibration::CALIBRATION_STEPS],
 }
 
 impl Default for SpeciesParams {
@@ -315,14 +322,20 @@ impl SpeciesParams {
         self.sphere_specular = four_a_row(&table.specular);
     }
 
-    /// Sets the lines' opacity scales by pixel size (`None`: every scale
-    /// 1).
+    /// Sets the needle and the wood lines' opacity scales by pixel size
+    /// (`None`: every scale 1).
     pub fn set_line_calibration(&mut self, calibration: Option<&crate::model::calibration::LineCalibration>) {
-        let (scales, range) = match calibration {
-            Some(c) => (c.scales, c.log_range()),
-            None => ([1.0; crate::model::calibration::CALIBRATION_STEPS], [0.0, 1.0]),
+        use crate::model::calibration::{CALIBRATION_STEPS, WOOD_OPACITY_NODES};
+        let (scales, wood_scales, range) = match calibration {
+            Some(c) => (c.scales, c.wood_scales, c.log_range()),
+            None => (
+                [1.0; CALIBRATION_STEPS],
+                [[1.0; WOOD_OPACITY_NODES]; CALIBRATION_STEPS],
+                [0.0, 1.0],
+            ),
         };
         self.line_scales = four_a_row(&scales);
+        self.wood_line_scales = wood_scales;
         self.line_scale_range = [range[0], range[1], 0.0, 0.0];
     }
 
@@ -565,8 +578,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_2080_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 2080);
+    fn species_params_is_2208_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 2208);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`
@@ -582,6 +595,10 @@ mod tests {
     fn the_shader_has_the_line_calibrations_length() {
         let steps = crate::model::calibration::CALIBRATION_STEPS;
         assert_shader_table("LINE_SCALE_STEPS", steps, "line_scales", super::LINE_SCALE_ROWS);
+        assert_shader_table("LINE_SCALE_STEPS", steps, "wood_line_scales", steps);
+        let nodes = crate::model::calibration::WOOD_OPACITY_NODES;
+        assert_eq!(nodes, 4, "a row of the wood table is one vec4");
+        assert!(include_str!("compact_types.wgsl").contains(&format!("const WOOD_OPACITY_NODES: u32 = {nodes}u;")));
     }
 
     /// The shader's crown profile is as long as `model::impostor`'s.
