@@ -295,17 +295,20 @@ fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
     // In front of the wall the layers show the trunk; behind it, hardly.
     assert!(in_sight(-1.0) > in_sight(1.0) + 0.3);
     assert!(gap[0] > 0.2 && gap[1] < gap[0] - 0.15, "layered less under: {gap:?}");
-    // Lines drawn by their area take the calibration's wood scale (CPU
-    // reference: `LineCalibration::wood_scale_at`): the trunk's line
-    // alone above the wall (0.73 of a pixel wide) keeps half its light at
-    // half its scale.
+    // Lines drawn by their area take the calibration's wood scale, read by
+    // the line's pixel size and opacity (CPU reference:
+    // `LineCalibration::wood_scale_at`): the trunk's line alone above the
+    // wall, 3 cm wide in pixels of 25 m · 2·tan 7.5° / 160 = 4.1 cm
+    // (opacity 0.73, between the table's nodes at 1/4 and 1), keeps the
+    // table's share of its light.
+    let rows = [2.0f32, 1.0, 0.5, 0.25];
     let mut alone = [0.0f32; 2];
-    for (k, wood_scale) in [1.0f32, 0.5].into_iter().enumerate() {
+    for (k, wood_scales) in [[[1.0f32; 4]; 8], [rows; 8]].into_iter().enumerate() {
         let calibrate = move |world: &mut World| {
             world.resource_mut::<ConiferLodSettings>().line_raster = LineRaster::Area;
             for (_, species) in world.resource_mut::<Assets<ConiferSpecies>>().iter_mut() {
                 let calibration = species.line_calibration.as_mut().expect("baked with a calibration");
-                calibration.wood_scales = [[wood_scale; 4]; 8];
+                calibration.wood_scales = wood_scales;
             }
         };
         let image = shot(
@@ -316,7 +319,16 @@ fn wood_lines_show_in_front_of_the_needles_and_not_behind() {
         );
         alone[k] = red(&image, &[79, 80], 64..67);
     }
+    let pixel = 25.0 * 2.0 * 7.5f32.to_radians().tan() / 160.0;
+    let table = bevy_conifer_lod::model::calibration::LineCalibration {
+        wood_scales: [rows; 8],
+        ..record.line_calibration.expect("baked with a calibration")
+    };
+    let want = table.wood_scale_at(pixel, 0.03 / pixel);
     let ratio = alone[1] / alone[0].max(1e-6);
-    println!("trunk alone, area lines: red {alone:?}, at half the wood scale {ratio:.3} of it");
-    assert!(alone[0] > 0.05 && (ratio - 0.5).abs() < 0.05, "{alone:?}: {ratio}");
+    println!("trunk alone, area lines: red {alone:?}, with the table {ratio:.3} of it, the CPU reference {want:.3}");
+    assert!(
+        alone[0] > 0.05 && (ratio - want).abs() < 0.05,
+        "{alone:?}: {ratio} against {want}"
+    );
 }

@@ -478,7 +478,7 @@ impl SideComposition {
     /// `min(opacity · strip_pixel_coverage, 1)`; a needle the cut draws as
     /// a prism (a pixel finer than the calibration's range) counts as its
     /// original line. Wood segments are drawn as the plugin draws them at
-    /// this size ([`cut_wood`]): prisms where they are wider than the
+    /// this size (`cut_wood`): prisms where they are wider than the
     /// spatial error, lines of opacity `min((r₀ + r₁) / s, 1)` from there
     /// to [`WOOD_LINE_FADE`] times that, nothing past it.
     pub fn new(record: &LodRecord, side: &SideNeedles, pixel: f32, options: &CalibrationOptions) -> Option<Self> {

@@ -41,7 +41,7 @@
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
-    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS,
+    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -573,9 +573,9 @@ fn toward_view_local(world_from_local: mat4x4<f32>, local_point: vec3<f32>) -> v
 
 // A vertex of an `sides`-sided prism whose ring faces the view: its first
 // corner toward the viewer (odd sides) or half a step off (sides 2 mod 4),
-// so the silhouette is centred on the axis and as wide as an inscribed
-// polygon gets, `2r·cos(π/2m)` odd, `2r` even (CPU reference:
-// `model::compact::prism_ring`).
+// so the silhouette is centred on the axis, and `2r` wide, the
+// cylinder's: an odd ring's corners stand `1/cos(π/2m)` radii out (CPU
+// reference: `model::compact::prism_ring`).
 fn prism_vertex(base: vec3<f32>, tip: vec3<f32>, base_radius: f32, tip_radius: f32, sides: u32, corner: PrismCorner, toward: vec3<f32>) -> PrismVertex {
     let m = max(species.max_sides, 3u);
     let k = corner.slot * sides / m;
@@ -592,7 +592,8 @@ fn prism_vertex(base: vec3<f32>, tip: vec3<f32>, base_radius: f32, tip_radius: f
     var out: PrismVertex;
     let end = select(base, tip, corner.at_tip);
     let radius = select(base_radius, tip_radius, corner.at_tip);
-    out.position = end + radial * radius;
+    let widen = select(1.0, 1.0 / cos(PI / f32(2u * sides)), sides % 2u == 1u);
+    out.position = end + radial * (radius * widen);
     out.normal = radial;
     if corner.cap {
         out.normal = select(-axis, axis, corner.at_tip);
