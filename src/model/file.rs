@@ -1110,19 +1110,13 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     // lack: they are dropped (the plugin bakes the impostor at load).
     let (impostor, rest) = if version >= 10 {
         let (stored, rest) = postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(malformed)?;
-        let impostor = match (impostor, stored) {
-            (Some(mut impostor), Some(bytes)) => {
+        let impostor = both_or_neither(impostor, stored, "impostor: a wood visibility without its impostor")?
+            .map(|(mut impostor, bytes)| {
                 impostor.wood_visibility = WoodVisibility::from_bytes(&bytes)
                     .ok_or_else(|| RecordError::Malformed("impostor: a wood visibility of another size".into()))?;
-                Some(impostor)
-            }
-            (None, None) => None,
-            _ => {
-                return Err(RecordError::Malformed(
-                    "impostor: a wood visibility without its impostor, or the other way".into(),
-                ));
-            }
-        };
+                Ok::<_, RecordError>(impostor)
+            })
+            .transpose()?;
         (impostor, rest)
     } else {
         (None, rest)
@@ -1131,18 +1125,15 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     let (line_calibration, rest) = if version >= 11 {
         let (stored, rest) = postcard::take_from_bytes::<Option<[[f32; WOOD_OPACITY_NODES]; CALIBRATION_STEPS]>>(rest)
             .map_err(malformed)?;
-        let calibration = match (line_calibration, stored) {
-            (Some(calibration), Some(wood_scales)) => Some(LineCalibration {
-                wood_scales,
-                ..calibration
-            }),
-            (None, None) => None,
-            _ => {
-                return Err(RecordError::Malformed(
-                    "line calibration: wood scales without the table, or the other way".into(),
-                ));
-            }
-        };
+        let calibration = both_or_neither(
+            line_calibration,
+            stored,
+            "line calibration: wood scales without the table",
+        )?
+        .map(|(calibration, wood_scales)| LineCalibration {
+            wood_scales,
+            ..calibration
+        });
         (calibration, rest)
     } else {
         (line_calibration, rest)
@@ -1171,6 +1162,16 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
             line_calibration,
         },
     ))
+}
+
+/// `part` and `extra`, which a record stores together: both, neither, or
+/// malformed (`what` says which is missing).
+fn both_or_neither<A, B>(part: Option<A>, extra: Option<B>, what: &str) -> Result<Option<(A, B)>, RecordError> {
+    match (part, extra) {
+        (Some(a), Some(b)) => Ok(Some((a, b))),
+        (None, None) => Ok(None),
+        _ => Err(RecordError::Malformed(format!("{what}, or the other way"))),
+    }
 }
 
 /// Placements on codes came with format 6: an older file holding one is
