@@ -31,7 +31,7 @@
 //! over them, [`super::impostor::WoodVisibility`]), and blending composes
 //! it with them as if they fell at random with respect to each other,
 //! where a twig sits inside its own needles: on the young Norway spruce
-//! at 6 cm pixels the wood lines add to the needles' coverage 1.4 times
+//! at 6 cm pixels the wood lines add to the needles' coverage 1.5 times
 //! what the wood adds to the needles' silhouettes, 11 % over the tree's
 //! whole coverage. A trunk or a bare branch drawn as a line is not hidden
 //! so, and a twig at one pixel size is as wide, relative to its pixel, as
