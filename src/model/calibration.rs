@@ -110,10 +110,8 @@ pub const WOOD_OPACITY_NODES: usize = 4;
 /// [`WOOD_OPACITY_NODES`]: `log₄(64 · opacity)`, clamped to `[0, 3]` (a
 /// NaN opacity takes 0).
 pub fn wood_opacity_node(opacity: f32) -> f32 {
+    // `max` takes 1e-12 for a NaN opacity.
     let node = 0.5 * ((opacity.max(1e-12)).log2() + 6.0);
-    if node.is_nan() {
-        return 0.0;
-    }
     node.clamp(0.0, (WOOD_OPACITY_NODES - 1) as f32)
 }
 
@@ -404,7 +402,7 @@ impl SideNeedles {
             return None;
         }
         let mut bits = SampleBits::new(width as u32, height as u32);
-        let to_samples = |p: Vec3| Vec2::new((p.dot(right) - low.x) / spacing, (high.y - p.y) / spacing);
+        let to_samples = |p: Vec3| side_sample(p, right, low, high, spacing);
         for n in record.needles.iter().filter(|n| n.is_valid()) {
             let r = n.radius / spacing;
             bits.stamp(to_samples(n.base), to_samples(n.tip), r, r, false);
@@ -525,7 +523,9 @@ impl SideComposition {
         // Picture metres to pixel units (x right, y down from the top).
         let top = lo.y + height as f32 * pixel;
         let right = Vec3::new(side.azimuth.cos(), 0.0, side.azimuth.sin());
-        let to_pixels = |p: Vec3| Vec2::new((p.dot(right) - lo.x) / pixel, (top - p.y) / pixel);
+        let in_picture = |p: Vec3| Vec2::new(p.dot(right), p.y);
+        let to_pixels_2d = |q: Vec2| Vec2::new((q.x - lo.x) / pixel, (top - q.y) / pixel);
+        let to_pixels = |p: Vec3| to_pixels_2d(in_picture(p));
 
         // Which pixel column each sample column falls in (its centre), and
         // how many sample columns each pixel column holds, counting the
@@ -554,7 +554,7 @@ impl SideComposition {
         // The wood on the needles' samples, as cones with round ends (they
         // meet their neighbours): its prisms, and its lines by the opacity
         // node nearest each line's.
-        let to_samples = |p: Vec3| Vec2::new((p.dot(right) - side.low.x) / spacing, (side.high.y - p.y) / spacing);
+        let to_samples = |p: Vec3| side_sample(p, right, side.low, side.high, spacing);
         let stamp = |bits: &mut SampleBits, w: &WoodSegment| {
             bits.stamp(
                 to_samples(w.start),
@@ -604,8 +604,6 @@ impl SideComposition {
         // The wood is sampled over the needles' bounds only: its lines are
         // clipped to them too.
         let (mut wood_touches, mut touches_of_line) = (Vec::new(), Vec::new());
-        let in_picture = |p: Vec3| Vec2::new(p.dot(right), p.y);
-        let to_pixels_2d = |q: Vec2| Vec2::new((q.x - lo.x) / pixel, (top - q.y) / pixel);
         for line in &wood.lines {
             let Some((a, b)) = clip_to_box(in_picture(line.a), in_picture(line.b), side.low, side.high) else {
                 continue;
@@ -825,6 +823,13 @@ fn cut_lines(record: &LodRecord, error: f32) -> Vec<CutLine> {
                 .then_some(CutLine { a, b, area_per_length })
         })
         .collect()
+}
+
+/// Where `p` falls on the samples of a side view whose picture x runs
+/// along `right` and whose samples, `spacing` apart, span `low` to `high`
+/// (picture metres; sample rows from `high.y` downwards).
+fn side_sample(p: Vec3, right: Vec3, low: Vec2, high: Vec2, spacing: f32) -> Vec2 {
+    Vec2::new((p.dot(right) - low.x) / spacing, (high.y - p.y) / spacing)
 }
 
 /// The wood of a cut, as [`SideComposition`] composes it.
