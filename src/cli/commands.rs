@@ -307,13 +307,13 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
             eprintln!("{}: already format {FORMAT_VERSION}", path.display());
             continue;
         }
-        if record.impostor.is_none() && !args.no_impostor {
+        // Format 12 measures the impostor and the line calibration against
+        // the needles' capped silhouettes: older ones are baked again.
+        let measured_without_caps = version.is_none_or(|v| v < 12);
+        if (record.impostor.is_none() || measured_without_caps) && !args.no_impostor {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
-        // Format 11 measured the wood lines' scales: an older calibration
-        // is measured again (the needles' table comes out the same).
-        let calibration_outdated = version.is_none_or(|v| v < 11);
-        if (record.line_calibration.is_none() || calibration_outdated) && !args.no_line_calibration {
+        if (record.line_calibration.is_none() || measured_without_caps) && !args.no_line_calibration {
             record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &Default::default())
                 .with_context(|| format!("{}: cannot calibrate its lines", path.display()))?;
         }

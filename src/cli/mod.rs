@@ -164,15 +164,16 @@ pub struct UpgradeArgs {
     /// The records to rewrite.
     #[arg(required = true)]
     pub files: Vec<PathBuf>,
-    /// Leave a record without a crown impostor as it is (by default, one older than
-    /// format 10 gains its impostor, baked with the default options; format 7's
-    /// lit its texels along one mean axis, and formats 8 and 9 lack its wood
-    /// visibility: theirs is baked again).
+    /// Leave a record's crown impostor as it is (by default, one older than format 12
+    /// gets its impostor baked again with the default options: format 7's lit its
+    /// texels along one mean axis, formats 8 and 9 lack its wood visibility, and
+    /// formats up to 11 left the needles' end caps out of its coverage).
     #[arg(long)]
     pub no_impostor: bool,
-    /// Leave a record's line calibration as it is (by default, one older than format 11 is
+    /// Leave a record's line calibration as it is (by default, one older than format 12 is
     /// calibrated again with the default options: format 9 added the table of line opacity
-    /// scales, format 11 the wood lines' scales in it).
+    /// scales, format 11 the wood lines' scales in it, format 12 counts the needles' end
+    /// caps in what the lines must cover).
     #[arg(long)]
     pub no_line_calibration: bool,
 }

@@ -52,6 +52,11 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 12 keeps 11's layout; its impostor texels and line
+//! calibration are measured against the needles' capped silhouettes (each
+//! prism's end caps seen at its slant, [`super::look::PieceEnds`]), where
+//! 11's left the caps out: an older file reads as it is, `conifer upgrade`
+//! bakes both again.
 //! Version 11 adds the wood lines' scales to the line calibration (an
 //! older file's reads with every wood scale 1, as it was drawn;
 //! `conifer upgrade` calibrates the file again).
@@ -99,7 +104,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 11;
+pub const FORMAT_VERSION: u32 = 12;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -1544,9 +1549,15 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
+        // Format 12 is 11's layout (measured against capped silhouettes):
+        // an 11 file reads as it is.
+        let body = &bytes[HEADER_BYTES..];
+        assert_eq!(
+            decode_prototype_record(&file_of_version(11, body)).unwrap(),
+            decode_prototype_record(&bytes).unwrap()
+        );
         // Format 11 ends with the wood scales: format 10 stops before
         // them, read with every wood scale 1.
-        let body = &bytes[HEADER_BYTES..];
         let wood_scales = postcard::to_allocvec(&Some(calibration.wood_scales)).unwrap();
         let v10 = &body[..body.len() - wood_scales.len()];
         let read = decode_prototype_record(&file_of_version(10, v10)).unwrap();

@@ -58,7 +58,7 @@
 //! and the mip levels the plugin samples at a distance are means of
 //! texels, so the impostor's coverage at any size is the samples' mean.
 
-use super::look::SampleBits;
+use super::look::{PieceEnds, SampleBits};
 use super::needle::{Needle, WoodSegment};
 use super::prism::TriangleMesh;
 use super::shading::{TexelShares, texel_shares};
@@ -889,10 +889,11 @@ impl CrownImpostor {
             (needle.base - centre).dot(canvas.toward),
             (needle.tip - centre).dot(canvas.toward),
         );
+        let ends = PieceEnds::of_cylinder(needle.tip - needle.base, canvas.toward);
         let (wood, wood_front, wood_hidden) = (&canvas.wood, &canvas.wood_front, &mut canvas.wood_hidden);
         canvas
             .needles
-            .stamp_each(a, b, half_width, half_width, false, |index, t| {
+            .stamp_each(a, b, half_width, half_width, ends, |index, t| {
                 if wood.is_set(index) && near_a + (near_b - near_a) * t > wood_front[index] {
                     wood_hidden.set(index);
                 }
@@ -921,7 +922,7 @@ impl CrownImpostor {
             (segment.end - centre).dot(canvas.toward) + segment.end_radius,
         );
         let front = &mut canvas.wood_front;
-        canvas.wood.stamp_each(a, b, ra, rb, true, |index, t| {
+        canvas.wood.stamp_each(a, b, ra, rb, PieceEnds::Round, |index, t| {
             let near = near_a + (near_b - near_a) * t;
             front[index] = front[index].max(near);
         });
