@@ -376,7 +376,8 @@ pub struct SideNeedles {
 impl SideNeedles {
     /// Samples `record`'s valid needles seen from `azimuth` every
     /// `spacing` metres (a sample is covered when its centre lies within a
-    /// needle's radius of its axis, between its ends). `None` without
+    /// needle's radius of its axis between its ends, or in one of its
+    /// prism's end caps seen at its slant, [`PieceEnds::Capped`]). `None` without
     /// valid needles, with a spacing that is not positive and finite, or
     /// one that would take more than 2³² samples.
     pub fn new(record: &LodRecord, azimuth: f32, spacing: f32) -> Option<Self> {

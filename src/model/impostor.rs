@@ -45,8 +45,9 @@
 //!
 //! Each view is rasterized exactly, as the reference draws the tree:
 //! [`SAMPLES_PER_TEXEL`]² binary samples a texel, a sample covered when
-//! its centre lies in a needle's strip (`2r` wide between its ends, the
-//! prism's silhouette) or a wood segment's trapezoid
+//! its centre lies in a needle's silhouette (its strip, `2r` wide between
+//! its ends, and its prism's end caps seen at its slant:
+//! [`super::look::PieceEnds::Capped`]) or a wood segment's trapezoid
 //! ([`super::look::SampleBits`], as `look::side_coverage` measures crowns).
 //! Needles in depth overlap exactly where they overlap in the picture, so
 //! a texel never covers more than itself and a clumped crown keeps the gaps
