@@ -68,9 +68,7 @@ fn covered_pixels(
         let ((a, scale_a), (b, scale_b)) = (project(w.start), project(w.end));
         bits.stamp(a, b, w.start_radius * scale_a, w.end_radius * scale_b, PieceEnds::Round);
     }
-    let mut set = 0u64;
-    bits.for_each_set(|_| set += 1);
-    set as f64 / f64::from(SAMPLES * SAMPLES)
+    bits.count_set() as f64 / f64::from(SAMPLES * SAMPLES)
 }
 
 #[test]

@@ -404,9 +404,10 @@ impl SideNeedles {
         }
         let mut bits = SampleBits::new(width as u32, height as u32);
         let to_samples = |p: Vec3| side_sample(p, right, low, high, spacing);
+        let toward = right.cross(Vec3::Y);
         for n in record.needles.iter().filter(|n| n.is_valid()) {
             let r = n.radius / spacing;
-            let ends = PieceEnds::of_cylinder(n.tip - n.base, right.cross(Vec3::Y));
+            let ends = PieceEnds::of_cylinder(n.tip - n.base, toward);
             bits.stamp(to_samples(n.base), to_samples(n.tip), r, r, ends);
         }
         Some(Self {
