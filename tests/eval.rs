@@ -408,3 +408,88 @@ fn the_cpu_tone_map_is_bevys() {
         }
     }
 }
+
+/// `conifer eval --float-blending`'s targets: a hundred translucent layers
+/// over the eval's grey sky, blended into an `Rgba32Float` target and read
+/// back as 8-bit sRGB, come out within a level of the exact composite
+/// (colour and alpha). The same layers in `Hdr`'s `Rgba16Float` are
+/// printed beside: lavapipe rounds each blend into a 16-bit float toward
+/// zero, so they come out darker than their coverage allows.
+#[test]
+fn float_blending_composites_many_layers_exactly() {
+    use bevy::camera::{Hdr, RenderTarget};
+    use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
+    use bevy::prelude::*;
+    use bevy::render::render_resource::TextureFormat;
+    use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+    let _turn = common::gpu_turn();
+
+    const LAYERS: usize = 100;
+    const ALPHA: f32 = 0.01;
+    let sky = [0.83f32, 0.85, 0.89];
+    let needle = [0.02f32, 0.06, 0.02];
+    let mut renderer = HeadlessRenderer::new(concat!(env!("CARGO_MANIFEST_DIR"), "/assets"));
+    let float_target = renderer.render_target_with_format(8, 8, TextureFormat::Rgba32Float);
+    let half_target = renderer.render_target(8, 8);
+    let world = renderer.world_mut();
+    let quad = world
+        .resource_mut::<Assets<Mesh>>()
+        .add(Mesh::from(Rectangle::new(4.0, 4.0)));
+    let layer = world.resource_mut::<Assets<StandardMaterial>>().add(StandardMaterial {
+        base_color: Color::linear_rgba(needle[0], needle[1], needle[2], ALPHA),
+        alpha_mode: AlphaMode::Blend,
+        unlit: true,
+        ..default()
+    });
+    for k in 0..LAYERS {
+        world.spawn((
+            Mesh3d(quad.clone()),
+            MeshMaterial3d(layer.clone()),
+            Transform::from_xyz(0.0, 0.0, -1.0 - 0.01 * k as f32),
+        ));
+    }
+    let [r, g, b] = sky;
+    for (k, (target, hdr)) in [(&float_target, false), (&half_target, true)].into_iter().enumerate() {
+        let mut camera = world.spawn((
+            Camera3d::default(),
+            RenderTarget::from(target.clone()),
+            Camera {
+                clear_color: ClearColorConfig::Custom(Color::linear_rgba(r, g, b, 0.0)),
+                order: k as isize,
+                ..default()
+            },
+            Tonemapping::None,
+            DebandDither::Disabled,
+        ));
+        if hdr {
+            camera.insert(Hdr);
+        }
+    }
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        renderer.update().unwrap();
+    }
+    let pictures = renderer.capture_all(&[float_target, half_target], 10).unwrap();
+    let encode = |linear: f32| {
+        let c = linear.clamp(0.0, 1.0);
+        let encoded = if c <= 0.003_130_8 {
+            c * 12.92
+        } else {
+            1.055 * c.powf(1.0 / 2.4) - 0.055
+        };
+        encoded * 255.0
+    };
+    let through = (1.0 - ALPHA).powi(LAYERS as i32);
+    let expected: Vec<f32> = (0..3)
+        .map(|k| encode(sky[k] * through + needle[k] * (1.0 - through)))
+        .chain([(1.0 - through) * 255.0])
+        .collect();
+    let float = pictures[0].get_pixel(4, 4).0;
+    let half = pictures[1].get_pixel(4, 4).0;
+    println!("{LAYERS} layers of alpha {ALPHA}: exact {expected:?}, Rgba32Float {float:?}, Hdr (Rgba16Float) {half:?}");
+    for k in 0..4 {
+        assert!(
+            (f32::from(float[k]) - expected[k]).abs() <= 1.0,
+            "channel {k}: Rgba32Float {float:?} against {expected:?}"
+        );
+    }
+}

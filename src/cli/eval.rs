@@ -68,6 +68,13 @@ pub struct EvalArgs {
     /// the clear colour with `--hdr` too.
     #[arg(long)]
     pub no_tonemapping: bool,
+    /// The methods' cameras blend in 32-bit float: each renders linear
+    /// light into an `Rgba32Float` target and is tone-mapped on the CPU as
+    /// the reference is. Lavapipe rounds each blend into `--hdr`'s 16-bit
+    /// float toward zero, which darkens a pixel under many translucent
+    /// lines; a GPU rounding to nearest does not.
+    #[arg(long)]
+    pub float_blending: bool,
     /// Shimmer under camera motion: an orbit (the camera circles the
     /// crown) and a lateral pan at each of these distances, metres (e.g.
     /// 12,56,250); reports each method's flicker_mean and flicker_p99.
@@ -197,6 +204,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         ours_impostor: !args.ours_no_impostor,
         hdr: args.hdr,
         tonemapping: !args.no_tonemapping,
+        float_blending: args.float_blending,
     };
     if args.inside {
         if let Some(bound) = args.merge_error {

@@ -170,7 +170,12 @@ pub fn evaluate_inside(
     let s = view.supersampling.max(1);
     let mut targets = Vec::new();
     for (layer, scale, order) in [(0usize, 1u32, 0isize), (1, s, 1)] {
-        let image = renderer.render_target(view.width * scale, view.height * scale);
+        let format = if layer == 1 {
+            bevy::render::render_resource::TextureFormat::Rgba8UnormSrgb
+        } else {
+            view.methods_target_format()
+        };
+        let image = renderer.render_target_with_format(view.width * scale, view.height * scale, format);
         let [r, g, b] = super::scene::BACKGROUND;
         let mut camera = renderer.world_mut().spawn((
             HeadlessRenderer::camera_bundle(&image, transform, view.fov_deg.to_radians()),
@@ -225,7 +230,12 @@ pub fn evaluate_inside(
         renderer.update().map_err(EvalError::from)?;
         let mut images = renderer.capture_all(&targets, 10).map_err(EvalError::from)?;
         let reference = resolve_reference(&images.pop().expect("reference"), s, reference_tone.as_ref());
-        let picture = images.pop().expect("picture");
+        let mut picture = images.pop().expect("picture");
+        if view.methods_tone_map_on_cpu()
+            && let Some(tone) = &reference_tone
+        {
+            tone.apply(&mut picture);
+        }
         if methods.is_empty() {
             write(&reference, "ref_inside.png", &mut files)?;
         }

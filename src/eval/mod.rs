@@ -276,6 +276,9 @@ pub struct EvalReport {
     /// Whether the cameras tone-mapped (TonyMcMapface) or wrote linear
     /// light clamped (`--no-tonemapping`).
     pub tonemapping: bool,
+    /// Whether the methods blended in 32-bit float and were tone-mapped on
+    /// the CPU (`--float-blending`).
+    pub float_blending: bool,
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -628,6 +631,7 @@ pub fn evaluate(
         ours_impostor: options.view.ours_impostor,
         hdr: options.view.hdr,
         tonemapping: options.view.tonemapping,
+        float_blending: options.view.float_blending,
         needles,
         dolly_distances: dolly,
         wind: wind.unwrap_or(0.0),

@@ -44,6 +44,7 @@ use bevy::camera::visibility::{RenderLayers, VisibilityRange};
 use bevy::core_pipeline::tonemapping::{DebandDither, Tonemapping};
 use bevy::mesh::PrimitiveTopology;
 use bevy::prelude::*;
+use bevy::render::render_resource::TextureFormat;
 use image::RgbaImage;
 use std::time::Instant;
 
@@ -229,6 +230,15 @@ pub struct EvalView {
     /// `false` writes linear light clamped to [0, 1] (`Tonemapping::None`),
     /// leaving the background the clear colour in both main textures.
     pub tonemapping: bool,
+    /// Whether the methods' cameras blend in 32-bit float: each renders
+    /// linear light into an `Rgba32Float` target (no `Hdr`, no tone
+    /// mapping) and is tone-mapped on the CPU as the reference is, instead
+    /// of blending in `Hdr`'s `Rgba16Float`. Lavapipe rounds every blend
+    /// into a 16-bit float toward zero (Mesa's `lp_build_float_to_half`),
+    /// so a pixel under a hundred translucent lines comes out darker than
+    /// its coverage allows; a 32-bit float blend rounds far below what a
+    /// picture shows, as a GPU rounding 16-bit blends to nearest does.
+    pub float_blending: bool,
 }
 
 /// Where the sun of `conifer eval`'s scene stands (the camera looks at the
@@ -292,12 +302,20 @@ impl EvalView {
             ours_impostor: true,
             hdr: false,
             tonemapping: true,
+            float_blending: false,
         }
     }
 
-    /// Gives `camera` this view's main texture (`Hdr` where [`Self::hdr`])
-    /// and tone mapping (`Tonemapping::None` where not [`Self::tonemapping`]).
+    /// Gives a method's `camera` this view's main texture (`Hdr` where
+    /// [`Self::hdr`]) and tone mapping (`Tonemapping::None` where not
+    /// [`Self::tonemapping`]); where [`Self::float_blending`], its target's
+    /// `Rgba32Float` with neither tone mapping nor dither (the picture is
+    /// tone-mapped on the CPU, [`Self::methods_tone_map_on_cpu`]).
     pub fn configure_camera(&self, camera: &mut EntityWorldMut) {
+        if self.float_blending {
+            camera.insert((Tonemapping::None, DebandDither::Disabled));
+            return;
+        }
         if self.hdr {
             camera.insert(Hdr);
         }
@@ -308,15 +326,35 @@ impl EvalView {
 
     /// Whether the reference renders linear light and is tone-mapped on
     /// the CPU after its box filter ([`super::tonemap`]): where the
-    /// methods' cameras have `Hdr` and tone mapping.
+    /// methods' cameras tone-map and have `Hdr` or blend in 32-bit float.
     pub fn reference_tone_maps_on_cpu(&self) -> bool {
-        self.hdr && self.tonemapping
+        (self.hdr || self.float_blending) && self.tonemapping
+    }
+
+    /// Whether the methods' pictures are tone-mapped on the CPU: where
+    /// they blend in 32-bit float ([`Self::float_blending`]) and tone-map.
+    pub fn methods_tone_map_on_cpu(&self) -> bool {
+        self.float_blending && self.tonemapping
+    }
+
+    /// The format of the methods' render targets: `Rgba32Float` where
+    /// they blend in it ([`Self::float_blending`]), else 8-bit sRGB.
+    pub fn methods_target_format(&self) -> TextureFormat {
+        if self.float_blending {
+            TextureFormat::Rgba32Float
+        } else {
+            TextureFormat::Rgba8UnormSrgb
+        }
     }
 
     /// Gives the reference's camera its main texture: this view's, but
     /// writing linear light (`Tonemapping::None`, no deband dither) where
     /// [`Self::reference_tone_maps_on_cpu`].
     pub fn configure_reference_camera(&self, camera: &mut EntityWorldMut) {
+        if self.float_blending {
+            camera.insert((Hdr, Tonemapping::None, DebandDither::Disabled));
+            return;
+        }
         self.configure_camera(camera);
         if self.reference_tone_maps_on_cpu() {
             camera.insert((Tonemapping::None, DebandDither::Disabled));
@@ -327,10 +365,12 @@ impl EvalView {
     /// cameras ([`LineRaster::Auto`] resolved by the main texture [`Self::hdr`]
     /// picks).
     pub fn drawn_line_raster(&self) -> LineRaster {
-        let main_format = if self.hdr {
-            bevy::render::render_resource::TextureFormat::Rgba16Float
+        let main_format = if self.float_blending {
+            TextureFormat::Rgba32Float
+        } else if self.hdr {
+            TextureFormat::Rgba16Float
         } else {
-            bevy::render::render_resource::TextureFormat::Rgba8UnormSrgb
+            TextureFormat::Rgba8UnormSrgb
         };
         if self.line_raster.draws_quads(main_format) {
             LineRaster::Area
@@ -690,8 +730,13 @@ impl EvalScene {
 
         // Cameras: one per method, and the reference's.
         let mut views = Vec::new();
-        let camera = |renderer: &mut HeadlessRenderer, width: u32, height: u32, layer: usize, order: isize| {
-            let target = renderer.render_target(width, height);
+        let camera = |renderer: &mut HeadlessRenderer,
+                      width: u32,
+                      height: u32,
+                      format: TextureFormat,
+                      layer: usize,
+                      order: isize| {
+            let target = renderer.render_target_with_format(width, height, format);
             let [r, g, b] = BACKGROUND;
             let camera = renderer
                 .world_mut()
@@ -711,7 +756,14 @@ impl EvalScene {
         for (k, &method) in methods.iter().enumerate() {
             views.push((
                 method,
-                camera(&mut renderer, view.width, view.height, method.layer(), k as isize),
+                camera(
+                    &mut renderer,
+                    view.width,
+                    view.height,
+                    view.methods_target_format(),
+                    method.layer(),
+                    k as isize,
+                ),
             ));
         }
         let s = view.supersampling.max(1);
@@ -719,6 +771,7 @@ impl EvalScene {
             &mut renderer,
             view.width * s,
             view.height * s,
+            TextureFormat::Rgba8UnormSrgb,
             REFERENCE_LAYER,
             methods.len() as isize,
         );
@@ -1072,16 +1125,31 @@ impl EvalScene {
         // and uploads the sampled lines for the cameras' new place.
         let mut targets: Vec<Handle<Image>> = self.views.iter().map(|(_, v)| v.target.clone()).collect();
         targets.push(self.reference.target.clone());
-        let mut images = self.renderer.capture_all(&targets, 10)?;
+        let images = self.renderer.capture_all(&targets, 10)?;
+        Ok(self.frame(images))
+    }
+
+    /// A frame of the captured `images` (each method's, then the
+    /// reference's): the reference resolved, the methods' pictures
+    /// tone-mapped where they were drawn in linear light
+    /// ([`EvalView::methods_tone_map_on_cpu`]).
+    fn frame(&self, mut images: Vec<RgbaImage>) -> EvalFrame {
         let reference = resolve_reference(
             &images.pop().expect("reference"),
             self.view.supersampling.max(1),
             self.reference_tone.as_ref(),
         );
-        Ok(EvalFrame {
+        if self.view.methods_tone_map_on_cpu()
+            && let Some(tone) = &self.reference_tone
+        {
+            for picture in &mut images {
+                tone.apply(picture);
+            }
+        }
+        EvalFrame {
             reference,
             methods: self.methods.iter().copied().zip(images).collect(),
-        })
+        }
     }
 
     /// Pictures at each of `distances` in turn (a dolly), one frame each:
@@ -1117,21 +1185,10 @@ impl EvalScene {
             |scene: &Self, pending: &mut std::collections::VecDeque<(usize, _)>| -> Result<(), EvalError> {
                 while let Some((step, request)) = pending.front() {
                     let request: &crate::plugin::headless::PendingScreenshots = request;
-                    let Some(mut images) = request.take()? else {
+                    let Some(images) = request.take()? else {
                         break;
                     };
-                    let reference = resolve_reference(
-                        &images.pop().expect("reference"),
-                        scene.view.supersampling.max(1),
-                        scene.reference_tone.as_ref(),
-                    );
-                    on_frame(
-                        *step,
-                        EvalFrame {
-                            reference,
-                            methods: scene.methods.iter().copied().zip(images).collect(),
-                        },
-                    );
+                    on_frame(*step, scene.frame(images));
                     pending.pop_front();
                 }
                 Ok(())

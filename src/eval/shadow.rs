@@ -215,7 +215,7 @@ impl ShadowScene {
                     RenderLayers::from_layers(&[tree_layer, ground_layer]),
                 ))
                 .id();
-            let target = renderer.render_target(view.width, view.height);
+            let target = renderer.render_target_with_format(view.width, view.height, view.methods_target_format());
             let camera = renderer
                 .world_mut()
                 .spawn((

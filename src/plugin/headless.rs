@@ -63,6 +63,9 @@ impl PendingScreenshots {
                     .unwrap_or_else(|e| e.into_inner())
                     .take()
                     .ok_or_else(|| HeadlessError::Format("screenshot taken twice".into()))?;
+                if image.texture_descriptor.format == TextureFormat::Rgba32Float {
+                    return float_screenshot_as_srgb(&image);
+                }
                 let dynamic = image
                     .try_into_dynamic()
                     .map_err(|e| HeadlessError::Format(e.to_string()))?;
@@ -71,6 +74,39 @@ impl PendingScreenshots {
             .collect::<Result<Vec<_>, _>>()
             .map(Some)
     }
+}
+
+/// An `Rgba32Float` screenshot as 8-bit sRGB: each colour channel's linear
+/// light clamped to [0, 1] and encoded, alpha scaled to 0–255.
+fn float_screenshot_as_srgb(image: &Image) -> Result<image::RgbaImage, HeadlessError> {
+    const TEXEL_BYTES: usize = 16;
+    let (width, height) = (image.width(), image.height());
+    let data = image.data.as_deref().unwrap_or_default();
+    let texels = width as usize * height as usize;
+    if data.len() != texels * TEXEL_BYTES {
+        return Err(HeadlessError::Format(format!(
+            "Rgba32Float screenshot of {width}x{height} holds {} bytes, not {}",
+            data.len(),
+            texels * TEXEL_BYTES
+        )));
+    }
+    let mut picture = image::RgbaImage::new(width, height);
+    for (pixel, texel) in picture.pixels_mut().zip(data.chunks_exact(TEXEL_BYTES)) {
+        let channel =
+            |k: usize| f32::from_le_bytes([texel[4 * k], texel[4 * k + 1], texel[4 * k + 2], texel[4 * k + 3]]);
+        let alpha = channel(3);
+        pixel.0 = [
+            crate::preview::linear_to_srgb(channel(0)),
+            crate::preview::linear_to_srgb(channel(1)),
+            crate::preview::linear_to_srgb(channel(2)),
+            if alpha >= 0.0 {
+                (alpha.min(1.0) * 255.0).round() as u8
+            } else {
+                0
+            },
+        ];
+    }
+    Ok(picture)
 }
 
 /// A Bevy app with the conifer plugin, rendering to images, driven by hand.
@@ -168,6 +204,13 @@ impl HeadlessRenderer {
 
     /// A new sRGB image to render into.
     pub fn render_target(&mut self, width: u32, height: u32) -> Handle<Image> {
+        self.render_target_with_format(width, height, TextureFormat::Rgba8UnormSrgb)
+    }
+
+    /// A new image of `format` to render into. Screenshots of an
+    /// `Rgba32Float` one come back as 8-bit sRGB of the linear light it
+    /// holds (clamped to [0, 1]), as an `Rgba8UnormSrgb` target's do.
+    pub fn render_target_with_format(&mut self, width: u32, height: u32, format: TextureFormat) -> Handle<Image> {
         let mut image = Image::new_uninit(
             Extent3d {
                 width: width.max(1),
@@ -175,7 +218,7 @@ impl HeadlessRenderer {
                 depth_or_array_layers: 1,
             },
             TextureDimension::D2,
-            TextureFormat::Rgba8UnormSrgb,
+            format,
             RenderAssetUsages::RENDER_WORLD,
         );
         image.texture_descriptor.usage |= TextureUsages::RENDER_ATTACHMENT;
