@@ -72,7 +72,8 @@ pub struct EvalArgs {
     /// light into an `Rgba32Float` target and is tone-mapped on the CPU as
     /// the reference is. Lavapipe rounds each blend into `--hdr`'s 16-bit
     /// float toward zero, which darkens a pixel under many translucent
-    /// lines; a GPU rounding to nearest does not.
+    /// lines; a GPU rounding to nearest does not. Needs a device that
+    /// multisamples `Rgba32Float` (lavapipe does).
     #[arg(long)]
     pub float_blending: bool,
     /// Shimmer under camera motion: an orbit (the camera circles the

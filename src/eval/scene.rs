@@ -238,6 +238,9 @@ pub struct EvalView {
     /// so a pixel under a hundred translucent lines comes out darker than
     /// its coverage allows; a 32-bit float blend rounds far below what a
     /// picture shows, as a GPU rounding 16-bit blends to nearest does.
+    /// The cameras keep Bevy's default 4× MSAA, so the device must
+    /// multisample `Rgba32Float` (lavapipe does; WebGPU does not promise
+    /// it).
     pub float_blending: bool,
 }
 

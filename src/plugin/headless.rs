@@ -327,3 +327,51 @@ impl HeadlessRenderer {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn float_image(width: u32, height: u32, texels: &[[f32; 4]]) -> Image {
+        let mut image = Image::new_uninit(
+            Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            TextureDimension::D2,
+            TextureFormat::Rgba32Float,
+            RenderAssetUsages::RENDER_WORLD,
+        );
+        image.data = Some(texels.iter().flatten().flat_map(|c| c.to_le_bytes()).collect());
+        image
+    }
+
+    #[test]
+    fn float_screenshots_come_back_as_srgb_of_their_linear_light() {
+        let image = float_image(
+            2,
+            2,
+            &[
+                [0.0, 1.0, 0.215_861, 1.0],
+                [2.5, -0.5, f32::NAN, 0.5],
+                [0.003_130_8, 0.5, 0.18, -0.25],
+                [0.2, 0.2, 0.2, 3.0],
+            ],
+        );
+        let picture = float_screenshot_as_srgb(&image).unwrap();
+        // 0.215861 is sRGB 128; 0.5 is 188; 0.18 is 118; 0.0031308 is 10
+        // (12.92 × 0.0031308 × 255); 0.2 is 124.
+        assert_eq!(picture.get_pixel(0, 0).0, [0, 255, 128, 255]);
+        assert_eq!(picture.get_pixel(1, 0).0, [255, 0, 0, 128]);
+        assert_eq!(picture.get_pixel(0, 1).0, [10, 188, 118, 0]);
+        assert_eq!(picture.get_pixel(1, 1).0, [124, 124, 124, 255]);
+        // A buffer that does not hold the image's texels is an error.
+        let mut short = image.clone();
+        short.data.as_mut().unwrap().truncate(40);
+        assert!(matches!(
+            float_screenshot_as_srgb(&short),
+            Err(HeadlessError::Format(_))
+        ));
+    }
+}
