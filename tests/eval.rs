@@ -132,6 +132,62 @@ fn every_method_renders_and_is_measured() {
     assert_eq!(image::open(out.join("ref_20m.png")).unwrap().width(), 96);
 }
 
+/// `--float-blending` end to end: `ours` drawn into `Rgba32Float` writes
+/// linear light whose colour agrees with its alpha, and the report says
+/// how it was drawn. The shipped young spruce at 12.22 m with a line for
+/// nearly every needle puts a hundred blends on a crown pixel; in `Hdr`
+/// on lavapipe 162 of its pixels came out darker in red than their alpha
+/// allows by more than 0.01 of linear light (README, "Lavapipe rounds
+/// 16-bit blends toward zero"). Here no pixel may be darker than that by
+/// more than one 8-bit step of the sky and a half (a line fainter than
+/// half a level of alpha still darkens the sky's red by a level): it
+/// finds 1.00, and 4.92 with `hdr` in place of `float_blending`.
+#[test]
+fn float_blending_pictures_keep_colour_and_coverage_together() {
+    let _turn = common::gpu_turn();
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let bytes = std::fs::read(root.join("assets/trees/norway-spruce.conifer")).unwrap();
+    let record = bevy_conifer_lod::model::file::decode_record(&bytes).unwrap();
+    let out = root.join("target/test-output/eval-float");
+    let options = EvalOptions {
+        methods: vec![Method::Ours],
+        distances: vec![12.22],
+        view: EvalView {
+            float_blending: true,
+            tonemapping: false,
+            pixel_error: 0.25,
+            ..EvalView::square(160, 45.0)
+        },
+        dolly_steps: 2,
+        timed_frames: 1,
+        out_dir: Some(out.clone()),
+        wind: None,
+        flicker_distances: Vec::new(),
+        orbit_steps: 0,
+        pan_steps: 0,
+    };
+    let report = evaluate(record, &options, &mut |_| {}).unwrap();
+    assert!(report.float_blending && !report.tonemapping);
+    assert_eq!(report.line_raster, "Area");
+    let picture = image::open(out.join("ours_12.22m.png")).unwrap().to_rgba8();
+    let sky = picture.get_pixel(0, 0).0;
+    assert_eq!(sky[3], 0, "the corner is sky");
+    let step = |k: usize| common::linear(sky[k]) - common::linear(sky[k] - 1);
+    let (mut covered, mut worst) = (0.0f32, 0.0f32);
+    for p in picture.pixels() {
+        let alpha = f32::from(p.0[3]) / 255.0;
+        covered += alpha;
+        for k in 0..3 {
+            // Linear light at least what the sky keeps through the pixel's alpha.
+            let floor = (1.0 - alpha) * common::linear(sky[k]);
+            worst = worst.max((floor - common::linear(p.0[k])) / step(k));
+        }
+    }
+    println!("covered {covered:.1} pixels; darkest below the floor by {worst:.2} sky steps");
+    assert!(covered > 100.0, "{covered}");
+    assert!(worst <= 1.5, "a pixel {worst} steps darker than its alpha allows");
+}
+
 #[test]
 fn inside_a_crown_each_placement_is_nearer_the_reference_than_one_error() {
     let _turn = common::gpu_turn();
