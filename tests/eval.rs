@@ -172,15 +172,16 @@ fn float_blending_pictures_keep_colour_and_coverage_together() {
     let picture = image::open(out.join("ours_12.22m.png")).unwrap().to_rgba8();
     let sky = picture.get_pixel(0, 0).0;
     assert_eq!(sky[3], 0, "the corner is sky");
-    let step = |k: usize| common::linear(sky[k]) - common::linear(sky[k] - 1);
     let (mut covered, mut worst) = (0.0f32, 0.0f32);
     for p in picture.pixels() {
         let alpha = f32::from(p.0[3]) / 255.0;
         covered += alpha;
-        for k in 0..3 {
-            // Linear light at least what the sky keeps through the pixel's alpha.
-            let floor = (1.0 - alpha) * common::linear(sky[k]);
-            worst = worst.max((floor - common::linear(p.0[k])) / step(k));
+        for (&light, &sky) in p.0.iter().zip(&sky).take(3) {
+            // Linear light at least what the sky keeps through the
+            // pixel's alpha, in 8-bit steps of the sky.
+            let floor = (1.0 - alpha) * common::linear(sky);
+            let step = common::linear(sky) - common::linear(sky - 1);
+            worst = worst.max((floor - common::linear(light)) / step);
         }
     }
     println!("covered {covered:.1} pixels; darkest below the floor by {worst:.2} sky steps");
