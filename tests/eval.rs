@@ -444,18 +444,9 @@ fn the_cpu_tone_map_is_bevys() {
     }
     let pictures = renderer.capture_all(&targets, 10).unwrap();
     let tone = ToneMap::from_world(renderer.world_mut()).expect("Bevy's TonyMcMapface LUT");
-    let encode = |linear: f32| {
-        let c = linear.clamp(0.0, 1.0);
-        let encoded = if c <= 0.003_130_8 {
-            c * 12.92
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        encoded * 255.0
-    };
     for (colour, picture) in colours.iter().zip(&pictures) {
         let gpu = picture.get_pixel(2, 2).0;
-        let cpu = tone.map(*colour).map(encode);
+        let cpu = tone.map(*colour).map(common::srgb_level);
         println!("{colour:?}: GPU {gpu:?}, CPU {cpu:?}");
         for k in 0..3 {
             assert!(
@@ -526,18 +517,9 @@ fn float_blending_composites_many_layers_exactly() {
         renderer.update().unwrap();
     }
     let pictures = renderer.capture_all(&[float_target, half_target], 10).unwrap();
-    let encode = |linear: f32| {
-        let c = linear.clamp(0.0, 1.0);
-        let encoded = if c <= 0.003_130_8 {
-            c * 12.92
-        } else {
-            1.055 * c.powf(1.0 / 2.4) - 0.055
-        };
-        encoded * 255.0
-    };
     let through = (1.0 - ALPHA).powi(LAYERS as i32);
     let expected: Vec<f32> = (0..3)
-        .map(|k| encode(sky[k] * through + needle[k] * (1.0 - through)))
+        .map(|k| common::srgb_level(sky[k] * through + needle[k] * (1.0 - through)))
         .chain([(1.0 - through) * 255.0])
         .collect();
     let float = pictures[0].get_pixel(4, 4).0;

@@ -219,6 +219,18 @@ pub fn sun_lit_renderer(
     (renderer, target, sun)
 }
 
+/// Linear light (clamped to `[0, 1]`) as an sRGB level in `[0, 255]`,
+/// not rounded.
+pub fn srgb_level(linear: f32) -> f32 {
+    let c = linear.clamp(0.0, 1.0);
+    let encoded = if c <= 0.003_130_8 {
+        c * 12.92
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    encoded * 255.0
+}
+
 /// An sRGB-encoded byte as linear light in `[0, 1]`.
 pub fn linear(c: u8) -> f32 {
     let c = f32::from(c) / 255.0;
