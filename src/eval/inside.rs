@@ -231,11 +231,7 @@ pub fn evaluate_inside(
         let mut images = renderer.capture_all(&targets, 10).map_err(EvalError::from)?;
         let reference = resolve_reference(&images.pop().expect("reference"), s, reference_tone.as_ref());
         let mut picture = images.pop().expect("picture");
-        if view.methods_tone_map_on_cpu()
-            && let Some(tone) = &reference_tone
-        {
-            tone.apply(&mut picture);
-        }
+        view.tone_map_methods(reference_tone.as_ref(), std::slice::from_mut(&mut picture));
         if methods.is_empty() {
             write(&reference, "ref_inside.png", &mut files)?;
         }

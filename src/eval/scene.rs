@@ -340,6 +340,20 @@ impl EvalView {
         self.float_blending && self.tonemapping
     }
 
+    /// Tone-maps the methods' `pictures` with `tone` (the reference's LUT)
+    /// where they were drawn in linear light
+    /// ([`Self::methods_tone_map_on_cpu`]); leaves them as they are
+    /// otherwise.
+    pub fn tone_map_methods(&self, tone: Option<&ToneMap>, pictures: &mut [RgbaImage]) {
+        if self.methods_tone_map_on_cpu()
+            && let Some(tone) = tone
+        {
+            for picture in pictures {
+                tone.apply(picture);
+            }
+        }
+    }
+
     /// The format of the methods' render targets: `Rgba32Float` where
     /// they blend in it ([`Self::float_blending`]), else 8-bit sRGB.
     pub fn methods_target_format(&self) -> TextureFormat {
@@ -1142,13 +1156,7 @@ impl EvalScene {
             self.view.supersampling.max(1),
             self.reference_tone.as_ref(),
         );
-        if self.view.methods_tone_map_on_cpu()
-            && let Some(tone) = &self.reference_tone
-        {
-            for picture in &mut images {
-                tone.apply(picture);
-            }
-        }
+        self.view.tone_map_methods(self.reference_tone.as_ref(), &mut images);
         EvalFrame {
             reference,
             methods: self.methods.iter().copied().zip(images).collect(),
