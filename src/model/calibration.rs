@@ -407,8 +407,12 @@ impl SideNeedles {
         let toward = right.cross(Vec3::Y);
         for n in record.needles.iter().filter(|n| n.is_valid()) {
             let r = n.radius / spacing;
-            let ends = PieceEnds::of_cylinder(n.tip - n.base, toward);
-            bits.stamp(to_samples(n.base), to_samples(n.tip), r, r, ends);
+            let (a, b) = (to_samples(n.base), to_samples(n.tip));
+            // Deep in a dense crown a needle often falls where every
+            // sample is set already.
+            if !bits.box_is_full(a, b, r) {
+                bits.stamp(a, b, r, r, PieceEnds::of_cylinder(n.tip - n.base, toward));
+            }
         }
         Some(Self {
             azimuth,

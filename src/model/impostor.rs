@@ -891,14 +891,23 @@ impl CrownImpostor {
             (needle.tip - centre).dot(canvas.toward),
         );
         let ends = PieceEnds::of_cylinder(needle.tip - needle.base, canvas.toward);
+        // Deep in a dense crown most needles fall where needles already
+        // cover every sample and no wood is left unhidden: stamping them
+        // would change nothing.
+        let settled = canvas.needles.box_is_full(a, b, half_width)
+            && !canvas.wood.box_has_any_outside(&canvas.wood_hidden, a, b, half_width);
         let (wood, wood_front, wood_hidden) = (&canvas.wood, &canvas.wood_front, &mut canvas.wood_hidden);
-        canvas
-            .needles
-            .stamp_each(a, b, half_width, half_width, ends, |index, t| {
-                if wood.is_set(index) && near_a + (near_b - near_a) * t > wood_front[index] {
-                    wood_hidden.set(index);
-                }
-            });
+        // The callback sees only the samples over wood (a word of samples
+        // at a time): most of a crown's needles lie over none.
+        if !settled {
+            canvas
+                .needles
+                .stamp_each_over(a, b, half_width, half_width, ends, wood, |index, t| {
+                    if near_a + (near_b - near_a) * t > wood_front[index] {
+                        wood_hidden.set(index);
+                    }
+                });
+        }
         // Weighted by the projected area.
         self.add_shares(
             canvas,

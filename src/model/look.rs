@@ -280,7 +280,109 @@ impl SampleBits {
     /// Sets every sample whose centre lies in the piece from `a` to `b`
     /// (see [`SampleBits::stamp_each`]).
     pub fn stamp(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, ends: PieceEnds) {
-        self.stamp_each(a, b, ra, rb, ends, |_, _| {});
+        if let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) {
+            piece.each_run(|first, last| self.set_run(first, last));
+        }
+    }
+
+    /// Sets every sample in the piece from `a` to `b` (as
+    /// [`SampleBits::stamp_each`]) and calls `f(index, t)` for those of
+    /// them also set in `mask` (of this size; none where it is not): the
+    /// samples a piece covers over something already drawn, found a word
+    /// at a time.
+    pub fn stamp_each_over(
+        &mut self,
+        a: Vec2,
+        b: Vec2,
+        ra: f32,
+        rb: f32,
+        ends: PieceEnds,
+        mask: &SampleBits,
+        mut f: impl FnMut(usize, f32),
+    ) {
+        let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) else {
+            return;
+        };
+        let same_size = (mask.width, mask.height) == (self.width, self.height);
+        piece.each_run(|first, last| {
+            self.set_run(first, last);
+            if same_size {
+                mask.for_each_set_in(first, last, |index| f(index, piece.t_of(index)));
+            }
+        });
+    }
+
+    /// Whether every sample of the bounding box of a piece from `a` to `b`
+    /// of half width up to `r` (sample units; the box
+    /// [`SampleBits::stamp`] searches, within the picture) is set: a
+    /// piece stamped there changes nothing. `false` for an empty or
+    /// non-finite box.
+    pub fn box_is_full(&self, a: Vec2, b: Vec2, r: f32) -> bool {
+        let Some(rows) = self.box_runs(a, b, r) else {
+            return false;
+        };
+        rows.into_iter().all(|(first, last)| {
+            (first / 64..=last / 64).all(|word| {
+                let mask = run_mask(word, first, last);
+                self.bits[word] & mask == mask
+            })
+        })
+    }
+
+    /// Whether a sample of the bounding box of a piece (as
+    /// [`SampleBits::box_is_full`]) is set in `self` and not in `other`
+    /// (`true` where the two are not of one size).
+    pub fn box_has_any_outside(&self, other: &SampleBits, a: Vec2, b: Vec2, r: f32) -> bool {
+        if (self.width, self.height) != (other.width, other.height) {
+            return true;
+        }
+        let Some(rows) = self.box_runs(a, b, r) else {
+            return false;
+        };
+        rows.into_iter().any(|(first, last)| {
+            (first / 64..=last / 64).any(|word| self.bits[word] & !other.bits[word] & run_mask(word, first, last) != 0)
+        })
+    }
+
+    /// Each row of a piece's bounding box as a run of row-major indices;
+    /// `None` for an empty or non-finite box.
+    fn box_runs(&self, a: Vec2, b: Vec2, r: f32) -> Option<impl Iterator<Item = (usize, usize)>> {
+        let (min, max) = (a.min(b) - r, a.max(b) + r);
+        if !(min.is_finite() && max.is_finite()) || self.width == 0 || self.height == 0 {
+            return None;
+        }
+        let (i0, i1) = (
+            ceil_to_i64(min.x - 0.5).max(0),
+            floor_to_i64(max.x - 0.5).min(i64::from(self.width) - 1),
+        );
+        let (j0, j1) = (
+            ceil_to_i64(min.y - 0.5).max(0),
+            floor_to_i64(max.y - 0.5).min(i64::from(self.height) - 1),
+        );
+        if i0 > i1 || j0 > j1 {
+            return None;
+        }
+        let width = self.width as usize;
+        Some((j0..=j1).map(move |j| (j as usize * width + i0 as usize, j as usize * width + i1 as usize)))
+    }
+
+    /// Sets samples `first ..= last` (row-major), a word at a time.
+    fn set_run(&mut self, first: usize, last: usize) {
+        for word in first / 64..=last / 64 {
+            self.bits[word] |= run_mask(word, first, last);
+        }
+    }
+
+    /// Calls `f(index)` for every set sample among `first ..= last`
+    /// (row-major), in order.
+    fn for_each_set_in(&self, first: usize, last: usize, mut f: impl FnMut(usize)) {
+        for word in first / 64..=last / 64 {
+            let mut rest = self.bits[word] & run_mask(word, first, last);
+            while rest != 0 {
+                f(word * 64 + rest.trailing_zeros() as usize);
+                rest &= rest - 1;
+            }
+        }
     }
 
     /// Sets sample `index` (row-major).
@@ -337,12 +439,23 @@ impl SampleBits {
     /// ([`PieceEnds`]). Samples outside the picture and non-finite pieces
     /// are skipped.
     pub fn stamp_each(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, ends: PieceEnds, mut f: impl FnMut(usize, f32)) {
+        let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) else {
+            return;
+        };
         let bits = &mut self.bits;
-        each_sample_in([self.width, self.height], a, b, ra, rb, ends, |index, t| {
+        piece.each_sample(|index, t| {
             bits[index / 64] |= 1 << (index % 64);
             f(index, t);
         });
     }
+}
+
+/// The bits of word `word` among samples `first ..= last`.
+fn run_mask(word: usize, first: usize, last: usize) -> u64 {
+    let low = first.saturating_sub(word * 64).min(64);
+    let high = (last + 1).saturating_sub(word * 64).min(64);
+    let below = |n: usize| if n >= 64 { u64::MAX } else { (1u64 << n) - 1 };
+    below(high) & !below(low)
 }
 
 impl SampleBits {
@@ -385,90 +498,235 @@ impl SampleBits {
     }
 }
 
-/// The samples of a `[width, height]` grid in a piece (see
-/// [`SampleBits::stamp_each`]).
-fn each_sample_in(
-    [width, height]: [u32; 2],
+/// A piece prepared for rasterizing on a `[width, height]` sample grid
+/// (see [`SampleBits::stamp_each`]): its clipped bounding box, and each
+/// row's candidate span through its bounding rectangle.
+struct PieceRaster {
+    width: u32,
     a: Vec2,
-    b: Vec2,
+    axis: Vec2,
+    length_sq: f32,
     ra: f32,
     rb: f32,
-    ends: PieceEnds,
-    mut f: impl FnMut(usize, f32),
-) {
-    let r = ra.max(rb);
-    let reach = ends.reach();
-    let (min, max) = (a.min(b) - r, a.max(b) + r);
-    if !(min.is_finite() && max.is_finite()) || width == 0 || height == 0 {
-        return;
+    length: f32,
+    reach: f32,
+    /// Columns and rows of the bounding box inside the grid.
+    columns: (i64, i64),
+    rows: (i64, i64),
+    /// The rectangle's two pairs of sides, for a piece of positive length.
+    rectangle: Option<[RowSpan; 2]>,
+    /// Whether the piece's samples in a row are one run: a piece of one
+    /// width (a strip with its caps), or with flat ends (a trapezoid). A
+    /// tapered piece with round ends has a notch where an end's disc meets
+    /// the narrower side.
+    convex: bool,
+}
+
+impl PieceRaster {
+    /// `None` for a non-finite piece or an empty grid.
+    fn new([width, height]: [u32; 2], a: Vec2, b: Vec2, ra: f32, rb: f32, ends: PieceEnds) -> Option<Self> {
+        let r = ra.max(rb);
+        let reach = ends.reach();
+        let (min, max) = (a.min(b) - r, a.max(b) + r);
+        if !(min.is_finite() && max.is_finite()) || width == 0 || height == 0 {
+            return None;
+        }
+        let axis = b - a;
+        let length_sq = axis.length_squared();
+        let length = length_sq.sqrt();
+        // Each row visits only the samples of its span through the piece's
+        // bounding rectangle (along the axis, `r` on each side, and `r` past
+        // the ends when they are round), widened by a hundredth of a sample
+        // against rounding; the exact test decides each sample. (A thin
+        // diagonal needle covers a sliver of its axis-aligned box.)
+        let rectangle = (length > 0.0 && length.is_finite()).then(|| {
+            let along = axis / length;
+            let across = Vec2::new(-along.y, along.x);
+            let (past_ends, slack) = (reach * r, 0.01);
+            [
+                RowSpan::new(a, across, -r - slack, r + slack),
+                RowSpan::new(a, along, -past_ends - slack, length + past_ends + slack),
+            ]
+        });
+        Some(Self {
+            width,
+            a,
+            axis,
+            length_sq,
+            ra,
+            rb,
+            length,
+            reach,
+            columns: (
+                ceil_to_i64(min.x - 0.5).max(0),
+                floor_to_i64(max.x - 0.5).min(i64::from(width) - 1),
+            ),
+            rows: (
+                ceil_to_i64(min.y - 0.5).max(0),
+                floor_to_i64(max.y - 0.5).min(i64::from(height) - 1),
+            ),
+            rectangle,
+            convex: ra == rb || reach == 0.0,
+        })
     }
-    let i0 = ((min.x - 0.5).ceil() as i64).max(0);
-    let i1 = ((max.x - 0.5).floor() as i64).min(i64::from(width) - 1);
-    let j0 = ((min.y - 0.5).ceil() as i64).max(0);
-    let j1 = ((max.y - 0.5).floor() as i64).min(i64::from(height) - 1);
-    let axis = b - a;
-    let length_sq = axis.length_squared();
-    let length = length_sq.sqrt();
-    // Each row visits only the samples of its span through the piece's
-    // bounding rectangle (along the axis, `r` on each side, and `r` past
-    // the ends when they are round), widened by a hundredth of a sample
-    // against rounding; the exact test below decides each sample. (A
-    // thin diagonal needle covers a sliver of its axis-aligned box.)
-    let rectangle = (length > 0.0 && length.is_finite()).then(|| {
-        let along = axis / length;
-        let across = Vec2::new(-along.y, along.x);
-        let (past_ends, slack) = (reach * r, 0.01);
-        [
-            (across, -r - slack, r + slack),
-            (along, -past_ends - slack, length + past_ends + slack),
-        ]
-    });
-    for j in j0..=j1 {
+
+    /// The columns of row `j` its bounding rectangle crosses (possibly
+    /// empty: `first > last`).
+    fn candidates(&self, j: i64) -> (i64, i64) {
         let y = j as f32 + 0.5;
+        let (i0, i1) = self.columns;
         let (mut x0, mut x1) = (i0 as f32 + 0.5, i1 as f32 + 0.5);
-        for &(direction, low, high) in rectangle.iter().flatten() {
-            // low ≤ (p − a)·direction ≤ high, for p = (x, y).
-            let offset = (y - a.y) * direction.y;
-            if direction.x.abs() < 1e-6 {
-                if offset < low || offset > high {
-                    x1 = f32::NEG_INFINITY;
-                }
-                continue;
-            }
-            let (u, v) = (a.x + (low - offset) / direction.x, a.x + (high - offset) / direction.x);
-            x0 = x0.max(u.min(v));
-            x1 = x1.min(u.max(v));
+        for span in self.rectangle.iter().flatten() {
+            (x0, x1) = span.clip(y, x0, x1);
         }
         // Empty (or NaN) span: nothing on this row.
         if x0.partial_cmp(&x1).is_none_or(|order| order.is_gt()) {
-            continue;
+            return (1, 0);
         }
-        let (first, last) = (((x0 - 0.5).ceil() as i64).max(i0), ((x1 - 0.5).floor() as i64).min(i1));
-        for i in first..=last {
-            let p = Vec2::new(i as f32 + 0.5, y);
-            if length_sq == 0.0 {
-                // A piece seen end on: the disc of its end.
-                if p.distance_squared(a) <= ra * ra {
-                    f(j as usize * width as usize + i as usize, 0.0);
+        (ceil_to_i64(x0 - 0.5).max(i0), floor_to_i64(x1 - 0.5).min(i1))
+    }
+
+    /// Where along the axis sample `(i, j)` lies, in `[0, 1]`, when its
+    /// centre is in the piece: within the half width of the axis between
+    /// the ends, past each end within the end's shape.
+    fn inside(&self, i: i64, j: i64) -> Option<f32> {
+        let p = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+        let (a, axis, ra, rb) = (self.a, self.axis, self.ra, self.rb);
+        if self.length_sq == 0.0 {
+            // A piece seen end on: the disc of its end.
+            return (p.distance_squared(a) <= ra * ra).then_some(0.0);
+        }
+        let t = (p - a).dot(axis) / self.length_sq;
+        let clamped = t.clamp(0.0, 1.0);
+        let half_width = ra + (rb - ra) * clamped;
+        let inside = if t == clamped {
+            p.distance_squared(a + axis * t) <= half_width * half_width
+        } else {
+            // Past an end: within the half ellipse of the end's half
+            // width across and `reach` times it along.
+            let past = (t - clamped).abs() * self.length;
+            let across = (p - a).perp_dot(axis) / self.length;
+            let reach = self.reach;
+            reach > 0.0 && past * past + (reach * across).powi(2) <= (reach * half_width).powi(2)
+        };
+        inside.then_some(clamped)
+    }
+
+    /// Calls `f(index, t)` for every sample in the piece (row-major
+    /// `index`, `t` from [`Self::inside`]).
+    fn each_sample(&self, mut f: impl FnMut(usize, f32)) {
+        for j in self.rows.0..=self.rows.1 {
+            let (first, last) = self.candidates(j);
+            let row = j as usize * self.width as usize;
+            for i in first..=last {
+                if let Some(t) = self.inside(i, j) {
+                    f(row + i as usize, t);
                 }
+            }
+        }
+    }
+
+    /// Calls `f(first, last)` for every run of consecutive samples in the
+    /// piece along a row (row-major indices, inclusive): the samples
+    /// [`Self::each_sample`] visits, a row's in one run where the piece is
+    /// convex (its first and last found by the exact test, the ones
+    /// between taken as inside).
+    fn each_run(&self, mut f: impl FnMut(usize, usize)) {
+        for j in self.rows.0..=self.rows.1 {
+            let (first, last) = self.candidates(j);
+            let row = j as usize * self.width as usize;
+            if self.convex {
+                let Some(start) = (first..=last).find(|&i| self.inside(i, j).is_some()) else {
+                    continue;
+                };
+                let end = (start..=last)
+                    .rev()
+                    .find(|&i| self.inside(i, j).is_some())
+                    .unwrap_or(start);
+                f(row + start as usize, row + end as usize);
                 continue;
             }
-            let t = (p - a).dot(axis) / length_sq;
-            let clamped = t.clamp(0.0, 1.0);
-            let half_width = ra + (rb - ra) * clamped;
-            let inside = if t == clamped {
-                p.distance_squared(a + axis * t) <= half_width * half_width
-            } else {
-                // Past an end: within the half ellipse of the end's half
-                // width across and `reach` times it along.
-                let past = (t - clamped).abs() * length;
-                let across = (p - a).perp_dot(axis) / length;
-                reach > 0.0 && past * past + (reach * across).powi(2) <= (reach * half_width).powi(2)
-            };
-            if inside {
-                f(j as usize * width as usize + i as usize, clamped);
+            let mut run: Option<(i64, i64)> = None;
+            for i in first..=last {
+                match (self.inside(i, j).is_some(), run) {
+                    (true, Some((start, end))) if end + 1 == i => run = Some((start, i)),
+                    (true, _) => {
+                        if let Some((start, end)) = run {
+                            f(row + start as usize, row + end as usize);
+                        }
+                        run = Some((i, i));
+                    }
+                    (false, _) => {}
+                }
+            }
+            if let Some((start, end)) = run {
+                f(row + start as usize, row + end as usize);
             }
         }
+    }
+
+    /// [`Self::inside`]'s `t` of sample `index` (row-major), for a sample
+    /// known to be in the piece.
+    fn t_of(&self, index: usize) -> f32 {
+        let (i, j) = (index % self.width as usize, index / self.width as usize);
+        self.inside(i as i64, j as i64).unwrap_or(0.0)
+    }
+}
+
+/// `⌈x⌉` as an integer, saturating, 0 for NaN (as `x.ceil() as i64`),
+/// without the libm call `f32::ceil` costs on a baseline x86-64 target.
+fn ceil_to_i64(x: f32) -> i64 {
+    let truncated = x as i64;
+    truncated.saturating_add(i64::from((truncated as f32) < x))
+}
+
+/// `⌊x⌋` as an integer, saturating, 0 for NaN (as `x.floor() as i64`).
+fn floor_to_i64(x: f32) -> i64 {
+    let truncated = x as i64;
+    truncated.saturating_sub(i64::from((truncated as f32) > x))
+}
+
+/// One pair of sides of a piece's bounding rectangle, `low ≤ (p −
+/// a)·direction ≤ high`, prepared once a piece to give each sample row's
+/// span of `x` without a division.
+#[derive(Clone, Copy)]
+struct RowSpan {
+    a: Vec2,
+    direction: Vec2,
+    low: f32,
+    high: f32,
+    /// `1 / direction.x`, or 0 where `direction` is (nearly) vertical and
+    /// the pair bounds rows, not columns.
+    inverse_x: f32,
+}
+
+impl RowSpan {
+    fn new(a: Vec2, direction: Vec2, low: f32, high: f32) -> Self {
+        let inverse_x = if direction.x.abs() < 1e-6 {
+            0.0
+        } else {
+            direction.x.recip()
+        };
+        Self {
+            a,
+            direction,
+            low,
+            high,
+            inverse_x,
+        }
+    }
+
+    /// The span `x0 ..= x1` of the row at `y` clipped to this pair of
+    /// sides (`x1` is −∞ where the row misses them).
+    fn clip(&self, y: f32, x0: f32, x1: f32) -> (f32, f32) {
+        let offset = (y - self.a.y) * self.direction.y;
+        if self.inverse_x == 0.0 {
+            let misses = offset < self.low || offset > self.high;
+            return (x0, if misses { f32::NEG_INFINITY } else { x1 });
+        }
+        let u = self.a.x + (self.low - offset) * self.inverse_x;
+        let v = self.a.x + (self.high - offset) * self.inverse_x;
+        (x0.max(u.min(v)), x1.min(u.max(v)))
     }
 }
 
@@ -772,5 +1030,175 @@ pub(crate) mod tests {
             )
             .is_none()
         );
+    }
+
+    /// Every sample of a piece the reference test ([`PieceRaster::inside`]
+    /// on each candidate) finds, as a set.
+    fn reference_samples(size: [u32; 2], a: Vec2, b: Vec2, ra: f32, rb: f32, ends: PieceEnds) -> Vec<(usize, f32)> {
+        let mut samples = Vec::new();
+        if let Some(piece) = PieceRaster::new(size, a, b, ra, rb, ends) {
+            piece.each_sample(|index, t| samples.push((index, t)));
+        }
+        samples
+    }
+
+    fn piece_ends(kind: u8, slant: f32) -> PieceEnds {
+        match kind % 3 {
+            0 => PieceEnds::Flat,
+            1 => PieceEnds::Round,
+            _ => PieceEnds::Capped { slant },
+        }
+    }
+
+    proptest::proptest! {
+        /// `stamp` sets a row's samples a run at a time: exactly the
+        /// samples the per-sample test finds, for pieces of one width and
+        /// tapered ones (whose round ends leave a notch, drawn sample by
+        /// sample), thin and wide, in and partly out of the picture.
+        #[test]
+        fn runs_set_exactly_the_samples_the_exact_test_finds(
+            ax in -5.0f32..45.0, ay in -5.0f32..35.0, bx in -5.0f32..45.0, by in -5.0f32..35.0,
+            ra in 0.01f32..6.0, taper in 0.2f32..1.5, tapered in proptest::bool::ANY,
+            kind in 0u8..3, slant in 0.0f32..1.0,
+        ) {
+            let size = [40, 30];
+            let (a, b) = (Vec2::new(ax, ay), Vec2::new(bx, by));
+            let rb = if tapered { ra * taper } else { ra };
+            let ends = piece_ends(kind, slant);
+            let mut stamped = SampleBits::new(size[0], size[1]);
+            stamped.stamp(a, b, ra, rb, ends);
+            let mut expected = SampleBits::new(size[0], size[1]);
+            for (index, _) in reference_samples(size, a, b, ra, rb, ends) {
+                expected.set(index);
+            }
+            proptest::prop_assert_eq!(stamped, expected);
+        }
+
+        /// `stamp_each_over` sets what `stamp` sets and calls back exactly
+        /// for the piece's samples set in the mask, with the reference's
+        /// `t`; `box_is_full` holds only where stamping changes nothing,
+        /// and `box_has_any_outside` sees every masked sample of the box.
+        #[test]
+        fn stamping_over_a_mask_calls_back_where_the_mask_is(
+            ax in 0.0f32..40.0, ay in 0.0f32..30.0, bx in 0.0f32..40.0, by in 0.0f32..30.0,
+            r in 0.05f32..4.0, kind in 0u8..3, slant in 0.0f32..1.0,
+            mask_seed in 0u64..u64::MAX, fill in 0.0f32..1.0,
+        ) {
+            let size = [40, 30];
+            let (a, b) = (Vec2::new(ax, ay), Vec2::new(bx, by));
+            let ends = piece_ends(kind, slant);
+            let mut mask = SampleBits::new(size[0], size[1]);
+            let mut state = mask_seed | 1;
+            for index in 0..1200 {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                if (state >> 40) as f32 / (1u64 << 24) as f32 <= fill {
+                    mask.set(index);
+                }
+            }
+            let mut over = SampleBits::new(size[0], size[1]);
+            let mut called = Vec::new();
+            over.stamp_each_over(a, b, r, r, ends, &mask, |index, t| called.push((index, t)));
+            let reference = reference_samples(size, a, b, r, r, ends);
+            let expected: Vec<(usize, f32)> = reference.iter().copied().filter(|(index, _)| mask.is_set(*index)).collect();
+            proptest::prop_assert_eq!(&called, &expected);
+            let mut stamped = SampleBits::new(size[0], size[1]);
+            stamped.stamp(a, b, r, r, ends);
+            proptest::prop_assert_eq!(&over, &stamped);
+
+            // Full: the mask with the piece stamped on it changes no more.
+            let mut covered = mask.clone();
+            covered.stamp(a, b, r, r, ends);
+            let mut again = covered.clone();
+            if covered.box_is_full(a, b, r) {
+                again.stamp(a, b, r, r, ends);
+                proptest::prop_assert_eq!(&again, &covered);
+            }
+            let mut everything = SampleBits::new(size[0], size[1]);
+            for index in 0..1200 {
+                everything.set(index);
+            }
+            // (An empty box, holding no sample centre, is not full.)
+            proptest::prop_assert_eq!(everything.box_is_full(a, b, r), box_holds_a_masked_sample(&everything, a, b, r));
+            proptest::prop_assert_eq!(
+                mask.box_has_any_outside(&SampleBits::new(size[0], size[1]), a, b, r),
+                !expected.is_empty() || box_holds_a_masked_sample(&mask, a, b, r)
+            );
+            proptest::prop_assert!(!mask.box_has_any_outside(&mask, a, b, r));
+        }
+    }
+
+    /// Whether a sample of the piece's bounding box (clamped to the
+    /// picture) is set in `mask`, sample by sample.
+    fn box_holds_a_masked_sample(mask: &SampleBits, a: Vec2, b: Vec2, r: f32) -> bool {
+        let (min, max) = (a.min(b) - r, a.max(b) + r);
+        (0..mask.height).any(|j| {
+            (0..mask.width).any(|i| {
+                let p = Vec2::new(i as f32 + 0.5, j as f32 + 0.5);
+                p.x >= min.x && p.x <= max.x && p.y >= min.y && p.y <= max.y && mask.get(i, j)
+            })
+        })
+    }
+
+    /// A strongly tapered piece with round ends, seen with its axis at
+    /// 29° to the rows, leaves a gap in a row between its wide side and
+    /// its narrow end's disc (the notch where they meet): `stamp` draws
+    /// such a piece sample by sample and sets exactly what the exact test
+    /// finds, gap included.
+    #[test]
+    fn a_tapered_round_piece_keeps_the_gap_its_notch_leaves_in_a_row() {
+        let size = [80, 60];
+        let direction = Vec2::new(29f32.to_radians().cos(), 29f32.to_radians().sin());
+        let (a, b) = (Vec2::new(20.0, 16.0), Vec2::new(20.0, 16.0) + direction * 20.0);
+        let (ra, rb) = (16.0, 3.0);
+        let reference = reference_samples(size, a, b, ra, rb, PieceEnds::Round);
+        let rows_with_a_gap = (0..size[1] as usize)
+            .filter(|&j| {
+                let columns: Vec<usize> = reference
+                    .iter()
+                    .map(|(index, _)| *index)
+                    .filter(|index| index / size[0] as usize == j)
+                    .map(|index| index % size[0] as usize)
+                    .collect();
+                columns.windows(2).any(|pair| pair[1] > pair[0] + 1)
+            })
+            .count();
+        assert!(rows_with_a_gap > 0, "the notch leaves no gap in a row");
+        let mut stamped = SampleBits::new(size[0], size[1]);
+        stamped.stamp(a, b, ra, rb, PieceEnds::Round);
+        let mut expected = SampleBits::new(size[0], size[1]);
+        for (index, _) in reference {
+            expected.set(index);
+        }
+        assert_eq!(stamped, expected);
+    }
+
+    #[test]
+    fn a_run_spans_the_words_it_touches() {
+        assert_eq!(run_mask(0, 0, 63), u64::MAX);
+        assert_eq!(run_mask(0, 3, 5), 0b111000);
+        assert_eq!(run_mask(1, 60, 66), 0b111);
+        assert_eq!(run_mask(0, 60, 66), 0xF << 60);
+        assert_eq!(run_mask(2, 60, 66), 0);
+        assert_eq!(
+            (
+                ceil_to_i64(2.0),
+                ceil_to_i64(2.1),
+                ceil_to_i64(-2.1),
+                ceil_to_i64(f32::NAN)
+            ),
+            (2, 3, -2, 0)
+        );
+        assert_eq!(
+            (
+                floor_to_i64(2.0),
+                floor_to_i64(2.9),
+                floor_to_i64(-2.1),
+                floor_to_i64(1e30)
+            ),
+            (2, 2, -3, i64::MAX)
+        );
+        assert_eq!(ceil_to_i64(1e30), i64::MAX);
     }
 }
