@@ -639,7 +639,7 @@ impl PieceRaster {
                 let Some(start) = (first..=last).find(|&i| self.inside(i, j).is_some()) else {
                     continue;
                 };
-                let end = (start..=last)
+                let end = (start + 1..=last)
                     .rev()
                     .find(|&i| self.inside(i, j).is_some())
                     .unwrap_or(start);
