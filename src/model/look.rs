@@ -280,7 +280,13 @@ impl SampleBits {
     /// Sets every sample whose centre lies in the piece from `a` to `b`
     /// (see [`SampleBits::stamp_each`]).
     pub fn stamp(&mut self, a: Vec2, b: Vec2, ra: f32, rb: f32, ends: PieceEnds) {
-        if let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) {
+        let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) else {
+            return;
+        };
+        if piece.is_narrow() {
+            let bits = &mut self.bits;
+            piece.each_sample(|index, _| bits[index / 64] |= 1 << (index % 64));
+        } else {
             piece.each_run(|first, last| self.set_run(first, last));
         }
     }
@@ -304,6 +310,16 @@ impl SampleBits {
             return;
         };
         let same_size = (mask.width, mask.height) == (self.width, self.height);
+        if piece.is_narrow() {
+            let bits = &mut self.bits;
+            piece.each_sample(|index, t| {
+                bits[index / 64] |= 1 << (index % 64);
+                if same_size && mask.is_set(index) {
+                    f(index, t);
+                }
+            });
+            return;
+        }
         piece.each_run(|first, last| {
             self.set_run(first, last);
             if same_size {
@@ -568,6 +584,13 @@ impl PieceRaster {
             rectangle,
             convex: ra == rb || reach == 0.0,
         })
+    }
+
+    /// Whether the piece is under two samples wide: a row holds a sample
+    /// or two of it, found faster one by one than as a run (a white pine's
+    /// needles in its impostor).
+    fn is_narrow(&self) -> bool {
+        self.ra.max(self.rb) < 1.0
     }
 
     /// The columns of row `j` its bounding rectangle crosses (possibly
