@@ -902,7 +902,7 @@ impl CrownImpostor {
         if !settled {
             canvas
                 .needles
-                .stamp_each_over(a, b, half_width, half_width, ends, wood, |index, t| {
+                .stamp_each_over(a, b, half_width, ends, wood, |index, t| {
                     if near_a + (near_b - near_a) * t > wood_front[index] {
                         wood_hidden.set(index);
                     }

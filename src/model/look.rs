@@ -291,22 +291,21 @@ impl SampleBits {
         }
     }
 
-    /// Sets every sample in the piece from `a` to `b` (as
-    /// [`SampleBits::stamp_each`]) and calls `f(index, t)` for those of
-    /// them also set in `mask` (of this size; none where it is not): the
-    /// samples a piece covers over something already drawn, found a word
-    /// at a time.
+    /// Sets every sample in the piece from `a` to `b` of half width `r`
+    /// (as [`SampleBits::stamp_each`] with `ra = rb = r`) and calls `f(index,
+    /// t)` for those of them also set in `mask` (of this size; none where
+    /// it is not): the samples a needle covers over something already
+    /// drawn, found a word at a time.
     pub fn stamp_each_over(
         &mut self,
         a: Vec2,
         b: Vec2,
-        ra: f32,
-        rb: f32,
+        r: f32,
         ends: PieceEnds,
         mask: &SampleBits,
         mut f: impl FnMut(usize, f32),
     ) {
-        let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) else {
+        let Some(piece) = PieceRaster::new([self.width, self.height], a, b, r, r, ends) else {
             return;
         };
         let same_size = (mask.width, mask.height) == (self.width, self.height);
@@ -1122,7 +1121,7 @@ pub(crate) mod tests {
             }
             let mut over = SampleBits::new(size[0], size[1]);
             let mut called = Vec::new();
-            over.stamp_each_over(a, b, r, r, ends, &mask, |index, t| called.push((index, t)));
+            over.stamp_each_over(a, b, r, ends, &mask, |index, t| called.push((index, t)));
             let reference = reference_samples(size, a, b, r, r, ends);
             let expected: Vec<(usize, f32)> = reference.iter().copied().filter(|(index, _)| mask.is_set(*index)).collect();
             proptest::prop_assert_eq!(&called, &expected);
