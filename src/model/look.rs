@@ -284,8 +284,7 @@ impl SampleBits {
             return;
         };
         if piece.is_narrow() {
-            let bits = &mut self.bits;
-            piece.each_sample(|index, _| bits[index / 64] |= 1 << (index % 64));
+            piece.each_sample(|index, _| self.set(index));
         } else {
             piece.each_run(|first, last| self.set_run(first, last));
         }
@@ -310,9 +309,8 @@ impl SampleBits {
         };
         let same_size = (mask.width, mask.height) == (self.width, self.height);
         if piece.is_narrow() {
-            let bits = &mut self.bits;
             piece.each_sample(|index, t| {
-                bits[index / 64] |= 1 << (index % 64);
+                self.set(index);
                 if same_size && mask.is_set(index) {
                     f(index, t);
                 }
@@ -362,18 +360,7 @@ impl SampleBits {
     /// Each row of a piece's bounding box as a run of row-major indices;
     /// `None` for an empty or non-finite box.
     fn box_runs(&self, a: Vec2, b: Vec2, r: f32) -> Option<impl Iterator<Item = (usize, usize)>> {
-        let (min, max) = (a.min(b) - r, a.max(b) + r);
-        if !(min.is_finite() && max.is_finite()) || self.width == 0 || self.height == 0 {
-            return None;
-        }
-        let (i0, i1) = (
-            ceil_to_i64(min.x - 0.5).max(0),
-            floor_to_i64(max.x - 0.5).min(i64::from(self.width) - 1),
-        );
-        let (j0, j1) = (
-            ceil_to_i64(min.y - 0.5).max(0),
-            floor_to_i64(max.y - 0.5).min(i64::from(self.height) - 1),
-        );
+        let ((i0, i1), (j0, j1)) = sample_box([self.width, self.height], a, b, r)?;
         if i0 > i1 || j0 > j1 {
             return None;
         }
@@ -457,9 +444,8 @@ impl SampleBits {
         let Some(piece) = PieceRaster::new([self.width, self.height], a, b, ra, rb, ends) else {
             return;
         };
-        let bits = &mut self.bits;
         piece.each_sample(|index, t| {
-            bits[index / 64] |= 1 << (index % 64);
+            self.set(index);
             f(index, t);
         });
     }
@@ -542,10 +528,7 @@ impl PieceRaster {
     fn new([width, height]: [u32; 2], a: Vec2, b: Vec2, ra: f32, rb: f32, ends: PieceEnds) -> Option<Self> {
         let r = ra.max(rb);
         let reach = ends.reach();
-        let (min, max) = (a.min(b) - r, a.max(b) + r);
-        if !(min.is_finite() && max.is_finite()) || width == 0 || height == 0 {
-            return None;
-        }
+        let (columns, rows) = sample_box([width, height], a, b, r)?;
         let axis = b - a;
         let length_sq = axis.length_squared();
         let length = length_sq.sqrt();
@@ -572,14 +555,8 @@ impl PieceRaster {
             rb,
             length,
             reach,
-            columns: (
-                ceil_to_i64(min.x - 0.5).max(0),
-                floor_to_i64(max.x - 0.5).min(i64::from(width) - 1),
-            ),
-            rows: (
-                ceil_to_i64(min.y - 0.5).max(0),
-                floor_to_i64(max.y - 0.5).min(i64::from(height) - 1),
-            ),
+            columns,
+            rows,
             rectangle,
             convex: ra == rb || reach == 0.0,
         })
@@ -693,6 +670,27 @@ impl PieceRaster {
         let (i, j) = (index % self.width as usize, index / self.width as usize);
         self.inside(i as i64, j as i64).unwrap_or(0.0)
     }
+}
+
+/// The columns and rows of a `[width, height]` sample grid whose centres
+/// lie in the box of a piece from `a` to `b` of half width up to `r`
+/// (either range empty, `first > last`, where none do); `None` for a
+/// non-finite box or an empty grid.
+fn sample_box([width, height]: [u32; 2], a: Vec2, b: Vec2, r: f32) -> Option<((i64, i64), (i64, i64))> {
+    let (min, max) = (a.min(b) - r, a.max(b) + r);
+    if !(min.is_finite() && max.is_finite()) || width == 0 || height == 0 {
+        return None;
+    }
+    Some((
+        (
+            ceil_to_i64(min.x - 0.5).max(0),
+            floor_to_i64(max.x - 0.5).min(i64::from(width) - 1),
+        ),
+        (
+            ceil_to_i64(min.y - 0.5).max(0),
+            floor_to_i64(max.y - 0.5).min(i64::from(height) - 1),
+        ),
+    ))
 }
 
 /// `⌈x⌉` as an integer, saturating, 0 for NaN (as `x.ceil() as i64`),
