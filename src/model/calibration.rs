@@ -50,7 +50,7 @@
 use super::look::{PieceEnds, SampleBits};
 use super::needle::WoodSegment;
 use super::prism::WOOD_LINE_FADE;
-use super::raster::strip_pixel_coverage;
+use super::raster::StripInPixels;
 use super::record::LodRecord;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -542,12 +542,18 @@ impl SideComposition {
         let columns = SampleAxis::new(sample_columns, width, side.low.x - lo.x, pixel, spacing);
         let rows = SampleAxis::new(sample_rows, height, top - side.high.y, pixel, spacing);
         let sample_width = sample_columns as usize;
+        // Each pixel column's run of sample columns (`pixel_of` never
+        // decreases): a row's samples in a pixel are counted a word at a
+        // time.
+        let column_runs = columns.runs();
         let coverage = |bits: &SampleBits| -> Vec<f32> {
             let mut counts = vec![0u32; pixels];
-            bits.for_each_set(|index| {
-                let (u, v) = (index % sample_width, index / sample_width);
-                counts[rows.pixel_of[v] as usize * width as usize + columns.pixel_of[u] as usize] += 1;
-            });
+            for (v, &pixel_row) in rows.pixel_of.iter().enumerate() {
+                let (row, counts_row) = (v * sample_width, pixel_row as usize * width as usize);
+                for &(pixel_column, first, last) in &column_runs {
+                    counts[counts_row + pixel_column as usize] += bits.count_set_in(row + first, row + last);
+                }
+            }
             counts
                 .into_iter()
                 .enumerate()
@@ -936,6 +942,21 @@ impl SampleAxis {
     }
 }
 
+impl SampleAxis {
+    /// Each pixel's run of samples, `(pixel, first, last)` (inclusive), in
+    /// order: `pixel_of` never decreases along the axis.
+    fn runs(&self) -> Vec<(u32, usize, usize)> {
+        let mut runs: Vec<(u32, usize, usize)> = Vec::new();
+        for (k, &pixel) in self.pixel_of.iter().enumerate() {
+            match runs.last_mut() {
+                Some((run_pixel, _, last)) if *run_pixel == pixel => *last = k,
+                _ => runs.push((pixel, k, k)),
+            }
+        }
+        runs
+    }
+}
+
 /// A fixed pseudo-random 32 bits of a pixel index (SplitMix64's
 /// finalizer).
 fn pixel_hash(index: u64) -> u32 {
@@ -956,11 +977,12 @@ fn needle_bounds(record: &LodRecord) -> Option<(Vec3, Vec3)> {
     )
 }
 
-/// Appends the unscaled coverage `opacity · strip_pixel_coverage` of the
+/// Appends the unscaled coverage `opacity ·`
+/// [`strip_pixel_coverage`](super::raster::strip_pixel_coverage) of the
 /// strip from `a` to `b` (pixel units, `opacity` wide) of every pixel of a
-/// `[width, height]` picture it touches that is `measured` (row-major).
-/// Each row visits only the columns
-/// the segment crosses within a pixel and a half of the row.
+/// `[width, height]` picture it touches that is `measured` (row-major, in
+/// order). Each row visits only the columns within the strip's half
+/// width of the segment's part within that half width of the row.
 fn strip_touches(
     a: Vec2,
     b: Vec2,
@@ -969,7 +991,10 @@ fn strip_touches(
     measured: &[bool],
     out: &mut Vec<(u32, f32)>,
 ) {
-    let reach = 0.5 * opacity + 1.0;
+    // Every point of the strip lies within half its width of the segment
+    // (a hundredth of a pixel more against rounding): a row or column
+    // farther than that from the segment's part in it holds none.
+    let reach = 0.5 * opacity + 0.01;
     let (y_lo, y_hi) = (a.y.min(b.y), a.y.max(b.y));
     let j0 = ((y_lo - reach).floor().max(0.0)) as u32;
     let j1 = ((y_hi + reach).floor().min(height as f32 - 1.0)).max(-1.0);
@@ -980,6 +1005,7 @@ fn strip_touches(
     let length_sq = d.length_squared();
     let far = 0.5 * opacity + std::f32::consts::FRAC_1_SQRT_2 + 1e-3;
     let far_sq = far * far;
+    let strip = StripInPixels::new(a.to_array(), b.to_array(), opacity);
     for j in j0..=j1 as u32 {
         let (x_lo, x_hi) = if d.y.abs() < 1e-6 {
             (a.x.min(b.x), a.x.max(b.x))
@@ -1010,7 +1036,7 @@ fn strip_touches(
             if centre.distance_squared(a + d * t) > far_sq {
                 continue;
             }
-            let g = strip_pixel_coverage(a.to_array(), b.to_array(), opacity, [i as f32, j as f32]);
+            let g = strip.coverage([i as f32, j as f32]);
             if g > 0.0 {
                 out.push((j * width + i, opacity * g));
             }
@@ -1023,6 +1049,7 @@ mod tests {
     use super::*;
     use crate::model::bake::{BakeOptions, bake};
     use crate::model::needle::{FoliageMaterial, Needle, TreeInput};
+    use crate::model::raster::strip_pixel_coverage;
     use proptest::prelude::*;
 
     /// `layers` copies, 5 cm apart along z, of `count` horizontal needles
@@ -1456,6 +1483,42 @@ mod tests {
                 let centre = offset + (k as f32 + 0.5) * spacing;
                 prop_assert!((centre / pixel - p as f32) > -1e-3 && (centre / pixel - p as f32) < 1.0 + 1e-3);
             }
+            // The runs hold every sample once, in order, each in its pixel.
+            let mut next = 0;
+            for (p, first, last) in axis.runs() {
+                prop_assert_eq!(first, next);
+                prop_assert!(first <= last);
+                prop_assert!(axis.pixel_of[first..=last].iter().all(|&q| q == p));
+                next = last + 1;
+            }
+            prop_assert_eq!(next, axis.pixel_of.len());
+        }
+
+        /// A strip's touches are every pixel of the picture it covers
+        /// (`strip_pixel_coverage` above 0, tried on every pixel), each
+        /// once, in row-major order, with its coverage times the opacity:
+        /// the rows and columns it skips hold none of it.
+        #[test]
+        fn strip_touches_find_every_pixel_the_strip_covers(
+            ax in -2.0f32..14.0, ay in -2.0f32..10.0, bx in -2.0f32..14.0, by in -2.0f32..10.0,
+            opacity in 0.01f32..1.0, snap in proptest::bool::ANY, seed in 0u64..u64::MAX,
+        ) {
+            let (width, height) = (12u32, 8u32);
+            // Ends on pixel edges too, where a strip runs along a side.
+            let at = |v: f32| if snap { v.round() } else { v };
+            let (a, b) = (Vec2::new(at(ax), at(ay)), Vec2::new(at(bx), by));
+            let measured: Vec<bool> = (0..(width * height) as u64).map(|k| pixel_hash(k ^ seed) % 4 != 0).collect();
+            let mut touches = Vec::new();
+            strip_touches(a, b, opacity, [width, height], &measured, &mut touches);
+            let expected: Vec<(u32, f32)> = (0..height)
+                .flat_map(|j| (0..width).map(move |i| (i, j)))
+                .filter(|&(i, j)| measured[(j * width + i) as usize])
+                .filter_map(|(i, j)| {
+                    let g = strip_pixel_coverage(a.to_array(), b.to_array(), opacity, [i as f32, j as f32]);
+                    (g > 0.0).then_some((j * width + i, opacity * g))
+                })
+                .collect();
+            prop_assert_eq!(touches, expected);
         }
 
         /// The table is interpolated in log size: each entry at its own

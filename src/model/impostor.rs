@@ -885,21 +885,22 @@ impl CrownImpostor {
             self.sample_point(canvas, needle.tip),
         );
         let half_width = needle.radius * SAMPLES_PER_TEXEL as f32 / self.texel;
-        let centre = self.axis_point();
-        let (near_a, near_b) = (
-            (needle.base - centre).dot(canvas.toward),
-            (needle.tip - centre).dot(canvas.toward),
-        );
-        let ends = PieceEnds::of_cylinder(needle.tip - needle.base, canvas.toward);
         // Deep in a dense crown most needles fall where needles already
         // cover every sample and no wood is left unhidden: stamping them
         // would change nothing.
-        let settled = canvas.needles.box_is_full(a, b, half_width)
-            && !canvas.wood.box_has_any_outside(&canvas.wood_hidden, a, b, half_width);
-        let (wood, wood_front, wood_hidden) = (&canvas.wood, &canvas.wood_front, &mut canvas.wood_hidden);
-        // The callback sees only the samples over wood (a word of samples
-        // at a time): most of a crown's needles lie over none.
+        let settled = canvas
+            .needles
+            .box_is_full_and_inside(&canvas.wood, &canvas.wood_hidden, a, b, half_width);
         if !settled {
+            let centre = self.axis_point();
+            let (near_a, near_b) = (
+                (needle.base - centre).dot(canvas.toward),
+                (needle.tip - centre).dot(canvas.toward),
+            );
+            let ends = PieceEnds::of_cylinder(needle.tip - needle.base, canvas.toward);
+            let (wood, wood_front, wood_hidden) = (&canvas.wood, &canvas.wood_front, &mut canvas.wood_hidden);
+            // The callback sees only the samples over wood (a word of
+            // samples at a time): most of a crown's needles lie over none.
             canvas
                 .needles
                 .stamp_each_over(a, b, half_width, ends, wood, |index, t| {

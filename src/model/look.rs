@@ -342,18 +342,25 @@ impl SampleBits {
         })
     }
 
-    /// Whether a sample of the bounding box of a piece (as
-    /// [`SampleBits::box_is_full`]) is set in `self` and not in `other`
-    /// (`true` where the two are not of one size).
-    pub fn box_has_any_outside(&self, other: &SampleBits, a: Vec2, b: Vec2, r: f32) -> bool {
-        if (self.width, self.height) != (other.width, other.height) {
-            return true;
+    /// Whether every sample of the bounding box of a piece (as
+    /// [`SampleBits::box_is_full`]) is set in `self`, and every one of them
+    /// set in `inner` is set in `outer` too: one pass over the box for
+    /// the three (`false` where they are not of one size, or for an empty
+    /// or non-finite box). The impostor skips a needle so whose samples
+    /// are all covered with no wood left unhidden under it.
+    pub fn box_is_full_and_inside(&self, inner: &SampleBits, outer: &SampleBits, a: Vec2, b: Vec2, r: f32) -> bool {
+        let size = (self.width, self.height);
+        if (inner.width, inner.height) != size || (outer.width, outer.height) != size {
+            return false;
         }
         let Some(rows) = self.box_runs(a, b, r) else {
             return false;
         };
-        rows.into_iter().any(|(first, last)| {
-            (first / 64..=last / 64).any(|word| self.bits[word] & !other.bits[word] & run_mask(word, first, last) != 0)
+        rows.into_iter().all(|(first, last)| {
+            (first / 64..=last / 64).all(|word| {
+                let mask = run_mask(word, first, last);
+                self.bits[word] & mask == mask && inner.bits[word] & !outer.bits[word] & mask == 0
+            })
         })
     }
 
@@ -415,6 +422,17 @@ impl SampleBits {
             height: self.height,
             bits: self.bits.iter().zip(&other.bits).map(|(a, b)| a & !b).collect(),
         })
+    }
+
+    /// How many of samples `first ..= last` (row-major) are set, a word
+    /// at a time (0 for an empty range; `last` must lie in the picture).
+    pub fn count_set_in(&self, first: usize, last: usize) -> u32 {
+        if first > last {
+            return 0;
+        }
+        (first / 64..=last / 64)
+            .map(|word| (self.bits[word] & run_mask(word, first, last)).count_ones())
+            .sum()
     }
 
     /// How many samples are set.
@@ -1094,10 +1112,29 @@ pub(crate) mod tests {
             proptest::prop_assert_eq!(stamped, expected);
         }
 
+        /// `count_set_in` counts the set samples of a run as one by one.
+        #[test]
+        fn a_run_counts_its_set_samples(seed in 0u64..u64::MAX, first in 0usize..300, length in 0usize..300) {
+            let mut bits = SampleBits::new(20, 15);
+            let mut state = seed | 1;
+            for index in 0..300 {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                if state % 3 == 0 {
+                    bits.set(index);
+                }
+            }
+            let last = (first + length).min(299);
+            let one_by_one = (first..=last).filter(|&index| bits.is_set(index)).count() as u32;
+            proptest::prop_assert_eq!(bits.count_set_in(first, last), one_by_one);
+        }
+
         /// `stamp_each_over` sets what `stamp` sets and calls back exactly
         /// for the piece's samples set in the mask, with the reference's
         /// `t`; `box_is_full` holds only where stamping changes nothing,
-        /// and `box_has_any_outside` sees every masked sample of the box.
+        /// and `box_is_full_and_inside` sees every masked sample of the
+        /// box.
         #[test]
         fn stamping_over_a_mask_calls_back_where_the_mask_is(
             ax in 0.0f32..40.0, ay in 0.0f32..30.0, bx in 0.0f32..40.0, by in 0.0f32..30.0,
@@ -1141,11 +1178,22 @@ pub(crate) mod tests {
             }
             // (An empty box, holding no sample centre, is not full.)
             proptest::prop_assert_eq!(everything.box_is_full(a, b, r), box_holds_a_masked_sample(&everything, a, b, r));
+            // Full and inside: `everything` is full wherever the box holds
+            // a sample; the mask lies inside itself, and inside nothing
+            // only where the box holds none of it.
+            let nothing = SampleBits::new(size[0], size[1]);
             proptest::prop_assert_eq!(
-                mask.box_has_any_outside(&SampleBits::new(size[0], size[1]), a, b, r),
-                !expected.is_empty() || box_holds_a_masked_sample(&mask, a, b, r)
+                everything.box_is_full_and_inside(&mask, &mask, a, b, r),
+                box_holds_a_masked_sample(&everything, a, b, r)
             );
-            proptest::prop_assert!(!mask.box_has_any_outside(&mask, a, b, r));
+            proptest::prop_assert_eq!(
+                everything.box_is_full_and_inside(&mask, &nothing, a, b, r),
+                box_holds_a_masked_sample(&everything, a, b, r) && !box_holds_a_masked_sample(&mask, a, b, r)
+            );
+            proptest::prop_assert_eq!(
+                covered.box_is_full_and_inside(&nothing, &nothing, a, b, r),
+                covered.box_is_full(a, b, r)
+            );
         }
     }
 

@@ -36,22 +36,46 @@ pub const LINE_QUAD_MARGIN: f32 = 1.25;
 /// (Liang–Barsky). 0 where it misses the square; a segment along a side
 /// counts in both squares it bounds.
 pub fn segment_length_in_pixel(a: [f32; 2], b: [f32; 2], pixel: [f32; 2]) -> f32 {
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let mut t0 = 0.0f32;
-    let mut t1 = 1.0f32;
-    for axis in 0..2 {
-        let (lo, hi) = (pixel[axis] - a[axis], pixel[axis] + 1.0 - a[axis]);
-        if d[axis].abs() < 1e-12 {
-            if lo > 0.0 || hi < 0.0 {
-                return 0.0;
-            }
-        } else {
-            let (ta, tb) = (lo / d[axis], hi / d[axis]);
-            t0 = t0.max(ta.min(tb));
-            t1 = t1.min(ta.max(tb));
+    ClippedSegment::new(a, b).length_in_pixel(pixel)
+}
+
+/// A segment prepared for [`segment_length_in_pixel`] over many pixels:
+/// its direction and length found once (the same bits).
+#[derive(Clone, Copy, Debug)]
+struct ClippedSegment {
+    a: [f32; 2],
+    d: [f32; 2],
+    length: f32,
+}
+
+impl ClippedSegment {
+    fn new(a: [f32; 2], b: [f32; 2]) -> Self {
+        let d = [b[0] - a[0], b[1] - a[1]];
+        Self {
+            a,
+            d,
+            length: (d[0] * d[0] + d[1] * d[1]).sqrt(),
         }
     }
-    (t1 - t0).max(0.0) * (d[0] * d[0] + d[1] * d[1]).sqrt()
+
+    fn length_in_pixel(&self, pixel: [f32; 2]) -> f32 {
+        let (a, d) = (self.a, self.d);
+        let mut t0 = 0.0f32;
+        let mut t1 = 1.0f32;
+        for axis in 0..2 {
+            let (lo, hi) = (pixel[axis] - a[axis], pixel[axis] + 1.0 - a[axis]);
+            if d[axis].abs() < 1e-12 {
+                if lo > 0.0 || hi < 0.0 {
+                    return 0.0;
+                }
+            } else {
+                let (ta, tb) = (lo / d[axis], hi / d[axis]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        (t1 - t0).max(0.0) * self.length
+    }
 }
 
 /// The strip of `width` (pixels) centred on the segment `a`–`b`: its area
@@ -66,30 +90,66 @@ pub fn segment_length_in_pixel(a: [f32; 2], b: [f32; 2], pixel: [f32; 2]) -> f32
 /// coverage by a line of opacity `w` (coverage per pixel of its length) is
 /// `min(w · strip_pixel_coverage(a, b, w, pixel), 1)`; summed over every
 /// pixel it is the segment's length. A degenerate segment covers nothing.
+/// ([`StripInPixels`] prepares one strip for many pixels.)
 pub fn strip_pixel_coverage(a: [f32; 2], b: [f32; 2], width: f32, pixel: [f32; 2]) -> f32 {
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
-    if length.is_nan() || length <= 1e-6 {
-        return 0.0;
-    }
-    let normal = [-d[1] / length, d[0] / length];
-    let width = width.clamp(0.0, 1.0);
-    let pieces = strip_pieces(width);
-    let piece = width / pieces as f32;
-    let node = piece / (2.0 * 3f32.sqrt());
-    let mut sum = 0.0;
-    for k in 0..pieces {
-        let middle = -0.5 * width + (k as f32 + 0.5) * piece;
-        for s in [middle - node, middle + node] {
-            let shift = [normal[0] * s, normal[1] * s];
-            sum += segment_length_in_pixel(
-                [a[0] + shift[0], a[1] + shift[1]],
-                [b[0] + shift[0], b[1] + shift[1]],
-                pixel,
-            );
+    StripInPixels::new(a, b, width).coverage(pixel)
+}
+
+/// One strip prepared for the many pixels it touches: its segments at the
+/// nodes across its width found once. `StripInPixels::new(a, b,
+/// width).coverage(pixel)` is [`strip_pixel_coverage`]`(a, b, width,
+/// pixel)`.
+#[derive(Clone, Copy, Debug)]
+pub struct StripInPixels {
+    /// The segment at each node across the width, two a piece (at most
+    /// four pieces).
+    nodes: [ClippedSegment; 8],
+    /// How many of `nodes` there are; 0 for a degenerate segment.
+    count: usize,
+}
+
+impl StripInPixels {
+    /// The strip of `width` (pixels, clamped to `[0, 1]`) centred on
+    /// `a`–`b` (pixels).
+    pub fn new(a: [f32; 2], b: [f32; 2], width: f32) -> Self {
+        let d = [b[0] - a[0], b[1] - a[1]];
+        let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        let mut strip = Self {
+            nodes: [ClippedSegment::new(a, b); 8],
+            count: 0,
+        };
+        if length.is_nan() || length <= 1e-6 {
+            return strip;
         }
+        let normal = [-d[1] / length, d[0] / length];
+        let width = width.clamp(0.0, 1.0);
+        let pieces = strip_pieces(width);
+        let piece = width / pieces as f32;
+        let node = piece / (2.0 * 3f32.sqrt());
+        for k in 0..pieces {
+            let middle = -0.5 * width + (k as f32 + 0.5) * piece;
+            for s in [middle - node, middle + node] {
+                let shift = [normal[0] * s, normal[1] * s];
+                strip.nodes[strip.count] =
+                    ClippedSegment::new([a[0] + shift[0], a[1] + shift[1]], [b[0] + shift[0], b[1] + shift[1]]);
+                strip.count += 1;
+            }
+        }
+        strip
     }
-    sum / (2 * pieces) as f32
+
+    /// The strip's area inside the unit square at `pixel` over its width
+    /// (see [`strip_pixel_coverage`]); 0 for a degenerate segment.
+    pub fn coverage(&self, pixel: [f32; 2]) -> f32 {
+        if self.count == 0 {
+            return 0.0;
+        }
+        let mut sum = 0.0;
+        for node in &self.nodes[..self.count] {
+            sum += node.length_in_pixel(pixel);
+        }
+        sum / self.count as f32
+    }
 }
 
 /// How many pieces [`strip_pixel_coverage`] cuts a strip of `width`
