@@ -989,34 +989,32 @@ impl CrownImpostor {
         let mut through = vec![0.0f64; (self.columns * self.rows) as usize];
         for row in 0..self.rows {
             for column in 0..self.columns {
-                let covered = (row * n..(row + 1) * n)
-                    .flat_map(|j| (column * n..(column + 1) * n).map(move |i| (i, j)))
-                    .filter(|&(i, j)| canvas.needles.get(i, j))
-                    .count();
-                through[(row * self.columns + column) as usize] = 1.0 - covered as f64 / f64::from(n * n);
+                let covered: u32 = (row * n..(row + 1) * n)
+                    .map(|j| {
+                        let first = j as usize * width as usize + (column * n) as usize;
+                        canvas.needles.run_bits(first, n).count_ones()
+                    })
+                    .sum();
+                through[(row * self.columns + column) as usize] = 1.0 - f64::from(covered) / f64::from(n * n);
             }
         }
         let (steps, bins) = (CROWN_PROFILE_STEPS as f32, WOOD_COUNT_BINS as f32);
-        for j in 0..height {
+        // The wood's samples in row-major order, a word at a time.
+        canvas.wood.for_each_set(|index| {
+            let (i, j) = ((index % width as usize) as u32, (index / width as usize) as u32);
             // Rows run from the top; a sample row's share of the height.
             let up = 1.0 - (j as f32 + 0.5) / height as f32;
             let step = ((up * steps) as usize).min(CROWN_PROFILE_STEPS - 1);
-            for i in 0..width {
-                let index = (j * width + i) as usize;
-                if !canvas.wood.is_set(index) {
-                    continue;
-                }
-                let nearness = canvas.wood_front[index];
-                let bin = ((nearness / self.half_width + 1.0) * 0.5 * bins)
-                    .floor()
-                    .clamp(0.0, bins - 1.0) as usize;
-                let t = through[((j / n) * self.columns + i / n) as usize];
-                let seen = if canvas.wood_hidden.is_set(index) { 0.0 } else { 1.0 };
-                let fit = &mut counts[step][bin];
-                fit[0] += (seen - t) * (1.0 - t);
-                fit[1] += (1.0 - t) * (1.0 - t);
-            }
-        }
+            let nearness = canvas.wood_front[index];
+            let bin = ((nearness / self.half_width + 1.0) * 0.5 * bins)
+                .floor()
+                .clamp(0.0, bins - 1.0) as usize;
+            let t = through[((j / n) * self.columns + i / n) as usize];
+            let seen = if canvas.wood_hidden.is_set(index) { 0.0 } else { 1.0 };
+            let fit = &mut counts[step][bin];
+            fit[0] += (seen - t) * (1.0 - t);
+            fit[1] += (1.0 - t) * (1.0 - t);
+        });
         counts
     }
 
@@ -1028,15 +1026,16 @@ impl CrownImpostor {
         let per_texel = (n * n) as f32;
         let byte = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
         let mut texels = Vec::with_capacity((self.columns * self.rows) as usize);
+        let width = (self.columns * n) as usize;
         for row in 0..self.rows {
             for column in 0..self.columns {
                 let (mut covered, mut wood) = (0u32, 0u32);
+                // A texel's row of samples at a time.
                 for j in row * n..(row + 1) * n {
-                    for i in column * n..(column + 1) * n {
-                        let (needle, bark) = (canvas.needles.get(i, j), canvas.wood.get(i, j));
-                        covered += u32::from(needle || bark);
-                        wood += u32::from(bark && !canvas.wood_hidden.get(i, j));
-                    }
+                    let first = j as usize * width + (column * n) as usize;
+                    let (needles, bark) = (canvas.needles.run_bits(first, n), canvas.wood.run_bits(first, n));
+                    covered += (needles | bark).count_ones();
+                    wood += (bark & !canvas.wood_hidden.run_bits(first, n)).count_ones();
                 }
                 // A texel no piece's axis crossed (the edge of a wide
                 // trunk) is lit as a vertical cylinder.

@@ -435,6 +435,24 @@ impl SampleBits {
             .sum()
     }
 
+    /// Samples `first .. first + length` (row-major, `length` at most 64)
+    /// as the low bits of a word, sample `first` in bit 0; samples past
+    /// the picture read as clear.
+    pub fn run_bits(&self, first: usize, length: u32) -> u64 {
+        if length == 0 {
+            return 0;
+        }
+        let (word, shift) = (first / 64, first % 64);
+        let low = self.bits.get(word).map_or(0, |bits| bits >> shift);
+        let high = if shift > 0 && shift + length as usize > 64 {
+            self.bits.get(word + 1).map_or(0, |bits| bits << (64 - shift))
+        } else {
+            0
+        };
+        let mask = if length >= 64 { u64::MAX } else { (1 << length) - 1 };
+        (low | high) & mask
+    }
+
     /// How many samples are set.
     pub fn count_set(&self) -> u64 {
         self.bits.iter().map(|word| u64::from(word.count_ones())).sum()
@@ -1112,7 +1130,9 @@ pub(crate) mod tests {
             proptest::prop_assert_eq!(stamped, expected);
         }
 
-        /// `count_set_in` counts the set samples of a run as one by one.
+        /// `count_set_in` counts the set samples of a run as one by one,
+        /// and `run_bits` reads them in order.
+
         #[test]
         fn a_run_counts_its_set_samples(seed in 0u64..u64::MAX, first in 0usize..300, length in 0usize..300) {
             let mut bits = SampleBits::new(20, 15);
@@ -1128,6 +1148,12 @@ pub(crate) mod tests {
             let last = (first + length).min(299);
             let one_by_one = (first..=last).filter(|&index| bits.is_set(index)).count() as u32;
             proptest::prop_assert_eq!(bits.count_set_in(first, last), one_by_one);
+            let run = (length % 65) as u32;
+            let read = bits.run_bits(first, run);
+            for k in 0..64 {
+                let expected = k < run as usize && first + k < 300 && bits.is_set(first + k);
+                proptest::prop_assert_eq!(read >> k & 1 == 1, expected, "sample {} of a run of {}", k, run);
+            }
         }
 
         /// `stamp_each_over` sets what `stamp` sets and calls back exactly
