@@ -1507,7 +1507,7 @@ mod tests {
             // Ends on pixel edges too, where a strip runs along a side.
             let at = |v: f32| if snap { v.round() } else { v };
             let (a, b) = (Vec2::new(at(ax), at(ay)), Vec2::new(at(bx), by));
-            let measured: Vec<bool> = (0..(width * height) as u64).map(|k| pixel_hash(k ^ seed) % 4 != 0).collect();
+            let measured: Vec<bool> = (0..(width * height) as u64).map(|k| !pixel_hash(k ^ seed).is_multiple_of(4)).collect();
             let mut touches = Vec::new();
             strip_touches(a, b, opacity, [width, height], &measured, &mut touches);
             let expected: Vec<(u32, f32)> = (0..height)
