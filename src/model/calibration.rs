@@ -940,9 +940,7 @@ impl SampleAxis {
         }
         Self { pixel_of, held }
     }
-}
 
-impl SampleAxis {
     /// Each pixel's run of samples, `(pixel, first, last)` (inclusive), in
     /// order: `pixel_of` never decreases along the axis.
     fn runs(&self) -> Vec<(u32, usize, usize)> {
@@ -1506,7 +1504,7 @@ mod tests {
             let (width, height) = (12u32, 8u32);
             // Ends on pixel edges too, where a strip runs along a side.
             let at = |v: f32| if snap { v.round() } else { v };
-            let (a, b) = (Vec2::new(at(ax), at(ay)), Vec2::new(at(bx), by));
+            let (a, b) = (Vec2::new(at(ax), at(ay)), Vec2::new(at(bx), at(by)));
             let measured: Vec<bool> = (0..(width * height) as u64).map(|k| !pixel_hash(k ^ seed).is_multiple_of(4)).collect();
             let mut touches = Vec::new();
             strip_touches(a, b, opacity, [width, height], &measured, &mut touches);

@@ -1132,7 +1132,6 @@ pub(crate) mod tests {
 
         /// `count_set_in` counts the set samples of a run as one by one,
         /// and `run_bits` reads them in order.
-
         #[test]
         fn a_run_counts_its_set_samples(seed in 0u64..u64::MAX, first in 0usize..300, length in 0usize..300) {
             let mut bits = SampleBits::new(20, 15);
