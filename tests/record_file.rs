@@ -326,3 +326,53 @@ fn shipped_mature_records_are_the_presets_current_bakes() {
     }
     assert!(total <= 30 << 20, "{total} bytes shipped");
 }
+
+#[test]
+fn shipped_impostors_keep_their_coverage_at_every_mip_level() {
+    // Each view of every shipped record's crown impostor: the mean
+    // coverage of every mip level the plugin uploads is the picture's to
+    // within half a step of 255, the levels of odd size too. (Rounding
+    // each level from the one below drifted a faint crown's coverage by
+    // up to 5 % by its fourth level.)
+    use bevy_conifer_lod::model::read_prototype_record;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees");
+    let mut paths: Vec<_> = ["", "mature"]
+        .iter()
+        .flat_map(|sub| std::fs::read_dir(root.join(sub)).unwrap())
+        .map(|entry| entry.unwrap().path())
+        .filter(|path| path.extension().is_some_and(|e| e == "conifer"))
+        .collect();
+    paths.sort();
+    assert_eq!(paths.len(), 10);
+    for path in paths {
+        let impostor = match read_record(&path) {
+            Ok(record) => record.impostor,
+            Err(_) => read_prototype_record(&path).unwrap().impostor,
+        }
+        .unwrap_or_else(|| panic!("{}: no impostor", path.display()));
+        let chain = impostor.mip_chain();
+        let mut worst: f64 = 0.0;
+        for view in 0..impostor.views as usize {
+            let mean = |(w, h, texels): &(u32, u32, Vec<[u8; 4]>)| {
+                let n = (*w * *h) as usize;
+                texels[view * n..(view + 1) * n]
+                    .iter()
+                    .map(|t| f64::from(t[0]))
+                    .sum::<f64>()
+                    / n as f64
+            };
+            let whole = mean(&chain[0]);
+            for level in &chain[1..] {
+                let drift = mean(level) - whole;
+                assert!(drift.abs() <= 0.5 + 1e-9, "{} view {view}: {drift}", path.display());
+                worst = worst.max(drift.abs() / whole);
+            }
+        }
+        println!(
+            "{}: {} levels, largest drift {:.2} %",
+            path.display(),
+            chain.len(),
+            100.0 * worst
+        );
+    }
+}
