@@ -346,8 +346,8 @@ impl SampleBits {
     /// [`SampleBits::box_is_full`]) is set in `self`, and every one of them
     /// set in `inner` is set in `outer` too: one pass over the box for
     /// the three (`false` where they are not of one size, or for an empty
-    /// or non-finite box). The impostor skips a needle so whose samples
-    /// are all covered with no wood left unhidden under it.
+    /// or non-finite box). The impostor skips a needle whose box is so:
+    /// every sample covered, no wood left unhidden under it.
     pub fn box_is_full_and_inside(&self, inner: &SampleBits, outer: &SampleBits, a: Vec2, b: Vec2, r: f32) -> bool {
         let size = (self.width, self.height);
         if (inner.width, inner.height) != size || (outer.width, outer.height) != size {
