@@ -726,7 +726,13 @@ fn halves_light(picture: &image::RgbaImage, split: u32) -> [f32; 2] {
 /// lines' 0.210. Taken at one plane (the crown's near side, as before) it
 /// was 0.359: the far half lit almost as the near one, flat and pale
 /// beside the lines it replaces; with the samples on a chord of the
-/// crown's widest radius at every height, 0.316.
+/// crown's widest radius at every height, 0.316. Past the shadow maps'
+/// range (the cascade ending 2 m from the camera) Bevy lit both fully
+/// (far half over sunlit half 0.943 and 0.944, the sunlit halves 2.7 and
+/// 2.6 times the lines' in the maps); there the crown now shades itself
+/// (`model::crown_shade`: the impostor's crown profile filled with four
+/// media measured on its pictures): 0.200 for the impostor and 0.193 for
+/// the lines, their sunlit halves 0.93 and 1.01 of the lines' in the maps.
 #[test]
 fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
     use bevy::core_pipeline::tonemapping::Tonemapping;
@@ -755,22 +761,27 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
     });
     // The sun 35° up from +x, across the view; one cascade over the tree.
     let elevation = 35f32.to_radians();
-    world.spawn((
-        DirectionalLight {
-            illuminance: 9_000.0,
-            shadow_maps_enabled: true,
-            ..default()
-        },
-        Transform::from_translation(crown + Vec3::new(elevation.cos(), elevation.sin(), 0.0) * 100.0)
-            .looking_at(crown, Vec3::Y),
+    let one_cascade = |reach: f32| {
         bevy::light::CascadeShadowConfigBuilder {
             num_cascades: 1,
-            maximum_distance: 90.0,
-            first_cascade_far_bound: 90.0,
+            maximum_distance: reach,
+            first_cascade_far_bound: reach,
             ..default()
         }
-        .build(),
-    ));
+        .build()
+    };
+    let sun = world
+        .spawn((
+            DirectionalLight {
+                illuminance: 9_000.0,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::from_translation(crown + Vec3::new(elevation.cos(), elevation.sin(), 0.0) * 100.0)
+                .looking_at(crown, Vec3::Y),
+            one_cascade(90.0),
+        ))
+        .id();
     // Two texels a pixel error: the impostor alone, the tree ~110 pixels
     // tall.
     let (camera, _) = impostor_camera(world, &target, crown, texel, 2.0);
@@ -804,4 +815,37 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
         (sunlit - 1.0).abs() < 0.1,
         "the sunlit halves: impostor over lines {sunlit}"
     );
+
+    // The cascade now ends 2 m from the camera: past it Bevy lights every
+    // fragment fully, and the crown shades itself (`model::crown_shade`),
+    // its impostor's and its lines' far halves as the shadow maps shaded
+    // its lines'.
+    *renderer
+        .world_mut()
+        .get_mut::<bevy::light::CascadeShadowConfig>(sun)
+        .unwrap() = one_cascade(2.0);
+    let impostor_past = shot(&mut renderer, true, "impostor_self_shadow_impostor_past_the_maps");
+    let lines_past = shot(&mut renderer, false, "impostor_self_shadow_lines_past_the_maps");
+    let (impostor_past_ratio, lines_past_ratio) = (impostor_past[0] / impostor_past[1], lines_past[0] / lines_past[1]);
+    println!(
+        "past the shadow maps, far half over sunlit half: impostor {impostor_past_ratio:.3} ({impostor_past:?}), \
+         lines {lines_past_ratio:.3} ({lines_past:?}); sunlit halves over the lines' in the maps: impostor {:.3}, \
+         lines {:.3}",
+        impostor_past[1] / lines[1],
+        lines_past[1] / lines[1]
+    );
+    for (what, ratio, sunlit) in [
+        ("impostor", impostor_past_ratio, impostor_past[1]),
+        ("lines", lines_past_ratio, lines_past[1]),
+    ] {
+        assert!(
+            (ratio - lines_ratio).abs() < 0.05,
+            "past the maps the {what}' far half over its sunlit half {ratio}, the lines' in the maps {lines_ratio}"
+        );
+        assert!(
+            (sunlit / lines[1] - 1.0).abs() < 0.1,
+            "past the maps the {what}' sunlit half over the lines' in the maps {}",
+            sunlit / lines[1]
+        );
+    }
 }

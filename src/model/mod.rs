@@ -14,6 +14,7 @@
 //! * [`shading`]: how a line is lit, as the cylinder it stands for.
 //! * [`calibration`]: line opacity calibrated against the needles' coverage, by pixel size.
 //! * [`impostor`]: the far representation (a crown impostor of a few views).
+//! * [`crown_shade`]: a crown's shade on itself past the shadow maps' range.
 //! * [`look`]: how the whole tree looks from afar (its crown's see-through).
 //! * [`color`]: colour within a tree (needles by age and side, bark by height).
 //! * [`view`]: view-dependent detail inside a tree (bounding spheres, errors per placement).
@@ -23,6 +24,7 @@ pub mod bake;
 pub mod calibration;
 pub mod color;
 pub mod compact;
+pub mod crown_shade;
 pub mod cut_count;
 pub mod file;
 pub mod impostor;

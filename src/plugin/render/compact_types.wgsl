@@ -138,6 +138,10 @@ struct SpeciesParams {
     // heights from its bottom to its top, four a row
     // (`model::impostor::CrownImpostor::crown_radii`)
     crown_radii: array<vec4<f32>, 8>,
+    // the extinction (per tree metre) of the crown's CROWN_SHADE_CLASSES
+    // media (lanes) at the same heights (rows)
+    // (`model::impostor::CrownImpostor::crown_extinction`)
+    crown_extinction: array<vec4<f32>, 32>,
     // the lines' opacity scales by pixel size, four a row
     // (`model::calibration::LineCalibration`; all 1 without one)
     line_scales: array<vec4<f32>, 2>,
@@ -158,6 +162,10 @@ const LINE_SCALE_STEPS: u32 = 8u;
 const WOOD_OPACITY_NODES: u32 = 4u;
 
 const CROWN_PROFILE_STEPS: u32 = 32u;
+
+const CROWN_SHADE_STEPS: u32 = 8u;
+
+const CROWN_SHADE_CLASSES: u32 = 4u;
 
 const WOOD_NEARNESS_BINS: u32 = 8u;
 

@@ -41,7 +41,7 @@
     Instance, InstanceLod, SpeciesParams, Placement, Prototype,
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
-    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
+    SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, CROWN_SHADE_STEPS, CROWN_SHADE_CLASSES, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -119,7 +119,6 @@ struct VertexOutput {
     // Where on the impostor's pictures (u right, v down) the calm card
     // point lies (outside [0, 1] on the margin the wind's sway needs).
     @location(3) uv: vec2<f32>,
-    @location(4) @interpolate(flat) tree: u32,
     // The card's point (tree-local, calm) and its unit axes across and up.
     @location(7) card_point: vec3<f32>,
     @location(8) @interpolate(flat) card_right: vec3<f32>,
@@ -129,6 +128,9 @@ struct VertexOutput {
     // Height in the tree's frame, for the bark's colour.
     @location(3) local_height: f32,
 #endif
+    // The tree's index in `instances` (its frame, for the crown's shade on
+    // itself past the shadow maps and the impostor's picture).
+    @location(4) @interpolate(flat) tree: u32,
 #ifdef CONIFER_MOTION_VECTORS
     // Where the point stood the frame before (last frame's wind).
     @location(5) previous_world_position: vec4<f32>,
@@ -165,6 +167,9 @@ fn culled() -> VertexOutput {
 // by `vertex`: the frame of the tree's own parts, of its placements, and
 // of the wind.
 var<private> wind_tree: mat4x4<f32>;
+// The index in `instances` of the tree the vertex belongs to (`finish`
+// passes it on to the fragment).
+var<private> vertex_tree: u32;
 // The impostor's quad leans with the trunk only (its fragments move the
 // picture by the rest of the field, `impostor_swayed_uv`).
 var<private> wind_trunk_only: bool;
@@ -440,6 +445,7 @@ fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: 
 #endif
     out.world_normal = normalize((world_from_local * vec4<f32>(local_normal, 0.0)).xyz);
     out.color = color;
+    out.tree = vertex_tree;
     return out;
 }
 
@@ -781,6 +787,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let entry = placed_entries[instance_index];
     let tree = entry.x & ENTRY_TREE_MASK;
     wind_tree = instance_world_from_local(instances[tree]);
+    vertex_tree = tree;
     let placement = placements[entry.y & ENTRY_PLACEMENT_MASK];
     let lod = instance_lods[tree];
     let code = entry.y >> 16u;
@@ -796,6 +803,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #else
     let tree = instance_index;
     wind_tree = instance_world_from_local(instances[tree]);
+    vertex_tree = tree;
     let lod = instance_lods[tree];
     let code = lod.code & LOD_CODE_MASK;
     let original_from_needles = (lod.code & LOD_ORIGINAL_FROM_NEEDLES) != 0u;
@@ -1043,7 +1051,6 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let k1 = (k0 + 1.0) % views;
     var out = finish(position, vec3<f32>(0.0, 1.0, 0.0), world_from_local, vec4<f32>(k0, k1, f - floor(f), fade));
     out.uv = vec2<f32>(0.5 * (across_card / frame.z + 1.0), (span.y - along_card) / max(span.y - span.x, 1e-6));
-    out.tree = tree;
     out.card_point = position;
     out.card_right = right;
     out.card_up = up;
@@ -1501,7 +1508,8 @@ fn impostor_shadow_samples(card: vec3<f32>, V: vec3<f32>, depths: vec3<f32>, sca
             shadow = 0.0;
             for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
                 let p = impostor_shadow_points[k];
-                shadow += shadows::fetch_directional_shadow(i, p, V, view_depth(p), frag);
+                let z = view_depth(p);
+                shadow += with_crown_shade(i, shadows::fetch_directional_shadow(i, p, V, z, frag), p.xyz, -z);
             }
             shadow /= f32(IMPOSTOR_SHADOW_SAMPLES);
         }
@@ -1520,12 +1528,59 @@ fn directional_shadow(i: u32, position: vec4<f32>, toward: vec3<f32>, view_z: f3
     var sum = 0.0;
     for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
         let p = impostor_shadow_points[k];
-        sum += shadows::fetch_directional_shadow(i, p, toward, view_depth(p), frag);
+        let z = view_depth(p);
+        sum += with_crown_shade(i, shadows::fetch_directional_shadow(i, p, toward, z, frag), p.xyz, -z);
     }
     return sum / f32(IMPOSTOR_SHADOW_SAMPLES);
 #else
-    return shadows::fetch_directional_shadow(i, position, toward, view_z, frag);
+    let shadow = shadows::fetch_directional_shadow(i, position, toward, view_z, frag);
+    return with_crown_shade(i, shadow, position.xyz, -view_z);
 #endif
+}
+
+// The tree the fragment belongs to (its index in `instances`), set first
+// thing by `fragment`.
+var<private> fragment_tree: u32;
+
+// Directional light `i`'s `shadow` (from its shadow maps) at world
+// `position`, `depth` metres ahead of the camera, with the tree's own
+// crown's shade where the maps end: cross-faded into it over the last
+// cascade's overlap band, all of it past the last cascade, where Bevy
+// lights every fragment fully (CPU reference:
+// `model::crown_shade::past_shadow_maps`,
+// `model::crown_shade::CrownShade::transmittance`).
+fn with_crown_shade(i: u32, shadow: f32, position: vec3<f32>, depth: f32) -> f32 {
+    let light = &view_bindings::lights.directional_lights[i];
+    let cascades = (*light).num_cascades;
+    var far = 0.0;
+    if cascades > 0u {
+        far = (*light).cascades[cascades - 1u].far_bound;
+    }
+    let crown_share = past_shadow_maps(depth, far, (*light).cascades_overlap_proportion);
+    if !(crown_share > 0.0) {
+        return shadow;
+    }
+    let world_from_local = instance_world_from_local(instances[fragment_tree]);
+    let scale = length(world_from_local[0].xyz);
+    let local = tree_local_point(world_from_local, scale, position);
+    let basis = mat3x3<f32>(world_from_local[0].xyz, world_from_local[1].xyz, world_from_local[2].xyz);
+    let to_light = transpose(basis) * (*light).direction_to_light;
+    return mix(shadow, crown_transmittance(local, to_light), crown_share);
+}
+
+// How much of a directional light's shade comes from the crown at view
+// `depth`: 0 before the last cascade's overlap band (its last `overlap`
+// share), 1 at and past its `far` bound (CPU reference:
+// `model::crown_shade::past_shadow_maps`).
+fn past_shadow_maps(depth: f32, far: f32, overlap: f32) -> f32 {
+    if !(far > 0.0) || depth >= far {
+        return 1.0;
+    }
+    let near = (1.0 - clamp(overlap, 0.0, 1.0)) * far;
+    if !(depth > near) {
+        return 0.0;
+    }
+    return (depth - near) / (far - near);
 }
 
 // Point light `light_id`'s shadow at `position` (an impostor texel's: the
@@ -1657,9 +1712,11 @@ fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> 
 }
 #endif
 
-// The crown's radius at tree-local `height`: linear between the profile's
-// steps (CPU reference: `model::impostor::CrownImpostor::crown_radius_at`).
-fn crown_radius_at(height: f32) -> f32 {
+// Where tree-local `height` falls in the crown's profile: the step below
+// it (x) and how far toward the next (y), linear between the steps'
+// middles, the end steps' outside them (CPU reference:
+// `model::impostor::CrownImpostor::crown_radius_at`).
+fn crown_profile_step(height: f32) -> vec2<f32> {
     let steps = f32(CROWN_PROFILE_STEPS);
     let span = species.impostor_span;
     var f = clamp((height - span.x) / (span.y - span.x) * steps - 0.5, 0.0, steps - 1.0);
@@ -1667,10 +1724,114 @@ fn crown_radius_at(height: f32) -> f32 {
         f = 0.0;
     }
     let k = min(u32(f), CROWN_PROFILE_STEPS - 2u);
-    let t = f - f32(k);
+    return vec2<f32>(f32(k), f - f32(k));
+}
+
+// The crown's radius at tree-local `height` (CPU reference:
+// `model::impostor::CrownImpostor::crown_radius_at`).
+fn crown_radius_at(height: f32) -> f32 {
+    let step = crown_profile_step(height);
+    let k = u32(step.x);
     let a = species.crown_radii[k / 4u][k % 4u];
     let b = species.crown_radii[(k + 1u) / 4u][(k + 1u) % 4u];
-    return mix(a, b, t);
+    return mix(a, b, step.y);
+}
+
+// The extinctions (per tree metre) of the crown's CROWN_SHADE_CLASSES
+// media at tree-local `height` (CPU reference:
+// `model::crown_shade::CrownShade::extinction_at`).
+fn crown_extinction_at(height: f32) -> vec4<f32> {
+    let step = crown_profile_step(height);
+    let k = u32(step.x);
+    return max(mix(species.crown_extinction[k], species.crown_extinction[k + 1u], step.y), vec4<f32>(0.0));
+}
+
+// How far inside the crown tree-local `p` lies, metres, negative outside
+// (CPU reference: `model::crown_shade::CrownShade::inside`).
+fn crown_inside(p: vec3<f32>) -> f32 {
+    let span = species.impostor_span;
+    let distance = length(p.xz - species.impostor_box.xy);
+    return min(min(crown_radius_at(p.y) - distance, p.y - span.x), span.y - p.y);
+}
+
+// Where the ray from tree-local `p` along the unit `toward` crosses the
+// upright cylinder of the crown's widest radius between its bottom and
+// top: its distances in (no nearer than `p`) and out; (0, 0) where the ray
+// never meets it (CPU reference: `model::crown_shade::CrownShade::crossing`).
+fn crown_crossing(p: vec3<f32>, toward: vec3<f32>) -> vec2<f32> {
+    var widest = 0.0;
+    for (var row = 0u; row < CROWN_PROFILE_STEPS / 4u; row++) {
+        let r = species.crown_radii[row];
+        widest = max(widest, max(max(r.x, r.y), max(r.z, r.w)));
+    }
+    let span = species.impostor_span;
+    let offset = p.xz - species.impostor_box.xy;
+    let across = toward.xz;
+    let a = dot(across, across);
+    var side = vec2<f32>(-3.0e38, 3.0e38);
+    if a > 1e-12 {
+        let b = dot(offset, across);
+        let c = dot(offset, offset) - widest * widest;
+        let disc = b * b - a * c;
+        if disc < 0.0 {
+            return vec2<f32>(0.0);
+        }
+        side = vec2<f32>(-b - sqrt(disc), -b + sqrt(disc)) / a;
+    } else if length(offset) > widest {
+        return vec2<f32>(0.0);
+    }
+    var ends = vec2<f32>(-3.0e38, 3.0e38);
+    if abs(toward.y) > 1e-6 {
+        let to_bottom = (span.x - p.y) / toward.y;
+        let to_top = (span.y - p.y) / toward.y;
+        ends = vec2<f32>(min(to_bottom, to_top), max(to_bottom, to_top));
+    } else if p.y < span.x || p.y > span.y {
+        return vec2<f32>(0.0);
+    }
+    let enter = max(max(side.x, ends.x), 0.0);
+    let exit = min(side.y, ends.y);
+    if !(exit > enter && exit < 1.0e38) {
+        return vec2<f32>(0.0);
+    }
+    return vec2<f32>(enter, exit);
+}
+
+// What the crown lets through from tree-local `p` toward a light along
+// `to_light` (tree-local, any length): the mean over its media of exp of
+// minus the extinction summed over CROWN_SHADE_STEPS even steps of its
+// crossing, each step's length
+// inside the crown taken with its inside depth linear along it; 1 without
+// an impostor's profile (CPU reference:
+// `model::crown_shade::CrownShade::transmittance`).
+fn crown_transmittance(p: vec3<f32>, to_light: vec3<f32>) -> f32 {
+    let span = species.impostor_span;
+    let len = length(to_light);
+    if !(span.w > 0.0 && span.y > span.x && len > 0.0 && len < 1.0e30) {
+        return 1.0;
+    }
+    let toward = to_light / len;
+    let crossing = crown_crossing(p, toward);
+    if !(crossing.y > crossing.x) {
+        return 1.0;
+    }
+    let step = (crossing.y - crossing.x) / f32(CROWN_SHADE_STEPS);
+    var depth = vec4<f32>(0.0);
+    var before = crown_inside(p + toward * crossing.x);
+    for (var k = 1u; k <= CROWN_SHADE_STEPS; k++) {
+        let after = crown_inside(p + toward * (crossing.x + step * f32(k)));
+        let middle = p + toward * (crossing.x + step * (f32(k) - 0.5));
+        var share = 0.0;
+        if before > 0.0 && after > 0.0 {
+            share = 1.0;
+        } else if before > 0.0 {
+            share = before / (before - after);
+        } else if after > 0.0 {
+            share = after / (after - before);
+        }
+        depth += crown_extinction_at(middle.y) * (share * step);
+        before = after;
+    }
+    return dot(exp(-depth), vec4<f32>(1.0 / f32(CROWN_SHADE_CLASSES)));
 }
 
 // The share of the wood the needles leave in sight where they cover the
@@ -1724,6 +1885,11 @@ fn round_prism_normal(normal: vec3<f32>, side: vec3<f32>, toward: vec3<f32>) -> 
 
 @fragment
 fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
+#ifdef CONIFER_LINES
+#ifndef CONIFER_FACING_STRIP
+    fragment_tree = in.tree;
+#endif
+#endif
 #ifdef CONIFER_LINE_QUADS
     // The pixel takes the line's strip's area in it; a quad's corners
     // reach past the strip (`LINE_QUAD_MARGIN`), and most of its pixels

@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 2,208 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 2,720 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -256,6 +256,14 @@ pub struct SpeciesParams {
     /// row ([`crate::model::impostor::CrownImpostor::crown_radii`]): where
     /// a texel's ray enters the crown, for its shadow samples.
     pub crown_radii: [[f32; 4]; CROWN_RADII_ROWS],
+    /// The extinction (per tree metre) of the crown's
+    /// [`crate::model::crown_shade::CROWN_SHADE_CLASSES`] media at the same
+    /// heights, a row a height
+    /// ([`crate::model::impostor::CrownImpostor::crown_extinction`]): the
+    /// crown's shade on itself past the shadow maps
+    /// ([`crate::model::crown_shade`]).
+    pub crown_extinction:
+        [[f32; crate::model::crown_shade::CROWN_SHADE_CLASSES]; crate::model::impostor::CROWN_PROFILE_STEPS],
     /// The lines' opacity scales by pixel size
     /// ([`crate::model::calibration::LineCalibration::scales`], four a
     /// row; all 1 without a calibration).
@@ -339,10 +347,12 @@ impl SpeciesParams {
         self.line_scale_range = [range[0], range[1], 0.0, 0.0];
     }
 
-    /// Sets the impostor's crown radius by height
-    /// ([`crate::model::impostor::CrownImpostor::crown_radii`]).
-    pub fn set_crown_radii(&mut self, radii: &[f32; crate::model::impostor::CROWN_PROFILE_STEPS]) {
-        self.crown_radii = four_a_row(radii);
+    /// Sets the impostor's crown radius and extinction by height
+    /// ([`crate::model::crown_shade::CrownShade`]; its axis and span are
+    /// the impostor's box and span).
+    pub fn set_crown_shade(&mut self, shade: &crate::model::crown_shade::CrownShade) {
+        self.crown_radii = four_a_row(&shade.radii);
+        self.crown_extinction = shade.extinction;
     }
 
     /// Sets the share of the wood the needles leave in sight where they
@@ -578,8 +588,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_2208_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 2208);
+    fn species_params_is_2720_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 2720);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`
@@ -606,6 +616,13 @@ mod tests {
     fn the_shader_has_the_crown_profiles_length() {
         let steps = crate::model::impostor::CROWN_PROFILE_STEPS;
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_radii", super::CROWN_RADII_ROWS);
+        assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_extinction", steps);
+        let types = include_str!("compact_types.wgsl");
+        let shade_steps = crate::model::crown_shade::CROWN_SHADE_STEPS;
+        assert!(types.contains(&format!("const CROWN_SHADE_STEPS: u32 = {shade_steps}u;")));
+        let classes = crate::model::crown_shade::CROWN_SHADE_CLASSES;
+        assert_eq!(classes, 4, "a height's media are one vec4");
+        assert!(types.contains(&format!("const CROWN_SHADE_CLASSES: u32 = {classes}u;")));
     }
 
     /// The shader's wood visibility table is as long as `model::impostor`'s.

@@ -39,6 +39,7 @@ use super::{
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
+use crate::model::crown_shade::CrownShade;
 use crate::model::impostor::CrownImpostor;
 use crate::model::prism::WOOD_LINE_FADE;
 use crate::model::shading::SphereLight;
@@ -315,9 +316,9 @@ struct RenderSpecies {
     /// The sphere light table and the material's roughness and reflectance
     /// (bits) it was made for.
     sphere_light: ([u32; 2], SphereLight),
-    /// The impostor's crown radius by height
-    /// ([`CrownImpostor::crown_radii`]; zeros without one).
-    crown_radii: [f32; crate::model::impostor::CROWN_PROFILE_STEPS],
+    /// The impostor's crown radius and extinction by height
+    /// ([`CrownShade::of`]; `None` without an impostor).
+    crown_shade: Option<CrownShade>,
 }
 
 impl RenderSpecies {
@@ -526,9 +527,10 @@ fn species_params(
     params
 }
 
-/// An impostor's crown radius by height (zeros without one).
-fn crown_radii(impostor: Option<&CrownImpostor>) -> [f32; crate::model::impostor::CROWN_PROFILE_STEPS] {
-    impostor.map(CrownImpostor::crown_radii).unwrap_or_default()
+/// An impostor's crown radius and extinction by height (`None` without
+/// one).
+fn crown_shade(impostor: Option<&CrownImpostor>) -> Option<CrownShade> {
+    impostor.map(CrownShade::of)
 }
 
 /// Copies the species and trees that changed into the render world.
@@ -592,7 +594,7 @@ fn extract_compact(
                 })
                 .id(),
             sphere_light: (material_key, sphere_light()),
-            crown_radii: crown_radii(asset.impostor.as_deref()),
+            crown_shade: crown_shade(asset.impostor.as_deref()),
         });
         if entry.sphere_light.0 != material_key {
             entry.sphere_light = (material_key, sphere_light());
@@ -601,7 +603,7 @@ fn extract_compact(
             // A reloaded record: new arrays.
             entry.compact = compact.clone();
             entry.impostor = asset.impostor.clone();
-            entry.crown_radii = crown_radii(asset.impostor.as_deref());
+            entry.crown_shade = crown_shade(asset.impostor.as_deref());
             entry.gpu = None;
             entry.instances_dirty = true;
         }
@@ -623,7 +625,9 @@ fn extract_compact(
             wind_step,
             &entry.sphere_light.1,
         );
-        entry.params.set_crown_radii(&entry.crown_radii);
+        if let Some(shade) = &entry.crown_shade {
+            entry.params.set_crown_shade(shade);
+        }
         // Without an impostor the wood lines are drawn once, unlayered.
         if let Some(impostor) = &entry.impostor {
             entry.params.set_wood_visibility(&impostor.wood_visibility);
