@@ -421,7 +421,7 @@ mod tests {
     /// a few per cent.
     #[test]
     fn a_clumped_crown_lets_through_what_its_gaps_do() {
-        let (columns, rows, texel, radius) = (40u32, 64u32, 0.1f32, 1.8f32);
+        let (columns, rows, texel) = (40u32, 64u32, 0.1f32);
         let half_width = columns as f32 * texel / 2.0;
         let texels: Vec<[u8; 4]> = (0..2 * rows * columns)
             .map(|i| {
