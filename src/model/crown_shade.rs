@@ -358,36 +358,38 @@ mod tests {
         assert_eq!(past_shadow_maps(f32::NAN, 80.0, 0.2), 0.0);
     }
 
+    /// `views` pictures of `columns` × 64 texels of side `texel` about an
+    /// axis at the origin, from height 0, each texel's coverage
+    /// `coverage(row, column)` (255ths; no wood).
+    fn pictures(views: u32, columns: u32, texel: f32, coverage: impl Fn(u32, u32) -> u8) -> CrownImpostor {
+        let rows = 64;
+        CrownImpostor {
+            views,
+            columns,
+            rows,
+            axis: Vec2::ZERO,
+            half_width: columns as f32 * texel / 2.0,
+            bottom: 0.0,
+            texel,
+            texels: (0..views * rows * columns)
+                .map(|i| [coverage((i / columns) % rows, i % columns), 0, 0, 0])
+                .collect(),
+            wood_visibility: WoodVisibility::default(),
+        }
+    }
+
     /// Pictures of a uniform medium filling a cylinder give back its
     /// extinction: each texel's coverage is `1 − exp(−σ·chord)` at its
     /// offset, rounded to 255ths as the bake stores it.
     #[test]
     fn the_pictures_of_a_uniform_crown_give_back_its_extinction() {
-        let (columns, rows, texel, radius, sigma) = (40u32, 64u32, 0.1f32, 1.8f32, 0.7f32);
+        let (columns, texel, radius, sigma) = (40u32, 0.1f32, 1.8f32, 0.7f32);
         let half_width = columns as f32 * texel / 2.0;
-        let mut texels = vec![[0u8; 4]; (3 * rows * columns) as usize];
-        for view in 0..3 {
-            for row in 0..rows {
-                for column in 0..columns {
-                    let along = (column as f32 + 0.5) * texel - half_width;
-                    let chord = 2.0 * (radius * radius - along * along).max(0.0).sqrt();
-                    let coverage = 1.0 - (-sigma * chord).exp();
-                    texels[((view * rows + row) * columns + column) as usize] =
-                        [(coverage * 255.0).round() as u8, 0, 0, 0];
-                }
-            }
-        }
-        let impostor = CrownImpostor {
-            views: 3,
-            columns,
-            rows,
-            axis: Vec2::ZERO,
-            half_width,
-            bottom: 0.0,
-            texel,
-            texels,
-            wood_visibility: WoodVisibility::default(),
-        };
+        let impostor = pictures(3, columns, texel, |_, column| {
+            let along = (column as f32 + 0.5) * texel - half_width;
+            let chord = 2.0 * (radius * radius - along * along).max(0.0).sqrt();
+            ((1.0 - (-sigma * chord).exp()) * 255.0).round() as u8
+        });
         let shade = CrownShade::of(&impostor);
         let axis = Vec3::new(0.0, 3.2, 0.0);
         for (step, (media, &r)) in shade.extinction.iter().zip(&shade.radii).enumerate() {
@@ -421,25 +423,14 @@ mod tests {
     /// a few per cent.
     #[test]
     fn a_clumped_crown_lets_through_what_its_gaps_do() {
-        let (columns, rows, texel) = (40u32, 64u32, 0.1f32);
+        let (columns, texel) = (40u32, 0.1f32);
         let half_width = columns as f32 * texel / 2.0;
-        let texels: Vec<[u8; 4]> = (0..2 * rows * columns)
-            .map(|i| {
-                let (row, column) = ((i / columns) % rows, i % columns);
-                [if (row + column) % 2 == 0 { 255 } else { 0 }, 0, 0, 0]
-            })
-            .collect();
-        let impostor = CrownImpostor {
-            views: 2,
+        let impostor = pictures(
+            2,
             columns,
-            rows,
-            axis: Vec2::ZERO,
-            half_width,
-            bottom: 0.0,
             texel,
-            texels,
-            wood_visibility: WoodVisibility::default(),
-        };
+            |row, column| if (row + column) % 2 == 0 { 255 } else { 0 },
+        );
         let shade = CrownShade::of(&impostor);
         for (step, (media, &r)) in shade.extinction.iter().zip(&shade.radii).enumerate() {
             assert_eq!(media[..2], [0.0; 2], "step {step}: the gaps' media are clear");
