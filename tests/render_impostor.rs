@@ -13,8 +13,9 @@ use bevy::prelude::*;
 use bevy_conifer_lod::eval::measure::{coverage_error, mean_coverage};
 use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
+use bevy_conifer_lod::model::crown_shade::CrownShade;
 use bevy_conifer_lod::model::impostor::{
-    CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade, swayed_card_point,
+    CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade, shadow_sample_depths, swayed_card_point,
 };
 use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, impostor_margin, trunk_offset, wind_offset};
 use bevy_conifer_lod::model::{BakeOptions, LodRecord, bake};
@@ -330,7 +331,16 @@ struct ImpostorScene {
 
 impl ImpostorScene {
     fn new(texels: f32) -> Self {
-        let species = ConiferSpecies::from_record(spruce()).unwrap();
+        Self::with_impostor(texels, |_| {})
+    }
+
+    /// [`ImpostorScene::new`] with the spruce's impostor changed by `edit`
+    /// first.
+    fn with_impostor(texels: f32, edit: impl FnOnce(&mut CrownImpostor)) -> Self {
+        let mut species = ConiferSpecies::from_record(spruce()).unwrap();
+        let mut edited = (*species.impostor.clone().expect("an impostor")).clone();
+        edit(&mut edited);
+        species.impostor = Some(std::sync::Arc::new(edited));
         let impostor = species.impostor.clone().expect("an impostor");
         let (wind_shape, crown) = (species.wind_shape, species.crown_center);
         let mut renderer = HeadlessRenderer::new(".");
@@ -848,4 +858,112 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
             sunlit / lines[1]
         );
     }
+}
+
+/// Past the shadow maps each impostor pixel takes the light the crown
+/// lets through toward the sun at its three shadow samples, as the CPU
+/// reference computes it: the picture under a sun whose one cascade ends
+/// 1 m from the camera, over the same picture with the sun's shadows off,
+/// is per pixel the mean of `CrownShade::transmittance` at the points
+/// `shadow_sample_depths` places on the pixel's ray (its coverage from
+/// `ImpostorMips::footprint`, the two nearest views blended; no ambient
+/// light, no tonemapping). Measured: 1,072 pixels within 0.0052 of the
+/// CPU's light on average, where the CPU's light spans 0.68 ± 0.15.
+#[test]
+fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference_does() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    let _turn = common::gpu_turn();
+    // The tree ~120 pixels tall, drawn as its impostor alone; the young
+    // spruce's pictures three times as dense (a mature crown's), each
+    // texel's shares kept.
+    let mut scene = ImpostorScene::with_impostor(2.0, |impostor| {
+        for texel in &mut impostor.texels {
+            let dense = (3 * u32::from(texel[0])).min(255);
+            let scale = |share: u8| (u32::from(share) * dense / u32::from(texel[0]).max(1)) as u8;
+            *texel = [dense as u8, scale(texel[1]), scale(texel[2]), scale(texel[3])];
+        }
+    });
+    let world = scene.renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
+    for camera in cameras {
+        world.entity_mut(camera).insert(Tonemapping::None);
+    }
+    let elevation = 35f32.to_radians();
+    let to_sun = Vec3::new(elevation.cos(), elevation.sin(), 0.0);
+    let sun = world
+        .spawn((
+            DirectionalLight {
+                illuminance: 9_000.0,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::from_translation(scene.crown + to_sun * 100.0).looking_at(scene.crown, Vec3::Y),
+            bevy::light::CascadeShadowConfigBuilder {
+                num_cascades: 1,
+                maximum_distance: 1.0,
+                first_cascade_far_bound: 1.0,
+                ..default()
+            }
+            .build(),
+        ))
+        .id();
+    let shaded = scene.picture("impostor_crown_shade_past_the_maps");
+    scene
+        .renderer
+        .world_mut()
+        .get_mut::<DirectionalLight>(sun)
+        .unwrap()
+        .shadow_maps_enabled = false;
+    let lit = scene.picture("impostor_crown_shade_no_shadows");
+    let shade = CrownShade::of(&scene.impostor);
+    let mips = ImpostorMips::new(&scene.impostor);
+    let (eye, origin, right) = (scene.eye, scene.origin, scene.right);
+    let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
+    let (mut error, mut expected_sum, mut expected_squares, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let lit_light = light(lit.get_pixel(x, y));
+            if lit_light < 0.05 {
+                continue; // too dark for 8 bits to hold a ratio
+            }
+            let at = |dx: f32, dy: f32| on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right);
+            let card = at(0.0, 0.0);
+            let uv = picture_uv(&scene.impostor, card);
+            let (du, dv) = (
+                picture_uv(&scene.impostor, at(1.0, 0.0)) - uv,
+                picture_uv(&scene.impostor, at(0.0, 1.0)) - uv,
+            );
+            if !((0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y)) {
+                continue;
+            }
+            let coverage = scene.blended(|view| mips.footprint(view, uv, du, dv));
+            if coverage < 0.3 {
+                continue;
+            }
+            let point = origin + right * card.x + Vec3::Y * card.y;
+            let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, card.y);
+            let depths = shadow_sample_depths(coverage, (2.0 * uv.x - 1.0) * scene.impostor.half_width, radius);
+            let toward_eye = (eye - point).normalize();
+            let expected = depths
+                .iter()
+                .map(|&depth| shade.transmittance(point + toward_eye * depth, to_sun))
+                .sum::<f32>()
+                / depths.len() as f32;
+            let drawn = light(shaded.get_pixel(x, y)) / lit_light;
+            error += f64::from((drawn - expected).abs());
+            expected_sum += f64::from(expected);
+            expected_squares += f64::from(expected * expected);
+            n += 1.0;
+        }
+    }
+    let (error, mean) = (error / n, expected_sum / n);
+    let spread = (expected_squares / n - mean * mean).max(0.0).sqrt();
+    println!("{n} pixels: |drawn − CPU| {error:.4}; the CPU's light mean {mean:.3}, spread {spread:.3}");
+    assert!(n > 300.0, "{n} pixels compared");
+    assert!(spread > 0.1, "the crown's light varies across it: spread {spread}");
+    assert!(error < 0.015, "drawn vs the CPU reference: {error}");
 }
