@@ -726,6 +726,40 @@ fn halves_light(picture: &image::RgbaImage, split: u32) -> [f32; 2] {
     sums.map(|[light, alpha]| light / alpha.max(1e-6))
 }
 
+/// Toward the sun the self-shadow tests light the crown from: 35° up from
+/// `+x`, across the view.
+fn side_sun() -> Vec3 {
+    let elevation = 35f32.to_radians();
+    Vec3::new(elevation.cos(), elevation.sin(), 0.0)
+}
+
+/// One shadow cascade reaching `reach` metres from the camera.
+fn one_cascade(reach: f32) -> bevy::light::CascadeShadowConfig {
+    bevy::light::CascadeShadowConfigBuilder {
+        num_cascades: 1,
+        maximum_distance: reach,
+        first_cascade_far_bound: reach,
+        ..default()
+    }
+    .build()
+}
+
+/// A 9,000 lux sun with shadow maps shining on `crown` from [`side_sun`],
+/// its one cascade reaching `reach` metres ([`one_cascade`]).
+fn spawn_side_sun(world: &mut World, crown: Vec3, reach: f32) -> Entity {
+    world
+        .spawn((
+            DirectionalLight {
+                illuminance: 9_000.0,
+                shadow_maps_enabled: true,
+                ..default()
+            },
+            Transform::from_translation(crown + side_sun() * 100.0).looking_at(crown, Vec3::Y),
+            one_cascade(reach),
+        ))
+        .id()
+}
+
 /// A crown shades itself: lit from the side, the shipped mature Norway
 /// spruce's far half lies in its near half's shadow. Its impostor takes
 /// the shadows it receives at three points on each texel's ray through
@@ -770,28 +804,7 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
         ..default()
     });
     // The sun 35° up from +x, across the view; one cascade over the tree.
-    let elevation = 35f32.to_radians();
-    let one_cascade = |reach: f32| {
-        bevy::light::CascadeShadowConfigBuilder {
-            num_cascades: 1,
-            maximum_distance: reach,
-            first_cascade_far_bound: reach,
-            ..default()
-        }
-        .build()
-    };
-    let sun = world
-        .spawn((
-            DirectionalLight {
-                illuminance: 9_000.0,
-                shadow_maps_enabled: true,
-                ..default()
-            },
-            Transform::from_translation(crown + Vec3::new(elevation.cos(), elevation.sin(), 0.0) * 100.0)
-                .looking_at(crown, Vec3::Y),
-            one_cascade(90.0),
-        ))
-        .id();
+    let sun = spawn_side_sun(world, crown, 90.0);
     // Two texels a pixel error: the impostor alone, the tree ~110 pixels
     // tall.
     let (camera, _) = impostor_camera(world, &target, crown, texel, 2.0);
@@ -892,25 +905,8 @@ fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference
     for camera in cameras {
         world.entity_mut(camera).insert(Tonemapping::None);
     }
-    let elevation = 35f32.to_radians();
-    let to_sun = Vec3::new(elevation.cos(), elevation.sin(), 0.0);
-    let sun = world
-        .spawn((
-            DirectionalLight {
-                illuminance: 9_000.0,
-                shadow_maps_enabled: true,
-                ..default()
-            },
-            Transform::from_translation(scene.crown + to_sun * 100.0).looking_at(scene.crown, Vec3::Y),
-            bevy::light::CascadeShadowConfigBuilder {
-                num_cascades: 1,
-                maximum_distance: 1.0,
-                first_cascade_far_bound: 1.0,
-                ..default()
-            }
-            .build(),
-        ))
-        .id();
+    let sun = spawn_side_sun(world, scene.crown, 1.0);
+    let to_sun = side_sun();
     let shaded = scene.picture("impostor_crown_shade_past_the_maps");
     scene
         .renderer
