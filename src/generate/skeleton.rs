@@ -135,6 +135,42 @@ const TWIG_VARIANTS: u32 = 2;
 /// A twig class: age, shoot length class and variant.
 type TwigKey = (u32, i32, u32);
 
+/// Cuts the wood of an axis leaving an upright trunk `trunk_radius` thick
+/// at `node` (on the trunk's axis) where it leaves the bark: `segments`
+/// (tip first, each starting where the next ends) lose the base-most ones
+/// that lie wholly inside the trunk's cylinder, and the one that crosses
+/// the bark starts there, its radius taken at that point. Inside, a
+/// branch's wood is hidden by the trunk in a picture of prisms, but as a
+/// line it would lie over the trunk's line and the blend would count both.
+fn cut_at_bark(segments: &mut Vec<WoodSegment>, node: Vec3, trunk_radius: f32) {
+    if trunk_radius.is_nan() || trunk_radius <= 0.0 {
+        return;
+    }
+    let from_axis = |point: Vec3| (point - node).with_y(0.0);
+    let outside = |point: Vec3| from_axis(point).length_squared() >= trunk_radius * trunk_radius;
+    while let Some(base) = segments.last_mut() {
+        if outside(base.start) {
+            return;
+        }
+        if !outside(base.end) {
+            segments.pop();
+            continue;
+        }
+        // |a + t·d| = r across the horizontal plane: the start is inside
+        // (c < 0) and the end outside, so the larger root lies in (0, 1].
+        let (a, d) = (from_axis(base.start), from_axis(base.end) - from_axis(base.start));
+        let (qa, qb, qc) = (
+            d.length_squared(),
+            2.0 * a.dot(d),
+            a.length_squared() - trunk_radius * trunk_radius,
+        );
+        let t = ((-qb + (qb * qb - 4.0 * qa * qc).max(0.0).sqrt()) / (2.0 * qa)).clamp(0.0, 1.0);
+        base.start = base.start.lerp(base.end, t);
+        base.start_radius += (base.end_radius - base.start_radius) * t;
+        return;
+    }
+}
+
 /// One branch (or lateral) to grow.
 #[derive(Clone, Copy, Debug)]
 struct Axis {
@@ -150,6 +186,10 @@ struct Axis {
     max_radius: f32,
     /// A dead branch below the crown: bare wood, no laterals.
     dead: bool,
+    /// The radius of the trunk it leaves (0 for a lateral): its wood
+    /// starts where it leaves the bark, so its line does not lie over the
+    /// trunk's.
+    trunk_radius: f32,
 }
 
 /// The site a run of consecutive pieces of one axis is merged into
@@ -343,6 +383,7 @@ impl Grower<'_> {
             vigor: 0.8 + 0.2 * vigor,
             max_radius: if dead { 0.3 } else { 0.6 } * trunk_radius,
             dead,
+            trunk_radius,
         });
     }
 
@@ -351,9 +392,11 @@ impl Grower<'_> {
         let direction = from_vertical(1.3 + 0.2 * self.rng.signed(), azimuth);
         let length = self.rng.range((0.03, 0.12));
         let radius = (0.25 * trunk_radius).min(0.008);
+        // It sticks out of the bark (it leaves within 15° of level).
+        let start = node + direction * (trunk_radius / direction.with_y(0.0).length());
         self.wood.push(WoodSegment {
-            start: node,
-            end: node + direction * length,
+            start,
+            end: start + direction * length,
             start_radius: radius,
             end_radius: 0.5 * radius,
         });
@@ -403,7 +446,7 @@ impl Grower<'_> {
                 pos = end;
             }
         }
-        self.emit_wood(&pieces, axis.max_radius)
+        self.emit_wood(&pieces, axis.max_radius, axis.trunk_radius)
     }
 
     /// Upward (positive) bending per metre: tips turn up, older wood sags,
@@ -451,6 +494,10 @@ impl Grower<'_> {
                 vigor: parent.vigor * 0.85,
                 max_radius: parent.max_radius * 0.7,
                 dead: false,
+                // The parent branch's radius here is known only once its
+                // laterals are grown (the pipe model); it is a few
+                // centimetres, so its laterals start on its axis.
+                trunk_radius: 0.0,
             };
             measure += if self.in_tree && lateral.order == branching.twig_order {
                 self.place_twig(lateral)
@@ -509,8 +556,10 @@ impl Grower<'_> {
 
     /// Wood of an axis from the pipe model: walking from the tip down, the
     /// cross-section measure `r^PIPE_EXPONENT` grows by each lateral's and
-    /// a little per piece. Returns the measure at the base.
-    fn emit_wood(&mut self, pieces: &[Piece], max_radius: f32) -> f32 {
+    /// a little per piece. Its wood starts where it leaves a trunk
+    /// `trunk_radius` thick ([`cut_at_bark`]). Returns the measure at the
+    /// base.
+    fn emit_wood(&mut self, pieces: &[Piece], max_radius: f32, trunk_radius: f32) -> f32 {
         let tip = self.params.branching.tip_radius.powf(PIPE_EXPONENT);
         let max = max_radius.powf(PIPE_EXPONENT);
         let radius = |measure: f32| measure.min(max).powf(PIPE_EXPONENT.recip());
@@ -529,15 +578,22 @@ impl Grower<'_> {
         }
         // Runs of `merge_pieces` pieces (from the tip) become one segment.
         let merge = self.params.branching.merge_pieces.max(1) as usize;
-        for run in segments.chunks(merge) {
-            let (tip_most, base_most) = (run[0], run[run.len() - 1]);
-            self.wood.push(WoodSegment {
-                start: base_most.start,
-                end: tip_most.end,
-                start_radius: base_most.start_radius,
-                end_radius: tip_most.end_radius,
-            });
+        let mut merged: Vec<WoodSegment> = segments
+            .chunks(merge)
+            .map(|run| {
+                let (tip_most, base_most) = (run[0], run[run.len() - 1]);
+                WoodSegment {
+                    start: base_most.start,
+                    end: tip_most.end,
+                    start_radius: base_most.start_radius,
+                    end_radius: tip_most.end_radius,
+                }
+            })
+            .collect();
+        if let Some(base) = pieces.first() {
+            cut_at_bark(&mut merged, base.start, trunk_radius);
         }
+        self.wood.extend(merged);
         measure.min(max)
     }
 
