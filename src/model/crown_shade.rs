@@ -93,13 +93,20 @@ impl CrownShade {
         })
     }
 
+    /// The widest of its radii (tree metres, 0 for an empty profile): the
+    /// upright cylinder about the axis that holds the crown. The GPU reads
+    /// it from the species' uniform, computed once at upload.
+    pub fn widest_radius(&self) -> f32 {
+        self.radii.iter().fold(0.0f32, |widest, &r| widest.max(r))
+    }
+
     /// Where the ray from `point` along the unit `toward` crosses the
     /// crown's bounds, the upright cylinder of its widest radius about the
     /// axis between its bottom and top: its distances (tree metres) in and
     /// out, the way in no nearer than `point` itself; `None` where the ray
     /// ahead of `point` never meets them.
     pub fn crossing(&self, point: Vec3, toward: Vec3) -> Option<(f32, f32)> {
-        let widest = self.radii.iter().fold(0.0f32, |a, &r| a.max(r));
+        let widest = self.widest_radius();
         let offset = Vec2::new(point.x, point.z) - self.axis;
         let across = Vec2::new(toward.x, toward.z);
         let a = across.length_squared();

@@ -102,7 +102,9 @@ struct SpeciesParams {
     // wind seconds since the previous frame's clocks (the motion vector
     // pass winds the oscillators back by it)
     wind_step: f32,
-    padding_c: u32,
+    // the widest of `crown_radii`: the cylinder the crown's shade on
+    // itself is looked for in (`CrownShade::widest_radius`)
+    crown_widest_radius: f32,
     // a sphere holding every node's sphere and the wood (tree-local xyz, w radius)
     tree_sphere: vec4<f32>,
     // the crown impostor (`model::impostor`): axis (tree-local x, z), half

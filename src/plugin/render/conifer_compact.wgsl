@@ -1759,11 +1759,7 @@ fn crown_inside(p: vec3<f32>) -> f32 {
 // top: its distances in (no nearer than `p`) and out; (0, 0) where the ray
 // never meets it (CPU reference: `model::crown_shade::CrownShade::crossing`).
 fn crown_crossing(p: vec3<f32>, toward: vec3<f32>) -> vec2<f32> {
-    var widest = 0.0;
-    for (var row = 0u; row < CROWN_PROFILE_STEPS / 4u; row++) {
-        let r = species.crown_radii[row];
-        widest = max(widest, max(max(r.x, r.y), max(r.z, r.w)));
-    }
+    let widest = species.crown_widest_radius;
     let span = species.impostor_span;
     let offset = p.xz - species.impostor_box.xy;
     let across = toward.xz;

@@ -211,8 +211,10 @@ pub struct SpeciesParams {
     /// vector pass winds the oscillators back by it (each runs at a fixed
     /// rate, [`crate::model::wind::WindClock::at`]).
     pub wind_step: f32,
-    /// Padding to 16 bytes.
-    pub padding: u32,
+    /// The widest of `crown_radii` (tree metres): the upright cylinder
+    /// the crown's shade on itself is looked for in
+    /// ([`crate::model::crown_shade::CrownShade::widest_radius`]).
+    pub crown_widest_radius: f32,
     /// A sphere holding every node's sphere and the wood (tree-local centre, radius).
     pub tree_sphere: [f32; 4],
     /// The crown impostor's axis (tree-local x, z), half width and texel
@@ -352,6 +354,7 @@ impl SpeciesParams {
     /// the impostor's box and span).
     pub fn set_crown_shade(&mut self, shade: &crate::model::crown_shade::CrownShade) {
         self.crown_radii = four_a_row(&shade.radii);
+        self.crown_widest_radius = shade.widest_radius();
         self.crown_extinction = shade.extinction;
     }
 

@@ -510,7 +510,7 @@ fn species_params(
             ErrorScope::Tree => 0,
             ErrorScope::Placement => 1,
         },
-        padding: 0,
+        crown_widest_radius: 0.0,
         tree_sphere: compact.tree_sphere.to_array(),
         impostor_box,
         impostor_span,
