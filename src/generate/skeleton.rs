@@ -392,7 +392,7 @@ impl Grower<'_> {
         let direction = from_vertical(1.3 + 0.2 * self.rng.signed(), azimuth);
         let length = self.rng.range((0.03, 0.12));
         let radius = (0.25 * trunk_radius).min(0.008);
-        // It sticks out of the bark (it leaves within 15° of level).
+        // It sticks out of the bark (it leaves 4–27° from level).
         let start = node + direction * (trunk_radius / direction.with_y(0.0).length());
         self.wood.push(WoodSegment {
             start,
@@ -495,8 +495,8 @@ impl Grower<'_> {
                 max_radius: parent.max_radius * 0.7,
                 dead: false,
                 // The parent branch's radius here is known only once its
-                // laterals are grown (the pipe model); it is a few
-                // centimetres, so its laterals start on its axis.
+                // laterals are grown (the pipe model), so its laterals
+                // start on its axis (a branch is far thinner than a trunk).
                 trunk_radius: 0.0,
             };
             measure += if self.in_tree && lateral.order == branching.twig_order {
@@ -692,5 +692,70 @@ impl Grower<'_> {
         };
         self.next_group_key += 1;
         grow_spray(&mut self.sites, self.rng, spray, start);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn segment(start: Vec3, end: Vec3) -> WoodSegment {
+        WoodSegment {
+            start,
+            end,
+            start_radius: 0.02,
+            end_radius: 0.01,
+        }
+    }
+
+    #[test]
+    fn wood_is_cut_where_it_leaves_the_bark() {
+        let node = Vec3::new(1.0, 2.0, 3.0);
+        // Tip first: a level branch from the axis in two segments, the
+        // base-most one crossing the bark 0.1 m out.
+        let mut wood = vec![
+            segment(node + Vec3::X * 0.4, node + Vec3::X),
+            segment(node, node + Vec3::X * 0.4),
+        ];
+        cut_at_bark(&mut wood, node, 0.1);
+        assert_eq!(wood.len(), 2);
+        assert!(
+            (wood[1].start - (node + Vec3::X * 0.1)).length() < 1e-6,
+            "{:?}",
+            wood[1].start
+        );
+        assert!(
+            (wood[1].start_radius - 0.0175).abs() < 1e-6,
+            "the radius a quarter along"
+        );
+        assert_eq!(
+            wood[0],
+            segment(node + Vec3::X * 0.4, node + Vec3::X),
+            "the tip is untouched"
+        );
+        // Rising at 45°: it leaves the bark 0.1 m out, √2·0.1 along.
+        let rising = Vec3::new(1.0, 1.0, 0.0).normalize();
+        let mut wood = vec![segment(node, node + rising)];
+        cut_at_bark(&mut wood, node, 0.1);
+        assert!((wood[0].start.distance(node) - 0.1 * 2f32.sqrt()).abs() < 1e-5);
+        // A base segment wholly inside the trunk goes; one wholly inside
+        // branch goes all.
+        let mut wood = vec![
+            segment(node + Vec3::Z * 0.05, node + Vec3::Z),
+            segment(node, node + Vec3::Z * 0.05),
+        ];
+        cut_at_bark(&mut wood, node, 0.1);
+        assert_eq!(wood.len(), 1);
+        assert!((wood[0].start - (node + Vec3::Z * 0.1)).length() < 1e-6);
+        let mut wood = vec![segment(node, node + Vec3::Z * 0.05)];
+        cut_at_bark(&mut wood, node, 0.1);
+        assert!(wood.is_empty());
+        // Wood that starts outside, and a trunk of no (or no valid)
+        // radius, leave it as it is.
+        for (start, radius) in [(node + Vec3::X * 0.2, 0.1), (node, 0.0), (node, f32::NAN)] {
+            let mut wood = vec![segment(start, start + Vec3::X)];
+            cut_at_bark(&mut wood, node, radius);
+            assert_eq!(wood, vec![segment(start, start + Vec3::X)]);
+        }
     }
 }
