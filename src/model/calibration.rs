@@ -1554,4 +1554,55 @@ mod tests {
             prop_assert!((table.wood_scale_at(pixel, at) - mirrored).abs() < 1e-4 * mirrored.max(1.0));
         }
     }
+
+    /// Where the wood lines add more than the wood's silhouettes: split
+    /// by how much of each pixel the needles' silhouettes cover, on the
+    /// shipped young spruce at 6.33 cm pixels (12.22 m in `conifer
+    /// eval`'s quick pictures), unscaled. The thick wood (the opacity-1
+    /// node: the trunk and branch bases) adds about what its silhouettes add,
+    /// in the open as among the needles (5 % over, which its table entry
+    /// of about 0.95 takes back); the twigs (node 1/16) add over twice
+    /// theirs among the needles, where they sit inside their shoots.
+    #[test]
+    fn thick_wood_lines_add_their_silhouettes_and_twigs_inside_needles_add_more() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees/norway-spruce.conifer");
+        let record = crate::model::read_record(&path).unwrap();
+        let table = calibrate_lines(&record, &CalibrationOptions::default()).unwrap();
+        for azimuth in [0.0, 90.0] {
+            let pixel = 0.0633;
+            let side = view(&record, azimuth, pixel).unwrap();
+            let lines = side.lines_at(table.scale_at(pixel));
+            // Per opacity node, [open, partly covered, covered] pixels:
+            // (what the lines add, what the silhouettes add).
+            let split = |node: usize| {
+                let mut log_clear = vec![0.0f32; side.needles.len()];
+                for &(k, c, n) in &side.wood_touches {
+                    if n as usize == node {
+                        log_clear[k as usize] += (-c.min(1.0)).ln_1p().max(-30.0);
+                    }
+                }
+                let mut classes = [(0.0f32, 0.0f32); 3];
+                for k in (0..side.needles.len()).filter(|&k| side.measured[k]) {
+                    let class = match side.needles[k] {
+                        n if n < 0.1 => 0,
+                        n if n < 0.9 => 1,
+                        _ => 2,
+                    };
+                    classes[class].0 += (1.0 - lines[k]) * (1.0 - side.wood_prisms[k]) * (1.0 - log_clear[k].exp());
+                    classes[class].1 += side.wood_bare[node][k];
+                }
+                classes
+            };
+            let (thick, twigs) = (split(WOOD_OPACITY_NODES - 1), split(1));
+            println!(
+                "{azimuth}°: opacity 1 (added, silhouettes) open / partly / covered {thick:.1?}; 1/16 {twigs:.1?}"
+            );
+            for (added, silhouettes) in &thick[..2] {
+                assert!(*silhouettes > 2.0, "{thick:?}");
+                assert!((added / silhouettes - 1.0).abs() < 0.1, "{thick:?}");
+            }
+            assert!(twigs[1].0 > 2.0 * twigs[1].1, "{twigs:?}");
+            assert!(thick[2].0 + twigs[2].0 < 0.5, "{thick:?} {twigs:?}");
+        }
+    }
 }
