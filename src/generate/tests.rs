@@ -556,7 +556,7 @@ fn branch_wood_inside_the_trunk(wood: &[WoodSegment]) -> (f32, f32) {
 fn branches_start_at_the_bark_not_on_the_trunks_axis() {
     // A branch's wood inside the trunk is hidden in a picture of prisms,
     // but as a line it lies over the trunk's line and the blend counts
-    // both: the wood calibration then thins every thick line to pay.
+    // both where the branch leaves it.
     // Started on the trunk's axis, 0.7–2.8 m of the young trees' 27–227 m
     // of branch wood lay inside it and 20–95 m of the mature trees'.
     for species in Species::ALL {
