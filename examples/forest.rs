@@ -28,7 +28,7 @@ use bevy::anti_alias::taa::TemporalAntiAliasing;
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::{Hdr, RenderTarget};
 use bevy::input::mouse::AccumulatedMouseMotion;
-use bevy::light::CascadeShadowConfigBuilder;
+use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
@@ -88,6 +88,12 @@ struct Args {
     /// No shadow maps (faster on a software renderer).
     #[arg(long)]
     no_shadows: bool,
+    /// How far the sun's shadow maps reach, metres: three cascades to 80 m
+    /// (20, 40, 80; to this distance when it is shorter), and past 80 m a
+    /// fourth to this distance, where every tree but the nearest casts its
+    /// crown impostor.
+    #[arg(long, default_value_t = 600.0, value_parser = parse_shadow_distance)]
+    shadow_distance: f32,
     /// Start with the debug overlay on.
     #[arg(long)]
     overlay: bool,
@@ -140,6 +146,11 @@ struct Args {
     /// farthest first, are drawn as their impostors or level-2 lines.
     #[arg(long)]
     max_expanded: Option<u32>,
+    /// Haze: the distance in metres at which it leaves a dark object 5 % of
+    /// its contrast against the horizon (Koschmieder's visibility; light
+    /// haze is 5–10 km, fog under 1 km); 0 turns it off.
+    #[arg(long, default_value_t = 8000.0, value_parser = parse_visibility)]
+    visibility: f32,
 }
 
 /// How lines are lit (`--line-lighting`).
@@ -189,6 +200,60 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Vec3::new(x, y, z)),
         _ => Err(format!("{s}: expected x,y,z")),
+    }
+}
+
+fn parse_shadow_distance(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v >= 1.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("{s}: expected a distance in metres, 1 or more")),
+    }
+}
+
+/// The sun's cascades: as Bevy's builder splits them up to 80 m (20, 40,
+/// 80 for three), and one more from 80 m to `distance` past that, so
+/// crowns far away take their neighbours' shadows (cast by their
+/// impostors, a few texels a crown) instead of only their own shade.
+fn sun_cascades(distance: f32) -> CascadeShadowConfig {
+    let near = CascadeShadowConfigBuilder {
+        num_cascades: 3,
+        maximum_distance: distance.min(80.0),
+        first_cascade_far_bound: 20.0f32.min(distance / 4.0),
+        ..default()
+    };
+    let mut config: CascadeShadowConfig = near.build();
+    if distance > 80.0 {
+        config.bounds.push(distance);
+    }
+    config
+}
+
+fn parse_visibility(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if v >= 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("{s}: expected a distance in metres, 0 or more")),
+    }
+}
+
+/// Aerial perspective: light from `d` metres away keeps `T = exp(−β·d)` of
+/// itself and gains `1 − T` of the horizon's colour, channel by channel, so
+/// a far stand fades toward the sky behind it and never past it (neither
+/// darker nor bluer than the sky). `β` is Koschmieder's `−ln 0.05 / V` in
+/// green, spread over red and blue by haze's `λ^−1.3` (aerosols, not air:
+/// the sky's `λ^−4` would take the red out of a stand in a few hundred
+/// metres). Both of Bevy's atmospheric coefficients are this `β`, which is
+/// what makes the light lost and the haze gained one transmittance.
+fn aerial_perspective(visibility: f32, horizon: Color) -> DistanceFog {
+    const WAVELENGTH_NM: [f32; 3] = [650.0, 550.0, 450.0];
+    let green_beta = -(0.05f32.ln()) / visibility;
+    let beta = Vec3::from_array(WAVELENGTH_NM.map(|nm| green_beta * (nm / 550.0).powf(-1.3)));
+    DistanceFog {
+        color: horizon,
+        falloff: FogFalloff::Atmospheric {
+            extinction: beta,
+            inscattering: beta,
+        },
+        ..default()
     }
 }
 
@@ -598,16 +663,12 @@ fn setup(
             ..default()
         },
         Transform::from_xyz(-0.5, 1.0, 0.35).looking_at(Vec3::ZERO, Vec3::Y),
-        // Shadows to 80 m: every needle line casts its coverage, and far
-        // trees (impostors for the camera) keep their lines in the
-        // cascades, so a mature forest's shadows cost most of its frame.
-        CascadeShadowConfigBuilder {
-            num_cascades: 3,
-            maximum_distance: 80.0,
-            first_cascade_far_bound: 20.0,
-            ..default()
-        }
-        .build(),
+        // Within 80 m every needle line casts its coverage, and trees the
+        // camera sees as impostors keep their lines in the cascades, so a
+        // mature forest's shadows cost most of its frame; the fourth
+        // cascade's budget goes to the trees nearest the camera too, and
+        // the rest cast their impostors.
+        sun_cascades(args.shadow_distance),
     ));
     commands.insert_resource(GlobalAmbientLight {
         color: Color::srgb(0.75, 0.85, 1.0),
@@ -618,9 +679,8 @@ fn setup(
     // With `Hdr` Bevy tone-maps the clear colour with the picture
     // (TonyMcMapface): this linear colour comes out as the 8-bit texture's
     // untouched sRGB haze, found by inverting Bevy's TonyMcMapface LUT on
-    // the CPU (to within 0.3 of 255 per channel). The fog keeps the haze:
-    // mixed with dark crowns before the tone mapping, the brighter blue
-    // would come out saturated.
+    // the CPU (to within 0.3 of 255 per channel). The haze's colour is the
+    // sky's, so a far stand fades into the sky behind it.
     let sky = if args.ldr {
         haze
     } else {
@@ -638,13 +698,10 @@ fn setup(
             ..default()
         }),
         Transform::from_translation(eye).looking_at(look_at, Vec3::Y),
-        DistanceFog {
-            color: haze,
-            // Aerial perspective: grey-blue haze, half gone at ~1 km.
-            falloff: FogFalloff::from_visibility_colors(2500.0, Color::srgb(0.5, 0.53, 0.56), haze),
-            ..default()
-        },
     ));
+    if args.visibility > 0.0 {
+        camera.insert(aerial_perspective(args.visibility, sky));
+    }
     // The stats panel draws on this camera, also when it renders to an image.
     camera.insert(IsDefaultUiCamera);
     if !args.ldr {
