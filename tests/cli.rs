@@ -541,6 +541,57 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     assert_eq!(std::fs::read(&junk).unwrap(), b"not a record at all");
 }
 
+/// `--calibration-elevation`: `upgrade` calibrates a current record's
+/// lines again on request (level views give back the bake's table exactly,
+/// views from ±11° another), and an elevation outside 0–90° is refused by
+/// `bake` and `upgrade` alike with nothing written.
+#[test]
+fn lines_calibrate_from_above_and_below_on_request() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = baked(dir.path(), "norway-spruce", "4000");
+    let path = record.to_str().unwrap();
+    let scales = |path: &str| json(&conifer(&["inspect", path, "--json"]))["line_calibration"]["scales"].clone();
+    let level = scales(path);
+    assert!(level.is_array());
+    let output = conifer(&["upgrade", path, "--calibration-elevation", "0"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert_eq!(scales(path), level);
+    let output = conifer(&["upgrade", path, "--calibration-elevation", "11"]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let tilted = scales(path);
+    assert!(tilted.is_array() && tilted != level, "{tilted} against {level}");
+
+    let bytes = std::fs::read(&record).unwrap();
+    for bad in ["90", "-1", "NaN", "inf"] {
+        assert_fails_naming(
+            &conifer(&["upgrade", path, &format!("--calibration-elevation={bad}")]),
+            "--calibration-elevation",
+        );
+        let out = dir.path().join("refused.conifer");
+        assert_fails_naming(
+            &conifer(&[
+                "bake",
+                "--preset",
+                "norway-spruce",
+                "--age",
+                "young",
+                "--needles",
+                "1000",
+                &format!("--calibration-elevation={bad}"),
+                "-o",
+                out.to_str().unwrap(),
+            ]),
+            "--calibration-elevation",
+        );
+        assert!(!out.exists());
+    }
+    assert_fails_naming(
+        &conifer(&["upgrade", path, "--calibration-elevation", "5", "--no-line-calibration"]),
+        "--calibration-elevation",
+    );
+    assert_eq!(std::fs::read(&record).unwrap(), bytes);
+}
+
 #[test]
 fn mature_presets_are_the_default_and_bad_ages_and_counts_are_refused() {
     let dir = tempfile::tempdir().unwrap();

@@ -4,6 +4,7 @@ use super::{BakeArgs, CutArgs, ExportArgs, InspectArgs, PreviewArgs, ViewArgs};
 use crate::export::write_cut_glb;
 use crate::generate::{GenerateOptions, Species, generate, generate_prototypes};
 use crate::import::{ImportOptions, ImportReport, import_gltf_prototypes};
+use crate::model::calibration::CalibrationOptions;
 use crate::model::compact::{CompactSpecies, threshold_code};
 use crate::model::file::FORMAT_VERSION;
 use crate::model::merge::PartnerSearch;
@@ -161,13 +162,20 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     if !(args.no_impostor || impostor_valid) {
         bail!("--impostor-texel takes a positive number of metres and --impostor-views a positive count");
     }
+    let elevation = args.calibration_elevation;
+    if !(0.0..90.0).contains(&elevation) {
+        bail!("--calibration-elevation takes degrees from 0 to under 90");
+    }
     let mut options = BakeOptions {
         max_sides: args.max_sides,
         impostor: (!args.no_impostor).then_some(crate::model::impostor::ImpostorOptions {
             views: args.impostor_views,
             texel: args.impostor_texel,
         }),
-        line_calibration: (!args.no_line_calibration).then(Default::default),
+        line_calibration: (!args.no_line_calibration).then(|| CalibrationOptions {
+            elevation_degrees: elevation,
+            ..Default::default()
+        }),
         ..Default::default()
     };
     options.merge.weights = MergeWeights {
@@ -296,6 +304,15 @@ fn load(path: &Path) -> anyhow::Result<LodRecord> {
 
 /// `conifer upgrade`: rewrites records in the current format, in place.
 pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
+    let elevation = args.calibration_elevation;
+    if let Some(e) = elevation
+        && !(0.0..90.0).contains(&e)
+    {
+        bail!("--calibration-elevation takes degrees from 0 to under 90");
+    }
+    if elevation.is_some() && args.no_line_calibration {
+        bail!("--calibration-elevation calibrates the lines again; --no-line-calibration leaves them");
+    }
     for path in &args.files {
         let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
         let version = bytes
@@ -303,7 +320,7 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
             .map(|v| u32::from_le_bytes(v.try_into().expect("4 bytes")));
         let mut record: PrototypeRecord = crate::model::decode_prototype_record(&bytes)
             .with_context(|| format!("{}: cannot load record", path.display()))?;
-        if version == Some(FORMAT_VERSION) {
+        if version == Some(FORMAT_VERSION) && elevation.is_none() {
             eprintln!("{}: already format {FORMAT_VERSION}", path.display());
             continue;
         }
@@ -313,8 +330,14 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         if (record.impostor.is_none() || measured_without_caps) && !args.no_impostor {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
-        if (record.line_calibration.is_none() || measured_without_caps) && !args.no_line_calibration {
-            record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &Default::default())
+        if (record.line_calibration.is_none() || measured_without_caps || elevation.is_some())
+            && !args.no_line_calibration
+        {
+            let options = CalibrationOptions {
+                elevation_degrees: elevation.unwrap_or(0.0),
+                ..Default::default()
+            };
+            record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &options)
                 .with_context(|| format!("{}: cannot calibrate its lines", path.display()))?;
         }
         let written = write_prototype_record(&record, path)

@@ -143,6 +143,12 @@ pub struct BakeArgs {
     /// its area-preserving opacity; see `model::calibration`).
     #[arg(long)]
     pub no_line_calibration: bool,
+    /// Also calibrate the lines from this many degrees above and below the horizontal
+    /// (`CalibrationOptions::elevation_degrees`; 0, the default, calibrates level views
+    /// only): for trees mostly seen from below or above, whose tiers a level view sees
+    /// edge on.
+    #[arg(long, default_value_t = 0.0)]
+    pub calibration_elevation: f32,
     /// Print a JSON summary of the bake on stdout.
     #[arg(long)]
     pub json: bool,
@@ -176,6 +182,11 @@ pub struct UpgradeArgs {
     /// caps in what the lines must cover).
     #[arg(long)]
     pub no_line_calibration: bool,
+    /// Calibrate the lines again, whatever the record's format, from level views and from
+    /// this many degrees above and below them (`conifer bake --calibration-elevation`; 0
+    /// calibrates level views only, as a bake does by default).
+    #[arg(long)]
+    pub calibration_elevation: Option<f32>,
 }
 
 /// How a view is described on the command line.
