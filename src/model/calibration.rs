@@ -13,7 +13,9 @@
 //! where every needle is a line to where the crown is
 //! [`MIN_CALIBRATION_ROWS`] pixels tall, the tree is seen from
 //! [`CalibrationOptions::views`] sides (orthographic, about the vertical
-//! axis, over half a turn): the needles' exact silhouettes, sampled once
+//! axis, over half a turn; level, and with
+//! [`CalibrationOptions::elevation_degrees`] from above and below too):
+//! the needles' exact silhouettes, sampled once
 //! a view on a grid of binary samples ([`SideNeedles`]) and counted into
 //! each size's pixels, give what they cover; the cut at that pixel size,
 //! each line composed by its strip's area in each pixel
@@ -370,8 +372,9 @@ pub fn calibrate_lines(record: &LodRecord, options: &CalibrationOptions) -> Opti
 /// bits): a finer spacing gives `None`.
 const MAX_SIDE_SAMPLES: u64 = 1 << 32;
 
-/// A tree's needles seen from one side, orthographic, about the vertical
-/// axis: their exact silhouettes on one grid of binary samples
+/// A tree's needles seen from one side, orthographic, from an azimuth
+/// about the vertical axis and an elevation above or below the
+/// horizontal (level by default): their exact silhouettes on one grid of binary samples
 /// ([`SampleBits`]) over the needles' bounds, which every pixel size of a
 /// calibration counts into its own pixels ([`SideComposition::new`]).
 #[derive(Clone, Debug)]
