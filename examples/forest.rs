@@ -31,6 +31,7 @@ use bevy::input::mouse::AccumulatedMouseMotion;
 use bevy::light::{CascadeShadowConfig, CascadeShadowConfigBuilder};
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
+use bevy_conifer_lod::plugin::aerial_perspective;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
 use bevy_conifer_lod::scatter::{HeightMap, Scatter};
@@ -232,28 +233,6 @@ fn parse_visibility(s: &str) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
         Ok(v) if v >= 0.0 && v.is_finite() => Ok(v),
         _ => Err(format!("{s}: expected a distance in metres, 0 or more")),
-    }
-}
-
-/// Aerial perspective: light from `d` metres away keeps `T = exp(−β·d)` of
-/// itself and gains `1 − T` of the horizon's colour, channel by channel, so
-/// a far stand fades toward the sky behind it and never past it (neither
-/// darker nor bluer than the sky). `β` is Koschmieder's `−ln 0.05 / V` in
-/// green, spread over red and blue by haze's `λ^−1.3` (aerosols, not air:
-/// the sky's `λ^−4` would take the red out of a stand in a few hundred
-/// metres). Both of Bevy's atmospheric coefficients are this `β`, which is
-/// what makes the light lost and the haze gained one transmittance.
-fn aerial_perspective(visibility: f32, horizon: Color) -> DistanceFog {
-    const WAVELENGTH_NM: [f32; 3] = [650.0, 550.0, 450.0];
-    let green_beta = -(0.05f32.ln()) / visibility;
-    let beta = Vec3::from_array(WAVELENGTH_NM.map(|nm| green_beta * (nm / 550.0).powf(-1.3)));
-    DistanceFog {
-        color: horizon,
-        falloff: FogFalloff::Atmospheric {
-            extinction: beta,
-            inscattering: beta,
-        },
-        ..default()
     }
 }
 
@@ -699,8 +678,10 @@ fn setup(
         }),
         Transform::from_translation(eye).looking_at(look_at, Vec3::Y),
     ));
-    if args.visibility > 0.0 {
-        camera.insert(aerial_perspective(args.visibility, sky));
+    // Aerial perspective toward the sky's own colour (`aerial_perspective`'s
+    // docs: Bevy's `from_visibility_colors` turned the far rows navy).
+    if let Some(fog) = aerial_perspective(args.visibility, sky) {
+        camera.insert(fog);
     }
     // The stats panel draws on this camera, also when it renders to an image.
     camera.insert(IsDefaultUiCamera);

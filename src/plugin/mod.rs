@@ -45,6 +45,7 @@
 
 mod asset;
 mod debug;
+mod haze;
 pub mod headless;
 mod preset;
 mod render;
@@ -53,6 +54,7 @@ mod wind;
 
 pub use asset::{ConiferLoadError, ConiferRecordLoader, ConiferSpecies, triangle_mesh, wood_mesh};
 pub use debug::{ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodStats, conifer_lod_keys};
+pub use haze::{aerial_perspective, haze_extinction};
 pub use preset::{ConiferPresets, PresetCache, PresetLoadError, cache_file_name, load_preset};
 pub use render::gpu::{
     FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE,
