@@ -29,7 +29,7 @@ const HAZE_EXPONENT: f32 = 1.3;
 
 /// The haze's extinction per metre in red, green and blue, for a
 /// visibility of `visibility` metres (Koschmieder: `−ln 0.05 / V` in
-/// green, the other channels by [`HAZE_EXPONENT`]); `None` for a
+/// green, the other channels by haze's `λ^−1.3`); `None` for a
 /// visibility that is not positive and finite.
 pub fn haze_extinction(visibility: f32) -> Option<Vec3> {
     if !(visibility.is_finite() && visibility > 0.0) {
