@@ -204,11 +204,16 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
-fn parse_shadow_distance(s: &str) -> Result<f32, String> {
+/// A distance in metres, finite and at least `least`.
+fn parse_metres(s: &str, least: f32) -> Result<f32, String> {
     match s.trim().parse::<f32>() {
-        Ok(v) if v >= 1.0 && v.is_finite() => Ok(v),
-        _ => Err(format!("{s}: expected a distance in metres, 1 or more")),
+        Ok(v) if v >= least && v.is_finite() => Ok(v),
+        _ => Err(format!("{s}: expected a distance in metres, {least} or more")),
     }
+}
+
+fn parse_shadow_distance(s: &str) -> Result<f32, String> {
+    parse_metres(s, 1.0)
 }
 
 /// The sun's cascades: as Bevy's builder splits them up to 80 m (20, 40,
@@ -230,10 +235,7 @@ fn sun_cascades(distance: f32) -> CascadeShadowConfig {
 }
 
 fn parse_visibility(s: &str) -> Result<f32, String> {
-    match s.trim().parse::<f32>() {
-        Ok(v) if v >= 0.0 && v.is_finite() => Ok(v),
-        _ => Err(format!("{s}: expected a distance in metres, 0 or more")),
-    }
+    parse_metres(s, 0.0)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {

@@ -162,20 +162,14 @@ pub(super) fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     if !(args.no_impostor || impostor_valid) {
         bail!("--impostor-texel takes a positive number of metres and --impostor-views a positive count");
     }
-    let elevation = args.calibration_elevation;
-    if !(0.0..90.0).contains(&elevation) {
-        bail!("--calibration-elevation takes degrees from 0 to under 90");
-    }
+    let calibration = calibration_options(args.calibration_elevation)?;
     let mut options = BakeOptions {
         max_sides: args.max_sides,
         impostor: (!args.no_impostor).then_some(crate::model::impostor::ImpostorOptions {
             views: args.impostor_views,
             texel: args.impostor_texel,
         }),
-        line_calibration: (!args.no_line_calibration).then(|| CalibrationOptions {
-            elevation_degrees: elevation,
-            ..Default::default()
-        }),
+        line_calibration: (!args.no_line_calibration).then_some(calibration),
         ..Default::default()
     };
     options.merge.weights = MergeWeights {
@@ -298,6 +292,18 @@ fn print_import(path: &Path, report: &ImportReport) {
     }
 }
 
+/// The line calibration's options for `--calibration-elevation` (degrees,
+/// from 0 to under 90; 0 is level views only, the default).
+fn calibration_options(elevation_degrees: f32) -> anyhow::Result<CalibrationOptions> {
+    if !(0.0..90.0).contains(&elevation_degrees) {
+        bail!("--calibration-elevation takes degrees from 0 to under 90");
+    }
+    Ok(CalibrationOptions {
+        elevation_degrees,
+        ..Default::default()
+    })
+}
+
 fn load(path: &Path) -> anyhow::Result<LodRecord> {
     read_record(path).with_context(|| format!("{}: cannot load record", path.display()))
 }
@@ -305,11 +311,7 @@ fn load(path: &Path) -> anyhow::Result<LodRecord> {
 /// `conifer upgrade`: rewrites records in the current format, in place.
 pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
     let elevation = args.calibration_elevation;
-    if let Some(e) = elevation
-        && !(0.0..90.0).contains(&e)
-    {
-        bail!("--calibration-elevation takes degrees from 0 to under 90");
-    }
+    let calibration = calibration_options(elevation.unwrap_or(0.0))?;
     if elevation.is_some() && args.no_line_calibration {
         bail!("--calibration-elevation calibrates the lines again; --no-line-calibration leaves them");
     }
@@ -333,11 +335,7 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         if (record.line_calibration.is_none() || measured_without_caps || elevation.is_some())
             && !args.no_line_calibration
         {
-            let options = CalibrationOptions {
-                elevation_degrees: elevation.unwrap_or(0.0),
-                ..Default::default()
-            };
-            record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &options)
+            record.line_calibration = crate::model::bake::calibrate_record_lines(&record, &calibration)
                 .with_context(|| format!("{}: cannot calibrate its lines", path.display()))?;
         }
         let written = write_prototype_record(&record, path)

@@ -1247,29 +1247,20 @@ mod tests {
         }
     }
 
-    /// `record` seen from `azimuth_degrees` at pixels of `pixel` metres,
-    /// its needles sampled as a calibration whose first size that is
-    /// would sample them (up to 2²⁶ samples), on `max_pixels` pixels at most.
-    fn side_at(record: &LodRecord, azimuth_degrees: f32, pixel: f32, max_pixels: u64) -> Option<SideComposition> {
-        let options = CalibrationOptions {
-            max_samples: 1 << 26,
-            max_pixels,
-            ..CalibrationOptions::default()
-        };
-        let spacing = sample_spacing(record, &options, pixel)?;
-        let needles = SideNeedles::new(record, azimuth_degrees.to_radians(), spacing)?;
-        SideComposition::new(record, &needles, pixel, &options)
-    }
-
-    /// [`side_at`] seen from `elevation_degrees` above the horizontal.
-    fn tilted_view(
+    /// `record` seen from `azimuth_degrees` and `elevation_degrees` above
+    /// the horizontal at pixels of `pixel` metres, its needles sampled as
+    /// a calibration whose first size that is would sample them (up to
+    /// 2²⁶ samples), on `max_pixels` pixels at most.
+    fn side_at(
         record: &LodRecord,
         azimuth_degrees: f32,
         elevation_degrees: f32,
         pixel: f32,
+        max_pixels: u64,
     ) -> Option<SideComposition> {
         let options = CalibrationOptions {
             max_samples: 1 << 26,
+            max_pixels,
             ..CalibrationOptions::default()
         };
         let spacing = sample_spacing(record, &options, pixel)?;
@@ -1280,6 +1271,16 @@ mod tests {
             spacing,
         )?;
         SideComposition::new(record, &needles, pixel, &options)
+    }
+
+    /// [`side_at`] on the default pixels.
+    fn tilted_view(
+        record: &LodRecord,
+        azimuth_degrees: f32,
+        elevation_degrees: f32,
+        pixel: f32,
+    ) -> Option<SideComposition> {
+        side_at(record, azimuth_degrees, elevation_degrees, pixel, default_max_pixels())
     }
 
     /// A tilted view turns the picture with the viewer: three layers of
@@ -1362,7 +1363,7 @@ mod tests {
     }
 
     fn view(record: &LodRecord, azimuth_degrees: f32, pixel: f32) -> Option<SideComposition> {
-        side_at(record, azimuth_degrees, pixel, default_max_pixels())
+        tilted_view(record, azimuth_degrees, 0.0, pixel)
     }
 
     /// What the end caps of `record`'s needles (seen from `azimuth_degrees`,
@@ -1556,20 +1557,20 @@ mod tests {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees/norway-spruce.conifer");
         let record = crate::model::read_record(&path).unwrap();
         let (pixel, _) = calibration_pixels(&record, &CalibrationOptions::default()).unwrap();
-        let whole = side_at(&record, 30.0, pixel, u64::MAX).unwrap();
+        let whole = side_at(&record, 30.0, 0.0, pixel, u64::MAX).unwrap();
         let pixels = whole.needles.len();
         assert!(pixels > 1 << 18, "{pixels}");
         assert!(whole.measured.iter().all(|&m| m));
         let exact = whole.matching_scale();
         for (most, within) in [(1u64 << 16, 0.01), (1 << 12, 0.03)] {
-            let subset = side_at(&record, 30.0, pixel, most).unwrap();
+            let subset = side_at(&record, 30.0, 0.0, pixel, most).unwrap();
             let measured = subset.measured.iter().filter(|&&m| m).count() as f64;
             assert!((measured / most as f64 - 1.0).abs() < 0.1, "{measured} of {most}");
             let scale = subset.matching_scale();
             println!("{most} pixels: scale {scale:.4} against {exact:.4} from {pixels}");
             assert!((scale / exact - 1.0).abs() < within, "{scale} vs {exact}");
         }
-        let mirrored = side_at(&record, 210.0, pixel, u64::MAX).unwrap().matching_scale();
+        let mirrored = side_at(&record, 210.0, 0.0, pixel, u64::MAX).unwrap().matching_scale();
         assert!((mirrored / exact - 1.0).abs() < 0.005, "{mirrored} vs {exact}");
     }
 
