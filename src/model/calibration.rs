@@ -49,7 +49,7 @@
 //! ([`CalibrationOptions::pixel_error`], the plugin's default 1): at
 //! another the cut at a pixel size is coarser or finer than calibrated.
 
-use super::look::{PieceEnds, SampleBits};
+use super::look::{PieceEnds, SampleBits, view_axes};
 use super::needle::WoodSegment;
 use super::prism::WOOD_LINE_FADE;
 use super::raster::StripInPixels;
@@ -470,19 +470,6 @@ impl SideNeedles {
     }
 }
 
-/// Right, up and toward the viewer of a side view from `azimuth` about +Y
-/// (0 looks along −Z) and `elevation` above the horizontal.
-fn view_axes(azimuth: f32, elevation: f32) -> [Vec3; 3] {
-    let right = Vec3::new(azimuth.cos(), 0.0, azimuth.sin());
-    let level_toward = right.cross(Vec3::Y);
-    let (sin, cos) = elevation.sin_cos();
-    [
-        right,
-        Vec3::Y * cos - level_toward * sin,
-        level_toward * cos + Vec3::Y * sin,
-    ]
-}
-
 /// A tree seen from one side at one pixel size: what its needles cover in
 /// each pixel, and what the lines of its cut at that size cover composed
 /// as the plugin blends them, at any scale of their opacity, over the
@@ -789,6 +776,24 @@ impl SideComposition {
     }
 
     fn wood_added_over(&self, lines: &[f32], wood_scales: [f32; WOOD_OPACITY_NODES], node: Option<usize>) -> f32 {
+        self.wood_added_pixels(lines, wood_scales, node)
+            .iter()
+            .zip(&self.measured)
+            .filter(|(_, m)| **m)
+            .map(|(added, _)| added)
+            .sum()
+    }
+
+    /// Per pixel, what the wood lines nearest opacity node `node` (all of
+    /// them with `None`), scaled by `wood_scales`, add over the needle
+    /// lines' coverage `lines` and the wood prisms: `(1 − L)·(1 − P)·(1 −
+    /// Π(1 − min(k·c, 1)))`, the term [`Self::wood_added`] sums.
+    fn wood_added_pixels(
+        &self,
+        lines: &[f32],
+        wood_scales: [f32; WOOD_OPACITY_NODES],
+        node: Option<usize>,
+    ) -> Vec<f32> {
         let mut log_clear = vec![0.0f32; self.needles.len()];
         for &(pixel, c, line_node) in &self.wood_touches {
             if node.is_some_and(|n| n != line_node as usize) {
@@ -798,9 +803,8 @@ impl SideComposition {
             log_clear[pixel as usize] += (-(scale * c).min(1.0)).ln_1p().max(-30.0);
         }
         (0..self.needles.len())
-            .filter(|&k| self.measured[k])
             .map(|k| (1.0 - lines[k]) * (1.0 - self.wood_prisms[k]) * (1.0 - log_clear[k].exp()))
-            .sum()
+            .collect()
     }
 
     /// For each opacity node, the scale of the wood lines nearest it at
@@ -1369,9 +1373,7 @@ mod tests {
     /// What the end caps of `record`'s needles (seen from `azimuth_degrees`,
     /// at their slant) add to their strips, as a share of the strips' area.
     fn cap_share(record: &LodRecord, azimuth_degrees: f32) -> f32 {
-        let azimuth = azimuth_degrees.to_radians();
-        let right = Vec3::new(azimuth.cos(), 0.0, azimuth.sin());
-        let toward = right.cross(Vec3::Y);
+        let [_, _, toward] = view_axes(azimuth_degrees.to_radians(), 0.0);
         let (mut strips, mut caps) = (0.0, 0.0);
         for n in &record.needles {
             let axis = n.tip - n.base;
@@ -1730,12 +1732,7 @@ mod tests {
             // Per opacity node, [open, partly covered, covered] pixels:
             // (what the lines add, what the silhouettes add).
             let split = |node: usize| {
-                let mut log_clear = vec![0.0f32; side.needles.len()];
-                for &(k, c, n) in &side.wood_touches {
-                    if n as usize == node {
-                        log_clear[k as usize] += (-c.min(1.0)).ln_1p().max(-30.0);
-                    }
-                }
+                let added = side.wood_added_pixels(&lines, [1.0; WOOD_OPACITY_NODES], Some(node));
                 let mut classes = [(0.0f32, 0.0f32); 3];
                 for k in (0..side.needles.len()).filter(|&k| side.measured[k]) {
                     let class = match side.needles[k] {
@@ -1743,7 +1740,7 @@ mod tests {
                         n if n < 0.9 => 1,
                         _ => 2,
                     };
-                    classes[class].0 += (1.0 - lines[k]) * (1.0 - side.wood_prisms[k]) * (1.0 - log_clear[k].exp());
+                    classes[class].0 += added[k];
                     classes[class].1 += side.wood_bare[node][k];
                 }
                 classes

@@ -789,6 +789,20 @@ impl RowSpan {
 /// Largest side of the sample grid: pictures above it take fewer samples.
 const MAX_SAMPLE_SIDE: u64 = 40_000;
 
+/// Right, up and toward the viewer of a side view from `azimuth` about +Y
+/// (0 looks along −Z) and `elevation` above the horizontal, in the tree's
+/// frame; level (`elevation` 0), up is +Y exactly.
+pub(crate) fn view_axes(azimuth: f32, elevation: f32) -> [Vec3; 3] {
+    let right = Vec3::new(azimuth.cos(), 0.0, azimuth.sin());
+    let level_toward = right.cross(Vec3::Y);
+    let (sin, cos) = elevation.sin_cos();
+    [
+        right,
+        Vec3::Y * cos - level_toward * sin,
+        level_toward * cos + Vec3::Y * sin,
+    ]
+}
+
 /// The tree's coverage seen from the side, orthographic, on the CPU: every
 /// needle its capped cylinder's silhouette (a strip `2r` wide and its end
 /// caps at the needle's slant, [`PieceEnds::Capped`]) and every wood
@@ -801,8 +815,7 @@ pub fn side_coverage(needles: &[Needle], wood: &[WoodSegment], view: SideView) -
     if !(view.pixel.is_finite() && view.pixel > 0.0) {
         return None;
     }
-    let right = Vec3::new(view.azimuth.cos(), 0.0, view.azimuth.sin());
-    let toward = right.cross(Vec3::Y);
+    let [right, _, toward] = view_axes(view.azimuth, 0.0);
     let project = |p: Vec3| Vec2::new(p.dot(right), p.y);
     let valid: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
     let thinnest = valid.iter().map(|n| n.radius).fold(f32::INFINITY, f32::min);
