@@ -152,6 +152,10 @@ struct Args {
     /// haze is 5–10 km, fog under 1 km); 0 turns it off.
     #[arg(long, default_value_t = 8000.0, value_parser = parse_visibility)]
     visibility: f32,
+    /// Light the crowns' insides by the full ambient light, as Bevy gives
+    /// it (`ConiferLodSettings::sky_occlusion` off; on by default here).
+    #[arg(long)]
+    no_sky_occlusion: bool,
 }
 
 /// How lines are lit (`--line-lighting`).
@@ -545,6 +549,7 @@ fn setup(
 ) {
     settings.pixel_error = args.pixel_error;
     settings.enabled = !args.lod_off;
+    settings.sky_occlusion = !args.no_sky_occlusion;
     settings.line_lighting = match args.line_lighting {
         Lighting::Bundle => LineLighting::Bundle,
         Lighting::Cylinder => LineLighting::Cylinder,

@@ -963,3 +963,79 @@ fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference
     assert!(spread > 0.1, "the crown's light varies across it: spread {spread}");
     assert!(error < 0.015, "drawn vs the CPU reference: {error}");
 }
+
+/// With `ConiferLodSettings::sky_occlusion` on, each impostor pixel takes
+/// the share of the ambient light the crown lets reach the point it is lit
+/// at, as the CPU reference computes it: the picture under ambient light
+/// alone with the setting on, over the same picture with it off, is per
+/// pixel `SkyVisibility::at` the middle of the three points
+/// `shadow_sample_depths` places on the pixel's ray (no sun, no
+/// tonemapping).
+#[test]
+fn sky_occlusion_dims_the_ambient_light_as_the_cpu_reference_does() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    let _turn = common::gpu_turn();
+    let mut scene = ImpostorScene::new(2.0);
+    let world = scene.renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 4_000.0,
+        ..default()
+    });
+    let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
+    for camera in cameras {
+        world.entity_mut(camera).insert(Tonemapping::None);
+    }
+    let open = scene.picture("impostor_sky_open");
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .sky_occlusion = true;
+    let occluded = scene.picture("impostor_sky_occluded");
+    let shade = CrownShade::of(&scene.impostor);
+    let sky = shade.sky_visibility_table();
+    let mips = ImpostorMips::new(&scene.impostor);
+    let (eye, origin, right) = (scene.eye, scene.origin, scene.right);
+    let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
+    let (mut error, mut expected_sum, mut expected_squares, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for y in 0..SIZE {
+        for x in 0..SIZE {
+            let open_light = light(open.get_pixel(x, y));
+            if open_light < 0.05 {
+                continue; // too dark for 8 bits to hold a ratio
+            }
+            let at = |dx: f32, dy: f32| on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right);
+            let card = at(0.0, 0.0);
+            let uv = picture_uv(&scene.impostor, card);
+            let (du, dv) = (
+                picture_uv(&scene.impostor, at(1.0, 0.0)) - uv,
+                picture_uv(&scene.impostor, at(0.0, 1.0)) - uv,
+            );
+            if !((0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y)) {
+                continue;
+            }
+            let coverage = scene.blended(|view| mips.footprint(view, uv, du, dv));
+            if coverage < 0.3 {
+                continue;
+            }
+            let point = origin + right * card.x + Vec3::Y * card.y;
+            let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, card.y);
+            let depths = shadow_sample_depths(coverage, (2.0 * uv.x - 1.0) * scene.impostor.half_width, radius);
+            let expected = sky.at(&shade, point + (eye - point).normalize() * depths[1]);
+            let drawn = light(occluded.get_pixel(x, y)) / open_light;
+            error += f64::from((drawn - expected).abs());
+            expected_sum += f64::from(expected);
+            expected_squares += f64::from(expected * expected);
+            n += 1.0;
+        }
+    }
+    let (error, mean) = (error / n, expected_sum / n);
+    let spread = (expected_squares / n - mean * mean).max(0.0).sqrt();
+    println!("{n} pixels: |drawn − CPU| {error:.4}; the CPU's sky mean {mean:.3}, spread {spread:.3}");
+    assert!(n > 300.0, "{n} pixels compared");
+    assert!(
+        mean < 0.8 && spread > 0.05,
+        "the crown hides part of its sky, more inside: mean {mean}, spread {spread}"
+    );
+    assert!(error < 0.015, "drawn vs the CPU reference: {error}");
+}

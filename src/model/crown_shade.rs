@@ -180,6 +180,109 @@ impl CrownShade {
     }
 }
 
+/// Distances from the axis at which a [`SkyVisibility`] holds the crown's
+/// sky: the axis, a third and two thirds of the crown's radius at the
+/// height, and its edge.
+pub const SKY_VISIBILITY_RINGS: usize = 4;
+
+/// Elevations (evenly spaced, midpoints) and azimuths of the rays
+/// [`CrownShade::sky_visibility`] looks at the sky along.
+const SKY_ELEVATIONS: usize = 6;
+const SKY_AZIMUTHS: usize = 16;
+
+impl CrownShade {
+    /// The share of the sky (the upper hemisphere, by solid angle) that
+    /// tree-local `point` sees through the crown: the mean of
+    /// [`CrownShade::transmittance`] over rays at [`SKY_ELEVATIONS`]
+    /// elevations and [`SKY_AZIMUTHS`] azimuths, each weighted by its
+    /// ring's solid angle (`cos` of its elevation). 1 outside the crown's
+    /// reach and for a point that is not finite.
+    pub fn sky_visibility(&self, point: Vec3) -> f32 {
+        let (mut seen, mut total) = (0.0f32, 0.0f32);
+        for e in 0..SKY_ELEVATIONS {
+            let elevation = (e as f32 + 0.5) / SKY_ELEVATIONS as f32 * std::f32::consts::FRAC_PI_2;
+            let (sin, cos) = elevation.sin_cos();
+            for a in 0..SKY_AZIMUTHS {
+                let azimuth = (a as f32 + 0.5) / SKY_AZIMUTHS as f32 * std::f32::consts::TAU;
+                let toward = Vec3::new(cos * azimuth.cos(), sin, cos * azimuth.sin());
+                seen += cos * self.transmittance(point, toward);
+                total += cos;
+            }
+        }
+        seen / total
+    }
+
+    /// Its [`CrownShade::sky_visibility`] tabled by height (the middles of
+    /// the profile's [`CROWN_PROFILE_STEPS`] steps, as its radii) and
+    /// distance from the axis ([`SKY_VISIBILITY_RINGS`] shares of the
+    /// radius at the height), for the GPU.
+    pub fn sky_visibility_table(&self) -> SkyVisibility {
+        let mut rows = [[1.0; SKY_VISIBILITY_RINGS]; CROWN_PROFILE_STEPS];
+        for (step, row) in rows.iter_mut().enumerate() {
+            let height = self.bottom + (step as f32 + 0.5) / CROWN_PROFILE_STEPS as f32 * (self.top - self.bottom);
+            let radius = self.radii[step];
+            for (ring, value) in row.iter_mut().enumerate() {
+                let out = radius * ring as f32 / (SKY_VISIBILITY_RINGS - 1) as f32;
+                *value = self.sky_visibility(Vec3::new(self.axis.x + out, height, self.axis.y));
+            }
+        }
+        SkyVisibility { rows }
+    }
+}
+
+/// How much of the sky a point in a crown sees through its needles
+/// ([`CrownShade::sky_visibility`]), by height and distance from the axis:
+/// the share of the ambient light that reaches it. Bevy's ambient light
+/// is the sky's: it lights a needle deep in a crown as it lights one on
+/// its top, and a crown's shaded body then reads a pale grey-green where
+/// a real one is nearly black. Rows bottom to top at the middles of the
+/// crown profile's steps, rings from the axis out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SkyVisibility {
+    /// Rows bottom to top, [`SKY_VISIBILITY_RINGS`] rings a row.
+    pub rows: [[f32; SKY_VISIBILITY_RINGS]; CROWN_PROFILE_STEPS],
+}
+
+impl SkyVisibility {
+    /// The share of the sky tree-local `point` sees through `shade`'s
+    /// crown: bilinear in the table, linear in height between the steps'
+    /// middles as [`CrownImpostor::crown_radius_at`] (clamped at the end
+    /// steps) and in distance from the axis over the crown's radius there
+    /// (clamped at its edge). 1 for a point that is not finite or a crown
+    /// with no height. CPU reference of the fragment's
+    /// `sky_visibility_at`.
+    pub fn at(&self, shade: &CrownShade, point: Vec3) -> f32 {
+        if !(point.is_finite() && shade.top > shade.bottom) {
+            return 1.0;
+        }
+        let steps = CROWN_PROFILE_STEPS as f32;
+        let f = ((point.y - shade.bottom) / (shade.top - shade.bottom) * steps - 0.5).clamp(0.0, steps - 1.0);
+        let k = (f as usize).min(CROWN_PROFILE_STEPS - 2);
+        let t = f - k as f32;
+        let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, point.y);
+        let last = (SKY_VISIBILITY_RINGS - 1) as f32;
+        let distance = (Vec2::new(point.x, point.z) - shade.axis).length();
+        let ring = if radius > 0.0 {
+            (distance / radius * last).clamp(0.0, last)
+        } else {
+            last
+        };
+        let j = (ring as usize).min(SKY_VISIBILITY_RINGS - 2);
+        let u = ring - j as f32;
+        let row = |k: usize| self.rows[k][j] * (1.0 - u) + self.rows[k][j + 1] * u;
+        row(k) * (1.0 - t) + row(k + 1) * t
+    }
+
+    /// A table that occludes nothing (every entry 1): the GPU's when the
+    /// plugin's `ConiferLodSettings::sky_occlusion` is off or the species
+    /// has no impostor.
+    pub fn open() -> Self {
+        Self {
+            rows: [[1.0; SKY_VISIBILITY_RINGS]; CROWN_PROFILE_STEPS],
+        }
+    }
+}
+
 /// The share of a step inside the crown when its ends lie `before` and
 /// `after` inside it (negative outside), the inside depth linear between
 /// them.
@@ -289,6 +392,61 @@ mod tests {
             top: 9.0,
             radii: [2.0; CROWN_PROFILE_STEPS],
             extinction: [[sigma; CROWN_SHADE_CLASSES]; CROWN_PROFILE_STEPS],
+        }
+    }
+
+    /// A uniform cylinder's sky: all of it above the top and through a
+    /// crown with no extinction, less toward the axis and toward the
+    /// bottom, and the table gives back each point it was taken at and
+    /// lies between its nodes elsewhere.
+    #[test]
+    fn the_sky_dims_toward_a_crowns_axis_and_bottom() {
+        let shade = cylinder(0.5);
+        let at = |out: f32, height: f32| Vec3::new(0.5 + out, height, -0.5);
+        assert_eq!(shade.sky_visibility(at(0.0, 9.5)), 1.0);
+        assert_eq!(cylinder(0.0).sky_visibility(at(0.0, 5.0)), 1.0);
+        let (edge, middle, axis) = (
+            shade.sky_visibility(at(2.0, 5.0)),
+            shade.sky_visibility(at(1.0, 5.0)),
+            shade.sky_visibility(at(0.0, 5.0)),
+        );
+        assert!(edge > middle && middle > axis && axis > 0.0, "{edge} {middle} {axis}");
+        // At the edge the outward half of the sky is open, the rest dimmed.
+        assert!(edge > 0.5 && edge < 0.75, "{edge}");
+        assert!(shade.sky_visibility(at(0.0, 8.5)) > shade.sky_visibility(at(0.0, 2.0)));
+        let table = shade.sky_visibility_table();
+        for step in [0, 7, 31] {
+            let height = 1.0 + (step as f32 + 0.5) / CROWN_PROFILE_STEPS as f32 * 8.0;
+            for ring in 0..SKY_VISIBILITY_RINGS {
+                let point = at(2.0 * ring as f32 / 3.0, height);
+                assert!((table.at(&shade, point) - shade.sky_visibility(point)).abs() < 1e-5);
+            }
+        }
+        let between = table.at(&shade, at(0.5, 5.0));
+        assert!(between < middle && between > axis, "{between}");
+        // Past the edge the edge's; not finite, all of it.
+        assert!((table.at(&shade, at(3.0, 5.0)) - table.at(&shade, at(2.0, 5.0))).abs() < 1e-6);
+        assert_eq!(table.at(&shade, Vec3::new(f32::NAN, 5.0, 0.0)), 1.0);
+        assert_eq!(SkyVisibility::open().at(&shade, at(0.0, 5.0)), 1.0);
+    }
+
+    proptest! {
+        /// The sky a point sees is a share, and inside a uniform crown's
+        /// height a point nearer its axis never sees more of it (below
+        /// the crown the axis may: its rays leave through the bottom).
+        #[test]
+        fn the_sky_seen_is_a_share_that_falls_toward_the_axis(
+            sigma in 0.0f32..3.0,
+            height in 1.0f32..9.0,
+            out in 0.0f32..3.0,
+            inward in 0.0f32..1.0,
+        ) {
+            let shade = cylinder(sigma);
+            let outer = shade.sky_visibility(Vec3::new(0.5 + out, height, -0.5));
+            let inner = shade.sky_visibility(Vec3::new(0.5 + out * inward, height, -0.5));
+            prop_assert!((0.0..=1.0).contains(&outer));
+            prop_assert!((0.0..=1.0).contains(&shade.sky_visibility(Vec3::new(out, height - 2.0, out))));
+            prop_assert!(inner <= outer + 1e-5, "{inner} {outer}");
         }
     }
 

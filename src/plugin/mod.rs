@@ -368,6 +368,18 @@ pub struct ConiferLodSettings {
     /// smaller than the pixel error, the lines fade into one textured quad
     /// per tree. Default on; [`ConiferLodSettings::paper`] turns it off.
     pub far_impostor: bool,
+    /// Dim the ambient light by the share of the sky each point of a
+    /// crown sees through the crown
+    /// ([`crate::model::crown_shade::SkyVisibility`], from the crown
+    /// impostor's profile; species without an impostor are not dimmed).
+    /// Bevy's `GlobalAmbientLight` lights a needle deep in a crown as
+    /// brightly as one on its top; with this on, the crown's shaded body
+    /// darkens as a real crown's does, every representation (prisms,
+    /// lines, impostor) by the same function of where it lies, so a
+    /// change of detail does not change it. Default off (the ambient light
+    /// as Bevy gives it, as `conifer eval`'s reference has it); the
+    /// `forest` example turns it on.
+    pub sky_occlusion: bool,
 }
 
 impl Default for ConiferLodSettings {
@@ -384,6 +396,7 @@ impl Default for ConiferLodSettings {
             max_expanded_placements: 1 << 17,
             error_scope: ErrorScope::default(),
             far_impostor: true,
+            sky_occlusion: false,
         }
     }
 }

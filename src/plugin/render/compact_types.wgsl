@@ -157,7 +157,14 @@ struct SpeciesParams {
     // (rows) and WOOD_OPACITY_NODES opacities (lanes)
     // (`model::calibration::LineCalibration::wood_scales`)
     wood_line_scales: array<vec4<f32>, 8>,
+    // the share of the sky each point of the crown sees through it, by
+    // height (CROWN_PROFILE_STEPS rows) and distance from the axis
+    // (SKY_VISIBILITY_RINGS lanes; `model::crown_shade::SkyVisibility`;
+    // all 1 with `ConiferLodSettings::sky_occlusion` off)
+    sky_visibility: array<vec4<f32>, 32>,
 }
+
+const SKY_VISIBILITY_RINGS: u32 = 4u;
 
 const LINE_SCALE_STEPS: u32 = 8u;
 

@@ -42,6 +42,7 @@
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, CROWN_SHADE_STEPS, CROWN_SHADE_CLASSES, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
+    SKY_VISIBILITY_RINGS,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -1830,6 +1831,33 @@ fn crown_transmittance(p: vec3<f32>, to_light: vec3<f32>) -> f32 {
     return dot(exp(-depth), vec4<f32>(1.0 / f32(CROWN_SHADE_CLASSES)));
 }
 
+// The share of the sky tree-local `p` sees through the crown: bilinear
+// in the species' table by height (between the profile steps' middles)
+// and by distance from the axis over the crown's radius there (clamped at
+// its edge); 1 without an impostor, and everywhere with
+// `ConiferLodSettings::sky_occlusion` off, whose table is all 1 (CPU
+// reference: `model::crown_shade::SkyVisibility::at`).
+fn sky_visibility_at(p: vec3<f32>) -> f32 {
+    let span = species.impostor_span;
+    if !(span.w > 0.0 && span.y > span.x) {
+        return 1.0;
+    }
+    let step = crown_profile_step(p.y);
+    let k = u32(step.x);
+    let row = mix(species.sky_visibility[k], species.sky_visibility[k + 1u], step.y);
+    let last = f32(SKY_VISIBILITY_RINGS - 1u);
+    let radius = crown_radius_at(p.y);
+    var ring = last;
+    if radius > 0.0 {
+        ring = clamp(length(p.xz - species.impostor_box.xy) / radius * last, 0.0, last);
+    }
+    if !(ring == ring) {
+        return 1.0;
+    }
+    let j = min(u32(ring), SKY_VISIBILITY_RINGS - 2u);
+    return mix(row[j], row[j + 1u], ring - f32(j));
+}
+
 // The share of the wood the needles leave in sight where they cover the
 // picture, at tree-local `height` and `nearness` (metres toward the
 // camera from the crown's axis): bilinear in the impostor's table, 1
@@ -1981,6 +2009,18 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
 #endif
     pbr_input.N = pbr_input.world_normal;
     pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;
+    // The ambient light reaches a point inside the crown through it
+    // (`ConiferLodSettings::sky_occlusion`), at the point the fragment is
+    // lit at (an impostor's middle shadow sample).
+    let sky_instance = instances[in.tree];
+    let sky_world_from_local = instance_world_from_local(sky_instance);
+    let sky = sky_visibility_at(tree_local_point(
+        sky_world_from_local,
+        length(sky_world_from_local[0].xyz),
+        pbr_input.world_position.xyz,
+    ));
+    pbr_input.diffuse_occlusion = vec3<f32>(sky);
+    pbr_input.specular_occlusion = sky;
 #ifdef CONIFER_FACING_STRIP
     // A strip turned toward the viewer (`LineLighting::FacingStrip`).
     var normal = pbr_input.V - pbr_input.world_normal * dot(pbr_input.world_normal, pbr_input.V);

@@ -287,6 +287,13 @@ pub struct SpeciesParams {
     /// without a calibration).
     pub wood_line_scales:
         [[f32; crate::model::calibration::WOOD_OPACITY_NODES]; crate::model::calibration::CALIBRATION_STEPS],
+    /// The share of the sky each point of the crown sees through it, by
+    /// height (rows) and distance from the axis (lanes)
+    /// ([`crate::model::crown_shade::SkyVisibility`]): what the ambient
+    /// light is scaled by. All 1 (nothing occluded) unless
+    /// [`crate::plugin::ConiferLodSettings::sky_occlusion`] is on.
+    pub sky_visibility:
+        [[f32; crate::model::crown_shade::SKY_VISIBILITY_RINGS]; crate::model::impostor::CROWN_PROFILE_STEPS],
 }
 
 impl Default for SpeciesParams {
@@ -356,6 +363,12 @@ impl SpeciesParams {
         self.crown_radii = four_a_row(&shade.radii);
         self.crown_widest_radius = shade.widest_radius();
         self.crown_extinction = shade.extinction;
+    }
+
+    /// Sets the share of the sky the crown lets each point see
+    /// ([`crate::model::crown_shade::SkyVisibility`]).
+    pub fn set_sky_visibility(&mut self, sky: &crate::model::crown_shade::SkyVisibility) {
+        self.sky_visibility = sky.rows;
     }
 
     /// Sets the share of the wood the needles leave in sight where they
@@ -626,6 +639,16 @@ mod tests {
         let classes = crate::model::crown_shade::CROWN_SHADE_CLASSES;
         assert_eq!(classes, 4, "a height's media are one vec4");
         assert!(types.contains(&format!("const CROWN_SHADE_CLASSES: u32 = {classes}u;")));
+    }
+
+    /// The shader's sky visibility table is as long as `model::crown_shade`'s.
+    #[test]
+    fn the_shader_has_the_sky_visibilitys_length() {
+        let rings = crate::model::crown_shade::SKY_VISIBILITY_RINGS;
+        assert_eq!(rings, 4, "a height's rings are one vec4");
+        assert!(include_str!("compact_types.wgsl").contains(&format!("const SKY_VISIBILITY_RINGS: u32 = {rings}u;")));
+        let steps = crate::model::impostor::CROWN_PROFILE_STEPS;
+        assert_shader_table("CROWN_PROFILE_STEPS", steps, "sky_visibility", steps);
     }
 
     /// The shader's wood visibility table is as long as `model::impostor`'s.

@@ -39,7 +39,7 @@ use super::{
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
-use crate::model::crown_shade::CrownShade;
+use crate::model::crown_shade::{CrownShade, SkyVisibility};
 use crate::model::impostor::CrownImpostor;
 use crate::model::prism::WOOD_LINE_FADE;
 use crate::model::shading::SphereLight;
@@ -317,8 +317,9 @@ struct RenderSpecies {
     /// (bits) it was made for.
     sphere_light: ([u32; 2], SphereLight),
     /// The impostor's crown radius and extinction by height
-    /// ([`CrownShade::of`]; `None` without an impostor).
-    crown_shade: Option<CrownShade>,
+    /// ([`CrownShade::of`]) and the sky its crown lets each point see
+    /// ([`CrownShade::sky_visibility_table`]); `None` without an impostor.
+    crown_shade: Option<(CrownShade, SkyVisibility)>,
 }
 
 impl RenderSpecies {
@@ -519,6 +520,7 @@ fn species_params(
         upper_wood_color: material.upper_wood_color,
         far_needle_color: compact.far_needle_color.extend(1.0).to_array(),
         wood_heights: [material.upper_wood_heights[0], material.upper_wood_heights[1], 0.0, 0.0],
+        sky_visibility: SkyVisibility::open().rows,
         ..SpeciesParams::default()
     };
     params.set_wind(&wind.model(), &species.wind_shape, wind.seconds(seconds), wind_step);
@@ -527,10 +529,13 @@ fn species_params(
     params
 }
 
-/// An impostor's crown radius and extinction by height (`None` without
-/// one).
-fn crown_shade(impostor: Option<&CrownImpostor>) -> Option<CrownShade> {
-    impostor.map(CrownShade::of)
+/// An impostor's crown radius and extinction by height, and its sky
+/// visibility table (`None` without one).
+fn crown_shade(impostor: Option<&CrownImpostor>) -> Option<(CrownShade, SkyVisibility)> {
+    impostor.map(|impostor| {
+        let shade = CrownShade::of(impostor);
+        (shade, shade.sky_visibility_table())
+    })
 }
 
 /// Copies the species and trees that changed into the render world.
@@ -625,8 +630,11 @@ fn extract_compact(
             wind_step,
             &entry.sphere_light.1,
         );
-        if let Some(shade) = &entry.crown_shade {
+        if let Some((shade, sky)) = &entry.crown_shade {
             entry.params.set_crown_shade(shade);
+            if settings.sky_occlusion {
+                entry.params.set_sky_visibility(sky);
+            }
         }
         // Without an impostor the wood lines are drawn once, unlayered.
         if let Some(impostor) = &entry.impostor {
