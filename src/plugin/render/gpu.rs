@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 2,720 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 3,232 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -604,8 +604,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_2720_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 2720);
+    fn species_params_is_3232_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 3232);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`
