@@ -193,8 +193,8 @@ const SKY_AZIMUTHS: usize = 16;
 impl CrownShade {
     /// The share of the sky (the upper hemisphere, by solid angle) that
     /// tree-local `point` sees through the crown: the mean of
-    /// [`CrownShade::transmittance`] over rays at [`SKY_ELEVATIONS`]
-    /// elevations and [`SKY_AZIMUTHS`] azimuths, each weighted by its
+    /// [`CrownShade::transmittance`] over 96 rays, at 6 evenly spaced
+    /// elevations and 16 azimuths, each weighted by its
     /// ring's solid angle (`cos` of its elevation). 1 outside the crown's
     /// reach and for a point that is not finite.
     pub fn sky_visibility(&self, point: Vec3) -> f32 {
