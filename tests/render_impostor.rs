@@ -380,6 +380,61 @@ impl ImpostorScene {
         picture
     }
 
+    /// Per pixel of the impostor (its texels' coverage at least 0.3, off
+    /// the pictures' edges, `denominator` bright enough for 8 bits), the
+    /// light of `numerator` over `denominator` against `expected(point,
+    /// toward_eye, depths)`: the card point the pixel's ray meets, the
+    /// unit direction from it to the eye and the three depths toward the
+    /// eye its shadow samples lie at (`shadow_sample_depths`). Returns the
+    /// pixels compared, the mean |drawn − expected|, and the expected
+    /// values' mean and spread.
+    fn ratio_against_cpu(
+        &self,
+        numerator: &image::RgbaImage,
+        denominator: &image::RgbaImage,
+        expected: impl Fn(Vec3, Vec3, [f32; 3]) -> f32,
+    ) -> (f64, f64, f64, f64) {
+        let shade = CrownShade::of(&self.impostor);
+        let mips = ImpostorMips::new(&self.impostor);
+        let (eye, origin, right) = (self.eye, self.origin, self.right);
+        let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
+        let (mut error, mut expected_sum, mut expected_squares, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for y in 0..SIZE {
+            for x in 0..SIZE {
+                let below = light(denominator.get_pixel(x, y));
+                if below < 0.05 {
+                    continue; // too dark for 8 bits to hold a ratio
+                }
+                let at = |dx: f32, dy: f32| on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right);
+                let card = at(0.0, 0.0);
+                let uv = picture_uv(&self.impostor, card);
+                let (du, dv) = (
+                    picture_uv(&self.impostor, at(1.0, 0.0)) - uv,
+                    picture_uv(&self.impostor, at(0.0, 1.0)) - uv,
+                );
+                if !((0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y)) {
+                    continue;
+                }
+                let coverage = self.blended(|view| mips.footprint(view, uv, du, dv));
+                if coverage < 0.3 {
+                    continue;
+                }
+                let point = origin + right * card.x + Vec3::Y * card.y;
+                let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, card.y);
+                let depths = shadow_sample_depths(coverage, (2.0 * uv.x - 1.0) * self.impostor.half_width, radius);
+                let value = expected(point, (eye - point).normalize(), depths);
+                let drawn = light(numerator.get_pixel(x, y)) / below;
+                error += f64::from((drawn - value).abs());
+                expected_sum += f64::from(value);
+                expected_squares += f64::from(value * value);
+                n += 1.0;
+            }
+        }
+        let (error, mean) = (error / n, expected_sum / n);
+        let spread = (expected_squares / n - mean * mean).max(0.0).sqrt();
+        (n, error, mean, spread)
+    }
+
     /// The two nearest views' coverage as `sample` gives it, blended as
     /// the fragment does (0 under its discard threshold).
     fn blended(&self, sample: impl Fn(u32) -> [f32; 4]) -> f32 {
@@ -916,48 +971,13 @@ fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference
         .shadow_maps_enabled = false;
     let lit = scene.picture("impostor_crown_shade_no_shadows");
     let shade = CrownShade::of(&scene.impostor);
-    let mips = ImpostorMips::new(&scene.impostor);
-    let (eye, origin, right) = (scene.eye, scene.origin, scene.right);
-    let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
-    let (mut error, mut expected_sum, mut expected_squares, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for y in 0..SIZE {
-        for x in 0..SIZE {
-            let lit_light = light(lit.get_pixel(x, y));
-            if lit_light < 0.05 {
-                continue; // too dark for 8 bits to hold a ratio
-            }
-            let at = |dx: f32, dy: f32| on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right);
-            let card = at(0.0, 0.0);
-            let uv = picture_uv(&scene.impostor, card);
-            let (du, dv) = (
-                picture_uv(&scene.impostor, at(1.0, 0.0)) - uv,
-                picture_uv(&scene.impostor, at(0.0, 1.0)) - uv,
-            );
-            if !((0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y)) {
-                continue;
-            }
-            let coverage = scene.blended(|view| mips.footprint(view, uv, du, dv));
-            if coverage < 0.3 {
-                continue;
-            }
-            let point = origin + right * card.x + Vec3::Y * card.y;
-            let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, card.y);
-            let depths = shadow_sample_depths(coverage, (2.0 * uv.x - 1.0) * scene.impostor.half_width, radius);
-            let toward_eye = (eye - point).normalize();
-            let expected = depths
-                .iter()
-                .map(|&depth| shade.transmittance(point + toward_eye * depth, to_sun))
-                .sum::<f32>()
-                / depths.len() as f32;
-            let drawn = light(shaded.get_pixel(x, y)) / lit_light;
-            error += f64::from((drawn - expected).abs());
-            expected_sum += f64::from(expected);
-            expected_squares += f64::from(expected * expected);
-            n += 1.0;
-        }
-    }
-    let (error, mean) = (error / n, expected_sum / n);
-    let spread = (expected_squares / n - mean * mean).max(0.0).sqrt();
+    let (n, error, mean, spread) = scene.ratio_against_cpu(&shaded, &lit, |point, toward_eye, depths| {
+        depths
+            .iter()
+            .map(|&depth| shade.transmittance(point + toward_eye * depth, to_sun))
+            .sum::<f32>()
+            / depths.len() as f32
+    });
     println!("{n} pixels: |drawn − CPU| {error:.4}; the CPU's light mean {mean:.3}, spread {spread:.3}");
     assert!(n > 300.0, "{n} pixels compared");
     assert!(spread > 0.1, "the crown's light varies across it: spread {spread}");
@@ -994,43 +1014,9 @@ fn sky_occlusion_dims_the_ambient_light_as_the_cpu_reference_does() {
     let occluded = scene.picture("impostor_sky_occluded");
     let shade = CrownShade::of(&scene.impostor);
     let sky = shade.sky_visibility_table();
-    let mips = ImpostorMips::new(&scene.impostor);
-    let (eye, origin, right) = (scene.eye, scene.origin, scene.right);
-    let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
-    let (mut error, mut expected_sum, mut expected_squares, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for y in 0..SIZE {
-        for x in 0..SIZE {
-            let open_light = light(open.get_pixel(x, y));
-            if open_light < 0.05 {
-                continue; // too dark for 8 bits to hold a ratio
-            }
-            let at = |dx: f32, dy: f32| on_quad(x as f32 + 0.5 + dx, y as f32 + 0.5 + dy, eye, origin, right);
-            let card = at(0.0, 0.0);
-            let uv = picture_uv(&scene.impostor, card);
-            let (du, dv) = (
-                picture_uv(&scene.impostor, at(1.0, 0.0)) - uv,
-                picture_uv(&scene.impostor, at(0.0, 1.0)) - uv,
-            );
-            if !((0.02..0.98).contains(&uv.x) && (0.02..0.98).contains(&uv.y)) {
-                continue;
-            }
-            let coverage = scene.blended(|view| mips.footprint(view, uv, du, dv));
-            if coverage < 0.3 {
-                continue;
-            }
-            let point = origin + right * card.x + Vec3::Y * card.y;
-            let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, card.y);
-            let depths = shadow_sample_depths(coverage, (2.0 * uv.x - 1.0) * scene.impostor.half_width, radius);
-            let expected = sky.at(&shade, point + (eye - point).normalize() * depths[1]);
-            let drawn = light(occluded.get_pixel(x, y)) / open_light;
-            error += f64::from((drawn - expected).abs());
-            expected_sum += f64::from(expected);
-            expected_squares += f64::from(expected * expected);
-            n += 1.0;
-        }
-    }
-    let (error, mean) = (error / n, expected_sum / n);
-    let spread = (expected_squares / n - mean * mean).max(0.0).sqrt();
+    let (n, error, mean, spread) = scene.ratio_against_cpu(&occluded, &open, |point, toward_eye, depths| {
+        sky.at(&shade, point + toward_eye * depths[1])
+    });
     println!("{n} pixels: |drawn − CPU| {error:.4}; the CPU's sky mean {mean:.3}, spread {spread:.3}");
     assert!(n > 300.0, "{n} pixels compared");
     assert!(
