@@ -380,6 +380,21 @@ impl ImpostorScene {
         picture
     }
 
+    /// Ambient light of `brightness` (0: none) and no tone mapping on the
+    /// cameras, so that a picture's light is linear in what lights it.
+    fn linear_light(&mut self, brightness: f32) {
+        use bevy::core_pipeline::tonemapping::Tonemapping;
+        let world = self.renderer.world_mut();
+        world.insert_resource(GlobalAmbientLight {
+            brightness,
+            ..default()
+        });
+        let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
+        for camera in cameras {
+            world.entity_mut(camera).insert(Tonemapping::None);
+        }
+    }
+
     /// Per pixel of the impostor (its texels' coverage at least 0.3, off
     /// the pictures' edges, `denominator` bright enough for 8 bits), the
     /// light of `numerator` over `denominator` against `expected(point,
@@ -939,7 +954,6 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
 /// CPU's light on average, where the CPU's light spans 0.68 ± 0.15.
 #[test]
 fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference_does() {
-    use bevy::core_pipeline::tonemapping::Tonemapping;
     let _turn = common::gpu_turn();
     // The tree ~120 pixels tall, drawn as its impostor alone; the young
     // spruce's pictures three times as dense (a mature crown's), each
@@ -951,16 +965,8 @@ fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference
             *texel = [dense as u8, scale(texel[1]), scale(texel[2]), scale(texel[3])];
         }
     });
-    let world = scene.renderer.world_mut();
-    world.insert_resource(GlobalAmbientLight {
-        brightness: 0.0,
-        ..default()
-    });
-    let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
-    for camera in cameras {
-        world.entity_mut(camera).insert(Tonemapping::None);
-    }
-    let sun = spawn_side_sun(world, scene.crown, 1.0);
+    scene.linear_light(0.0);
+    let sun = spawn_side_sun(scene.renderer.world_mut(), scene.crown, 1.0);
     let to_sun = side_sun();
     let shaded = scene.picture("impostor_crown_shade_past_the_maps");
     scene
@@ -993,18 +999,9 @@ fn past_the_shadow_maps_the_impostor_takes_the_crowns_light_as_the_cpu_reference
 /// tonemapping).
 #[test]
 fn sky_occlusion_dims_the_ambient_light_as_the_cpu_reference_does() {
-    use bevy::core_pipeline::tonemapping::Tonemapping;
     let _turn = common::gpu_turn();
     let mut scene = ImpostorScene::new(2.0);
-    let world = scene.renderer.world_mut();
-    world.insert_resource(GlobalAmbientLight {
-        brightness: 4_000.0,
-        ..default()
-    });
-    let cameras: Vec<Entity> = world.query_filtered::<Entity, With<Camera>>().iter(world).collect();
-    for camera in cameras {
-        world.entity_mut(camera).insert(Tonemapping::None);
-    }
+    scene.linear_light(4_000.0);
     let open = scene.picture("impostor_sky_open");
     scene
         .renderer

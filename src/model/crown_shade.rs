@@ -255,10 +255,7 @@ impl SkyVisibility {
         if !(point.is_finite() && shade.top > shade.bottom) {
             return 1.0;
         }
-        let steps = CROWN_PROFILE_STEPS as f32;
-        let f = ((point.y - shade.bottom) / (shade.top - shade.bottom) * steps - 0.5).clamp(0.0, steps - 1.0);
-        let k = (f as usize).min(CROWN_PROFILE_STEPS - 2);
-        let t = f - k as f32;
+        let (k, t) = CrownImpostor::profile_step(shade.bottom, shade.top, point.y);
         let radius = CrownImpostor::crown_radius_at(&shade.radii, shade.bottom, shade.top, point.y);
         let last = (SKY_VISIBILITY_RINGS - 1) as f32;
         let distance = (Vec2::new(point.x, point.z) - shade.axis).length();

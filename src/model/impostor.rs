@@ -742,12 +742,21 @@ impl CrownImpostor {
     /// steps' outside them. CPU reference of the impostor fragment's
     /// `crown_radius_at`.
     pub fn crown_radius_at(radii: &[f32; CROWN_PROFILE_STEPS], bottom: f32, top: f32, height: f32) -> f32 {
+        let (k, t) = Self::profile_step(bottom, top, height);
+        radii[k] * (1.0 - t) + radii[k + 1] * t
+    }
+
+    /// Where `height` falls in a crown profile of [`CROWN_PROFILE_STEPS`]
+    /// steps from `bottom` to `top`: the step below it and how far toward
+    /// the next (in `[0, 1]`), linear between the steps' middles, the end
+    /// steps' outside them (step 0 for a NaN height). CPU reference of
+    /// the fragment's `crown_profile_step`.
+    pub fn profile_step(bottom: f32, top: f32, height: f32) -> (usize, f32) {
         let steps = CROWN_PROFILE_STEPS as f32;
         let f = ((height - bottom) / (top - bottom) * steps - 0.5).clamp(0.0, steps - 1.0);
         let f = if f.is_nan() { 0.0 } else { f };
         let k = (f as usize).min(CROWN_PROFILE_STEPS - 2);
-        let t = f - k as f32;
-        radii[k] * (1.0 - t) + radii[k + 1] * t
+        (k, f - k as f32)
     }
 
     /// Tree-local height of the pictures' top edge.

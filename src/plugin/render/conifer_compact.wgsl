@@ -1926,6 +1926,10 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
     pbr_input.material.base_color = in.color;
     var axis = in.world_normal;
+    // The frame of the fragment's tree (the impostor's picture, the
+    // crown's sky).
+    let world_from_local = instance_world_from_local(instances[in.tree]);
+    let tree_scale = length(world_from_local[0].xyz);
 #ifdef CONIFER_IMPOSTOR
     // The two views' texels over the pixel's footprint: coverage, wood,
     // and the shares lit as a vertical cylinder and as one across the view
@@ -1936,9 +1940,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
         discard;
     }
     let wood = clamp(texel.g / texel.r, 0.0, 1.0);
-    let instance = instances[in.tree];
-    let world_from_local = instance_world_from_local(instance);
-    let height = tree_local_point(world_from_local, length(world_from_local[0].xyz), in.world_position.xyz).y;
+    let height = tree_local_point(world_from_local, tree_scale, in.world_position.xyz).y;
     var albedo = mix(species.far_needle_color.rgb, bark_albedo(height), wood);
     if species.debug_colors != 0u {
         albedo = vec3<f32>(0.85, 0.2, 0.85);
@@ -1949,7 +1951,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     axis = normalize(world_from_local[1].xyz);
     // The view's right: across the camera's azimuth round the impostor's
     // axis, as the quad is turned.
-    let camera_local = tree_local_point(world_from_local, length(world_from_local[0].xyz), view.world_position);
+    let camera_local = tree_local_point(world_from_local, tree_scale, view.world_position);
     var to_camera = camera_local.xz - species.impostor_box.xy;
     if dot(to_camera, to_camera) < 1e-12 {
         to_camera = vec2<f32>(0.0, 1.0);
@@ -1997,13 +1999,12 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // of a texel are needles spread along its ray through the crown, nearer
     // its near side the denser it is. Shadows are averaged over three
     // points where they lie, lights taken at the middle one.
-    let scale = length(world_from_local[0].xyz);
     let depths = impostor_shadow_depths(texel.r, (2.0 * uv.x - 1.0) * species.impostor_box.z, crown_radius_at(height));
 #ifdef CONIFER_FACING_STRIP
     // Bevy's own lighting takes one shadow, at the middle sample.
-    pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * (depths[1] * scale), 1.0);
+    pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * (depths[1] * tree_scale), 1.0);
 #else
-    impostor_shadow_samples(in.world_position.xyz, pbr_input.V, depths, scale, in.position.xy);
+    impostor_shadow_samples(in.world_position.xyz, pbr_input.V, depths, tree_scale, in.position.xy);
     pbr_input.world_position = impostor_shadow_points[1];
 #endif
 #endif
@@ -2012,13 +2013,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The ambient light reaches a point inside the crown through it
     // (`ConiferLodSettings::sky_occlusion`), at the point the fragment is
     // lit at (an impostor's middle shadow sample).
-    let sky_instance = instances[in.tree];
-    let sky_world_from_local = instance_world_from_local(sky_instance);
-    let sky = sky_visibility_at(tree_local_point(
-        sky_world_from_local,
-        length(sky_world_from_local[0].xyz),
-        pbr_input.world_position.xyz,
-    ));
+    let sky = sky_visibility_at(tree_local_point(world_from_local, tree_scale, pbr_input.world_position.xyz));
     pbr_input.diffuse_occlusion = vec3<f32>(sky);
     pbr_input.specular_occlusion = sky;
 #ifdef CONIFER_FACING_STRIP
