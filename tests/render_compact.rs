@@ -689,6 +689,169 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
     assert!(diff_fresh < 1.0 && diff_old > 3.0 * diff_fresh.max(0.3));
 }
 
+/// Five needles 0.6 m long at 0°, 30°, 45°, 71° and 90° from the
+/// vertical, far enough apart that no two touch a pixel, seen from 20 m
+/// by a 128² camera onto a transparent background, sun-lit, without tone
+/// mapping; the species without a line calibration, the impostor off
+/// (lines only), the compute pass read back.
+struct FiveNeedles {
+    renderer: HeadlessRenderer,
+    target: Handle<Image>,
+    camera: Entity,
+    handle: Handle<ConiferSpecies>,
+    /// Each needle's ends in pixels (the camera's projection).
+    ends: Vec<[[f32; 2]; 2]>,
+    size: u32,
+    _sun: Entity,
+}
+
+impl FiveNeedles {
+    fn new(radius: f32) -> Self {
+        use bevy::core_pipeline::tonemapping::Tonemapping;
+        use bevy_conifer_lod::model::{FoliageMaterial, Needle, TreeInput};
+        use bevy_conifer_lod::plugin::CompactReadback;
+        let size = 128u32;
+        let needles: Vec<Needle> = [0.0f32, 30.0, 45.0, 71.0, 90.0]
+            .iter()
+            .enumerate()
+            .map(|(k, degrees)| {
+                let (sin, cos) = degrees.to_radians().sin_cos();
+                let half = 0.3 * Vec3::new(sin, cos, 0.0);
+                let centre = Vec3::new(-3.0 + 1.5 * k as f32, 0.17 * k as f32 - 0.3, 0.0);
+                Needle {
+                    base: centre - half,
+                    tip: centre + half,
+                    radius,
+                    normal: Vec3::Z,
+                    group: k as u32,
+                }
+            })
+            .collect();
+        let input = TreeInput {
+            name: "five needles".into(),
+            needles: needles.clone(),
+            wood: Vec::new(),
+            wood_mesh: Default::default(),
+            material: FoliageMaterial::default(),
+        };
+        let record = bake(&input, &BakeOptions::default(), &()).unwrap();
+        let mut species = ConiferSpecies::from_record(record).unwrap();
+        // Without a calibration (the five needles' own is about 1).
+        species.line_calibration = None;
+        let (mut renderer, target, sun) = common::sun_lit_renderer(size);
+        let world = renderer.world_mut();
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+        world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+        let eye = Vec3::new(0.0, 0.0, 20.0);
+        let fov = 45f32.to_radians();
+        let transform = Transform::from_translation(eye).looking_at(Vec3::ZERO, Vec3::Y);
+        let camera = world
+            .spawn((
+                HeadlessRenderer::camera_bundle(&target, transform, fov),
+                Camera {
+                    clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
+                    ..default()
+                },
+                Tonemapping::None,
+            ))
+            .id();
+        world.resource_mut::<CompactReadback>().enabled = true;
+        // Lines only: this small tree would fade into its crown impostor here.
+        world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+        // Bevy's reversed infinite perspective, near 0.1 m.
+        let clip_from_world = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1) * transform.to_matrix().inverse();
+        let pixel = |p: Vec3| {
+            let clip = clip_from_world * p.extend(1.0);
+            let ndc = clip.truncate() / clip.w;
+            [(0.5 + 0.5 * ndc.x) * size as f32, (0.5 - 0.5 * ndc.y) * size as f32]
+        };
+        let ends = needles.iter().map(|n| [pixel(n.base), pixel(n.tip)]).collect();
+        Self {
+            renderer,
+            target,
+            camera,
+            handle,
+            ends,
+            size,
+            _sun: sun,
+        }
+    }
+}
+
+/// Lines wider than a pixel (`model::raster::line_pixel_coverage`): the
+/// five needles of [`FiveNeedles`] 0.26 m thick at pixel error 3, so each
+/// is an original line standing for a needle about two pixels wide. With
+/// `LineRaster::Area` each pixel's alpha is the strip's exact area there
+/// (a strip two pixels wide), as the CPU reference gives it; a one-pixel
+/// line (what the area raster drew before, and what `Hardware` draws)
+/// would cover half of it.
+#[test]
+fn wide_lines_cover_each_pixel_by_their_strips_area() {
+    use bevy_conifer_lod::model::raster::line_pixel_coverage;
+    let _turn = common::gpu_turn();
+    let radius = 0.13;
+    let FiveNeedles {
+        mut renderer,
+        target,
+        handle,
+        ends,
+        size,
+        ..
+    } = FiveNeedles::new(radius);
+    let pixel_error = 3.0;
+    {
+        let mut settings = renderer.world_mut().resource_mut::<ConiferLodSettings>();
+        settings.line_raster = LineRaster::Area;
+        settings.pixel_error = pixel_error;
+    }
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+        renderer.update().unwrap();
+    }
+    let picture = renderer.capture(&target, 8).unwrap();
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    picture.save(out.join("compact_wide_lines.png")).unwrap();
+    let readback = common::camera_readback(renderer.world(), handle.id());
+    let (_, spatial_error) = readback.tree_lod(0);
+    // The needle's width in pixels: its `2R` over the pixel (the spatial
+    // error over the pixel error).
+    let width = 2.0 * radius * pixel_error / spatial_error;
+    assert!(
+        width > 1.5 && width < 2.5 && 2.0 * radius < spatial_error,
+        "lines about two pixels wide: {width}"
+    );
+    let (mut sum, mut worst, mut pixels, mut drawn, mut expected) = (0.0f32, 0.0f32, 0usize, 0.0f32, 0.0f32);
+    for y in 0..size {
+        for x in 0..size {
+            let square = [x as f32, y as f32];
+            let want = 1.0
+                - ends
+                    .iter()
+                    .map(|&[a, b]| 1.0 - line_pixel_coverage(a, b, 1.0, width, square))
+                    .product::<f32>();
+            let got = f32::from(picture.get_pixel(x, y)[3]) / 255.0;
+            if want > 0.0 || got > 0.0 {
+                sum += (got - want).abs();
+                worst = worst.max((got - want).abs());
+                pixels += 1;
+            }
+            drawn += got;
+            expected += want;
+        }
+    }
+    let mean = sum / pixels.max(1) as f32;
+    println!(
+        "wide lines {width:.3} pixels: alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
+    );
+    // Five strips 0.6 m long (4.6 pixels) and two pixels wide.
+    assert!(expected > 30.0, "the needles are in the picture: {expected}");
+    assert!(
+        (drawn / expected - 1.0).abs() < 0.02,
+        "alpha summed {drawn} against {expected}"
+    );
+    assert!(mean < 0.005 && worst < 0.02, "mean {mean}, largest {worst}");
+}
+
 /// Lines cover each pixel by their strip's area in it
 /// (`LineRaster::Area`, CPU reference `model::raster::strip_pixel_coverage`):
 /// five needles 0.6 m long at 0°, 30°, 45°, 71° and 90° from the vertical,
@@ -708,70 +871,19 @@ fn a_reloaded_record_and_a_removed_override_are_drawn_anew() {
 /// summed 3.73 against 3.70).
 #[test]
 fn lines_cover_each_pixel_by_their_strips_area() {
-    use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_conifer_lod::model::calibration::LineCalibration;
     use bevy_conifer_lod::model::raster::strip_pixel_coverage;
-    use bevy_conifer_lod::model::{FoliageMaterial, Needle, TreeInput};
-    use bevy_conifer_lod::plugin::CompactReadback;
     let _turn = common::gpu_turn();
-    let size = 128u32;
     let radius = 0.015;
-    let needles: Vec<Needle> = [0.0f32, 30.0, 45.0, 71.0, 90.0]
-        .iter()
-        .enumerate()
-        .map(|(k, degrees)| {
-            let (sin, cos) = degrees.to_radians().sin_cos();
-            let half = 0.3 * Vec3::new(sin, cos, 0.0);
-            let centre = Vec3::new(-3.0 + 1.5 * k as f32, 0.17 * k as f32 - 0.3, 0.0);
-            Needle {
-                base: centre - half,
-                tip: centre + half,
-                radius,
-                normal: Vec3::Z,
-                group: k as u32,
-            }
-        })
-        .collect();
-    let input = TreeInput {
-        name: "five needles".into(),
-        needles: needles.clone(),
-        wood: Vec::new(),
-        wood_mesh: Default::default(),
-        material: FoliageMaterial::default(),
-    };
-    let record = bake(&input, &BakeOptions::default(), &()).unwrap();
-    let mut species = ConiferSpecies::from_record(record).unwrap();
-    // First without a calibration (the five needles' own is about 1).
-    species.line_calibration = None;
-    let (mut renderer, target, _sun) = common::sun_lit_renderer(size);
-    let world = renderer.world_mut();
-    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-    world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
-    let eye = Vec3::new(0.0, 0.0, 20.0);
-    let fov = 45f32.to_radians();
-    let transform = Transform::from_translation(eye).looking_at(Vec3::ZERO, Vec3::Y);
-    let camera = world
-        .spawn((
-            HeadlessRenderer::camera_bundle(&target, transform, fov),
-            Camera {
-                clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
-                ..default()
-            },
-            Tonemapping::None,
-        ))
-        .id();
-    world.resource_mut::<CompactReadback>().enabled = true;
-    // Lines only: this small tree would fade into its crown impostor here.
-    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
-    // Each needle's ends in pixels (the camera's projection: Bevy's
-    // reversed infinite perspective, near 0.1 m).
-    let clip_from_world = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1) * transform.to_matrix().inverse();
-    let pixel = |p: Vec3| {
-        let clip = clip_from_world * p.extend(1.0);
-        let ndc = clip.truncate() / clip.w;
-        [(0.5 + 0.5 * ndc.x) * size as f32, (0.5 - 0.5 * ndc.y) * size as f32]
-    };
-    let ends: Vec<[[f32; 2]; 2]> = needles.iter().map(|n| [pixel(n.base), pixel(n.tip)]).collect();
+    let FiveNeedles {
+        mut renderer,
+        target,
+        camera,
+        handle,
+        ends,
+        size,
+        ..
+    } = FiveNeedles::new(radius);
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
     // A table of line opacity scales whose pixel sizes bracket this view's

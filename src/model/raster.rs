@@ -22,6 +22,13 @@
 //! square at two offsets across the width (Gauss–Legendre; the length is
 //! piecewise linear in the offset, so two nodes are exact wherever the
 //! strip crosses no corner of the square), times the width.
+//!
+//! At a pixel error over one a line may stand for something wider than a
+//! pixel: a branch, a needle or a bundle up to the pixel error wide. Its
+//! strip is then as wide as what it stands for (up to
+//! [`MAX_STRIP_WIDTH`]) and each pixel takes the strip's exact area there
+//! times the line's opacity ([`line_pixel_coverage`]), where a one-pixel
+//! line would lose the rest.
 
 /// How far past its strip's half width (and past its ends) a line's quad
 /// reaches, in pixels: a pixel the strip touches has its centre within
@@ -30,6 +37,10 @@
 /// a pixel lies in the quad, so the pixel's coverage is what the fragment
 /// writes, not a share of it.
 pub const LINE_QUAD_MARGIN: f32 = 1.25;
+
+/// The widest strip a line is drawn as, in pixels: a wider line (a pixel
+/// error over eight) keeps this width.
+pub const MAX_STRIP_WIDTH: f32 = 8.0;
 
 /// Length of the segment `a`–`b` inside the unit square whose lower corner
 /// is `pixel` (all in pixels): clipped to the square's four sides
@@ -90,9 +101,102 @@ impl ClippedSegment {
 /// coverage by a line of opacity `w` (coverage per pixel of its length) is
 /// `min(w · strip_pixel_coverage(a, b, w, pixel), 1)`; summed over every
 /// pixel it is the segment's length. A degenerate segment covers nothing.
-/// ([`StripInPixels`] prepares one strip for many pixels.)
+/// The width is clamped to `[0, 1]`. ([`StripInPixels`]
+/// prepares one strip for many pixels; [`line_pixel_coverage`] is a
+/// line's coverage of a pixel, wide or thin.)
 pub fn strip_pixel_coverage(a: [f32; 2], b: [f32; 2], width: f32, pixel: [f32; 2]) -> f32 {
     StripInPixels::new(a, b, width).coverage(pixel)
+}
+
+/// The strip a line is drawn as, in pixels: its own `width` where it is
+/// wider than a pixel (at most [`MAX_STRIP_WIDTH`]), else its `opacity`
+/// (a line thinner than a pixel covers a strip as wide as its opacity
+/// whole, so its fade and its layers thin the strip). CPU reference of the
+/// shader's `strip_of`.
+pub fn line_strip_width(opacity: f32, width: f32) -> f32 {
+    if width > 1.0 {
+        width.min(MAX_STRIP_WIDTH)
+    } else {
+        opacity.clamp(0.0, 1.0)
+    }
+}
+
+/// The coverage of the pixel at `pixel` by a line from `a` to `b` (pixels)
+/// of `opacity` that stands for something `width` pixels wide. A line
+/// thinner than a pixel: `min(opacity · strip_pixel_coverage(a, b,
+/// opacity, pixel), 1)`. A wider one: its strip of [`line_strip_width`]
+/// covers the pixel by its exact area there ([`strip_area_in_pixel`]),
+/// times the opacity (what the line's fade and layers leave, at most 1).
+/// Summed over the pixels it is the segment's length times the opacity,
+/// times the strip's width where that is over a pixel. CPU reference of
+/// the shader's `line_coverage`.
+pub fn line_pixel_coverage(a: [f32; 2], b: [f32; 2], opacity: f32, width: f32, pixel: [f32; 2]) -> f32 {
+    let opacity = opacity.clamp(0.0, 1.0);
+    if width > 1.0 {
+        (opacity * strip_area_in_pixel(a, b, line_strip_width(opacity, width), pixel)).min(1.0)
+    } else {
+        (opacity * strip_pixel_coverage(a, b, opacity, pixel)).min(1.0)
+    }
+}
+
+/// The exact area, inside the unit square at `pixel`, of the rectangle of
+/// `width` (pixels) centred on the segment `a`–`b`, its ends square:
+/// the rectangle clipped to the square's four sides (Sutherland–Hodgman)
+/// and measured by the shoelace formula. A wide strip's quadrature would
+/// err wherever a column's edge cuts one of its pieces, in every pixel
+/// inside a vertical trunk's strip; this does not. 0 for a degenerate
+/// segment or a width of 0 or less.
+pub fn strip_area_in_pixel(a: [f32; 2], b: [f32; 2], width: f32, pixel: [f32; 2]) -> f32 {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
+    if !(length > 1e-6) || !(width > 0.0) {
+        return 0.0;
+    }
+    let half = 0.5 * width;
+    let n = [-d[1] / length * half, d[0] / length * half];
+    let mut polygon = [[0.0f32; 2]; 8];
+    polygon[..4].copy_from_slice(&[
+        [a[0] + n[0], a[1] + n[1]],
+        [b[0] + n[0], b[1] + n[1]],
+        [b[0] - n[0], b[1] - n[1]],
+        [a[0] - n[0], a[1] - n[1]],
+    ]);
+    let mut count = 4;
+    // Each side of the square: keep where `sign · (p[axis] − bound) ≤ 0`.
+    for (axis, bound, sign) in [
+        (0, pixel[0], -1.0f32),
+        (0, pixel[0] + 1.0, 1.0),
+        (1, pixel[1], -1.0),
+        (1, pixel[1] + 1.0, 1.0),
+    ] {
+        let mut clipped = [[0.0f32; 2]; 8];
+        let mut kept = 0;
+        for i in 0..count {
+            let p = polygon[i];
+            let q = polygon[(i + 1) % count];
+            let (dp, dq) = (sign * (p[axis] - bound), sign * (q[axis] - bound));
+            if dp <= 0.0 {
+                clipped[kept] = p;
+                kept += 1;
+            }
+            if (dp < 0.0 && dq > 0.0) || (dp > 0.0 && dq < 0.0) {
+                let t = dp / (dp - dq);
+                clipped[kept] = [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])];
+                kept += 1;
+            }
+        }
+        polygon = clipped;
+        count = kept;
+        if count < 3 {
+            return 0.0;
+        }
+    }
+    let mut twice = 0.0;
+    for i in 0..count {
+        let (p, q) = (polygon[i], polygon[(i + 1) % count]);
+        twice += p[0] * q[1] - q[0] * p[1];
+    }
+    (0.5 * twice.abs()).min(1.0)
 }
 
 /// One strip prepared for the many pixels it touches: its segments at the
@@ -173,7 +277,7 @@ pub fn line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32) -> [f
     } else {
         [1.0, 0.0]
     };
-    let reach = 0.5 * width.clamp(0.0, 1.0) + LINE_QUAD_MARGIN;
+    let reach = 0.5 * width.clamp(0.0, MAX_STRIP_WIDTH) + LINE_QUAD_MARGIN;
     let (end, sign_along) = if at_b { (b, 1.0) } else { (a, -1.0) };
     let sign_across = if left { 1.0 } else { -1.0 };
     let across = [-along[1], along[0]];
@@ -275,6 +379,58 @@ mod tests {
     }
 
     proptest! {
+        /// A line wider than a pixel covers the pixels inside its strip
+        /// wholly (times its opacity) and, summed, its strip's area times
+        /// its opacity; a thinner one keeps the thin rule, and at a width
+        /// of one pixel both rules agree.
+        #[test]
+        fn a_wide_line_covers_its_strips_area(
+            ax in 2.0f32..6.0, ay in 2.0f32..6.0, angle in 0.0f32..std::f32::consts::TAU, length in 1.0f32..5.0,
+            width in 1.01f32..3.5, opacity in 0.05f32..0.7,
+        ) {
+            let a = [ax, ay];
+            let b = [ax + length * angle.cos(), ay + length * angle.sin()];
+            let (mut sum, mut thin_sum) = (0.0, 0.0);
+            for x in -6..14 {
+                for y in -6..14 {
+                    let pixel = [x as f32, y as f32];
+                    let got = line_pixel_coverage(a, b, opacity, width, pixel);
+                    prop_assert!((0.0..=opacity + 1e-6).contains(&got));
+                    // Exact: the area a dense grid of samples finds; nothing
+                    // in a square the rectangle does not reach.
+                    if distance_to_segment(a, b, [pixel[0] + 0.5, pixel[1] + 0.5]) > 0.5 * width + 0.75 {
+                        prop_assert_eq!(got, 0.0);
+                    } else {
+                        let want = opacity * width * sampled(a, b, width, pixel);
+                        prop_assert!((got - want).abs() < 0.01, "pixel {pixel:?}: {got} vs {want}");
+                    }
+                    sum += got;
+                    // Wholly inside the strip (its square's corners within
+                    // the half width, off the ends): the opacity itself.
+                    let corners = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]].map(|c| [pixel[0] + c[0], pixel[1] + c[1]]);
+                    let d = [b[0] - a[0], b[1] - a[1]];
+                    let inside = corners.iter().all(|p| {
+                        let r = [p[0] - a[0], p[1] - a[1]];
+                        let t = (r[0] * d[0] + r[1] * d[1]) / length;
+                        let s = (-r[0] * d[1] + r[1] * d[0]) / length;
+                        (0.0..=length).contains(&t) && s.abs() <= 0.5 * width
+                    });
+                    if inside {
+                        prop_assert!((got - opacity).abs() < 1e-3, "pixel {pixel:?} inside: {got}");
+                    }
+                    let thin = line_pixel_coverage(a, b, opacity, 0.5, pixel);
+                    prop_assert!((thin - (opacity * strip_pixel_coverage(a, b, opacity, pixel)).min(1.0)).abs() < 1e-6);
+                    thin_sum += thin;
+                    // At a width of one pixel the wide rule is the thin one
+                    // at full opacity, within the thin rule's quadrature.
+                    let at_one = line_pixel_coverage(a, b, 1.0, 1.0, pixel);
+                    prop_assert!((at_one - line_pixel_coverage(a, b, 1.0, 1.0 + 1e-4, pixel)).abs() < 0.075);
+                }
+            }
+            prop_assert!((sum - opacity * width * length).abs() < 2e-3 * width * length, "{sum} vs {}", opacity * width * length);
+            prop_assert!((thin_sum - opacity * length).abs() < 2e-3 * length);
+        }
+
         /// The nodes follow the strip's exact area in a pixel within a few
         /// hundredths of a pixel (exact where the strip crosses no corner),
         /// and summed over the pixels it keeps the segment's length.
@@ -311,13 +467,13 @@ mod tests {
         /// written whole.
         #[test]
         fn the_quad_holds_every_sample_of_every_pixel_the_strip_touches(
-            ax in 3.0f32..5.0, ay in 3.0f32..5.0, angle in 0.0f32..std::f32::consts::TAU, length in 0.0f32..3.0, width in 0.0f32..1.0,
+            ax in 3.0f32..5.0, ay in 3.0f32..5.0, angle in 0.0f32..std::f32::consts::TAU, length in 0.0f32..3.0, width in 0.0f32..3.0,
         ) {
             let a = [ax, ay];
             let b = [ax + length * angle.cos(), ay + length * angle.sin()];
             let samples = [[0.375, 0.125], [0.875, 0.375], [0.125, 0.625], [0.625, 0.875], [0.5, 0.5]];
-            for x in 0..10 {
-                for y in 0..10 {
+            for x in -1..11 {
+                for y in -1..11 {
                     let pixel = [x as f32, y as f32];
                     // Every pixel whose square reaches the strip (a superset
                     // of those it covers).

@@ -98,6 +98,8 @@ const WIND_GUST_HZ: vec2<f32> = vec2<f32>(0.071, 0.173);
 const LINE_VERTICES: u32 = 6u;
 // `model::raster::LINE_QUAD_MARGIN`.
 const LINE_QUAD_MARGIN: f32 = 1.25;
+// `model::raster::MAX_STRIP_WIDTH`.
+const MAX_STRIP_WIDTH: f32 = 8.0;
 #else
 const LINE_VERTICES: u32 = 2u;
 #endif
@@ -151,6 +153,11 @@ struct VertexOutput {
     // vertex stage placed them: the fragment covers its pixel by the
     // strip's area there.
     @location(12) @interpolate(flat) line_ends: vec4<f32>,
+    // How wide (pixels) what the line stands for is, where that is over a
+    // pixel (its strip is then that wide, each pixel covered by the
+    // strip's area times the line's opacity); else 0 (the strip is the
+    // opacity wide).
+    @location(13) @interpolate(flat) line_width: f32,
 #endif
 }
 
@@ -397,7 +404,7 @@ fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_loca
         along = d / span;
     }
     let across = vec2<f32>(-along.y, along.x);
-    let reach = 0.5 * clamp(out.color.a, 0.0, 1.0) + LINE_QUAD_MARGIN;
+    let reach = 0.5 * strip_of(out.color.a, out.line_width) + LINE_QUAD_MARGIN;
     let pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
     let ndc = 2.0 * (pixel - view.viewport.xy) / view.viewport.zw - vec2<f32>(1.0);
     result.position = vec4<f32>(vec2<f32>(ndc.x, -ndc.y) * here.w, here.z, here.w);
@@ -406,6 +413,44 @@ fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_loca
 #else
     return out;
 #endif
+}
+
+// `out` (a line's vertex) standing for something `pixels` wide, where
+// the view covers pixels by its lines' areas: wider than a pixel, its
+// strip is that wide (`strip_of`); else the opacity wide. Set before
+// `with_line_quad`, which reaches past the strip.
+fn with_line_width(out: VertexOutput, pixels: f32) -> VertexOutput {
+#ifdef CONIFER_LINE_QUADS
+    var result = out;
+    result.line_width = select(0.0, pixels, pixels > 1.0);
+    return result;
+#else
+    return out;
+#endif
+}
+
+#ifdef CONIFER_LINE_QUADS
+// The strip (pixels) a line of `opacity` standing for something `width`
+// pixels wide covers: that width where it is over a pixel (at most
+// `MAX_STRIP_WIDTH`), else the opacity (CPU reference:
+// `model::raster::line_strip_width`).
+fn strip_of(opacity: f32, width: f32) -> f32 {
+    if width > 1.0 {
+        return min(width, MAX_STRIP_WIDTH);
+    }
+    return clamp(opacity, 0.0, 1.0);
+}
+#endif
+
+// A line of equivalent width `width` (metres) at `spatial_error`, in
+// pixels, unclamped: what it stands for, where the line's opacity rule
+// keeps its area (not the paper's, whose lines are one pixel at most); 0
+// under the paper's rule.
+fn line_pixels(lod: InstanceLod, spatial_error: f32, width: f32) -> f32 {
+    if ((lod.code >> LOD_OPACITY_SHIFT) & 3u) == 0u {
+        return 0.0;
+    }
+    return width * lod.pixel_error / max(spatial_error, 1e-12);
 }
 
 // The world normal `normal` of a surface at (calm) world point `world`,
@@ -874,13 +919,15 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         return culled();
     }
     let width = log_decode(own);
-    let alpha = min(line_alpha(lod, spatial_error, width, width) * line_calibration(lod, spatial_error), 1.0) * lod.transition;
+    let scale = line_calibration(lod, spatial_error);
+    let alpha = min(line_alpha(lod, spatial_error, width, width) * scale, 1.0) * lod.transition;
     let base = needle_base(grid, k);
     let tip = needle_tip(grid, k);
     let at_end = line_vertex_at_end(vertex_index);
     let position = select(base, tip, at_end);
     var out = finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
     out.alignment = 1.0;
+    out = with_line_width(out, line_pixels(lod, spatial_error, width) * scale);
     return with_line_quad(swayed_line(out, base, tip, world_from_local, at_end), base, tip, world_from_local, vertex_index);
 #endif
 
@@ -915,7 +962,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     // The width code's top 12 bits (`model::compact::CompactSpecies::merged_width_code`).
     let width = log_decode(((a >> 24u) | (((b >> 24u) & 0xfu) << 8u)) << 4u);
-    let alpha = min(merged_line_alpha(lod, line_error, width, log_decode(own)) * line_calibration(lod, line_error), 1.0);
+    let scale = line_calibration(lod, line_error);
+    let alpha = min(merged_line_alpha(lod, line_error, width, log_decode(own)) * scale, 1.0);
+    // Wider than a pixel its strip keeps its area, under the
+    // area-preserving rule (the coverage rule's opacity saturates instead).
+    let merged_pixels = select(0.0, line_pixels(lod, line_error, width) * scale, ((lod.code >> LOD_OPACITY_SHIFT) & 3u) == 1u);
     let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
     let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
     let start = end_position(grid, a);
@@ -925,6 +976,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     var out = finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
     // `model::compact::CompactSpecies::merged_alignment`.
     out.alignment = f32(b >> 28u) / ALIGNMENT_STEPS;
+    out = with_line_width(out, merged_pixels);
     return with_line_quad(swayed_line(out, start, end, world_from_local, at_end), start, end, world_from_local, vertex_index);
 #endif
 
@@ -944,9 +996,14 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     // Scaled as the calibration measured, by the line's size and opacity:
     // a twig's line blends with the needle lines around it as if they fell
-    // independently, where the twig lies inside its own needles.
+    // independently, where the twig lies inside its own needles. Wood
+    // wider than a pixel (a line at a pixel error over 1) goes to its own
+    // width by two pixels: it stands in front of or behind the needles,
+    // not among them.
     let unscaled = line_alpha(lod, wood_error, width, width);
-    var alpha = min(unscaled * wood_line_calibration(lod, wood_error, unscaled), 1.0);
+    let pixels = line_pixels(lod, wood_error, width);
+    let scale = mix(wood_line_calibration(lod, wood_error, unscaled), 1.0, clamp(pixels - 1.0, 0.0, 1.0));
+    var alpha = min(max(unscaled, pixels) * scale, 1.0);
     // Sections at least two pixels long: a line shorter than a pixel may
     // light none (CPU reference: `model::wind::wood_line_sections`); the
     // segment's slots past them are not drawn.
@@ -990,6 +1047,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
     var out = finish(position, b - a, world_from_local, color);
     out.alignment = 1.0;
+    out = with_line_width(out, pixels * scale);
     return with_height(with_line_quad(swayed_line(out, a, b, world_from_local, at_end), a, b, world_from_local, vertex_index), position.y);
 #endif
 
@@ -1200,11 +1258,58 @@ fn segment_length_in_pixel(a: vec2<f32>, b: vec2<f32>, pixel: vec2<f32>) -> f32 
     return max(t1 - t0, 0.0) * length(d);
 }
 
-// The pixel at `frag` covered by the line of `opacity` (its strip's width
-// in pixels) between `ends` (pixels): the strip's area in the pixel's
-// square, each quarter pixel of width at its two Gauss–Legendre nodes
-// (CPU reference: `model::raster::strip_pixel_coverage`).
-fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32) -> f32 {
+// The exact area inside the unit square at `pixel` of the rectangle of
+// `width` pixels on the segment `a`–`b`: clipped to the square's sides,
+// measured by the shoelace formula (CPU reference:
+// `model::raster::strip_area_in_pixel`).
+fn strip_area_in_pixel(a: vec2<f32>, b: vec2<f32>, width: f32, pixel: vec2<f32>) -> f32 {
+    let d = b - a;
+    let n = vec2<f32>(-d.y, d.x) * (0.5 * width / length(d));
+    var polygon = array<vec2<f32>, 8>(a + n, b + n, b - n, a - n, vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0), vec2<f32>(0.0));
+    var count = 4u;
+    for (var side = 0u; side < 4u; side += 1u) {
+        let axis = side / 2u;
+        let sign = select(-1.0, 1.0, (side & 1u) == 1u);
+        let bound = pixel[axis] + f32(side & 1u);
+        var clipped: array<vec2<f32>, 8>;
+        var kept = 0u;
+        for (var i = 0u; i < count; i += 1u) {
+            let p = polygon[i];
+            let q = polygon[(i + 1u) % count];
+            let dp = sign * (p[axis] - bound);
+            let dq = sign * (q[axis] - bound);
+            if dp <= 0.0 && kept < 8u {
+                clipped[kept] = p;
+                kept += 1u;
+            }
+            if ((dp < 0.0 && dq > 0.0) || (dp > 0.0 && dq < 0.0)) && kept < 8u {
+                clipped[kept] = mix(p, q, dp / (dp - dq));
+                kept += 1u;
+            }
+        }
+        polygon = clipped;
+        count = kept;
+        if count < 3u {
+            return 0.0;
+        }
+    }
+    var twice = 0.0;
+    for (var i = 0u; i < count; i += 1u) {
+        let p = polygon[i];
+        let q = polygon[(i + 1u) % count];
+        twice += p.x * q.y - q.x * p.y;
+    }
+    return min(0.5 * abs(twice), 1.0);
+}
+
+// The pixel at `frag` covered by the line of `opacity` between `ends`
+// (pixels) standing for something `line_width` pixels wide: thinner than a
+// pixel, the area in the pixel's square of a strip as wide as the
+// opacity, each quarter pixel of width at its two Gauss–Legendre nodes
+// (CPU reference: `model::raster::strip_pixel_coverage`); wider, the
+// opacity times the exact area of a strip that wide
+// (`model::raster::line_pixel_coverage`).
+fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32, line_width: f32) -> f32 {
     let a = ends.xy;
     let b = ends.zw;
     let d = b - a;
@@ -1213,6 +1318,9 @@ fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32) -> f32 {
         return 0.0;
     }
     let pixel = floor(frag);
+    if line_width > 1.0 {
+        return min(clamp(opacity, 0.0, 1.0) * strip_area_in_pixel(a, b, strip_of(opacity, line_width), pixel), 1.0);
+    }
     let normal = vec2<f32>(-d.y, d.x) / span;
     let width = clamp(opacity, 0.0, 1.0);
     let pieces = max(u32(ceil(width * 4.0)), 1u);
@@ -1249,7 +1357,7 @@ struct MotionOutput {
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOutput {
 #ifdef CONIFER_LINE_QUADS
-    let opacity = line_coverage(in.position.xy, in.line_ends, in.color.a);
+    let opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width);
 #else
     let opacity = in.color.a;
 #endif
@@ -1918,7 +2026,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The pixel takes the line's strip's area in it; a quad's corners
     // reach past the strip (`LINE_QUAD_MARGIN`), and most of its pixels
     // lie off it.
-    let line_opacity = line_coverage(in.position.xy, in.line_ends, in.color.a);
+    let line_opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width);
     if !(line_opacity > 1.0 / 1024.0) {
         discard;
     }

@@ -651,6 +651,13 @@ mod tests {
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "sky_visibility", steps);
     }
 
+    /// The shader draws strips up to `model::raster`'s widest.
+    #[test]
+    fn the_shader_has_the_widest_strip() {
+        let strip = crate::model::raster::MAX_STRIP_WIDTH;
+        assert!(include_str!("conifer_compact.wgsl").contains(&format!("const MAX_STRIP_WIDTH: f32 = {strip:.1};")));
+    }
+
     /// The shader's wood visibility table is as long as `model::impostor`'s.
     #[test]
     fn the_shader_has_the_wood_visibilitys_length() {
