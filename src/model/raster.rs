@@ -149,7 +149,7 @@ pub fn line_pixel_coverage(a: [f32; 2], b: [f32; 2], opacity: f32, width: f32, p
 pub fn strip_area_in_pixel(a: [f32; 2], b: [f32; 2], width: f32, pixel: [f32; 2]) -> f32 {
     let d = [b[0] - a[0], b[1] - a[1]];
     let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
-    if !(length > 1e-6) || !(width > 0.0) {
+    if length.is_nan() || length <= 1e-6 || width.is_nan() || width <= 0.0 {
         return 0.0;
     }
     let half = 0.5 * width;
