@@ -160,3 +160,58 @@ fn overlay_colours_each_representation() {
     );
     assert!(far.2 > 20 && far.2 > 2 * (far.0 + far.1), "merged lines warm: {far:?}");
 }
+
+/// A shader that does not compile fails the headless frame, naming its
+/// pipeline: Bevy logs it and draws on without the pipeline, and the
+/// pictures measured from such frames would be missing what it draws.
+#[test]
+fn a_pipeline_that_fails_to_compile_fails_the_frame() {
+    use bevy::render::render_resource::{CachedComputePipelineId, ComputePipelineDescriptor, PipelineCache};
+    use bevy::render::{ExtractSchedule, MainWorld, RenderApp};
+    use bevy::shader::Shader;
+    use bevy_conifer_lod::plugin::headless::HeadlessError;
+
+    #[derive(Resource, Clone)]
+    struct Broken(Handle<Shader>);
+    #[derive(Resource, Default)]
+    struct Queued(Option<CachedComputePipelineId>);
+
+    fn queue_broken(main_world: Res<MainWorld>, cache: Res<PipelineCache>, mut queued: ResMut<Queued>) {
+        if queued.0.is_none()
+            && let Some(broken) = main_world.get_resource::<Broken>()
+        {
+            queued.0 = Some(cache.queue_compute_pipeline(ComputePipelineDescriptor {
+                label: Some("deliberately broken".into()),
+                shader: broken.0.clone(),
+                entry_point: Some("main".into()),
+                ..default()
+            }));
+        }
+    }
+
+    let _turn = common::gpu_turn();
+    let mut renderer = HeadlessRenderer::with_setup(".", |app| {
+        let shader = app.world_mut().resource_mut::<Assets<Shader>>().add(Shader::from_wgsl(
+            "@compute @workgroup_size(1) fn main() { let x: u32 = ; }",
+            "broken.wgsl",
+        ));
+        app.insert_resource(Broken(shader));
+        app.sub_app_mut(RenderApp)
+            .init_resource::<Queued>()
+            .add_systems(ExtractSchedule, queue_broken);
+    });
+    let mut failure = None;
+    for _ in 0..10 {
+        if let Err(error) = renderer.update() {
+            failure = Some(error);
+            break;
+        }
+    }
+    match failure {
+        Some(HeadlessError::Pipeline(label, message)) => {
+            assert_eq!(label, "deliberately broken");
+            assert!(!message.is_empty());
+        }
+        other => panic!("expected the broken pipeline to fail the frame, got {other:?}"),
+    }
+}

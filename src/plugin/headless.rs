@@ -37,6 +37,12 @@ pub enum HeadlessError {
     /// The assets did not load within the frames allowed.
     #[error("assets did not load in {0} frames")]
     NotLoaded(u32),
+    /// A render or compute pipeline failed to compile (a shader that does
+    /// not parse or validate): the frames would be drawn without it, and
+    /// every figure read from them would be wrong. Its label and Bevy's
+    /// error.
+    #[error("pipeline {0} failed: {1}")]
+    Pipeline(String, String),
 }
 
 /// Screenshots asked for by [`HeadlessRenderer::request_screenshots`].
@@ -109,6 +115,44 @@ fn float_screenshot_as_srgb(image: &Image) -> Result<image::RgbaImage, HeadlessE
     Ok(picture)
 }
 
+/// The first pipeline (its label and Bevy's error) whose shader failed to
+/// compile, shared by the render world, which finds it, and the renderer,
+/// which reports it.
+#[derive(Resource, Clone, Default)]
+struct PipelineFailure(Arc<Mutex<Option<(String, String)>>>);
+
+/// Looks through the render world's pipeline cache for a pipeline whose
+/// shader failed to compile. Bevy logs such a failure and draws on
+/// without the pipeline (a missing import in a WGSL file drops every draw
+/// that uses it); a headless frame, whose pictures are measured, fails
+/// instead. A shader not loaded yet is not a failure (Bevy retries it).
+fn find_pipeline_failure(cache: Res<bevy::render::render_resource::PipelineCache>, failure: Res<PipelineFailure>) {
+    use bevy::render::render_resource::{CachedPipelineState, PipelineDescriptor};
+    use bevy::shader::ShaderCacheError;
+    let mut found = failure.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if found.is_some() {
+        return;
+    }
+    for pipeline in cache.pipelines() {
+        let CachedPipelineState::Err(error) = &pipeline.state else {
+            continue;
+        };
+        if matches!(
+            error,
+            ShaderCacheError::ShaderNotLoaded(_) | ShaderCacheError::ShaderImportNotYetAvailable
+        ) {
+            continue;
+        }
+        let label = match &pipeline.descriptor {
+            PipelineDescriptor::RenderPipelineDescriptor(d) => d.label.clone(),
+            PipelineDescriptor::ComputePipelineDescriptor(d) => d.label.clone(),
+        };
+        let label = label.map_or_else(|| "(unnamed)".to_string(), |l| l.to_string());
+        *found = Some((label, error.to_string()));
+        return;
+    }
+}
+
 /// A Bevy app with the conifer plugin, rendering to images, driven by hand.
 pub struct HeadlessRenderer {
     apps: SubApps,
@@ -154,6 +198,14 @@ impl HeadlessRenderer {
         // Pictures repeat: calm, unless the caller's setup brings wind.
         .insert_resource(ConiferWind::CALM);
         setup(&mut app);
+        let failure = PipelineFailure::default();
+        app.insert_resource(failure.clone());
+        if let Some(render) = app.get_sub_app_mut(bevy::render::RenderApp) {
+            render.insert_resource(failure).add_systems(
+                bevy::render::Render,
+                find_pipeline_failure.in_set(bevy::render::RenderSystems::Cleanup),
+            );
+        }
         app.finish();
         app.cleanup();
         Self {
@@ -228,6 +280,7 @@ impl HeadlessRenderer {
     /// Runs one frame and waits for the GPU to finish it.
     pub fn update(&mut self) -> Result<(), HeadlessError> {
         self.apps.update();
+        self.pipeline_failure()?;
         self.apps
             .main
             .world()
@@ -239,6 +292,22 @@ impl HeadlessRenderer {
             })
             .map_err(|e| HeadlessError::Poll(e.to_string()))?;
         Ok(())
+    }
+
+    /// The first pipeline whose shader failed to compile, as an error
+    /// ([`HeadlessError::Pipeline`], found by the render world's
+    /// `find_pipeline_failure`).
+    fn pipeline_failure(&self) -> Result<(), HeadlessError> {
+        let failure = self.apps.main.world().resource::<PipelineFailure>();
+        match failure
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+        {
+            Some((label, error)) => Err(HeadlessError::Pipeline(label, error)),
+            None => Ok(()),
+        }
     }
 
     /// Renders frames until `target`'s screenshot arrives (at most
