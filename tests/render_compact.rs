@@ -701,7 +701,6 @@ struct FiveNeedles {
     handle: Handle<ConiferSpecies>,
     /// Each needle's ends in pixels (the camera's projection).
     ends: Vec<[[f32; 2]; 2]>,
-    size: u32,
     _sun: Entity,
 }
 
@@ -772,9 +771,54 @@ impl FiveNeedles {
             camera,
             handle,
             ends,
-            size,
             _sun: sun,
         }
+    }
+}
+
+/// A picture's alpha against the CPU's: each pixel's `1 − Π(1 − c)` over
+/// the lines between `ends` (pixels), `c` what `coverage(a, b, pixel)`
+/// gives each.
+struct AlphaAgainstCpu {
+    /// Mean |Δ| over the pixels either covers.
+    mean: f32,
+    /// Largest |Δ|.
+    worst: f32,
+    /// Pixels either covers.
+    pixels: usize,
+    /// Alpha summed over the picture.
+    drawn: f32,
+    /// The CPU's alpha summed.
+    expected: f32,
+}
+
+impl AlphaAgainstCpu {
+    fn of(
+        picture: &image::RgbaImage,
+        ends: &[[[f32; 2]; 2]],
+        coverage: impl Fn([f32; 2], [f32; 2], [f32; 2]) -> f32,
+    ) -> Self {
+        let mut result = Self {
+            mean: 0.0,
+            worst: 0.0,
+            pixels: 0,
+            drawn: 0.0,
+            expected: 0.0,
+        };
+        for (x, y, pixel) in picture.enumerate_pixels() {
+            let square = [x as f32, y as f32];
+            let want = 1.0 - ends.iter().map(|&[a, b]| 1.0 - coverage(a, b, square)).product::<f32>();
+            let got = f32::from(pixel[3]) / 255.0;
+            if want > 0.0 || got > 0.0 {
+                result.mean += (got - want).abs();
+                result.worst = result.worst.max((got - want).abs());
+                result.pixels += 1;
+            }
+            result.drawn += got;
+            result.expected += want;
+        }
+        result.mean /= result.pixels.max(1) as f32;
+        result
     }
 }
 
@@ -795,7 +839,6 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
         target,
         handle,
         ends,
-        size,
         ..
     } = FiveNeedles::new(radius);
     let pixel_error = 3.0;
@@ -820,26 +863,15 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
         width > 1.5 && width < 2.5 && 2.0 * radius < spatial_error,
         "lines about two pixels wide: {width}"
     );
-    let (mut sum, mut worst, mut pixels, mut drawn, mut expected) = (0.0f32, 0.0f32, 0usize, 0.0f32, 0.0f32);
-    for y in 0..size {
-        for x in 0..size {
-            let square = [x as f32, y as f32];
-            let want = 1.0
-                - ends
-                    .iter()
-                    .map(|&[a, b]| 1.0 - line_pixel_coverage(a, b, 1.0, width, square))
-                    .product::<f32>();
-            let got = f32::from(picture.get_pixel(x, y)[3]) / 255.0;
-            if want > 0.0 || got > 0.0 {
-                sum += (got - want).abs();
-                worst = worst.max((got - want).abs());
-                pixels += 1;
-            }
-            drawn += got;
-            expected += want;
-        }
-    }
-    let mean = sum / pixels.max(1) as f32;
+    let AlphaAgainstCpu {
+        mean,
+        worst,
+        pixels,
+        drawn,
+        expected,
+    } = AlphaAgainstCpu::of(&picture, &ends, |a, b, square| {
+        line_pixel_coverage(a, b, 1.0, width, square)
+    });
     println!(
         "wide lines {width:.3} pixels: alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
     );
@@ -881,7 +913,6 @@ fn lines_cover_each_pixel_by_their_strips_area() {
         camera,
         handle,
         ends,
-        size,
         ..
     } = FiveNeedles::new(radius);
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
@@ -934,26 +965,15 @@ fn lines_cover_each_pixel_by_their_strips_area() {
             opacity > 0.1 && opacity < 0.35,
             "the needles are lines 0.1–0.35 pixels wide: {opacity}"
         );
-        let (mut sum, mut worst, mut pixels, mut drawn, mut expected) = (0.0f32, 0.0f32, 0usize, 0.0f32, 0.0f32);
-        for y in 0..size {
-            for x in 0..size {
-                let square = [x as f32, y as f32];
-                let want = 1.0
-                    - ends
-                        .iter()
-                        .map(|&[a, b]| 1.0 - (opacity * strip_pixel_coverage(a, b, opacity, square)).min(1.0))
-                        .product::<f32>();
-                let got = f32::from(picture.get_pixel(x, y)[3]) / 255.0;
-                if want > 0.0 || got > 0.0 {
-                    sum += (got - want).abs();
-                    worst = worst.max((got - want).abs());
-                    pixels += 1;
-                }
-                drawn += got;
-                expected += want;
-            }
-        }
-        let mean = sum / pixels.max(1) as f32;
+        let AlphaAgainstCpu {
+            mean,
+            worst,
+            pixels,
+            drawn,
+            expected,
+        } = AlphaAgainstCpu::of(&picture, &ends, |a, b, square| {
+            (opacity * strip_pixel_coverage(a, b, opacity, square)).min(1.0)
+        });
         println!(
             "{raster:?}, scale {scale:.3}: opacity {opacity:.3}; alpha summed {drawn:.2} (reference {expected:.2}); \
              mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
