@@ -726,14 +726,13 @@ fn bark_albedo(height: f32) -> vec3<f32> {
 
 // A line of equivalent width `width` (metres) as coverage of its one-pixel
 // line: the paper's `T = 2R/e` (`paper_width` is 2R for an original line,
-// e(X) for a merged one), or the width over the pixel size.
+// e(X) for a merged one), or the width over the pixel size
+// (`line_pixels`), at most 1.
 fn line_alpha(lod: InstanceLod, spatial_error: f32, width: f32, paper_width: f32) -> f32 {
-    let rule = (lod.code >> LOD_OPACITY_SHIFT) & 3u;
-    let e = max(spatial_error, 1e-12);
-    if rule == 0u {
-        return min(paper_width / e, 1.0);
+    if ((lod.code >> LOD_OPACITY_SHIFT) & 3u) == 0u {
+        return min(paper_width / max(spatial_error, 1e-12), 1.0);
     }
-    return min(width * lod.pixel_error / e, 1.0);
+    return min(line_pixels(lod, spatial_error, width), 1.0);
 }
 
 // A merged line: as `line_alpha`, except under the coverage rule (2),
