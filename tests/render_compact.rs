@@ -884,6 +884,155 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
     assert!(mean < 0.005 && worst < 0.02, "mean {mean}, largest {worst}");
 }
 
+/// A branch drawn as wood lines wider than a pixel covers its pixels as
+/// one strip (`model::raster::joined_line_pixel_coverage`): six straight
+/// segments end to end, one 0.31 m (2.4 pixels) long, 0.324 m thick at
+/// 20 m and pixel error 3 (lines about 2.5 pixels wide), tilted 17° so
+/// that every joint falls inside pixels. Each pixel's alpha is the CPU's
+/// joined composition within a few levels of 255; blended as six
+/// separate strips (what the area raster drew before) the pixels at the
+/// joints would be a quarter short, pale stripes across the branch.
+#[test]
+fn a_wide_branch_covers_its_pixels_as_one_strip() {
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy_conifer_lod::model::raster::{LineJoints, joined_line_pixel_coverage};
+    use bevy_conifer_lod::model::{FoliageMaterial, Needle, Sphere, TreeInput, WoodSegment};
+    let _turn = common::gpu_turn();
+    let size = 128u32;
+    let radius = 0.162;
+    let (from, to) = (Vec3::new(-2.6, -1.0, 0.0), Vec3::new(2.6, 0.6, 0.0));
+    let stops = [0.0f32, 0.13, 0.31, 0.52, 0.58, 0.8, 1.0];
+    let wood: Vec<WoodSegment> = stops
+        .windows(2)
+        .map(|t| WoodSegment {
+            start: from.lerp(to, t[0]),
+            end: from.lerp(to, t[1]),
+            start_radius: radius,
+            end_radius: radius,
+        })
+        .collect();
+    // One needle, out of the picture: a record has foliage.
+    let input = TreeInput {
+        name: "one branch".into(),
+        needles: vec![Needle {
+            base: Vec3::new(0.0, 14.0, 0.0),
+            tip: Vec3::new(0.0, 14.05, 0.0),
+            radius: 0.001,
+            normal: Vec3::Z,
+            group: 0,
+        }],
+        wood: wood.clone(),
+        wood_mesh: Default::default(),
+        material: FoliageMaterial::default(),
+    };
+    let record = bake(&input, &BakeOptions::default(), &()).unwrap();
+    let mut species = ConiferSpecies::from_record(record).unwrap();
+    species.line_calibration = None;
+    let (mut renderer, target, _sun) = common::sun_lit_renderer(size);
+    let pixel_error = 3.0;
+    let world = renderer.world_mut();
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+    world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+    let eye = Vec3::new(0.0, 0.0, 20.0);
+    let fov = 45f32.to_radians();
+    let transform = Transform::from_translation(eye).looking_at(Vec3::ZERO, Vec3::Y);
+    world.spawn((
+        HeadlessRenderer::camera_bundle(&target, transform, fov),
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
+            ..default()
+        },
+        Tonemapping::None,
+    ));
+    world
+        .resource_mut::<bevy_conifer_lod::plugin::CompactReadback>()
+        .enabled = true;
+    {
+        let mut settings = world.resource_mut::<ConiferLodSettings>();
+        settings.far_impostor = false;
+        settings.line_raster = LineRaster::Area;
+        settings.pixel_error = pixel_error;
+    }
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+        renderer.update().unwrap();
+    }
+    let picture = renderer.capture(&target, 8).unwrap();
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
+    std::fs::create_dir_all(&out).unwrap();
+    picture.save(out.join("compact_wide_branch.png")).unwrap();
+    // Each segment's width in pixels at its own error (the nearest point of
+    // its sphere, as the shader's `wood_segment_error`).
+    let readback = common::camera_readback(renderer.world(), handle.id());
+    let (_, tree_error) = readback.tree_lod(0);
+    let view = readback.view_point(0);
+    let clip_from_world = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1) * transform.to_matrix().inverse();
+    let pixel = |p: Vec3| {
+        let clip = clip_from_world * p.extend(1.0);
+        let ndc = clip.truncate() / clip.w;
+        [(0.5 + 0.5 * ndc.x) * size as f32, (0.5 - 0.5 * ndc.y) * size as f32]
+    };
+    let strips: Vec<([f32; 2], [f32; 2], f32, LineJoints)> = wood
+        .iter()
+        .enumerate()
+        .map(|(k, w)| {
+            let error = view.map_or(tree_error, |v| v.spatial_error(&Sphere::around_wood(w)));
+            let joints = LineJoints {
+                start: k > 0,
+                end: k + 1 < wood.len(),
+            };
+            (pixel(w.start), pixel(w.end), 2.0 * radius * pixel_error / error, joints)
+        })
+        .collect();
+    assert!(
+        strips.iter().all(|s| s.2 > 2.0 && s.2 < 3.0),
+        "lines 2–3 pixels wide: {:?}",
+        strips.iter().map(|s| s.2).collect::<Vec<_>>()
+    );
+    // Past two pixels wide a wood line's opacity is 1 and its
+    // calibration's scale 1.
+    let compose = |joined: bool, square: [f32; 2]| {
+        1.0 - strips
+            .iter()
+            .map(|&(a, b, width, joints)| {
+                let joints = if joined { joints } else { LineJoints::NONE };
+                1.0 - joined_line_pixel_coverage(a, b, 1.0, width, joints, square)
+            })
+            .product::<f32>()
+    };
+    let (mut mean, mut worst, mut open_mean, mut pixels, mut drawn, mut expected) =
+        (0.0f32, 0.0f32, 0.0f32, 0usize, 0.0f32, 0.0f32);
+    let mut inside_least = 1.0f32;
+    for (x, y, p) in picture.enumerate_pixels() {
+        let square = [x as f32, y as f32];
+        let (want, open) = (compose(true, square), compose(false, square));
+        let got = f32::from(p[3]) / 255.0;
+        if want > 0.0 || got > 0.0 {
+            mean += (got - want).abs();
+            worst = worst.max((got - want).abs());
+            open_mean += (got - open).abs();
+            pixels += 1;
+        }
+        drawn += got;
+        expected += want;
+        if want > 0.999 {
+            inside_least = inside_least.min(got);
+        }
+    }
+    mean /= pixels.max(1) as f32;
+    open_mean /= pixels.max(1) as f32;
+    println!(
+        "wide branch: alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}; against separate strips {open_mean:.4}; least alpha inside the strip {inside_least:.3}"
+    );
+    assert!(expected > 80.0, "the branch is in the picture: {expected}");
+    assert!(
+        (drawn / expected - 1.0).abs() < 0.02,
+        "alpha summed {drawn} against {expected}"
+    );
+    assert!(mean < 0.006 && worst < 0.03, "mean {mean}, largest {worst}");
+    assert!(open_mean > 2.0 * mean, "separate strips: {open_mean} against {mean}");
+    assert!(inside_least > 0.97, "a pale stripe inside the branch: {inside_least}");
+}
+
 /// Lines cover each pixel by their strip's area in it
 /// (`LineRaster::Area`, CPU reference `model::raster::strip_pixel_coverage`):
 /// five needles 0.6 m long at 0°, 30°, 45°, 71° and 90° from the vertical,

@@ -25,8 +25,10 @@
 //!   codes. Sorted by parent error code descending.
 //! * **Wood**, 16 bytes a segment: both ends as 16-bit codes on the
 //!   wood's own grid and both radii as 16-bit logarithmic codes rounded
-//!   up, sorted by the larger radius descending; an imported wood mesh on
-//!   the same grid (12 bytes a vertex, `u32` indices).
+//!   up to an even code, their low bits whether the segment's start and end
+//!   go on into another segment of the same branch ([`wood_joints`]),
+//!   sorted by the larger radius descending; an imported wood mesh on the
+//!   same grid (12 bytes a vertex, `u32` indices).
 //!
 //! ## The cut in code space
 //!
@@ -49,11 +51,13 @@ use super::needle::WoodSegment;
 use super::prism::{TriangleMesh, WOOD_LINE_FADE};
 use super::prototype::{Placement, PrototypeRecord};
 use super::quantize::{LOG_CODE_MAX, LOG_CODE_MIN, PositionGrid, log_decode, log_encode_at_least, log_encode_nearest};
+use super::raster::LineJoints;
 use super::record::{Cut, LodRecord, NO_PARENT};
 use super::shading::{self, AxisSpread};
 use super::view::{Sphere, ViewPoint};
 use super::{file, metric};
 use glam::Vec3;
+use std::collections::HashMap;
 
 /// Most needles a compact species holds: a needle-end reference is 24 bits.
 pub const MAX_COMPACT_NEEDLES: usize = 1 << 23;
@@ -116,9 +120,11 @@ pub struct CompactSpecies {
     pub merged_by_own: Vec<u32>,
     /// Wood segments, four words each: both ends on `wood_grid` (16 bits a
     /// coordinate, `sx | sy << 16`, `sz | ex << 16`, `ey | ez << 16`) and
-    /// their radii as logarithmic codes rounded up (`start | end << 16`),
-    /// sorted by the larger radius descending
-    /// ([`CompactSpecies::wood_segment`] decodes one as the shaders do).
+    /// their radii as even logarithmic codes rounded up (`start | end <<
+    /// 16`), each code's low bit set where that end is joined
+    /// ([`WOOD_JOINED_START`], [`WOOD_JOINED_END`]), sorted by the larger
+    /// radius descending ([`CompactSpecies::wood_segment`] decodes one as
+    /// the shaders do, [`CompactSpecies::wood_joints`] its joints).
     pub wood_segments: Vec<[u32; 4]>,
     /// The grid of the wood's positions: segment ends and mesh vertices.
     pub wood_grid: PositionGrid,
@@ -598,9 +604,54 @@ fn merged_line_words(ends: [u32; 2], width: u16, alignment: f32, own: u16, paren
 /// (shared with the mesh), and the wood mesh on it.
 type WoodLayout = (Vec<[u32; 4]>, PositionGrid, Vec<[u32; 3]>);
 
+/// Set in a compact wood segment's fourth word (the low bit of its start
+/// radius code) where its start is the end of another segment running on
+/// in nearly its direction ([`wood_joints`]).
+pub const WOOD_JOINED_START: u32 = 1;
+
+/// Set in a compact wood segment's fourth word (the low bit of its end
+/// radius code) where its end is the start of another segment running on
+/// in nearly its direction ([`wood_joints`]).
+pub const WOOD_JOINED_END: u32 = 1 << 16;
+
+/// The bits of a compact wood segment's radius code that hold the radius
+/// (its low bit is a joint's).
+pub const WOOD_RADIUS_CODE_MASK: u32 = 0xfffe;
+
+/// The cosine of the largest turn between a segment and the next one at
+/// which the two still count as one strip (30°): a branch bends a few
+/// degrees between its segments; a branch leaving another leaves at 40° or
+/// more.
+pub const WOOD_JOINT_MIN_COSINE: f32 = 0.866_025_4;
+
 /// The larger of a compact wood segment's two radius codes.
 fn wood_radius_code(w: &[u32; 4]) -> u32 {
-    (w[3] & 0xffff).max(w[3] >> 16)
+    (w[3] & WOOD_RADIUS_CODE_MASK).max((w[3] >> 16) & WOOD_RADIUS_CODE_MASK)
+}
+
+/// Which ends of each segment (given by its ends' grid codes) go on into
+/// another segment: an end is joined where another segment starts
+/// exactly there (the same grid point) and turns from this one by at most
+/// 30° ([`WOOD_JOINT_MIN_COSINE`]); a start alike where another ends.
+/// A wide wood line then draws its joints as one strip
+/// ([`super::raster::joined_line_pixel_coverage`]).
+pub fn wood_joints(ends: &[[[u16; 3]; 2]], grid: &PositionGrid) -> Vec<LineJoints> {
+    let direction = |e: &[[u16; 3]; 2]| (grid.decode(e[1]) - grid.decode(e[0])).normalize_or_zero();
+    let mut starting_at: HashMap<[u16; 3], Vec<usize>> = HashMap::new();
+    for (k, e) in ends.iter().enumerate() {
+        starting_at.entry(e[0]).or_default().push(k);
+    }
+    let mut joints = vec![LineJoints::NONE; ends.len()];
+    for (k, e) in ends.iter().enumerate() {
+        let here = direction(e);
+        for &next in starting_at.get(&e[1]).into_iter().flatten() {
+            if next != k && here.dot(direction(&ends[next])) >= WOOD_JOINT_MIN_COSINE {
+                joints[k].end = true;
+                joints[next].start = true;
+            }
+        }
+    }
+    joints
 }
 
 fn wood_layout(wood: &[WoodSegment], mesh: &TriangleMesh) -> Result<WoodLayout, CompactError> {
@@ -617,12 +668,29 @@ fn wood_layout(wood: &[WoodSegment], mesh: &TriangleMesh) -> Result<WoodLayout, 
     } else {
         PositionGrid::covering(points).ok_or(CompactError::OutOfRange("wood"))?
     };
-    let radius_code = |r: f32| log_encode_at_least(r).ok_or(CompactError::OutOfRange("wood radius"));
+    // Rounded up to an even code: the low bit is the joint's.
+    let radius_code = |r: f32| {
+        log_encode_at_least(r)
+            .and_then(|code| code.checked_add(code & 1))
+            .map(u32::from)
+            .ok_or(CompactError::OutOfRange("wood radius"))
+    };
+    let ends: Vec<[[u16; 3]; 2]> = valid
+        .iter()
+        .map(|w| [wood_grid.encode(w.start), wood_grid.encode(w.end)])
+        .collect();
+    let joints = wood_joints(&ends, &wood_grid);
     let mut wood_segments = Vec::with_capacity(valid.len());
-    for w in valid {
-        let [sx, sy, sz] = wood_grid.encode(w.start).map(u32::from);
-        let [ex, ey, ez] = wood_grid.encode(w.end).map(u32::from);
-        let radii = u32::from(radius_code(w.start_radius)?) | u32::from(radius_code(w.end_radius)?) << 16;
+    for ((w, [start, end]), joint) in valid.iter().zip(&ends).zip(&joints) {
+        let [sx, sy, sz] = start.map(u32::from);
+        let [ex, ey, ez] = end.map(u32::from);
+        let mut radii = radius_code(w.start_radius)? | radius_code(w.end_radius)? << 16;
+        if joint.start {
+            radii |= WOOD_JOINED_START;
+        }
+        if joint.end {
+            radii |= WOOD_JOINED_END;
+        }
         wood_segments.push([sx | sy << 16, sz | ex << 16, ey | ez << 16, radii]);
     }
     // Stable: segments of one radius keep the record's order.
@@ -754,8 +822,21 @@ impl CompactSpecies {
             .decode([w1 >> 16, w2 & 0xffff, w2 >> 16].map(|c| c as u16));
         (
             [start, end],
-            [shader_log_decode(w3 & 0xffff), shader_log_decode(w3 >> 16)],
+            [
+                shader_log_decode(w3 & WOOD_RADIUS_CODE_MASK),
+                shader_log_decode((w3 >> 16) & WOOD_RADIUS_CODE_MASK),
+            ],
         )
+    }
+
+    /// Which ends of compact wood segment `s` go on into another segment
+    /// of its branch ([`wood_joints`]), as the shaders read them.
+    pub fn wood_joints(&self, s: usize) -> LineJoints {
+        let w3 = self.wood_segments[s][3];
+        LineJoints {
+            start: w3 & WOOD_JOINED_START != 0,
+            end: w3 & WOOD_JOINED_END != 0,
+        }
     }
 
     /// Line-error code (`2R`, rounded up) of compact needle `k`.
@@ -1815,8 +1896,8 @@ mod tests {
         let bytes = compact.bytes();
         assert_eq!(bytes.wood, 16 * record.wood.len() as u64);
         // Each record segment is decoded once: ends within half a grid step
-        // a coordinate, radii rounded up by one code (0.049 %) and decoded
-        // in `f32` as the shaders do (0.1 %).
+        // a coordinate, radii rounded up to an even code (at most two codes,
+        // 0.098 %) and decoded in `f32` as the shaders do.
         let mut matched = vec![false; record.wood.len()];
         // (and f32 rounding of the sums).
         let half = 0.5 * compact.wood_grid.step + 1e-6;
@@ -1853,6 +1934,79 @@ mod tests {
                 (prefixes.wood_prisms as usize, prefixes.wood_lines as usize),
                 (prisms, lines)
             );
+        }
+    }
+
+    /// A branch's segments end to end are joined where they run on (the
+    /// trunk's whole length, every branch's inner joints); a branch
+    /// leaving the trunk is not; the joint bits never change a radius or
+    /// the sort.
+    #[test]
+    fn wood_segments_know_which_ends_run_on() {
+        let record = record(4000, 5);
+        let compact = CompactSpecies::build(&record).unwrap();
+        let count = compact.wood_segments.len();
+        let joints: Vec<LineJoints> = (0..count).map(|s| compact.wood_joints(s)).collect();
+        let ends: Vec<[Vec3; 2]> = (0..count).map(|s| compact.wood_segment(s).0).collect();
+        // Every joined end has its partner, within 30°.
+        for s in 0..count {
+            let along = |k: usize| (ends[k][1] - ends[k][0]).normalize();
+            if joints[s].end {
+                assert!(
+                    (0..count).any(|k| k != s
+                        && joints[k].start
+                        && ends[k][0] == ends[s][1]
+                        && along(s).dot(along(k)) >= WOOD_JOINT_MIN_COSINE),
+                    "segment {s}'s end"
+                );
+            }
+            if joints[s].start {
+                assert!(
+                    (0..count).any(|k| k != s
+                        && joints[k].end
+                        && ends[k][1] == ends[s][0]
+                        && along(s).dot(along(k)) >= WOOD_JOINT_MIN_COSINE),
+                    "segment {s}'s start"
+                );
+            }
+        }
+        // The trunk: the lowest segment, then up through its joints to the
+        // top, every inner end joined.
+        let mut trunk = vec![
+            (0..count)
+                .min_by(|&a, &b| ends[a][0].y.total_cmp(&ends[b][0].y))
+                .unwrap(),
+        ];
+        while let Some(next) = (0..count).find(|&k| {
+            joints[*trunk.last().unwrap()].end
+                && joints[k].start
+                && ends[k][0] == ends[*trunk.last().unwrap()][1]
+                && ends[k][1].y > ends[k][0].y + 0.5 * (ends[k][1] - ends[k][0]).length()
+        }) {
+            trunk.push(next);
+        }
+        let top = trunk.iter().map(|&k| ends[k][1].y).fold(f32::MIN, f32::max);
+        let tallest = ends.iter().map(|e| e[1].y).fold(f32::MIN, f32::max);
+        assert!(
+            trunk.len() > 10 && top > 0.9 * tallest,
+            "{} trunk segments to {top} of {tallest} m",
+            trunk.len()
+        );
+        assert!(!joints[trunk[0]].start);
+        // Most segments run on from one another, not all: branches' bases
+        // leave the trunk at its bark, their tips end.
+        let joined = joints.iter().filter(|j| j.start || j.end).count();
+        assert!(
+            joined > count / 2 && joints.iter().any(|j| !j.start) && joints.iter().any(|j| !j.end),
+            "{joined} of {count}"
+        );
+        // Radius codes stay even under the bits.
+        for w in &compact.wood_segments {
+            assert_eq!(
+                w[3] & 0xffff & WOOD_RADIUS_CODE_MASK,
+                w[3] & 0xffff & !WOOD_JOINED_START
+            );
+            assert_eq!(wood_radius_code(w) & 1, 0);
         }
     }
 

@@ -131,12 +131,70 @@ pub fn line_strip_width(opacity: f32, width: f32) -> f32 {
 /// times the strip's width where that is over a pixel. CPU reference of
 /// the shader's `line_coverage`.
 pub fn line_pixel_coverage(a: [f32; 2], b: [f32; 2], opacity: f32, width: f32, pixel: [f32; 2]) -> f32 {
+    joined_line_pixel_coverage(a, b, opacity, width, LineJoints::NONE, pixel)
+}
+
+/// Which ends of a line go on into the next piece of one strip: a
+/// branch's next segment, or the next section of a segment the wind bends.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LineJoints {
+    /// The line's start (`a`) is the end of the piece before it.
+    pub start: bool,
+    /// The line's end (`b`) is the start of the piece after it.
+    pub end: bool,
+}
+
+impl LineJoints {
+    /// Both ends open: the line is a strip of its own.
+    pub const NONE: Self = Self {
+        start: false,
+        end: false,
+    };
+}
+
+/// How far past a joined end a line's strip reaches for the pixels it
+/// owns, in pixels: a pixel's square lies within `√2/2` of its centre.
+pub const JOINT_REACH: f32 = 1.0;
+
+/// [`line_pixel_coverage`] of a line whose ends `joints` go on into the
+/// next piece of one strip (a branch drawn as segments end to end). Two
+/// strips meeting inside a pixel would each cover part of it, and blended
+/// as independent layers they cover `1 − (1 − c₁)(1 − c₂)` of it, short of
+/// `c₁ + c₂`: a fully covered pixel at a joint drawn at `1 − ½·½`, a pale
+/// stripe across a wide branch. So a line wider than a pixel covers only
+/// the pixels whose centres lie between its joined ends (measured along
+/// it: the pixel at a joint belongs to one piece), each by the area of its
+/// strip extended [`JOINT_REACH`] past those ends, which is the whole
+/// strip's area there where the pieces run on straight. An open end stays
+/// square. A line thinner than a pixel keeps [`line_pixel_coverage`]'s
+/// rule whatever its joints (the line calibration measures it so).
+pub fn joined_line_pixel_coverage(
+    a: [f32; 2],
+    b: [f32; 2],
+    opacity: f32,
+    width: f32,
+    joints: LineJoints,
+    pixel: [f32; 2],
+) -> f32 {
     let opacity = opacity.clamp(0.0, 1.0);
-    if width > 1.0 {
-        (opacity * strip_area_in_pixel(a, b, line_strip_width(opacity, width), pixel)).min(1.0)
-    } else {
-        (opacity * strip_pixel_coverage(a, b, opacity, pixel)).min(1.0)
+    if width.is_nan() || width <= 1.0 {
+        return (opacity * strip_pixel_coverage(a, b, opacity, pixel)).min(1.0);
     }
+    let strip = line_strip_width(opacity, width);
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let length_squared = d[0] * d[0] + d[1] * d[1];
+    if !(length_squared > 1e-12) {
+        return 0.0;
+    }
+    let along = ((pixel[0] + 0.5 - a[0]) * d[0] + (pixel[1] + 0.5 - a[1]) * d[1]) / length_squared;
+    if (joints.start && along < 0.0) || (joints.end && along >= 1.0) {
+        return 0.0;
+    }
+    let reach = JOINT_REACH / length_squared.sqrt();
+    let at = |t: f32| [a[0] + t * d[0], a[1] + t * d[1]];
+    let from = if joints.start { at(-reach) } else { a };
+    let to = if joints.end { at(1.0 + reach) } else { b };
+    (opacity * strip_area_in_pixel(from, to, strip, pixel)).min(1.0)
 }
 
 /// The exact area, inside the unit square at `pixel`, of the rectangle of
@@ -349,6 +407,77 @@ mod tests {
     }
 
     #[test]
+    fn a_joint_inside_a_pixel_leaves_no_pale_stripe() {
+        // A 3-pixel-wide horizontal strip cut at x = 5.5, through the
+        // centres of column 5: each piece covers half of pixel (5, 4).
+        let (a, joint, b) = ([1.0, 4.5], [5.5, 4.5], [10.0, 4.5]);
+        let pixel = [5.0, 4.0];
+        let open = [
+            line_pixel_coverage(a, joint, 1.0, 3.0, pixel),
+            line_pixel_coverage(joint, b, 1.0, 3.0, pixel),
+        ];
+        assert!((open[0] - 0.5).abs() < 1e-5 && (open[1] - 0.5).abs() < 1e-5, "{open:?}");
+        // Blended as independent layers: three quarters, a pale stripe.
+        assert!((1.0 - (1.0 - open[0]) * (1.0 - open[1]) - 0.75).abs() < 1e-5);
+        let joined = [
+            joined_line_pixel_coverage(
+                a,
+                joint,
+                1.0,
+                3.0,
+                LineJoints {
+                    start: false,
+                    end: true,
+                },
+                pixel,
+            ),
+            joined_line_pixel_coverage(
+                joint,
+                b,
+                1.0,
+                3.0,
+                LineJoints {
+                    start: true,
+                    end: false,
+                },
+                pixel,
+            ),
+        ];
+        // The centre (5.5, 4.5) is the second piece's: it covers the pixel whole.
+        assert_eq!(joined[0], 0.0);
+        assert!((joined[1] - 1.0).abs() < 1e-5, "{joined:?}");
+        // Open ends stay square; a thin line keeps its rule.
+        assert_eq!(
+            joined_line_pixel_coverage(
+                a,
+                joint,
+                1.0,
+                3.0,
+                LineJoints {
+                    start: false,
+                    end: true
+                },
+                [0.0, 4.0]
+            ),
+            line_pixel_coverage(a, joint, 1.0, 3.0, [0.0, 4.0])
+        );
+        assert_eq!(
+            joined_line_pixel_coverage(
+                joint,
+                b,
+                0.6,
+                0.8,
+                LineJoints {
+                    start: true,
+                    end: false
+                },
+                pixel
+            ),
+            line_pixel_coverage(joint, b, 0.6, 0.8, pixel)
+        );
+    }
+
+    #[test]
     fn a_segment_inside_one_pixel_gives_it_its_length() {
         let length = segment_length_in_pixel([3.2, 5.3], [3.8, 5.6], [3.0, 5.0]);
         assert!((length - (0.36f32 + 0.09).sqrt()).abs() < 1e-6);
@@ -429,6 +558,43 @@ mod tests {
             }
             prop_assert!((sum - opacity * width * length).abs() < 2e-3 * width * length, "{sum} vs {}", opacity * width * length);
             prop_assert!((thin_sum - opacity * length).abs() < 2e-3 * length);
+        }
+
+        /// A wide straight strip drawn as pieces end to end, each joined to
+        /// the next, covers every pixel as the whole strip does, each pixel
+        /// by one piece alone (blending composes nothing), however short
+        /// the inner pieces (an open end has at least 0.75 px of strip
+        /// behind it, past a pixel's reach from any joint).
+        #[test]
+        fn joined_pieces_cover_as_one_strip(
+            ax in 2.0f32..6.0, ay in 2.0f32..6.0, angle in 0.0f32..std::f32::consts::TAU, length in 1.6f32..8.0,
+            width in 1.01f32..4.0, opacity in 0.05f32..1.0, mut cuts in proptest::collection::vec(0.0f32..1.0, 1..6),
+            axis_aligned in proptest::bool::ANY,
+        ) {
+            let angle = if axis_aligned { (angle / std::f32::consts::FRAC_PI_2).round() * std::f32::consts::FRAC_PI_2 } else { angle };
+            cuts.sort_by(f32::total_cmp);
+            let along = [angle.cos(), angle.sin()];
+            let at = |t: f32| [ax + t * along[0], ay + t * along[1]];
+            let mut stops = vec![0.0];
+            stops.extend(cuts.iter().map(|c| 0.75 + c * (length - 1.5)));
+            stops.push(length);
+            let pieces = stops.len() - 1;
+            for x in -8..18 {
+                for y in -8..18 {
+                    let pixel = [x as f32, y as f32];
+                    let whole = line_pixel_coverage(at(0.0), at(length), opacity, width, pixel);
+                    let covering: Vec<f32> = (0..pieces)
+                        .map(|k| {
+                            let joints = LineJoints { start: k > 0, end: k + 1 < pieces };
+                            joined_line_pixel_coverage(at(stops[k]), at(stops[k + 1]), opacity, width, joints, pixel)
+                        })
+                        .filter(|&c| c > 0.0)
+                        .collect();
+                    prop_assert!(covering.len() <= 1, "pixel {pixel:?}: {covering:?}");
+                    let got = covering.first().copied().unwrap_or(0.0);
+                    prop_assert!((got - whole).abs() < 2e-3, "pixel {pixel:?}: {got} vs {whole}");
+                }
+            }
         }
 
         /// The nodes follow the strip's exact area in a pixel within a few

@@ -410,16 +410,23 @@ struct WoodEnds {
     end: vec4<f32>,
 }
 
+// `model::compact::WOOD_JOINED_START`, `WOOD_JOINED_END`,
+// `WOOD_RADIUS_CODE_MASK`: a wood segment's radius codes are even, their
+// low bits whether its start and end run on into another segment.
+const WOOD_JOINED_START: u32 = 1u;
+const WOOD_JOINED_END: u32 = 65536u;
+const WOOD_RADIUS_CODE_MASK: u32 = 65534u;
+
 fn decode_wood_segment(w: vec4<u32>, grid: vec4<f32>) -> WoodEnds {
     let start = grid.xyz + vec3<f32>(f32(w.x & 0xffffu), f32(w.x >> 16u), f32(w.y & 0xffffu)) * grid.w;
     let end = grid.xyz + vec3<f32>(f32(w.y >> 16u), f32(w.z & 0xffffu), f32(w.z >> 16u)) * grid.w;
     var ends: WoodEnds;
-    ends.start = vec4<f32>(start, log_decode(w.w & 0xffffu));
-    ends.end = vec4<f32>(end, log_decode(w.w >> 16u));
+    ends.start = vec4<f32>(start, log_decode(w.w & WOOD_RADIUS_CODE_MASK));
+    ends.end = vec4<f32>(end, log_decode((w.w >> 16u) & WOOD_RADIUS_CODE_MASK));
     return ends;
 }
 
 // The larger radius of a compact wood segment (what its order sorts by).
 fn wood_segment_radius(w: vec4<u32>) -> f32 {
-    return log_decode(max(w.w & 0xffffu, w.w >> 16u));
+    return log_decode(max(w.w & WOOD_RADIUS_CODE_MASK, (w.w >> 16u) & WOOD_RADIUS_CODE_MASK));
 }

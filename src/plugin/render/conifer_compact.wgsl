@@ -42,7 +42,7 @@
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, CROWN_SHADE_STEPS, CROWN_SHADE_CLASSES, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
-    SKY_VISIBILITY_RINGS,
+    SKY_VISIBILITY_RINGS, WOOD_JOINED_START, WOOD_JOINED_END,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -100,6 +100,8 @@ const LINE_VERTICES: u32 = 6u;
 const LINE_QUAD_MARGIN: f32 = 1.25;
 // `model::raster::MAX_STRIP_WIDTH`.
 const MAX_STRIP_WIDTH: f32 = 8.0;
+// `model::raster::JOINT_REACH`.
+const JOINT_REACH: f32 = 1.0;
 #else
 const LINE_VERTICES: u32 = 2u;
 #endif
@@ -158,6 +160,12 @@ struct VertexOutput {
     // strip's area times the line's opacity); else 0 (the strip is the
     // opacity wide).
     @location(13) @interpolate(flat) line_width: f32,
+    // Which of the line's ends run on into the next piece of one strip
+    // (bit 0 the start, bit 1 the end: a branch's next segment, a bent
+    // segment's next section): a wide line then covers only the pixels
+    // whose centres lie between its joined ends, by its strip extended
+    // past them (`line_coverage`).
+    @location(14) @interpolate(flat) line_joints: u32,
 #endif
 }
 
@@ -423,6 +431,18 @@ fn with_line_width(out: VertexOutput, pixels: f32) -> VertexOutput {
 #ifdef CONIFER_LINE_QUADS
     var result = out;
     result.line_width = select(0.0, pixels, pixels > 1.0);
+    return result;
+#else
+    return out;
+#endif
+}
+
+// `out` (a line's vertex) whose start and end run on into the next piece
+// of one strip where `start` and `end` are set (`line_coverage`).
+fn with_line_joints(out: VertexOutput, start: bool, end: bool) -> VertexOutput {
+#ifdef CONIFER_LINE_QUADS
+    var result = out;
+    result.line_joints = select(0u, 1u, start) | select(0u, 2u, end);
     return result;
 #else
     return out;
@@ -1016,6 +1036,10 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     if section >= drawn {
         return culled();
     }
+    // A section runs on into the next one, and the segment's ends into
+    // its branch's next segments where those continue it.
+    let joined_start = section > 0u || (wood_segments[s].w & WOOD_JOINED_START) != 0u;
+    let joined_end = section + 1u < drawn || (wood_segments[s].w & WOOD_JOINED_END) != 0u;
     let a = mix(start.xyz, end.xyz, f32(section) / f32(drawn));
     let b = mix(start.xyz, end.xyz, f32(section + 1u) / f32(drawn));
 #ifdef CONIFER_WOOD_LAYERS
@@ -1047,6 +1071,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     var out = finish(position, b - a, world_from_local, color);
     out.alignment = 1.0;
     out = with_line_width(out, pixels * scale);
+    out = with_line_joints(out, joined_start, joined_end);
     return with_height(with_line_quad(swayed_line(out, a, b, world_from_local, at_end), a, b, world_from_local, vertex_index), position.y);
 #endif
 
@@ -1306,9 +1331,11 @@ fn strip_area_in_pixel(a: vec2<f32>, b: vec2<f32>, width: f32, pixel: vec2<f32>)
 // pixel, the area in the pixel's square of a strip as wide as the
 // opacity, each quarter pixel of width at its two Gauss–Legendre nodes
 // (CPU reference: `model::raster::strip_pixel_coverage`); wider, the
-// opacity times the exact area of a strip that wide
-// (`model::raster::line_pixel_coverage`).
-fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32, line_width: f32) -> f32 {
+// opacity times the exact area of a strip that wide, and where an end is
+// joined (`joints`, bit 0 the start, bit 1 the end) only for pixels whose
+// centres lie on this side of it, by the strip extended `JOINT_REACH`
+// past it (`model::raster::joined_line_pixel_coverage`).
+fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32, line_width: f32, joints: u32) -> f32 {
     let a = ends.xy;
     let b = ends.zw;
     let d = b - a;
@@ -1318,7 +1345,16 @@ fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32, line_width: f32
     }
     let pixel = floor(frag);
     if line_width > 1.0 {
-        return min(clamp(opacity, 0.0, 1.0) * strip_area_in_pixel(a, b, strip_of(opacity, line_width), pixel), 1.0);
+        let along = dot(pixel + vec2<f32>(0.5) - a, d) / (span * span);
+        let joined_start = (joints & 1u) != 0u;
+        let joined_end = (joints & 2u) != 0u;
+        if (joined_start && along < 0.0) || (joined_end && along >= 1.0) {
+            return 0.0;
+        }
+        let reach = JOINT_REACH / span;
+        let strip_start = select(a, a - reach * d, joined_start);
+        let strip_end = select(b, b + reach * d, joined_end);
+        return min(clamp(opacity, 0.0, 1.0) * strip_area_in_pixel(strip_start, strip_end, strip_of(opacity, line_width), pixel), 1.0);
     }
     let normal = vec2<f32>(-d.y, d.x) / span;
     let width = clamp(opacity, 0.0, 1.0);
@@ -1356,7 +1392,7 @@ struct MotionOutput {
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOutput {
 #ifdef CONIFER_LINE_QUADS
-    let opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width);
+    let opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width, in.line_joints);
 #else
     let opacity = in.color.a;
 #endif
@@ -2025,7 +2061,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The pixel takes the line's strip's area in it; a quad's corners
     // reach past the strip (`LINE_QUAD_MARGIN`), and most of its pixels
     // lie off it.
-    let line_opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width);
+    let line_opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width, in.line_joints);
     if !(line_opacity > 1.0 / 1024.0) {
         discard;
     }

@@ -656,6 +656,23 @@ mod tests {
     fn the_shader_has_the_widest_strip() {
         let strip = crate::model::raster::MAX_STRIP_WIDTH;
         assert!(include_str!("conifer_compact.wgsl").contains(&format!("const MAX_STRIP_WIDTH: f32 = {strip:.1};")));
+        let reach = crate::model::raster::JOINT_REACH;
+        assert!(include_str!("conifer_compact.wgsl").contains(&format!("const JOINT_REACH: f32 = {reach:.1};")));
+    }
+
+    /// The shaders read a wood segment's joints and radii with the bits
+    /// `model::compact` writes.
+    #[test]
+    fn the_shaders_know_the_wood_joints_bits() {
+        use crate::model::compact::{WOOD_JOINED_END, WOOD_JOINED_START, WOOD_RADIUS_CODE_MASK};
+        let types = include_str!("compact_types.wgsl");
+        for (name, value) in [
+            ("WOOD_JOINED_START", WOOD_JOINED_START),
+            ("WOOD_JOINED_END", WOOD_JOINED_END),
+            ("WOOD_RADIUS_CODE_MASK", WOOD_RADIUS_CODE_MASK),
+        ] {
+            assert!(types.contains(&format!("const {name}: u32 = {value}u;")), "{name}");
+        }
     }
 
     /// The shader's wood visibility table is as long as `model::impostor`'s.
