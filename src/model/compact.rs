@@ -629,23 +629,70 @@ fn wood_radius_code(w: &[u32; 4]) -> u32 {
     (w[3] & WOOD_RADIUS_CODE_MASK).max((w[3] >> 16) & WOOD_RADIUS_CODE_MASK)
 }
 
-/// Which ends of each segment (given by its ends' grid codes) go on into
-/// another segment: an end is joined where another segment starts
-/// exactly there (the same grid point) and turns from this one by at most
-/// 30° ([`WOOD_JOINT_MIN_COSINE`]); a start alike where another ends.
-/// A wide wood line then draws its joints as one strip
-/// ([`super::raster::joined_line_pixel_coverage`]).
-pub fn wood_joints(ends: &[[[u16; 3]; 2]], grid: &PositionGrid) -> Vec<LineJoints> {
-    let direction = |e: &[[u16; 3]; 2]| (grid.decode(e[1]) - grid.decode(e[0])).normalize_or_zero();
+/// Which ends of each segment (given by its ends' grid codes and its
+/// larger radius) go on into another segment as one strip. An end is
+/// joined where another segment starts exactly there (the same grid
+/// point) turning from this one by at most 30° ([`WOOD_JOINT_MIN_COSINE`]),
+/// and where the run of such segments behind the joint and the run ahead of
+/// it are each at least as long as the wider segment's diameter; that
+/// segment's start is joined with it. A wide wood line covers the pixels
+/// owned by its joined ends by its strip extended [`JOINT_REACH`] pixels
+/// past them ([`super::raster::joined_line_pixel_coverage`]), and it is
+/// only wide (past one pixel) where a pixel is narrower than its
+/// diameter: the run beyond reaches that far, and the extension does not
+/// pass an open end (a trunk's first short pieces, a branch's tip).
+///
+/// [`JOINT_REACH`]: super::raster::JOINT_REACH
+pub fn wood_joints(ends: &[[[u16; 3]; 2]], radii: &[f32], grid: &PositionGrid) -> Vec<LineJoints> {
+    let points: Vec<[Vec3; 2]> = ends.iter().map(|e| [grid.decode(e[0]), grid.decode(e[1])]).collect();
+    let length = |k: usize| points[k][0].distance(points[k][1]);
+    let direction = |k: usize| (points[k][1] - points[k][0]).normalize_or_zero();
     let mut starting_at: HashMap<[u16; 3], Vec<usize>> = HashMap::new();
+    let mut ending_at: HashMap<[u16; 3], Vec<usize>> = HashMap::new();
     for (k, e) in ends.iter().enumerate() {
         starting_at.entry(e[0]).or_default().push(k);
+        ending_at.entry(e[1]).or_default().push(k);
     }
+    // The segments that carry segment `k` on past its end (or back past
+    // its start).
+    let onward = |k: usize, ahead: bool| -> Vec<usize> {
+        let (at, map) = if ahead {
+            (ends[k][1], &starting_at)
+        } else {
+            (ends[k][0], &ending_at)
+        };
+        map.get(&at)
+            .into_iter()
+            .flatten()
+            .copied()
+            .filter(|&j| j != k && direction(k).dot(direction(j)) >= WOOD_JOINT_MIN_COSINE)
+            .collect()
+    };
+    // Whether the run from segment `k` on (ahead or back) reaches `needed`
+    // metres: its own length, then the longest way on.
+    let reaches = |k: usize, ahead: bool, needed: f32| -> bool {
+        let mut run = 0.0;
+        let mut here = k;
+        for _ in 0..ends.len() {
+            run += length(here);
+            if run >= needed {
+                return true;
+            }
+            match onward(here, ahead)
+                .into_iter()
+                .max_by(|&a, &b| length(a).total_cmp(&length(b)))
+            {
+                Some(next) => here = next,
+                None => return false,
+            }
+        }
+        false
+    };
     let mut joints = vec![LineJoints::NONE; ends.len()];
-    for (k, e) in ends.iter().enumerate() {
-        let here = direction(e);
-        for &next in starting_at.get(&e[1]).into_iter().flatten() {
-            if next != k && here.dot(direction(&ends[next])) >= WOOD_JOINT_MIN_COSINE {
+    for k in 0..ends.len() {
+        for next in onward(k, true) {
+            let needed = 2.0 * radii[k].max(radii[next]);
+            if reaches(k, false, needed) && reaches(next, true, needed) {
                 joints[k].end = true;
                 joints[next].start = true;
             }
@@ -679,7 +726,8 @@ fn wood_layout(wood: &[WoodSegment], mesh: &TriangleMesh) -> Result<WoodLayout, 
         .iter()
         .map(|w| [wood_grid.encode(w.start), wood_grid.encode(w.end)])
         .collect();
-    let joints = wood_joints(&ends, &wood_grid);
+    let radii: Vec<f32> = valid.iter().map(|w| w.start_radius.max(w.end_radius)).collect();
+    let joints = wood_joints(&ends, &radii, &wood_grid);
     let mut wood_segments = Vec::with_capacity(valid.len());
     for ((w, [start, end]), joint) in valid.iter().zip(&ends).zip(&joints) {
         let [sx, sy, sz] = start.map(u32::from);
@@ -1937,20 +1985,20 @@ mod tests {
         }
     }
 
-    /// A branch's segments end to end are joined where they run on (the
-    /// trunk's whole length, every branch's inner joints); a branch
-    /// leaving the trunk is not; the joint bits never change a radius or
-    /// the sort.
+    /// A branch's segments end to end are joined where they run on: along
+    /// the trunk, wherever at least a diameter of trunk lies behind and
+    /// ahead of the joint (not between its first short pieces); a branch
+    /// leaving the trunk is not; the joint bits never change a radius.
     #[test]
     fn wood_segments_know_which_ends_run_on() {
         let record = record(4000, 5);
         let compact = CompactSpecies::build(&record).unwrap();
         let count = compact.wood_segments.len();
         let joints: Vec<LineJoints> = (0..count).map(|s| compact.wood_joints(s)).collect();
-        let ends: Vec<[Vec3; 2]> = (0..count).map(|s| compact.wood_segment(s).0).collect();
+        let (ends, radii): (Vec<[Vec3; 2]>, Vec<[f32; 2]>) = (0..count).map(|s| compact.wood_segment(s)).unzip();
+        let along = |k: usize| (ends[k][1] - ends[k][0]).normalize();
         // Every joined end has its partner, within 30°.
         for s in 0..count {
-            let along = |k: usize| (ends[k][1] - ends[k][0]).normalize();
             if joints[s].end {
                 assert!(
                     (0..count).any(|k| k != s
@@ -1970,18 +2018,16 @@ mod tests {
                 );
             }
         }
-        // The trunk: the lowest segment, then up through its joints to the
-        // top, every inner end joined.
+        // The trunk: the lowest segment, then up through the segments that
+        // start where the last ends, rising.
         let mut trunk = vec![
             (0..count)
                 .min_by(|&a, &b| ends[a][0].y.total_cmp(&ends[b][0].y))
                 .unwrap(),
         ];
         while let Some(next) = (0..count).find(|&k| {
-            joints[*trunk.last().unwrap()].end
-                && joints[k].start
-                && ends[k][0] == ends[*trunk.last().unwrap()][1]
-                && ends[k][1].y > ends[k][0].y + 0.5 * (ends[k][1] - ends[k][0]).length()
+            ends[k][0] == ends[*trunk.last().unwrap()][1]
+                && along(k).dot(along(*trunk.last().unwrap())) >= WOOD_JOINT_MIN_COSINE
         }) {
             trunk.push(next);
         }
@@ -1993,6 +2039,32 @@ mod tests {
             trunk.len()
         );
         assert!(!joints[trunk[0]].start);
+        let lengths: Vec<f32> = trunk.iter().map(|&k| ends[k][0].distance(ends[k][1])).collect();
+        let mut joined_inner = 0;
+        for i in 0..trunk.len() - 1 {
+            let (below, above) = (trunk[i], trunk[i + 1]);
+            // Radii decode rounded up by a code or two: a little margin.
+            let needed = 2.0
+                * radii[below][0]
+                    .max(radii[below][1])
+                    .max(radii[above][0])
+                    .max(radii[above][1]);
+            let (behind, ahead) = (lengths[..=i].iter().sum::<f32>(), lengths[i + 1..].iter().sum::<f32>());
+            if behind < 0.99 * needed {
+                assert!(
+                    !joints[below].end && !joints[above].start,
+                    "trunk joint {i}: {behind} m behind, {needed} needed"
+                );
+            } else if behind > 1.01 * needed && ahead > 1.01 * needed {
+                assert!(joints[below].end && joints[above].start, "trunk joint {i}");
+                joined_inner += 1;
+            }
+        }
+        assert!(
+            joined_inner > trunk.len() / 2,
+            "{joined_inner} of {} trunk joints",
+            trunk.len() - 1
+        );
         // Most segments run on from one another, not all: branches' bases
         // leave the trunk at its bark, their tips end.
         let joined = joints.iter().filter(|j| j.start || j.end).count();
@@ -2002,11 +2074,8 @@ mod tests {
         );
         // Radius codes stay even under the bits.
         for w in &compact.wood_segments {
-            assert_eq!(
-                w[3] & 0xffff & WOOD_RADIUS_CODE_MASK,
-                w[3] & 0xffff & !WOOD_JOINED_START
-            );
             assert_eq!(wood_radius_code(w) & 1, 0);
+            assert_eq!(w[3] & !(WOOD_JOINED_START | WOOD_JOINED_END) & 0x0001_0001, 0);
         }
     }
 

@@ -194,9 +194,14 @@ impl Default for WoodVisibility {
 /// foliage lines and after them, `a·(1 − g)/(1 − a·g)` and `a·g`. Blended
 /// over a pixel that lets `b` through, needle lines that let `t` through
 /// between them, the wood takes `a·(g + (1 − g)·t)` of the pixel and `b`
-/// keeps `t·(1 − a)`, as with the wood among the needles. Inputs are
-/// clamped to `[0, 1]`. CPU reference of the wood lines' vertex shader
-/// (`CONIFER_WOOD_LAYERS`).
+/// keeps `t·(1 − a)`, as with the wood among the needles. Exact when `a`
+/// is what the line covers of the pixel: the shaders split a wide area
+/// line's coverage of each pixel in the fragment stage (split by its
+/// opacity of 1, a pixel it half covers would take `½ + ½·g·½` with
+/// nothing between the layers), a thinner line's opacity in the vertex
+/// stage (its strip is as wide as its opacity; a hardware line covers its
+/// pixels whole). Inputs are clamped to `[0, 1]`. CPU reference of the
+/// wood lines' shaders (`CONIFER_WOOD_LAYERS`).
 pub fn wood_layer_opacities(opacity: f32, in_sight: f32) -> (f32, f32) {
     let (a, g) = (clamp_share(opacity), clamp_share(in_sight));
     (a * (1.0 - g) / (1.0 - a * g).max(1e-6), a * g)

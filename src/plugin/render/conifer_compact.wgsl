@@ -166,6 +166,12 @@ struct VertexOutput {
     // whose centres lie between its joined ends, by its strip extended
     // past them (`line_coverage`).
     @location(14) @interpolate(flat) line_joints: u32,
+#ifdef CONIFER_WOOD_LAYERS
+    // A layered wood line's share in sight where the needles cover the
+    // pixel (`model::impostor::WoodVisibility`): the fragment splits its
+    // pixel's coverage between the two layers (`wood_layer_coverage`).
+    @location(15) @interpolate(flat) wood_in_sight: f32,
+#endif
 #endif
 }
 
@@ -1058,11 +1064,21 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
         toward = normalize(toward);
         in_sight = wood_visibility_at(middle.y, dot(middle.xz - species.impostor_box.xy, toward) + max(start.w, end.w));
     }
-#ifdef CONIFER_WOOD_OVER_FOLIAGE
-    alpha = alpha * in_sight;
-#else
-    alpha = alpha * (1.0 - in_sight) / max(1.0 - alpha * in_sight, 1e-6);
+    // A line wider than a pixel has each pixel's coverage split in the
+    // fragment (`pixel_line_coverage`): it covers a pixel at its edge in
+    // part at full opacity. A thinner one (a strip as wide as its opacity)
+    // and a hardware line have their opacity split here.
+    var split_in_fragment = false;
+#ifdef CONIFER_LINE_QUADS
+    split_in_fragment = pixels * scale > 1.0;
 #endif
+    if !split_in_fragment {
+#ifdef CONIFER_WOOD_OVER_FOLIAGE
+        alpha = alpha * in_sight;
+#else
+        alpha = alpha * (1.0 - in_sight) / max(1.0 - alpha * in_sight, 1e-6);
+#endif
+    }
 #endif
     let at_end = line_vertex_at_end(vertex_index);
     let position = select(a, b, at_end);
@@ -1072,6 +1088,11 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     out.alignment = 1.0;
     out = with_line_width(out, pixels * scale);
     out = with_line_joints(out, joined_start, joined_end);
+#ifdef CONIFER_WOOD_LAYERS
+#ifdef CONIFER_LINE_QUADS
+    out.wood_in_sight = in_sight;
+#endif
+#endif
     return with_height(with_line_quad(swayed_line(out, a, b, world_from_local, at_end), a, b, world_from_local, vertex_index), position.y);
 #endif
 
@@ -1370,6 +1391,31 @@ fn line_coverage(frag: vec2<f32>, ends: vec4<f32>, opacity: f32, line_width: f32
     }
     return min(opacity * sum / f32(2u * pieces), 1.0);
 }
+
+// The coverage the line of fragment `in` gives its pixel: its strip's
+// area there (`line_coverage`); a layered wood line wider than a pixel
+// takes its layer's share of it, `c·(1 − g)/(1 − c·g)` under the foliage
+// lines and `c·g` over them (`g` the wood's share in sight; CPU
+// reference: `model::impostor::wood_layer_opacities`), so that with
+// nothing between the layers its pixel takes `c` (split by its opacity
+// of 1, a pixel it half covers would take `½ + ½·g·½`). A thinner line's
+// opacity was split by the vertex stage.
+fn pixel_line_coverage(in: VertexOutput) -> f32 {
+    let coverage = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width, in.line_joints);
+#ifdef CONIFER_WOOD_LAYERS
+    if !(in.line_width > 1.0) {
+        return coverage;
+    }
+    let in_sight = clamp(in.wood_in_sight, 0.0, 1.0);
+#ifdef CONIFER_WOOD_OVER_FOLIAGE
+    return coverage * in_sight;
+#else
+    return coverage * (1.0 - in_sight) / max(1.0 - coverage * in_sight, 1e-6);
+#endif
+#else
+    return coverage;
+#endif
+}
 #endif
 
 #ifdef CONIFER_MOTION_VECTORS
@@ -1392,7 +1438,7 @@ struct MotionOutput {
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOutput {
 #ifdef CONIFER_LINE_QUADS
-    let opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width, in.line_joints);
+    let opacity = pixel_line_coverage(in);
 #else
     let opacity = in.color.a;
 #endif
@@ -2061,7 +2107,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     // The pixel takes the line's strip's area in it; a quad's corners
     // reach past the strip (`LINE_QUAD_MARGIN`), and most of its pixels
     // lie off it.
-    let line_opacity = line_coverage(in.position.xy, in.line_ends, in.color.a, in.line_width, in.line_joints);
+    let line_opacity = pixel_line_coverage(in);
     if !(line_opacity > 1.0 / 1024.0) {
         discard;
     }
