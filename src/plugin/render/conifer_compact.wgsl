@@ -169,7 +169,7 @@ struct VertexOutput {
 #ifdef CONIFER_WOOD_LAYERS
     // A layered wood line's share in sight where the needles cover the
     // pixel (`model::impostor::WoodVisibility`): the fragment splits its
-    // pixel's coverage between the two layers (`wood_layer_coverage`).
+    // pixel's coverage between the two layers (`pixel_line_coverage`).
     @location(15) @interpolate(flat) wood_in_sight: f32,
 #endif
 #endif
