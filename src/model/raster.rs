@@ -183,7 +183,7 @@ pub fn joined_line_pixel_coverage(
     let strip = line_strip_width(opacity, width);
     let d = [b[0] - a[0], b[1] - a[1]];
     let length_squared = d[0] * d[0] + d[1] * d[1];
-    if !(length_squared > 1e-12) {
+    if length_squared.is_nan() || length_squared <= 1e-12 {
         return 0.0;
     }
     let along = ((pixel[0] + 0.5 - a[0]) * d[0] + (pixel[1] + 0.5 - a[1]) * d[1]) / length_squared;
