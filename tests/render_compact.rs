@@ -778,7 +778,8 @@ impl FiveNeedles {
 
 /// A picture's alpha against the CPU's: each pixel's `1 − Π(1 − c)` over
 /// the lines between `ends` (pixels), `c` what `coverage(a, b, pixel)`
-/// gives each.
+/// gives each ([`AlphaAgainstCpu::composed`]), or what `want` gives the
+/// pixel ([`AlphaAgainstCpu::of`]).
 struct AlphaAgainstCpu {
     /// Mean |Δ| over the pixels either covers.
     mean: f32,
@@ -790,29 +791,41 @@ struct AlphaAgainstCpu {
     drawn: f32,
     /// The CPU's alpha summed.
     expected: f32,
+    /// The least alpha drawn where the CPU covers a pixel wholly (1 where
+    /// it covers none).
+    least_inside: f32,
 }
 
 impl AlphaAgainstCpu {
-    fn of(
+    fn composed(
         picture: &image::RgbaImage,
         ends: &[[[f32; 2]; 2]],
         coverage: impl Fn([f32; 2], [f32; 2], [f32; 2]) -> f32,
     ) -> Self {
+        Self::of(picture, |square| {
+            1.0 - ends.iter().map(|&[a, b]| 1.0 - coverage(a, b, square)).product::<f32>()
+        })
+    }
+
+    fn of(picture: &image::RgbaImage, want: impl Fn([f32; 2]) -> f32) -> Self {
         let mut result = Self {
             mean: 0.0,
             worst: 0.0,
             pixels: 0,
             drawn: 0.0,
             expected: 0.0,
+            least_inside: 1.0,
         };
         for (x, y, pixel) in picture.enumerate_pixels() {
-            let square = [x as f32, y as f32];
-            let want = 1.0 - ends.iter().map(|&[a, b]| 1.0 - coverage(a, b, square)).product::<f32>();
+            let want = want([x as f32, y as f32]);
             let got = f32::from(pixel[3]) / 255.0;
             if want > 0.0 || got > 0.0 {
                 result.mean += (got - want).abs();
                 result.worst = result.worst.max((got - want).abs());
                 result.pixels += 1;
+            }
+            if want > 0.999 {
+                result.least_inside = result.least_inside.min(got);
             }
             result.drawn += got;
             result.expected += want;
@@ -869,7 +882,8 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
         pixels,
         drawn,
         expected,
-    } = AlphaAgainstCpu::of(&picture, &ends, |a, b, square| {
+        ..
+    } = AlphaAgainstCpu::composed(&picture, &ends, |a, b, square| {
         line_pixel_coverage(a, b, 1.0, width, square)
     });
     println!(
@@ -1024,29 +1038,17 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
                 })
                 .product::<f32>()
         };
-        let (mut mean, mut worst, mut open_mean, mut pixels, mut drawn, mut expected) =
-            (0.0f32, 0.0f32, 0.0f32, 0usize, 0.0f32, 0.0f32);
-        let mut inside_least = 1.0f32;
-        for (x, y, p) in picture.enumerate_pixels() {
-            let square = [x as f32, y as f32];
-            let (want, open) = (compose(true, square), compose(false, square));
-            let got = f32::from(p[3]) / 255.0;
-            if want > 0.0 || got > 0.0 {
-                mean += (got - want).abs();
-                worst = worst.max((got - want).abs());
-                open_mean += (got - open).abs();
-                pixels += 1;
-            }
-            drawn += got;
-            expected += want;
-            if want > 0.999 {
-                inside_least = inside_least.min(got);
-            }
-        }
-        mean /= pixels.max(1) as f32;
-        open_mean /= pixels.max(1) as f32;
+        let AlphaAgainstCpu {
+            mean,
+            worst,
+            pixels,
+            drawn,
+            expected,
+            least_inside,
+        } = AlphaAgainstCpu::of(&picture, |square| compose(true, square));
+        let open_mean = AlphaAgainstCpu::of(&picture, |square| compose(false, square)).mean;
         println!(
-            "wide branch (wood half in sight: {half_in_sight}): alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}; against separate strips {open_mean:.4}; least alpha inside the strip {inside_least:.3}"
+            "wide branch (wood half in sight: {half_in_sight}): alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}; against separate strips {open_mean:.4}; least alpha inside the strip {least_inside:.3}"
         );
         assert!(expected > 80.0, "the branch is in the picture: {expected}");
         assert!(
@@ -1055,7 +1057,7 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
         );
         assert!(mean < 0.006 && worst < 0.03, "mean {mean}, largest {worst}");
         assert!(open_mean > 2.0 * mean, "separate strips: {open_mean} against {mean}");
-        assert!(inside_least > 0.97, "a pale stripe inside the branch: {inside_least}");
+        assert!(least_inside > 0.97, "a pale stripe inside the branch: {least_inside}");
     }
 }
 
@@ -1146,7 +1148,8 @@ fn lines_cover_each_pixel_by_their_strips_area() {
             pixels,
             drawn,
             expected,
-        } = AlphaAgainstCpu::of(&picture, &ends, |a, b, square| {
+            ..
+        } = AlphaAgainstCpu::composed(&picture, &ends, |a, b, square| {
             (opacity * strip_pixel_coverage(a, b, opacity, square)).min(1.0)
         });
         println!(

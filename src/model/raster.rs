@@ -412,6 +412,16 @@ mod tests {
         // centres of column 5: each piece covers half of pixel (5, 4).
         let (a, joint, b) = ([1.0, 4.5], [5.5, 4.5], [10.0, 4.5]);
         let pixel = [5.0, 4.0];
+        let (end_joined, start_joined) = (
+            LineJoints {
+                start: false,
+                end: true,
+            },
+            LineJoints {
+                start: true,
+                end: false,
+            },
+        );
         let open = [
             line_pixel_coverage(a, joint, 1.0, 3.0, pixel),
             line_pixel_coverage(joint, b, 1.0, 3.0, pixel),
@@ -420,59 +430,19 @@ mod tests {
         // Blended as independent layers: three quarters, a pale stripe.
         assert!((1.0 - (1.0 - open[0]) * (1.0 - open[1]) - 0.75).abs() < 1e-5);
         let joined = [
-            joined_line_pixel_coverage(
-                a,
-                joint,
-                1.0,
-                3.0,
-                LineJoints {
-                    start: false,
-                    end: true,
-                },
-                pixel,
-            ),
-            joined_line_pixel_coverage(
-                joint,
-                b,
-                1.0,
-                3.0,
-                LineJoints {
-                    start: true,
-                    end: false,
-                },
-                pixel,
-            ),
+            joined_line_pixel_coverage(a, joint, 1.0, 3.0, end_joined, pixel),
+            joined_line_pixel_coverage(joint, b, 1.0, 3.0, start_joined, pixel),
         ];
         // The centre (5.5, 4.5) is the second piece's: it covers the pixel whole.
         assert_eq!(joined[0], 0.0);
         assert!((joined[1] - 1.0).abs() < 1e-5, "{joined:?}");
         // Open ends stay square; a thin line keeps its rule.
         assert_eq!(
-            joined_line_pixel_coverage(
-                a,
-                joint,
-                1.0,
-                3.0,
-                LineJoints {
-                    start: false,
-                    end: true
-                },
-                [0.0, 4.0]
-            ),
+            joined_line_pixel_coverage(a, joint, 1.0, 3.0, end_joined, [0.0, 4.0]),
             line_pixel_coverage(a, joint, 1.0, 3.0, [0.0, 4.0])
         );
         assert_eq!(
-            joined_line_pixel_coverage(
-                joint,
-                b,
-                0.6,
-                0.8,
-                LineJoints {
-                    start: true,
-                    end: false
-                },
-                pixel
-            ),
+            joined_line_pixel_coverage(joint, b, 0.6, 0.8, start_joined, pixel),
             line_pixel_coverage(joint, b, 0.6, 0.8, pixel)
         );
     }
