@@ -706,10 +706,7 @@ struct FiveNeedles {
 
 impl FiveNeedles {
     fn new(radius: f32) -> Self {
-        use bevy::core_pipeline::tonemapping::Tonemapping;
         use bevy_conifer_lod::model::{FoliageMaterial, Needle, TreeInput};
-        use bevy_conifer_lod::plugin::CompactReadback;
-        let size = 128u32;
         let needles: Vec<Needle> = [0.0f32, 30.0, 45.0, 71.0, 90.0]
             .iter()
             .enumerate()
@@ -737,34 +734,19 @@ impl FiveNeedles {
         let mut species = ConiferSpecies::from_record(record).unwrap();
         // Without a calibration (the five needles' own is about 1).
         species.line_calibration = None;
-        let (mut renderer, target, sun) = common::sun_lit_renderer(size);
-        let world = renderer.world_mut();
-        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-        world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
-        let eye = Vec3::new(0.0, 0.0, 20.0);
-        let fov = 45f32.to_radians();
-        let transform = Transform::from_translation(eye).looking_at(Vec3::ZERO, Vec3::Y);
-        let camera = world
-            .spawn((
-                HeadlessRenderer::camera_bundle(&target, transform, fov),
-                Camera {
-                    clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
-                    ..default()
-                },
-                Tonemapping::None,
-            ))
-            .id();
-        world.resource_mut::<CompactReadback>().enabled = true;
-        // Lines only: this small tree would fade into its crown impostor here.
-        world.resource_mut::<ConiferLodSettings>().far_impostor = false;
-        // Bevy's reversed infinite perspective, near 0.1 m.
-        let clip_from_world = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1) * transform.to_matrix().inverse();
-        let pixel = |p: Vec3| {
-            let clip = clip_from_world * p.extend(1.0);
-            let ndc = clip.truncate() / clip.w;
-            [(0.5 + 0.5 * ndc.x) * size as f32, (0.5 - 0.5 * ndc.y) * size as f32]
-        };
-        let ends = needles.iter().map(|n| [pixel(n.base), pixel(n.tip)]).collect();
+        let scene = LineScene::new(species);
+        let ends = needles
+            .iter()
+            .map(|n| [scene.pixel(n.base), scene.pixel(n.tip)])
+            .collect();
+        let LineScene {
+            renderer,
+            target,
+            camera,
+            handle,
+            sun,
+            ..
+        } = scene;
         Self {
             renderer,
             target,
@@ -776,10 +758,70 @@ impl FiveNeedles {
     }
 }
 
+/// A species seen from 20 m by a 128² camera looking along −Z at the
+/// origin onto a transparent background, sun-lit, without tone mapping;
+/// the impostor off (lines only), the compute pass read back.
+struct LineScene {
+    renderer: HeadlessRenderer,
+    target: Handle<Image>,
+    camera: Entity,
+    handle: Handle<ConiferSpecies>,
+    sun: Entity,
+    /// The camera's projection (Bevy's reversed infinite perspective, near
+    /// 0.1 m) and view.
+    clip_from_world: Mat4,
+}
+
+impl LineScene {
+    /// The picture's side, pixels.
+    const SIZE: u32 = 128;
+
+    fn new(species: ConiferSpecies) -> Self {
+        use bevy::core_pipeline::tonemapping::Tonemapping;
+        use bevy_conifer_lod::plugin::CompactReadback;
+        let (mut renderer, target, sun) = common::sun_lit_renderer(Self::SIZE);
+        let world = renderer.world_mut();
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+        world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
+        let fov = 45f32.to_radians();
+        let transform = Transform::from_translation(Vec3::new(0.0, 0.0, 20.0)).looking_at(Vec3::ZERO, Vec3::Y);
+        let camera = world
+            .spawn((
+                HeadlessRenderer::camera_bundle(&target, transform, fov),
+                Camera {
+                    clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
+                    ..default()
+                },
+                Tonemapping::None,
+            ))
+            .id();
+        world.resource_mut::<CompactReadback>().enabled = true;
+        // Lines only: a small tree would fade into its crown impostor here.
+        world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+        Self {
+            renderer,
+            target,
+            camera,
+            handle,
+            sun,
+            clip_from_world: Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1) * transform.to_matrix().inverse(),
+        }
+    }
+
+    /// Where the camera sees `p` (world metres), in pixels.
+    fn pixel(&self, p: Vec3) -> [f32; 2] {
+        let clip = self.clip_from_world * p.extend(1.0);
+        let ndc = clip.truncate() / clip.w;
+        let size = Self::SIZE as f32;
+        [(0.5 + 0.5 * ndc.x) * size, (0.5 - 0.5 * ndc.y) * size]
+    }
+}
+
 /// A picture's alpha against the CPU's: each pixel's `1 − Π(1 − c)` over
 /// the lines between `ends` (pixels), `c` what `coverage(a, b, pixel)`
 /// gives each ([`AlphaAgainstCpu::composed`]), or what `want` gives the
 /// pixel ([`AlphaAgainstCpu::of`]).
+#[derive(Clone, Copy)]
 struct AlphaAgainstCpu {
     /// Mean |Δ| over the pixels either covers.
     mean: f32,
@@ -833,6 +875,28 @@ impl AlphaAgainstCpu {
         result.mean /= result.pixels.max(1) as f32;
         result
     }
+
+    /// Asserts that `what` is in the picture (the CPU's alpha summed over
+    /// `at_least`), drawn in total within 2 % of the CPU's, and pixel by
+    /// pixel within `mean_at_most` on average and `worst_at_most`.
+    fn assert_near(&self, what: &str, at_least: f32, mean_at_most: f32, worst_at_most: f32) {
+        let Self {
+            mean,
+            worst,
+            drawn,
+            expected,
+            ..
+        } = *self;
+        assert!(expected > at_least, "{what} in the picture: {expected}");
+        assert!(
+            (drawn / expected - 1.0).abs() < 0.02,
+            "alpha summed {drawn} against {expected}"
+        );
+        assert!(
+            mean < mean_at_most && worst < worst_at_most,
+            "mean {mean}, largest {worst}"
+        );
+    }
 }
 
 /// Lines wider than a pixel (`model::raster::line_pixel_coverage`): the
@@ -876,6 +940,9 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
         width > 1.5 && width < 2.5 && 2.0 * radius < spatial_error,
         "lines about two pixels wide: {width}"
     );
+    let alpha = AlphaAgainstCpu::composed(&picture, &ends, |a, b, square| {
+        line_pixel_coverage(a, b, 1.0, width, square)
+    });
     let AlphaAgainstCpu {
         mean,
         worst,
@@ -883,19 +950,12 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
         drawn,
         expected,
         ..
-    } = AlphaAgainstCpu::composed(&picture, &ends, |a, b, square| {
-        line_pixel_coverage(a, b, 1.0, width, square)
-    });
+    } = alpha;
     println!(
         "wide lines {width:.3} pixels: alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
     );
     // Five strips 0.6 m long (4.6 pixels) and two pixels wide.
-    assert!(expected > 30.0, "the needles are in the picture: {expected}");
-    assert!(
-        (drawn / expected - 1.0).abs() < 0.02,
-        "alpha summed {drawn} against {expected}"
-    );
-    assert!(mean < 0.005 && worst < 0.02, "mean {mean}, largest {worst}");
+    alpha.assert_near("the needles", 30.0, 0.005, 0.02);
 }
 
 /// A branch drawn as wood lines wider than a pixel covers its pixels as
@@ -919,12 +979,10 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
 /// mean |Δ| 0.052.
 #[test]
 fn a_wide_branch_covers_its_pixels_as_one_strip() {
-    use bevy::core_pipeline::tonemapping::Tonemapping;
     use bevy_conifer_lod::model::impostor::{CROWN_PROFILE_STEPS, WOOD_NEARNESS_BINS, WoodVisibility};
     use bevy_conifer_lod::model::raster::{LineJoints, joined_line_pixel_coverage};
     use bevy_conifer_lod::model::{FoliageMaterial, Needle, Sphere, TreeInput, WoodSegment};
     let _turn = common::gpu_turn();
-    let size = 128u32;
     let radius = 0.162;
     let (from, to) = (Vec3::new(-2.6, -1.0, 0.0), Vec3::new(2.6, 0.6, 0.0));
     let stops = [0.0f32, 0.13, 0.31, 0.52, 0.58, 0.8, 1.0];
@@ -964,35 +1022,17 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
             };
             species.impostor = Some(std::sync::Arc::new(impostor));
         }
-        let (mut renderer, target, _sun) = common::sun_lit_renderer(size);
         let pixel_error = 3.0;
-        let world = renderer.world_mut();
-        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-        world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
-        let eye = Vec3::new(0.0, 0.0, 20.0);
-        let fov = 45f32.to_radians();
-        let transform = Transform::from_translation(eye).looking_at(Vec3::ZERO, Vec3::Y);
-        world.spawn((
-            HeadlessRenderer::camera_bundle(&target, transform, fov),
-            Camera {
-                clear_color: ClearColorConfig::Custom(Color::srgba(0.0, 0.0, 0.0, 0.0)),
-                ..default()
-            },
-            Tonemapping::None,
-        ));
-        world
-            .resource_mut::<bevy_conifer_lod::plugin::CompactReadback>()
-            .enabled = true;
+        let mut scene = LineScene::new(species);
         {
-            let mut settings = world.resource_mut::<ConiferLodSettings>();
-            settings.far_impostor = false;
+            let mut settings = scene.renderer.world_mut().resource_mut::<ConiferLodSettings>();
             settings.line_raster = LineRaster::Area;
             settings.pixel_error = pixel_error;
         }
         for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
-            renderer.update().unwrap();
+            scene.renderer.update().unwrap();
         }
-        let picture = renderer.capture(&target, 8).unwrap();
+        let picture = scene.renderer.capture(&scene.target, 8).unwrap();
         let name = if half_in_sight {
             "compact_wide_branch_half_in_sight.png"
         } else {
@@ -1001,15 +1041,9 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
         picture.save(out.join(name)).unwrap();
         // Each segment's width in pixels at its own error (the nearest point of
         // its sphere, as the shader's `wood_segment_error`).
-        let readback = common::camera_readback(renderer.world(), handle.id());
+        let readback = common::camera_readback(scene.renderer.world(), scene.handle.id());
         let (_, tree_error) = readback.tree_lod(0);
         let view = readback.view_point(0);
-        let clip_from_world = Mat4::perspective_infinite_reverse_rh(fov, 1.0, 0.1) * transform.to_matrix().inverse();
-        let pixel = |p: Vec3| {
-            let clip = clip_from_world * p.extend(1.0);
-            let ndc = clip.truncate() / clip.w;
-            [(0.5 + 0.5 * ndc.x) * size as f32, (0.5 - 0.5 * ndc.y) * size as f32]
-        };
         let strips: Vec<([f32; 2], [f32; 2], f32, LineJoints)> = wood
             .iter()
             .enumerate()
@@ -1019,7 +1053,12 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
                     start: k > 0,
                     end: k + 1 < wood.len(),
                 };
-                (pixel(w.start), pixel(w.end), 2.0 * radius * pixel_error / error, joints)
+                (
+                    scene.pixel(w.start),
+                    scene.pixel(w.end),
+                    2.0 * radius * pixel_error / error,
+                    joints,
+                )
             })
             .collect();
         assert!(
@@ -1038,6 +1077,7 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
                 })
                 .product::<f32>()
         };
+        let alpha = AlphaAgainstCpu::of(&picture, |square| compose(true, square));
         let AlphaAgainstCpu {
             mean,
             worst,
@@ -1045,17 +1085,12 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
             drawn,
             expected,
             least_inside,
-        } = AlphaAgainstCpu::of(&picture, |square| compose(true, square));
+        } = alpha;
         let open_mean = AlphaAgainstCpu::of(&picture, |square| compose(false, square)).mean;
         println!(
             "wide branch (wood half in sight: {half_in_sight}): alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}; against separate strips {open_mean:.4}; least alpha inside the strip {least_inside:.3}"
         );
-        assert!(expected > 80.0, "the branch is in the picture: {expected}");
-        assert!(
-            (drawn / expected - 1.0).abs() < 0.02,
-            "alpha summed {drawn} against {expected}"
-        );
-        assert!(mean < 0.006 && worst < 0.03, "mean {mean}, largest {worst}");
+        alpha.assert_near("the branch", 80.0, 0.006, 0.03);
         assert!(open_mean > 2.0 * mean, "separate strips: {open_mean} against {mean}");
         assert!(least_inside > 0.97, "a pale stripe inside the branch: {least_inside}");
     }
