@@ -876,6 +876,15 @@ impl AlphaAgainstCpu {
         result
     }
 
+    /// The figures, for the log: alpha summed against the CPU's, the mean
+    /// and largest |Δ|.
+    fn summary(&self) -> String {
+        format!(
+            "alpha summed {:.2} (reference {:.2}); mean |Δ| {:.4} over {} pixels, largest {:.3}",
+            self.drawn, self.expected, self.mean, self.pixels, self.worst
+        )
+    }
+
     /// Asserts that `what` is in the picture (the CPU's alpha summed over
     /// `at_least`), drawn in total within 2 % of the CPU's, and pixel by
     /// pixel within `mean_at_most` on average and `worst_at_most`.
@@ -943,17 +952,7 @@ fn wide_lines_cover_each_pixel_by_their_strips_area() {
     let alpha = AlphaAgainstCpu::composed(&picture, &ends, |a, b, square| {
         line_pixel_coverage(a, b, 1.0, width, square)
     });
-    let AlphaAgainstCpu {
-        mean,
-        worst,
-        pixels,
-        drawn,
-        expected,
-        ..
-    } = alpha;
-    println!(
-        "wide lines {width:.3} pixels: alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}"
-    );
+    println!("wide lines {width:.3} pixels: {}", alpha.summary());
     // Five strips 0.6 m long (4.6 pixels) and two pixels wide.
     alpha.assert_near("the needles", 30.0, 0.005, 0.02);
 }
@@ -1078,21 +1077,23 @@ fn a_wide_branch_covers_its_pixels_as_one_strip() {
                 .product::<f32>()
         };
         let alpha = AlphaAgainstCpu::of(&picture, |square| compose(true, square));
-        let AlphaAgainstCpu {
-            mean,
-            worst,
-            pixels,
-            drawn,
-            expected,
-            least_inside,
-        } = alpha;
         let open_mean = AlphaAgainstCpu::of(&picture, |square| compose(false, square)).mean;
         println!(
-            "wide branch (wood half in sight: {half_in_sight}): alpha summed {drawn:.2} (reference {expected:.2}); mean |Δ| {mean:.4} over {pixels} pixels, largest {worst:.3}; against separate strips {open_mean:.4}; least alpha inside the strip {least_inside:.3}"
+            "wide branch (wood half in sight: {half_in_sight}): {}; against separate strips {open_mean:.4}; least alpha inside the strip {:.3}",
+            alpha.summary(),
+            alpha.least_inside
         );
         alpha.assert_near("the branch", 80.0, 0.006, 0.03);
-        assert!(open_mean > 2.0 * mean, "separate strips: {open_mean} against {mean}");
-        assert!(least_inside > 0.97, "a pale stripe inside the branch: {least_inside}");
+        assert!(
+            open_mean > 2.0 * alpha.mean,
+            "separate strips: {open_mean} against {}",
+            alpha.mean
+        );
+        assert!(
+            alpha.least_inside > 0.97,
+            "a pale stripe inside the branch: {}",
+            alpha.least_inside
+        );
     }
 }
 
