@@ -653,14 +653,9 @@ pub fn wood_joints(ends: &[[[u16; 3]; 2]], radii: &[f32], grid: &PositionGrid) -
         starting_at.entry(e[0]).or_default().push(k);
         ending_at.entry(e[1]).or_default().push(k);
     }
-    // The segments that carry segment `k` on past its end (or back past
-    // its start).
-    let onward = |k: usize, ahead: bool| -> Vec<usize> {
-        let (at, map) = if ahead {
-            (ends[k][1], &starting_at)
-        } else {
-            (ends[k][0], &ending_at)
-        };
+    // The segments that carry each segment on past its end (`ahead`) and
+    // back past its start (`behind`), found once.
+    let onward = |k: usize, at: [u16; 3], map: &HashMap<[u16; 3], Vec<usize>>| -> Vec<usize> {
         map.get(&at)
             .into_iter()
             .flatten()
@@ -668,9 +663,12 @@ pub fn wood_joints(ends: &[[[u16; 3]; 2]], radii: &[f32], grid: &PositionGrid) -
             .filter(|&j| j != k && direction(k).dot(direction(j)) >= WOOD_JOINT_MIN_COSINE)
             .collect()
     };
-    // Whether the run from segment `k` on (ahead or back) reaches `needed`
-    // metres: its own length, then the longest way on.
-    let reaches = |k: usize, ahead: bool, needed: f32| -> bool {
+    let ahead: Vec<Vec<usize>> = (0..ends.len()).map(|k| onward(k, ends[k][1], &starting_at)).collect();
+    let behind: Vec<Vec<usize>> = (0..ends.len()).map(|k| onward(k, ends[k][0], &ending_at)).collect();
+    // Whether the run from segment `k` on (through `ways`, ahead or
+    // behind) reaches `needed` metres: its own length, then the longest
+    // way on.
+    let reaches = |k: usize, ways: &[Vec<usize>], needed: f32| -> bool {
         let mut run = 0.0;
         let mut here = k;
         for _ in 0..ends.len() {
@@ -678,8 +676,9 @@ pub fn wood_joints(ends: &[[[u16; 3]; 2]], radii: &[f32], grid: &PositionGrid) -
             if run >= needed {
                 return true;
             }
-            match onward(here, ahead)
-                .into_iter()
+            match ways[here]
+                .iter()
+                .copied()
                 .max_by(|&a, &b| length(a).total_cmp(&length(b)))
             {
                 Some(next) => here = next,
@@ -690,9 +689,9 @@ pub fn wood_joints(ends: &[[[u16; 3]; 2]], radii: &[f32], grid: &PositionGrid) -
     };
     let mut joints = vec![LineJoints::NONE; ends.len()];
     for k in 0..ends.len() {
-        for next in onward(k, true) {
+        for &next in &ahead[k] {
             let needed = 2.0 * radii[k].max(radii[next]);
-            if reaches(k, false, needed) && reaches(next, true, needed) {
+            if reaches(k, &behind, needed) && reaches(next, &ahead, needed) {
                 joints[k].end = true;
                 joints[next].start = true;
             }
@@ -1997,26 +1996,21 @@ mod tests {
         let joints: Vec<LineJoints> = (0..count).map(|s| compact.wood_joints(s)).collect();
         let (ends, radii): (Vec<[Vec3; 2]>, Vec<[f32; 2]>) = (0..count).map(|s| compact.wood_segment(s)).unzip();
         let along = |k: usize| (ends[k][1] - ends[k][0]).normalize();
-        // Every joined end has its partner, within 30°.
-        for s in 0..count {
-            if joints[s].end {
-                assert!(
-                    (0..count).any(|k| k != s
-                        && joints[k].start
-                        && ends[k][0] == ends[s][1]
-                        && along(s).dot(along(k)) >= WOOD_JOINT_MIN_COSINE),
-                    "segment {s}'s end"
-                );
-            }
-            if joints[s].start {
-                assert!(
-                    (0..count).any(|k| k != s
-                        && joints[k].end
-                        && ends[k][1] == ends[s][0]
-                        && along(s).dot(along(k)) >= WOOD_JOINT_MIN_COSINE),
-                    "segment {s}'s start"
-                );
-            }
+        // Every joined end has its partner, within 30°: a segment whose
+        // joined start lies at a joined end, or the other way round.
+        let has_partner = |s: usize, at_end: bool| {
+            (0..count).any(|k| {
+                let meets = if at_end {
+                    joints[k].start && ends[k][0] == ends[s][1]
+                } else {
+                    joints[k].end && ends[k][1] == ends[s][0]
+                };
+                k != s && meets && along(s).dot(along(k)) >= WOOD_JOINT_MIN_COSINE
+            })
+        };
+        for (s, joint) in joints.iter().enumerate() {
+            assert!(!joint.end || has_partner(s, true), "segment {s}'s end");
+            assert!(!joint.start || has_partner(s, false), "segment {s}'s start");
         }
         // The trunk: the lowest segment, then up through the segments that
         // start where the last ends, rising.

@@ -822,6 +822,20 @@ fn wood_line_calibration(lod: InstanceLod, spatial_error: f32, opacity: f32) -> 
 #endif
 }
 
+#ifdef CONIFER_WOOD_LAYERS
+// This draw's layer of a wood line covering `a` of a pixel whose wood the
+// needles leave `in_sight` in sight: `a·(1 − g)/(1 − a·g)` under the
+// foliage lines, `a·g` over them (CPU reference:
+// `model::impostor::wood_layer_opacities`).
+fn wood_layer_opacity(a: f32, in_sight: f32) -> f32 {
+#ifdef CONIFER_WOOD_OVER_FOLIAGE
+    return a * in_sight;
+#else
+    return a * (1.0 - in_sight) / max(1.0 - a * in_sight, 1e-6);
+#endif
+}
+#endif
+
 // How far a tree has faded into its impostor, in [0, 1].
 fn impostor_fade(lod: InstanceLod) -> f32 {
     return f32(lod.code >> LOD_FADE_SHIFT) / 255.0;
@@ -1010,7 +1024,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let sections = wood_sections(species.wind.z);
     let slot = vertex_index / LINE_VERTICES;
     let s = slot / sections;
-    let ends = decode_wood_segment(wood_segments[s], species.wood_grid);
+    let segment = wood_segments[s];
+    let ends = decode_wood_segment(segment, species.wood_grid);
     let start = ends.start;
     let end = ends.end;
     let width = start.w + end.w;
@@ -1044,8 +1059,8 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     }
     // A section runs on into the next one, and the segment's ends into
     // its branch's next segments where those continue it.
-    let joined_start = section > 0u || (wood_segments[s].w & WOOD_JOINED_START) != 0u;
-    let joined_end = section + 1u < drawn || (wood_segments[s].w & WOOD_JOINED_END) != 0u;
+    let joined_start = section > 0u || (segment.w & WOOD_JOINED_START) != 0u;
+    let joined_end = section + 1u < drawn || (segment.w & WOOD_JOINED_END) != 0u;
     let a = mix(start.xyz, end.xyz, f32(section) / f32(drawn));
     let b = mix(start.xyz, end.xyz, f32(section + 1u) / f32(drawn));
 #ifdef CONIFER_WOOD_LAYERS
@@ -1073,11 +1088,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     split_in_fragment = pixels * scale > 1.0;
 #endif
     if !split_in_fragment {
-#ifdef CONIFER_WOOD_OVER_FOLIAGE
-        alpha = alpha * in_sight;
-#else
-        alpha = alpha * (1.0 - in_sight) / max(1.0 - alpha * in_sight, 1e-6);
-#endif
+        alpha = wood_layer_opacity(alpha, in_sight);
     }
 #endif
     let at_end = line_vertex_at_end(vertex_index);
@@ -1406,12 +1417,7 @@ fn pixel_line_coverage(in: VertexOutput) -> f32 {
     if !(in.line_width > 1.0) {
         return coverage;
     }
-    let in_sight = clamp(in.wood_in_sight, 0.0, 1.0);
-#ifdef CONIFER_WOOD_OVER_FOLIAGE
-    return coverage * in_sight;
-#else
-    return coverage * (1.0 - in_sight) / max(1.0 - coverage * in_sight, 1e-6);
-#endif
+    return wood_layer_opacity(coverage, clamp(in.wood_in_sight, 0.0, 1.0));
 #else
     return coverage;
 #endif
