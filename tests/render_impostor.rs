@@ -15,7 +15,8 @@ use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::crown_shade::CrownShade;
 use bevy_conifer_lod::model::impostor::{
-    CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade, shadow_sample_depths, swayed_card_point,
+    CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade, impostor_samples, shadow_sample_depths,
+    swayed_card_point,
 };
 use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, impostor_margin, trunk_offset, wind_offset};
 use bevy_conifer_lod::model::{BakeOptions, LodRecord, bake};
@@ -153,6 +154,140 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
             assert_eq!(shadow.impostor_fade(0), 0.0);
             assert_eq!(shadow.tree_draw(PartKind::Impostor, 0)[0], 0);
         }
+    }
+}
+
+/// Halfway through the fade each sample shows the tree's cut or its
+/// impostor, as the CPU's dither (`impostor_samples`) hands it over.
+/// Without MSAA the fading picture is, pixel by pixel, the picture of the
+/// lines alone or of the impostor alone; under 4× MSAA each pixel is the
+/// two mixed by its samples' shares (in linear light). Either way the
+/// crown keeps their coverage (blending the two, the cut's opacity times
+/// `1 − fade` over the impostor's times `fade`, thinned it by 12 %).
+#[test]
+fn a_fading_tree_hands_each_sample_to_its_cut_or_its_impostor() {
+    let _turn = common::gpu_turn();
+    let species = ConiferSpecies::from_record(spruce()).unwrap();
+    let texel = species.impostor.as_ref().expect("an impostor").texel;
+    let crown = species.crown_center;
+    let mut renderer = HeadlessRenderer::new(".");
+    let target = renderer.render_target(SIZE, SIZE);
+    let world = renderer.world_mut();
+    HeadlessRenderer::spawn_lights(world);
+    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+    let tree = world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY)).id();
+    let (camera, _) = impostor_camera(world, &target, crown, texel, 0.5 * (FADE_START + FADE_END));
+    world.resource_mut::<CompactReadback>().enabled = true;
+    let out = out_dir();
+    let linear = |c: u8| {
+        let c = f64::from(c) / 255.0;
+        if c <= 0.04045 {
+            c / 12.92
+        } else {
+            ((c + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    for (msaa, samples) in [(Msaa::Off, 1u32), (Msaa::Sample4, 4)] {
+        renderer.world_mut().entity_mut(camera).insert(msaa);
+        let picture = |renderer: &mut HeadlessRenderer, lod: ConiferLodOverride| {
+            renderer.world_mut().entity_mut(tree).insert(lod);
+            for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+                renderer.update().unwrap();
+            }
+            let picture = renderer.capture(&target, 60).unwrap();
+            let fade = common::camera_readback(renderer.world(), handle.id()).impostor_fade(0);
+            (picture, fade)
+        };
+        let (fading, fade) = picture(&mut renderer, ConiferLodOverride::default());
+        let (lines, lines_fade) = picture(
+            &mut renderer,
+            ConiferLodOverride {
+                far_impostor: Some(false),
+                ..default()
+            },
+        );
+        // Twice the pixel error: the impostor alone (its picture does not
+        // depend on the error).
+        let (impostor, impostor_fade) = picture(
+            &mut renderer,
+            ConiferLodOverride {
+                pixel_error: Some(2.0),
+                ..default()
+            },
+        );
+        assert!(fade > 0.3 && fade < 0.7, "{fade}");
+        assert_eq!((lines_fade, impostor_fade), (0.0, 1.0));
+        let code = (fade * 255.0).round() as u8;
+        let (mut sum, mut largest, mut contested, mut handed) = (0.0f64, 0.0f64, 0u32, [0u32; 2]);
+        let mut expected = image::RgbaImage::new(SIZE, SIZE);
+        for (x, y, pixel) in fading.enumerate_pixels() {
+            let share = f64::from((impostor_samples([x, y], 0, code, samples) & ((1 << samples) - 1)).count_ones())
+                / f64::from(samples);
+            let (l, i) = (lines.get_pixel(x, y), impostor.get_pixel(x, y));
+            let mut want = [0u8; 4];
+            for c in 0..4 {
+                want[c] = if c < 3 {
+                    let mixed = (1.0 - share) * linear(l[c]) + share * linear(i[c]);
+                    let srgb = if mixed <= 0.0031308 {
+                        12.92 * mixed
+                    } else {
+                        1.055 * mixed.powf(1.0 / 2.4) - 0.055
+                    };
+                    (255.0 * srgb).round() as u8
+                } else {
+                    ((1.0 - share) * f64::from(l[c]) + share * f64::from(i[c])).round() as u8
+                };
+            }
+            expected.put_pixel(x, y, image::Rgba(want));
+            let d = pixel.0.iter().zip(want).map(|(a, b)| a.abs_diff(b)).max().unwrap();
+            (sum, largest) = (sum + f64::from(d), largest.max(f64::from(d)));
+            if l != i {
+                contested += 1;
+                handed[usize::from(share > 0.0)] += 1;
+            }
+        }
+        for (name, image) in [
+            ("fading", &fading),
+            ("lines", &lines),
+            ("impostor", &impostor),
+            ("expected", &expected),
+        ] {
+            image
+                .save(out.join(format!("crossfade_{samples}x_{name}.png")))
+                .unwrap();
+        }
+        let coverage = |image: &image::RgbaImage| image.pixels().map(|p| f64::from(p[3]) / 255.0).sum::<f64>();
+        let (faded, cut, alone) = (coverage(&fading), coverage(&lines), coverage(&impostor));
+        let blended: f64 = lines
+            .pixels()
+            .zip(impostor.pixels())
+            .map(|(l, i)| {
+                let (l, i) = (f64::from(l[3]) / 255.0, f64::from(i[3]) / 255.0);
+                1.0 - (1.0 - f64::from(1.0 - fade) * l) * (1.0 - f64::from(fade) * i)
+            })
+            .sum();
+        let mean = sum / f64::from(SIZE * SIZE);
+        println!(
+            "{samples} sample(s) a pixel, fade {fade:.3}: {contested} pixels where the two differ ({} without \
+             the impostor's samples, {} with some); fading against the dither's mix: mean max-channel |Δ| {mean:.4}, largest \
+             {largest}; summed coverage {faded:.1}, lines alone {cut:.1}, impostor alone {alone:.1}, the two \
+             blended {blended:.1}",
+            handed[0], handed[1]
+        );
+        if samples == 1 {
+            assert!(handed[0] > 500 && handed[1] > 500, "{handed:?}");
+            assert!(mean < 0.05 && largest <= 2.0, "mean {mean}, largest {largest}");
+        } else {
+            // Every pixel takes half of each (8 of a 2×2 block's 16
+            // samples). A pixel's samples differ where the edge of a
+            // line's quad crosses it, so the mix of the whole pictures is
+            // near, not exact.
+            assert_eq!(handed[0], 0);
+            assert!(mean < 2.0, "mean {mean}, largest {largest}");
+        }
+        let between = f64::from(1.0 - fade) * cut + f64::from(fade) * alone;
+        assert!((faded / between - 1.0).abs() < 0.03, "{faded} vs {between}");
+        assert!(faded > blended * 1.05, "{faded} vs blended {blended}");
     }
 }
 

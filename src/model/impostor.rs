@@ -105,6 +105,55 @@ pub fn impostor_fade(spatial_error: f32, texel: f32, elevation: f32) -> f32 {
     (t * (1.0 - steep) * 255.0).round() / 255.0
 }
 
+/// Ordered dithering's 4 × 4 threshold map (Bayer's; Bevy's
+/// `visibility_range_dither` uses the same), `[row][column]`: each of
+/// 0–15 once, neighbours far apart, so any share of a block's pixels is
+/// spread evenly over it.
+pub const CROSSFADE_THRESHOLDS: [[u32; 4]; 4] = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]];
+
+/// The 2 × 2 threshold map `[row][column]` under 4× MSAA: sample `s` of a
+/// pixel has threshold `4·s +` its pixel's entry, so the 16 thresholds
+/// span a 2 × 2 block's 16 samples and every pixel gets a quarter of each
+/// four.
+pub const CROSSFADE_SAMPLE_THRESHOLDS: [[u32; 2]; 2] = [[0, 2], [3, 1]];
+
+/// The samples (a mask, bit `s` for sample `s`) of framebuffer pixel
+/// `pixel` that the impostor, rather than the tree's cut (prisms, lines,
+/// wood), draws for instance `tree` faded by `fade_code` (0–255,
+/// [`impostor_fade`] × 255 as the cull pass stores it), in a view of
+/// `msaa_samples` samples a pixel. The two take complementary samples:
+/// the impostor those whose threshold `t` has `(t + ½)/16 < fade`, so
+/// `round(16·fade)` of every 16 thresholds. Under 4× MSAA (Bevy's default)
+/// the thresholds are a 2 × 2 block's samples
+/// ([`CROSSFADE_SAMPLE_THRESHOLDS`]) and each pixel blends both
+/// representations in quarters; otherwise they are a 4 × 4 block's pixels
+/// ([`CROSSFADE_THRESHOLDS`]) and a pixel is one or the other whole (its
+/// mask all ones or zero). Either way the crown keeps its coverage through
+/// the fade; blending the two instead, the cut's opacity times `1 − fade`
+/// over the impostor's times `fade`, left a crown of coverage `a` at
+/// `1 − (1 − a/2)²` halfway (a dense crown 30 % see-through where it is
+/// 10 %). A sample the impostor takes at one fade it takes at every larger
+/// one, so a tree moving away hands samples over one way. The blocks are
+/// shifted by a hash of `tree` so that neighbours do not dither alike.
+/// CPU reference of the camera passes' fragment test in
+/// `conifer_compact.wgsl`.
+pub fn impostor_samples(pixel: [u32; 2], tree: u32, fade_code: u8, msaa_samples: u32) -> u32 {
+    let offset = super::compact::pcg_hash(tree);
+    let takes = |threshold: u32| 255 * (2 * threshold + 1) < 32 * u32::from(fade_code);
+    if msaa_samples == 4 {
+        let x = (pixel[0].wrapping_add(offset & 1) % 2) as usize;
+        let y = (pixel[1].wrapping_add((offset >> 1) & 1) % 2) as usize;
+        (0..4)
+            .filter(|&s| takes(4 * s + CROSSFADE_SAMPLE_THRESHOLDS[y][x]))
+            .map(|s| 1 << s)
+            .sum()
+    } else {
+        let x = (pixel[0].wrapping_add(offset & 3) % 4) as usize;
+        let y = (pixel[1].wrapping_add((offset >> 2) & 3) % 4) as usize;
+        if takes(CROSSFADE_THRESHOLDS[y][x]) { u32::MAX } else { 0 }
+    }
+}
+
 /// How far, in radians, the impostor's card leans away from a light at
 /// `elevation` radians above the horizon (negative below) when a tree past
 /// a shadow view's budget casts it, for a crown `width` wide and `height`
@@ -1731,6 +1780,59 @@ mod tests {
         assert_eq!(impostor_fade(1e9, texel, -2.0), 0.0);
         assert_eq!(impostor_fade(1e9, texel, f32::NAN), 0.0);
         assert!((impostor_fade(1e9, texel, 0.5 * (STEEP_START + STEEP_END)) - 0.5).abs() <= 1.0 / 255.0);
+    }
+
+    /// Every block of any instance hands `round(16·fade)` of its 16
+    /// thresholds to the impostor and the rest to the cut, whatever the
+    /// fade code: a 4 × 4 block's pixels whole, or under 4× MSAA a 2 × 2
+    /// block's samples, a quarter of each four to every pixel; a sample
+    /// once the impostor's stays so as the fade grows.
+    #[test]
+    fn the_crossfade_hands_each_block_over_in_sixteenths() {
+        for (samples, side, all) in [(1u32, 4u32, u32::MAX), (4, 2, 0b1111)] {
+            for tree in [0u32, 1, 7, 123_456, u32::MAX] {
+                let mut last = vec![0u32; (side * side) as usize];
+                for code in 0..=255u8 {
+                    let expected = (16.0 * f32::from(code) / 255.0).round() as u32;
+                    // Blocks anywhere, even across u32 wrapping.
+                    for origin in [[0u32, 0], [5, 9], [u32::MAX - 1, 2]] {
+                        let mut taken = 0;
+                        for y in 0..side {
+                            for x in 0..side {
+                                let pixel = [origin[0].wrapping_add(x), origin[1].wrapping_add(y)];
+                                let mask = impostor_samples(pixel, tree, code, samples);
+                                assert!(mask == 0 || mask == all || samples == 4, "{mask:#x}");
+                                taken += (mask & all).count_ones();
+                                if samples == 4 {
+                                    // A pixel's share is within a quarter of the fade.
+                                    let share = mask.count_ones() as f32 / 4.0;
+                                    assert!((share - f32::from(code) / 255.0).abs() <= 0.25 + 1e-6);
+                                }
+                            }
+                        }
+                        let per_pixel = if samples == 4 { 1 } else { 32 };
+                        assert_eq!(
+                            taken / per_pixel,
+                            expected,
+                            "{samples} samples, tree {tree}, code {code}"
+                        );
+                    }
+                    for (k, was) in last.iter_mut().enumerate() {
+                        let now = impostor_samples([k as u32 % side, k as u32 / side], tree, code, samples);
+                        assert_eq!(now & *was, *was, "tree {tree}: pixel {k} handed back at code {code}");
+                        *was = now;
+                    }
+                }
+                assert_eq!(impostor_samples([3, 1], tree, 0, samples), 0);
+                assert_eq!(impostor_samples([3, 1], tree, 255, samples) & all, all);
+            }
+        }
+        // Trees are dithered apart: the pixels taken at a quarter differ
+        // between most neighbours.
+        let pattern =
+            |tree: u32| -> Vec<u32> { (0..16).map(|k| impostor_samples([k % 4, k / 4], tree, 64, 1)).collect() };
+        let differing = (0..32u32).filter(|&t| pattern(t) != pattern(t + 1)).count();
+        assert!(differing >= 16, "{differing} of 32 neighbours differ");
     }
 
     #[test]

@@ -841,13 +841,63 @@ fn impostor_fade(lod: InstanceLod) -> f32 {
     return f32(lod.code >> LOD_FADE_SHIFT) / 255.0;
 }
 
-// A line's colour, faded as its tree fades into its impostor; in shadow
-// passes its index and tree (for the hashed alpha test) and its opacity.
-fn line_color(lod: InstanceLod, color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
+// `model::impostor::CROSSFADE_THRESHOLDS`: ordered dithering's 4×4
+// threshold map, a row a word, a column a byte (as Bevy's
+// `visibility_range_dither` packs it); under 4× MSAA
+// `CROSSFADE_SAMPLE_THRESHOLDS`' 2×2, row by row a byte each.
+const CROSSFADE_THRESHOLDS: vec4<u32> = vec4<u32>(0x0a020800u, 0x060e040cu, 0x09010b03u, 0x050d070fu);
+const CROSSFADE_SAMPLE_THRESHOLDS: u32 = 0x01030200u;
+
+// The samples of framebuffer pixel `pixel` (a mask) the impostor, rather
+// than the tree's cut, draws for instance `tree` faded by `fade_code`
+// (0–255): the two take complementary samples, `round(16·fade)` of every
+// 16 thresholds the impostor's, so the crown keeps its coverage through
+// the fade. Under 4× MSAA (`CONIFER_CROSSFADE_SAMPLES`) the thresholds are
+// a 2×2 block's samples, else a 4×4 block's pixels whole. CPU reference:
+// `model::impostor::impostor_samples`.
+fn impostor_samples(pixel: vec2<f32>, tree: u32, fade_code: u32) -> u32 {
+    let offset = pcg(tree);
+#ifdef CONIFER_CROSSFADE_SAMPLES
+    let p = (vec2<u32>(pixel) + vec2<u32>(offset & 1u, (offset >> 1u) & 1u)) % vec2<u32>(2u);
+    let base = (CROSSFADE_SAMPLE_THRESHOLDS >> ((2u * p.y + p.x) * 8u)) & 0xffu;
+    var mask = 0u;
+    for (var s = 0u; s < 4u; s += 1u) {
+        if 255u * (2u * (4u * s + base) + 1u) < 32u * fade_code {
+            mask |= 1u << s;
+        }
+    }
+    return mask;
+#else
+    let p = (vec2<u32>(pixel) + vec2<u32>(offset & 3u, (offset >> 2u) & 3u)) % vec2<u32>(4u);
+    let threshold = (CROSSFADE_THRESHOLDS[p.y] >> (p.x * 8u)) & 0xffu;
+    return select(0u, 0xffffffffu, 255u * (2u * threshold + 1u) < 32u * fade_code);
+#endif
+}
+
+// The samples of its pixel a camera pass's fragment of tree `tree` draws
+// (a mask; 0: none): while the tree fades into its impostor
+// (`impostor_samples`) the impostor draws its samples and the cut
+// (prisms, lines, wood) the others; outside the fade all of them.
+fn crossfade_samples(pixel: vec2<f32>, tree: u32) -> u32 {
+    let fade_code = instance_lods[tree].code >> LOD_FADE_SHIFT;
+#ifdef CONIFER_IMPOSTOR
+    return impostor_samples(pixel, tree, fade_code);
+#else
+    if fade_code == 0u {
+        return 0xffffffffu;
+    }
+    return ~impostor_samples(pixel, tree, fade_code);
+#endif
+}
+
+// A line's colour; in shadow passes its index and tree (for the hashed
+// alpha test) and its opacity. (A camera hands each sample of a fading
+// tree to its lines or its impostor: `crossfade_samples`.)
+fn line_color(color: vec4<f32>, line: u32, tree: u32) -> vec4<f32> {
 #ifdef CONIFER_SHADOW
     return vec4<f32>(f32(line & 0xffffffu), f32(tree & 0xffffffu), 0.0, color.a);
 #else
-    return vec4<f32>(color.rgb, color.a * (1.0 - impostor_fade(lod)));
+    return color;
 #endif
 }
 
@@ -964,7 +1014,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let tip = needle_tip(grid, k);
     let at_end = line_vertex_at_end(vertex_index);
     let position = select(base, tip, at_end);
-    var out = finish(position, tip - base, world_from_local, line_color(lod, base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
+    var out = finish(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
     out.alignment = 1.0;
     out = with_line_width(out, line_pixels(lod, spatial_error, width) * scale);
     return with_line_quad(swayed_line(out, base, tip, world_from_local, at_end), base, tip, world_from_local, vertex_index);
@@ -1012,7 +1062,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let end = end_position(grid, b);
     let at_end = line_vertex_at_end(vertex_index);
     let position = select(start, end, at_end);
-    var out = finish(position, end - start, world_from_local, line_color(lod, base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
+    var out = finish(position, end - start, world_from_local, line_color(base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
     // `model::compact::CompactSpecies::merged_alignment`.
     out.alignment = f32(b >> 28u) / ALIGNMENT_STEPS;
     out = with_line_width(out, merged_pixels);
@@ -1094,7 +1144,7 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
     let at_end = line_vertex_at_end(vertex_index);
     let position = select(a, b, at_end);
     // The fragment takes the bark's colour at its own height (CONIFER_BARK).
-    let color = line_color(lod, base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
+    let color = line_color(base_color(2, 0.0, alpha, species.wood_color.rgb), 0xffffffu - s, hash_tree);
     var out = finish(position, b - a, world_from_local, color);
     out.alignment = 1.0;
     out = with_line_width(out, pixels * scale);
@@ -1439,10 +1489,18 @@ struct MotionOutput {
     @location(0) normal: vec4<f32>,
 #endif
     @location(1) motion_vector: vec4<f32>,
+#ifdef CONIFER_CROSSFADE_SAMPLES
+    // The samples the fragment goes to (`crossfade_samples`).
+    @builtin(sample_mask) samples: u32,
+#endif
 }
 
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOutput {
+    let fade_samples = crossfade_samples(in.position.xy, in.tree);
+    if fade_samples == 0u {
+        discard;
+    }
 #ifdef CONIFER_LINE_QUADS
     let opacity = pixel_line_coverage(in);
 #else
@@ -1458,6 +1516,9 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
     let before = previous_view_uniforms.clip_from_world * vec4<f32>(in.previous_world_position.xyz, 1.0);
     let motion = (now.xy / now.w - before.xy / before.w) * vec2<f32>(0.5, -0.5);
     out.motion_vector = vec4<f32>(motion, 0.0, saturate(opacity));
+#ifdef CONIFER_CROSSFADE_SAMPLES
+    out.samples = fade_samples;
+#endif
 #ifdef CONIFER_NORMALS
     let normal = normalize(select(-in.world_normal, in.world_normal, is_front));
     out.normal = vec4<f32>(normal * 0.5 + vec3<f32>(0.5), 1.0);
@@ -2102,13 +2163,26 @@ fn round_prism_normal(normal: vec3<f32>, side: vec3<f32>, toward: vec3<f32>) -> 
 }
 #endif
 
+// The main pass's output: the colour, and under 4× MSAA the samples it
+// goes to (`crossfade_samples`).
+struct FragmentOutput {
+    @location(0) color: vec4<f32>,
+#ifdef CONIFER_CROSSFADE_SAMPLES
+    @builtin(sample_mask) samples: u32,
+#endif
+}
+
 @fragment
-fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
+fn fragment(in: VertexOutput) -> FragmentOutput {
 #ifdef CONIFER_LINES
 #ifndef CONIFER_FACING_STRIP
     fragment_tree = in.tree;
 #endif
 #endif
+    let fade_samples = crossfade_samples(in.position.xy, in.tree);
+    if fade_samples == 0u {
+        discard;
+    }
 #ifdef CONIFER_LINE_QUADS
     // The pixel takes the line's strip's area in it; a quad's corners
     // reach past the strip (`LINE_QUAD_MARGIN`), and most of its pixels
@@ -2140,7 +2214,7 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     if species.debug_colors != 0u {
         albedo = vec3<f32>(0.85, 0.2, 0.85);
     }
-    pbr_input.material.base_color = vec4<f32>(albedo, texel.r * in.color.w);
+    pbr_input.material.base_color = vec4<f32>(albedo, texel.r);
     let vertical_share = clamp(texel.b / texel.r, 0.0, 1.0);
     let across_share = clamp(texel.a / texel.r, 0.0, 1.0 - vertical_share);
     axis = normalize(world_from_local[1].xyz);
@@ -2252,6 +2326,11 @@ fn fragment(in: VertexOutput) -> @location(0) vec4<f32> {
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
 #endif
     color = pbr_functions::main_pass_post_lighting_processing(pbr_input, color);
-    return color;
+    var out: FragmentOutput;
+    out.color = color;
+#ifdef CONIFER_CROSSFADE_SAMPLES
+    out.samples = fade_samples;
+#endif
+    return out;
 }
 #endif

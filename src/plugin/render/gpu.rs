@@ -675,6 +675,32 @@ mod tests {
         }
     }
 
+    /// The camera passes' cross-fade dithers by `model::impostor`'s
+    /// threshold maps: the pixels' a row a word, a column a byte; the
+    /// samples' a byte a pixel, row by row.
+    #[test]
+    fn the_shaders_dither_the_crossfade_by_the_cpus_map() {
+        let shader = include_str!("conifer_compact.wgsl");
+        let words: Vec<String> = crate::model::impostor::CROSSFADE_THRESHOLDS
+            .iter()
+            .map(|row| {
+                let word = row.iter().enumerate().fold(0u32, |word, (x, t)| word | (t << (8 * x)));
+                format!("0x{word:08x}u")
+            })
+            .collect();
+        let declared = format!(
+            "const CROSSFADE_THRESHOLDS: vec4<u32> = vec4<u32>({});",
+            words.join(", ")
+        );
+        assert!(shader.contains(&declared), "{declared}");
+        let samples = crate::model::impostor::CROSSFADE_SAMPLE_THRESHOLDS
+            .iter()
+            .flatten()
+            .enumerate()
+            .fold(0u32, |word, (k, t)| word | (t << (8 * k)));
+        assert!(shader.contains(&format!("const CROSSFADE_SAMPLE_THRESHOLDS: u32 = 0x{samples:08x}u;")));
+    }
+
     /// The shader's wood visibility table is as long as `model::impostor`'s.
     #[test]
     fn the_shader_has_the_wood_visibilitys_length() {

@@ -1002,6 +1002,15 @@ pub enum WoodLineLayer {
     OverFoliage,
 }
 
+/// The MSAA sample count under which a fading tree's cut and impostor
+/// split each pixel's samples (`model::impostor::impostor_samples`); at
+/// other counts they split whole pixels.
+const CROSSFADE_MSAA_SAMPLES: u32 = 4;
+
+/// The shader definition that makes the camera passes' fragments write
+/// their cross-fade's sample mask.
+const CROSSFADE_SAMPLES_DEF: &str = "CONIFER_CROSSFADE_SAMPLES";
+
 /// The passes the compact parts are drawn in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum CompactPass {
@@ -1220,6 +1229,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
         if key.wood_layer != WoodLineLayer::Whole {
             defs.push("CONIFER_WOOD_LAYERS".into());
         }
+        if key.mesh_key.msaa_samples() == CROSSFADE_MSAA_SAMPLES {
+            defs.push(CROSSFADE_SAMPLES_DEF.into());
+        }
         if key.wood_layer == WoodLineLayer::OverFoliage {
             defs.push("CONIFER_WOOD_OVER_FOLIAGE".into());
         }
@@ -1374,6 +1386,9 @@ impl CompactPipeline {
         let writes_surface = writes_depth && !kind.is_blended();
         if normals {
             defs.push("CONIFER_NORMALS".into());
+        }
+        if samples == CROSSFADE_MSAA_SAMPLES {
+            defs.push(CROSSFADE_SAMPLES_DEF.into());
         }
         let targets = vec![
             normals.then_some(ColorTargetState {
