@@ -8,7 +8,9 @@
 //! distance where its texel is a fraction of the pixel error, the plugin
 //! draws the tree as one camera-facing quad textured with the two views
 //! nearest the camera's azimuth instead, cross-faded with the lines over
-//! a band of distances ([`FADE_START`], [`FADE_END`]).
+//! a band of distances ([`FADE_START`], [`FADE_END`]): each sample of the
+//! tree's pixels goes to one or the other by an ordered dither
+//! ([`impostor_samples`]), so the crown keeps its coverage as it fades.
 //!
 //! The texel has one size for every tree ([`ImpostorOptions::texel`],
 //! 10 cm), so every tree turns into its impostor at the same pixel error

@@ -366,7 +366,10 @@ pub struct ConiferLodSettings {
     /// Draw a far tree as its crown impostor
     /// ([`crate::model::impostor`]): from where one of its texels is
     /// smaller than the pixel error, the lines fade into one textured quad
-    /// per tree. Default on; [`ConiferLodSettings::paper`] turns it off.
+    /// per tree, each sample of the tree's pixels drawn by one or the other
+    /// ([`crate::model::impostor::impostor_samples`]; under 4× MSAA a pixel
+    /// mixes both by quarters). Default on; [`ConiferLodSettings::paper`]
+    /// turns it off.
     pub far_impostor: bool,
     /// Dim the ambient light by the share of the sky each point of a
     /// crown sees through the crown
