@@ -68,6 +68,42 @@ fn error_per_metre() -> f32 {
     2.0 * (0.5 * FOV_DEG.to_radians()).tan() / SIZE as f32
 }
 
+/// A renderer with [`spruce`] standing once at the origin under the
+/// default lights, and a `SIZE²` target.
+struct LitSpruce {
+    renderer: HeadlessRenderer,
+    target: Handle<Image>,
+    handle: Handle<ConiferSpecies>,
+    /// The tree's entity.
+    tree: Entity,
+    /// The species' crown centre.
+    crown: Vec3,
+    /// Its impostor's texel.
+    texel: f32,
+}
+
+impl LitSpruce {
+    fn new() -> Self {
+        let species = ConiferSpecies::from_record(spruce()).unwrap();
+        let texel = species.impostor.as_ref().expect("an impostor").texel;
+        let crown = species.crown_center;
+        let mut renderer = HeadlessRenderer::new(".");
+        let target = renderer.render_target(SIZE, SIZE);
+        let world = renderer.world_mut();
+        HeadlessRenderer::spawn_lights(world);
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
+        let tree = world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY)).id();
+        LitSpruce {
+            renderer,
+            target,
+            handle,
+            tree,
+            crown,
+            texel,
+        }
+    }
+}
+
 fn out_dir() -> PathBuf {
     let out = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/render");
     std::fs::create_dir_all(&out).unwrap();
@@ -77,15 +113,15 @@ fn out_dir() -> PathBuf {
 #[test]
 fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
     let _turn = common::gpu_turn();
-    let species = ConiferSpecies::from_record(spruce()).unwrap();
-    let texel = species.impostor.as_ref().expect("an impostor").texel;
-    let crown = species.crown_center;
-    let mut renderer = HeadlessRenderer::new(".");
-    let target = renderer.render_target(SIZE, SIZE);
+    let LitSpruce {
+        mut renderer,
+        target,
+        handle,
+        crown,
+        texel,
+        ..
+    } = LitSpruce::new();
     let world = renderer.world_mut();
-    HeadlessRenderer::spawn_lights(world);
-    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-    world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY));
     let camera = world
         .spawn(HeadlessRenderer::camera_bundle(
             &target,
@@ -167,15 +203,15 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
 #[test]
 fn a_fading_tree_hands_each_sample_to_its_cut_or_its_impostor() {
     let _turn = common::gpu_turn();
-    let species = ConiferSpecies::from_record(spruce()).unwrap();
-    let texel = species.impostor.as_ref().expect("an impostor").texel;
-    let crown = species.crown_center;
-    let mut renderer = HeadlessRenderer::new(".");
-    let target = renderer.render_target(SIZE, SIZE);
+    let LitSpruce {
+        mut renderer,
+        target,
+        handle,
+        tree,
+        crown,
+        texel,
+    } = LitSpruce::new();
     let world = renderer.world_mut();
-    HeadlessRenderer::spawn_lights(world);
-    let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
-    let tree = world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY)).id();
     let (camera, _) = impostor_camera(world, &target, crown, texel, 0.5 * (FADE_START + FADE_END));
     world.resource_mut::<CompactReadback>().enabled = true;
     let out = out_dir();
