@@ -215,14 +215,6 @@ fn a_fading_tree_hands_each_sample_to_its_cut_or_its_impostor() {
     let (camera, _) = impostor_camera(world, &target, crown, texel, 0.5 * (FADE_START + FADE_END));
     world.resource_mut::<CompactReadback>().enabled = true;
     let out = out_dir();
-    let linear = |c: u8| {
-        let c = f64::from(c) / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
     for (msaa, samples) in [(Msaa::Off, 1u32), (Msaa::Sample4, 4)] {
         renderer.world_mut().entity_mut(camera).insert(msaa);
         let picture = |renderer: &mut HeadlessRenderer, lod: ConiferLodOverride| {
@@ -263,13 +255,9 @@ fn a_fading_tree_hands_each_sample_to_its_cut_or_its_impostor() {
             let mut want = [0u8; 4];
             for c in 0..4 {
                 want[c] = if c < 3 {
-                    let mixed = (1.0 - share) * linear(l[c]) + share * linear(i[c]);
-                    let srgb = if mixed <= 0.0031308 {
-                        12.92 * mixed
-                    } else {
-                        1.055 * mixed.powf(1.0 / 2.4) - 0.055
-                    };
-                    (255.0 * srgb).round() as u8
+                    let share = share as f32;
+                    let mixed = (1.0 - share) * common::linear(l[c]) + share * common::linear(i[c]);
+                    common::srgb_level(mixed).round() as u8
                 } else {
                     ((1.0 - share) * f64::from(l[c]) + share * f64::from(i[c])).round() as u8
                 };

@@ -255,15 +255,7 @@ fn thick_trunk() -> ConiferSpecies {
 
 /// A pixel's linear brightness (the mean of its RGB channels, sRGB decoded).
 fn linear(p: &image::Rgba<u8>) -> f32 {
-    let decode = |c: u8| {
-        let c = f32::from(c) / 255.0;
-        if c <= 0.04045 {
-            c / 12.92
-        } else {
-            ((c + 0.055) / 1.055).powf(2.4)
-        }
-    };
-    (decode(p[0]) + decode(p[1]) + decode(p[2])) / 3.0
+    (common::linear(p[0]) + common::linear(p[1]) + common::linear(p[2])) / 3.0
 }
 
 #[test]
