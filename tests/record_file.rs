@@ -299,6 +299,11 @@ fn shipped_mature_records_are_the_presets_current_bakes() {
         // texels are the bake's own function of the needles, tested in
         // `model::impostor`; baking six here would take minutes in debug).
         let impostor = shipped.impostor.as_deref().expect("the record holds its impostor");
+        assert_eq!(
+            impostor.crown_density,
+            bevy_conifer_lod::model::impostor::CrownDensity::measure(&flat.needles, impostor),
+            "{species}: the impostor's crown density is its needles'"
+        );
         let options = bevy_conifer_lod::model::impostor::ImpostorOptions::default();
         assert_eq!(impostor.views, options.views, "{species}");
         assert!(
@@ -375,4 +380,90 @@ fn shipped_impostors_keep_their_coverage_at_every_mip_level() {
             100.0 * worst
         );
     }
+}
+
+/// The mature Norway spruce's impostor takes its shadows where its
+/// needles are seen. A depth buffer of its needles in view 0 (16 × 16
+/// samples a texel; a needle's steps of half a sample each hit the sample
+/// under them with the share of it they cover, the nearest hit kept)
+/// gives each texel's median seen depth; the impostor's middle shadow
+/// sample (`shadow_sample_depths`) with the crown's rings sits nearer it
+/// than with the needles even along the chord. Measured: even 0.88 m in
+/// front of it on average over 11,479 of the crown's texels, the rings
+/// 0.40 m.
+#[test]
+fn the_mature_spruces_impostor_takes_its_shadows_where_its_needles_are_seen() {
+    use bevy_conifer_lod::model::impostor::{CROWN_DENSITY_RINGS, CrownImpostor, shadow_sample_depths};
+    use bevy_conifer_lod::model::read_prototype_record;
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/trees/mature/norway-spruce.conifer");
+    let record = read_prototype_record(&path).unwrap();
+    let impostor = record.impostor.as_deref().expect("an impostor");
+    let needles = record.placed_needles();
+    let radii = impostor.crown_radii();
+    let n = 16u32;
+    let sample = impostor.texel / n as f32;
+    let (width, height) = (impostor.columns * n, impostor.rows * n);
+    let axis = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+    let (right, toward) = (impostor.view_right(0), Vec3::Z);
+    let mut nearest = vec![f32::NEG_INFINITY; (width * height) as usize];
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    for needle in &needles {
+        let steps = ((needle.length() / (0.5 * sample)).ceil() as u32).max(1);
+        let hit = f64::from(2.0 * needle.radius * needle.length() / steps as f32 / (sample * sample));
+        for k in 0..steps {
+            let p = needle.base.lerp(needle.tip, (k as f32 + 0.5) / steps as f32);
+            let x = ((p - axis).dot(right) + impostor.half_width) / sample;
+            let y = (impostor.top() - p.y) / sample;
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            if x >= 0.0
+                && y >= 0.0
+                && x < width as f32
+                && y < height as f32
+                && ((seed >> 11) as f64) < hit * (1u64 << 53) as f64
+            {
+                let at = &mut nearest[(y as u32 * width + x as u32) as usize];
+                *at = at.max((p - axis).dot(toward));
+            }
+        }
+    }
+    let (mut even_off, mut rings_off, mut texels) = (0.0f64, 0.0f64, 0u32);
+    for row in 0..impostor.rows {
+        let y = impostor.top() - (row as f32 + 0.5) * impostor.texel;
+        let radius = CrownImpostor::crown_radius_at(&radii, impostor.bottom, impostor.top(), y);
+        let density = impostor.crown_density.row_at(impostor.bottom, impostor.top(), y);
+        for column in 0..impostor.columns {
+            let texel = impostor.texel_at(0, column, row).unwrap();
+            let offset = (column as f32 + 0.5) * impostor.texel - impostor.half_width;
+            if texel.coverage < 0.1 || texel.wood > 0.05 || offset.abs() >= radius {
+                continue;
+            }
+            let mut seen: Vec<f32> = (row * n..(row + 1) * n)
+                .flat_map(|j| (column * n..(column + 1) * n).map(move |i| (j * width + i) as usize))
+                .map(|i| nearest[i])
+                .filter(|d| d.is_finite())
+                .collect();
+            if seen.len() < 12 {
+                continue;
+            }
+            seen.sort_by(f32::total_cmp);
+            let median = seen[seen.len() / 2];
+            let even = shadow_sample_depths(texel.coverage, offset, radius, &[1.0; CROWN_DENSITY_RINGS])[1];
+            let rings = shadow_sample_depths(texel.coverage, offset, radius, &density)[1];
+            even_off += f64::from(even - median);
+            rings_off += f64::from(rings - median);
+            texels += 1;
+        }
+    }
+    let (even_off, rings_off) = (even_off / f64::from(texels), rings_off / f64::from(texels));
+    println!(
+        "middle shadow sample in front of the median seen needle over {texels} texels: even {even_off:.3} m, rings {rings_off:.3} m"
+    );
+    assert!(texels > 5_000, "{texels} texels");
+    assert!(even_off > 0.5, "the even crown puts the samples in front: {even_off}");
+    assert!(
+        rings_off.abs() < 0.5 * even_off,
+        "the rings: {rings_off}, even: {even_off}"
+    );
 }

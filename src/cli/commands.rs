@@ -332,6 +332,15 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         if (record.impostor.is_none() || measured_without_caps) && !args.no_impostor {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
+        // Format 13 stores how densely the needles fill the impostor's
+        // crown: an older impostor's is measured from the needles.
+        if version.is_none_or(|v| v < 13) && record.impostor.is_some() {
+            let needles = record.placed_needles();
+            if let Some(impostor) = record.impostor.as_mut() {
+                let density = crate::model::impostor::CrownDensity::measure(&needles, impostor);
+                std::sync::Arc::make_mut(impostor).crown_density = density;
+            }
+        }
         if (record.line_calibration.is_none() || measured_without_caps || elevation.is_some())
             && !args.no_line_calibration
         {

@@ -537,6 +537,7 @@ mod tests {
                 .map(|i| [coverage((i / columns) % rows, i % columns), 0, 0, 0])
                 .collect(),
             wood_visibility: WoodVisibility::default(),
+            crown_density: Default::default(),
         }
     }
 

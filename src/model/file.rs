@@ -52,6 +52,11 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 13 adds the impostor's crown density (how its needles fill
+//! it by height and distance from the axis, where its shadow samples go:
+//! [`super::impostor::CrownDensity`]); an older impostor reads with its
+//! needles even through the crown, as it was drawn, and `conifer upgrade`
+//! measures the density into the file.
 //! Version 12 keeps 11's layout; its impostor texels and line
 //! calibration are measured against the needles' capped silhouettes (each
 //! prism's end caps seen at its slant, [`super::look::PieceEnds`]), where
@@ -85,7 +90,7 @@
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
 use super::calibration::{CALIBRATION_STEPS, LineCalibration, WOOD_OPACITY_NODES};
-use super::impostor::{CrownImpostor, WoodVisibility};
+use super::impostor::{CrownDensity, CrownImpostor, WoodVisibility};
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
@@ -104,7 +109,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 12;
+pub const FORMAT_VERSION: u32 = 13;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -369,6 +374,7 @@ impl StoredImpostor {
             texel: self.texel,
             texels,
             wood_visibility: Default::default(),
+            crown_density: Default::default(),
         })
     }
 }
@@ -934,6 +940,8 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
     body.extend(postcard::to_allocvec(&wood_visibility).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let wood_scales = record.line_calibration.as_ref().map(|c| c.wood_scales);
     body.extend(postcard::to_allocvec(&wood_scales).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    let crown_density = record.impostor.as_deref().map(|i| i.crown_density.to_bytes());
+    body.extend(postcard::to_allocvec(&crown_density).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -1142,6 +1150,21 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
         (calibration, rest)
     } else {
         (line_calibration, rest)
+    };
+    // Format 13: the impostor's crown density; an older impostor's
+    // needles are even through its crown.
+    let (impostor, rest) = if version >= 13 {
+        let (stored, rest) = postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(malformed)?;
+        let impostor = both_or_neither(impostor, stored, "impostor: a crown density without its impostor")?
+            .map(|(mut impostor, bytes)| {
+                impostor.crown_density = CrownDensity::from_bytes(&bytes)
+                    .ok_or_else(|| RecordError::Malformed("impostor: a crown density of another size".into()))?;
+                Ok::<_, RecordError>(impostor)
+            })
+            .transpose()?;
+        (impostor, rest)
+    } else {
+        (impostor, rest)
     };
     if line_calibration.is_some_and(|c| !c.is_valid()) {
         return Err(RecordError::Malformed(
@@ -1549,17 +1572,21 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
+        // Format 13 ends with the impostor's crown density: format 12
+        // stops before it, its impostor's needles even through the crown.
+        let body = &bytes[HEADER_BYTES..];
+        let density = postcard::to_allocvec(&record.impostor.as_deref().map(|i| i.crown_density.to_bytes())).unwrap();
+        let v12 = &body[..body.len() - density.len()];
+        let mut even = decode_prototype_record(&bytes).unwrap();
+        Arc::make_mut(even.impostor.as_mut().expect("an impostor")).crown_density = CrownDensity::default();
+        assert_eq!(decode_prototype_record(&file_of_version(12, v12)).unwrap(), even);
         // Format 12 is 11's layout (measured against capped silhouettes):
         // an 11 file reads as it is.
-        let body = &bytes[HEADER_BYTES..];
-        assert_eq!(
-            decode_prototype_record(&file_of_version(11, body)).unwrap(),
-            decode_prototype_record(&bytes).unwrap()
-        );
+        assert_eq!(decode_prototype_record(&file_of_version(11, v12)).unwrap(), even);
         // Format 11 ends with the wood scales: format 10 stops before
         // them, read with every wood scale 1.
         let wood_scales = postcard::to_allocvec(&Some(calibration.wood_scales)).unwrap();
-        let v10 = &body[..body.len() - wood_scales.len()];
+        let v10 = &v12[..v12.len() - wood_scales.len()];
         let read = decode_prototype_record(&file_of_version(10, v10)).unwrap();
         assert_eq!(
             read.line_calibration,
@@ -1640,19 +1667,22 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one (and without a line calibration), format 11 stores a
-        // single byte for each, for the wood visibility and for the wood
-        // scales.
+        // Without one (and without a line calibration), format 13 stores a
+        // single byte for each, for the wood visibility, for the wood
+        // scales and for the crown density.
         let mut bare = record.clone();
         bare.impostor = None;
         bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 4
+            HEADER_BYTES + v6.len() + 5
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
-        let file = |version: u32, edit: &dyn Fn(&mut StoredImpostor), visibility: Option<Vec<u8>>| {
+        let file = |version: u32,
+                    edit: &dyn Fn(&mut StoredImpostor),
+                    visibility: Option<Vec<u8>>,
+                    density: Option<Vec<u8>>| {
             let mut s = StoredImpostor::encode(&impostor).unwrap();
             edit(&mut s);
             let mut body = v6.to_vec();
@@ -1666,20 +1696,43 @@ mod tests {
             if version >= 11 {
                 body.extend(postcard::to_allocvec(&None::<[[f32; WOOD_OPACITY_NODES]; CALIBRATION_STEPS]>).unwrap());
             }
+            if version >= 13 {
+                body.extend(postcard::to_allocvec(&density).unwrap());
+            }
             decode_prototype_record(&file_of_version(version, &body))
         };
-        let with = |edit: &dyn Fn(&mut StoredImpostor)| file(10, edit, Some(impostor.wood_visibility.to_bytes()));
+        let density = Some(impostor.crown_density.to_bytes());
+        let file_with_density = |version: u32, edit: &dyn Fn(&mut StoredImpostor), density: Option<Vec<u8>>| {
+            file(version, edit, Some(impostor.wood_visibility.to_bytes()), density)
+        };
+        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(13, edit, density.clone());
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
+        // Format 13's crown density comes with the impostor, at its size;
+        // format 10 to 12 files read with the needles even through the
+        // crown.
+        for density in [None, Some(vec![255; 10])] {
+            let error = file_with_density(13, &|_| {}, density).unwrap_err();
+            assert!(
+                matches!(&error, RecordError::Malformed(m) if m.starts_with("impostor")),
+                "{error}"
+            );
+        }
+        let even = file_with_density(10, &|_| {}, None)
+            .unwrap()
+            .impostor
+            .expect("a format 10 impostor");
+        assert_eq!(even.crown_density, CrownDensity::default());
+        assert_eq!(even.texels, impostor.texels);
         // Formats 8 and 9 stored no wood visibility: read without the
         // impostor (the plugin bakes it at load).
         for version in [8, 9] {
-            let old = file(version, &|_| {}, None).unwrap();
+            let old = file(version, &|_| {}, None, None).unwrap();
             assert!(old.impostor.is_none());
             assert_eq!(old.placements, record.placements);
         }
         // Format 10's wood visibility comes with the impostor, at its size.
         for visibility in [None, Some(vec![255; 10])] {
-            let error = file(10, &|_| {}, visibility).unwrap_err();
+            let error = file(10, &|_| {}, visibility, None).unwrap_err();
             assert!(
                 matches!(&error, RecordError::Malformed(m) if m.starts_with("impostor")),
                 "{error}"

@@ -354,28 +354,178 @@ impl WoodVisibility {
 /// metres, toward the camera from the card) of [`SHADOW_SAMPLES`] points
 /// on the view ray through the crown, which the shader averages. The ray
 /// enters a crown of `radius` (at the texel's height,
-/// [`CrownImpostor::crown_radius_at`]) at
-/// `√(radius² − offset²)` for a texel `offset` from the axis across the
-/// card, and crosses a chord twice that long; with the needles spread
-/// evenly along it and the texel's `coverage` (1 − what the chord lets
-/// through), the visible needles lie deeper by `s` with probability
-/// `(1 − (1 − coverage)^(s/chord)) / coverage`, and the points sit at the
-/// 1/6, 1/2 and 5/6 quantiles of that: toward the near side in a dense
-/// crown, along the whole chord in a sparse one. One plane (the card, or
-/// the crown's near side) takes a neighbour's shadow with a hard edge and
-/// none of the crown's own: its sunlit impostors read flat and pale.
-/// Texels outside the crown's circle, and inputs that are not finite,
-/// take the three at the card's plane offset by nothing. CPU reference of
-/// the impostor fragment's `impostor_shadow_depths`.
-pub fn shadow_sample_depths(coverage: f32, offset: f32, radius: f32) -> [f32; SHADOW_SAMPLES] {
+/// [`CrownImpostor::crown_radius_at`]) at `√(radius² − offset²)` for a
+/// texel `offset` from the axis across the card, and crosses a chord
+/// twice that long. Along it the needles are as dense as the crown's
+/// rings say (`density`, its [`CrownDensity::row_at`] at the texel's
+/// height, read at each point's distance from the axis,
+/// [`density_across`]), taken in [`SHADOW_DEPTH_STEPS`] even steps; lying
+/// at random within that, with the texel's `coverage` (1 − what the chord
+/// lets through), the share `F(s)` of the chord's needles in front of
+/// depth `s` holds the seen ones in front of it with probability
+/// `(1 − (1 − coverage)^F(s)) / coverage`, and the points sit at the 1/6,
+/// 1/2 and 5/6 quantiles of that, linear within a step: toward the near
+/// side in a dense crown, along the chord in a sparse one, and deeper
+/// where the needles crowd toward the axis (branches spread from the
+/// trunk). With the needles even along the chord (the density 1 every
+/// ring, as a record before format 13 reads) the quantiles are `½ chord −
+/// chord · ln(1 − q · coverage) / ln(1 − coverage)`; measured on the
+/// mature Norway spruce's pictures, its needles are seen half as deep
+/// again as that puts them (the middle sample 0.78 m in front of the card
+/// against 1.61 m), and the impostor's sunlit side took 1.41 times the
+/// light its lines do. One plane (the card, or the crown's near side)
+/// takes a neighbour's shadow with a hard edge and none of the crown's
+/// own: its sunlit impostors read flat and pale. Texels outside the
+/// crown's circle, and inputs that are not finite, take the three at the
+/// card's plane offset by nothing; a chord whose rings hold no needles is
+/// taken as even. CPU reference of the impostor fragment's
+/// `impostor_shadow_depths`.
+pub fn shadow_sample_depths(
+    coverage: f32,
+    offset: f32,
+    radius: f32,
+    density: &[f32; CROWN_DENSITY_RINGS],
+) -> [f32; SHADOW_SAMPLES] {
     let half_chord = (radius * radius - offset * offset).max(0.0).sqrt();
     if !(half_chord > 0.0 && half_chord.is_finite() && coverage.is_finite()) {
         return [0.0; SHADOW_SAMPLES];
     }
     let coverage = coverage.clamp(1e-4, 0.999);
-    let chord = 2.0 * half_chord;
+    let step = 2.0 * half_chord / SHADOW_DEPTH_STEPS as f32;
+    // The chord's needles in front of each step's far end, in steps' worth
+    // of density, from the near side.
+    let mut in_front = [0.0f32; SHADOW_DEPTH_STEPS + 1];
+    for k in 0..SHADOW_DEPTH_STEPS {
+        let depth = half_chord - (k as f32 + 0.5) * step;
+        let share = (offset * offset + depth * depth).sqrt() / radius;
+        in_front[k + 1] = in_front[k] + density_across(density, share);
+    }
+    if !(in_front[SHADOW_DEPTH_STEPS] > 0.0 && in_front[SHADOW_DEPTH_STEPS].is_finite()) {
+        for (k, sum) in in_front.iter_mut().enumerate() {
+            *sum = k as f32;
+        }
+    }
     let through = (1.0 - coverage).ln();
-    [1.0f32 / 6.0, 0.5, 5.0 / 6.0].map(|q| half_chord - chord * (1.0 - q * coverage).ln() / through)
+    [1.0f32 / 6.0, 0.5, 5.0 / 6.0].map(|q| {
+        let wanted = in_front[SHADOW_DEPTH_STEPS] * (1.0 - q * coverage).ln() / through;
+        let k = (0..SHADOW_DEPTH_STEPS - 1)
+            .find(|&k| in_front[k + 1] >= wanted)
+            .unwrap_or(SHADOW_DEPTH_STEPS - 1);
+        let within = ((wanted - in_front[k]) / (in_front[k + 1] - in_front[k]).max(1e-12)).clamp(0.0, 1.0);
+        half_chord - (k as f32 + within) * step
+    })
+}
+
+/// Steps a texel's ray through the crown is taken in by
+/// [`shadow_sample_depths`].
+pub const SHADOW_DEPTH_STEPS: usize = 16;
+
+/// Rings a [`CrownDensity`] holds at each height: even shares of the
+/// crown's radius there, from the axis out.
+pub const CROWN_DENSITY_RINGS: usize = 8;
+
+/// How densely the crown's needles fill it, by height and distance from
+/// the axis: at each of [`CROWN_PROFILE_STEPS`] heights (bottom to top, as
+/// [`CrownImpostor::crown_radii`]) and [`CROWN_DENSITY_RINGS`] rings (ring
+/// `k` from `k/8` to `(k + 1)/8` of the crown's radius at the needle's
+/// height; needles past it count in the last), the needles' area
+/// (`2·radius·length`, by their middles) over the ring's volume, each
+/// height's densest ring 1. Branches spread from the trunk, so a crown's
+/// needles crowd toward its axis (a whorl's density falls as one over the
+/// distance), and the impostor's shadow samples go where a texel's needles
+/// are seen ([`shadow_sample_depths`]). A height without needles is even.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CrownDensity {
+    /// Relative densities, `[height][ring]`, each in `[0, 1]` in steps of
+    /// 1/255.
+    pub rings: [[f32; CROWN_DENSITY_RINGS]; CROWN_PROFILE_STEPS],
+}
+
+impl Default for CrownDensity {
+    /// Needles even through the crown (what the shadow samples took before
+    /// record format 13).
+    fn default() -> Self {
+        Self {
+            rings: [[1.0; CROWN_DENSITY_RINGS]; CROWN_PROFILE_STEPS],
+        }
+    }
+}
+
+impl CrownDensity {
+    /// Measures the density of `needles` (tree-local; invalid ones
+    /// skipped) in the crown `impostor` pictures (its axis, height span
+    /// and [`CrownImpostor::crown_radii`]).
+    pub fn measure<'a>(needles: impl IntoIterator<Item = &'a Needle>, impostor: &CrownImpostor) -> Self {
+        let radii = impostor.crown_radii();
+        let (bottom, top) = (impostor.bottom, impostor.top());
+        let mut area = [[0.0f64; CROWN_DENSITY_RINGS]; CROWN_PROFILE_STEPS];
+        for needle in needles.into_iter().filter(|n| n.is_valid()) {
+            let middle = needle.base.lerp(needle.tip, 0.5);
+            let step = ((middle.y - bottom) / (top - bottom) * CROWN_PROFILE_STEPS as f32).floor();
+            if !(step >= 0.0 && step < CROWN_PROFILE_STEPS as f32) {
+                continue;
+            }
+            let radius = CrownImpostor::crown_radius_at(&radii, bottom, top, middle.y).max(1e-6);
+            let distance = Vec2::new(middle.x, middle.z).distance(impostor.axis);
+            let ring = ((distance / radius * CROWN_DENSITY_RINGS as f32) as usize).min(CROWN_DENSITY_RINGS - 1);
+            area[step as usize][ring] += f64::from(2.0 * needle.radius * needle.length());
+        }
+        let mut density = Self::default();
+        for (row, sums) in density.rings.iter_mut().zip(&area) {
+            // A ring's volume in a height's slice goes as (k + 1)² − k².
+            let per_volume: [f64; CROWN_DENSITY_RINGS] = std::array::from_fn(|k| sums[k] / (2 * k + 1) as f64);
+            let densest = per_volume.iter().fold(0.0f64, |a, &b| a.max(b));
+            if densest > 0.0 && densest.is_finite() {
+                // In steps of 1/255, as record files store it.
+                *row = per_volume.map(|d| ((d / densest * 255.0).round() / 255.0) as f32);
+            }
+        }
+        density
+    }
+
+    /// The rings' densities at tree-local `height` of a crown from
+    /// `bottom` to `top`: linear between the heights' middles, the end
+    /// heights' outside them ([`CrownImpostor::profile_step`]). CPU
+    /// reference of the impostor fragment's `crown_density_row`.
+    pub fn row_at(&self, bottom: f32, top: f32, height: f32) -> [f32; CROWN_DENSITY_RINGS] {
+        let (k, t) = CrownImpostor::profile_step(bottom, top, height);
+        std::array::from_fn(|ring| self.rings[k][ring] * (1.0 - t) + self.rings[k + 1][ring] * t)
+    }
+
+    /// The densities as bytes (`density · 255`), heights major.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        self.rings
+            .iter()
+            .flatten()
+            .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+            .collect()
+    }
+
+    /// The table [`CrownDensity::to_bytes`] gave; `None` for another
+    /// length.
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        if bytes.len() != CROWN_PROFILE_STEPS * CROWN_DENSITY_RINGS {
+            return None;
+        }
+        let mut density = Self::default();
+        for (k, &byte) in bytes.iter().enumerate() {
+            density.rings[k / CROWN_DENSITY_RINGS][k % CROWN_DENSITY_RINGS] = f32::from(byte) / 255.0;
+        }
+        Some(density)
+    }
+}
+
+/// The density of a [`CrownDensity::row_at`] row `density` at `share` of
+/// the crown's radius from the axis: linear between the rings' middles,
+/// the end rings' outside them (the first ring's for NaN). CPU reference
+/// of the impostor fragment's `density_across`.
+pub fn density_across(density: &[f32; CROWN_DENSITY_RINGS], share: f32) -> f32 {
+    let rings = CROWN_DENSITY_RINGS as f32;
+    let f = (share * rings - 0.5).clamp(0.0, rings - 1.0);
+    let f = if f.is_nan() { 0.0 } else { f };
+    let k = (f as usize).min(CROWN_DENSITY_RINGS - 2);
+    let t = f - k as f32;
+    density[k] * (1.0 - t) + density[k + 1] * t
 }
 
 /// Where on its calm card an impostor fragment reads the crown's picture
@@ -467,6 +617,9 @@ pub struct CrownImpostor {
     /// How much of the wood the needles leave in sight, by height and
     /// depth in the crown.
     pub wood_visibility: WoodVisibility,
+    /// How densely the needles fill the crown, by height and distance
+    /// from the axis: where a texel's shadow samples go.
+    pub crown_density: CrownDensity,
 }
 
 /// One texel decoded.
@@ -713,6 +866,7 @@ impl CrownImpostor {
             texel,
             texels: Vec::new(),
             wood_visibility: WoodVisibility::default(),
+            crown_density: CrownDensity::default(),
         };
         // Views are independent: each rasterizes every piece (in parallel,
         // on the caller's rayon pool), wood first, so that each needle
@@ -742,6 +896,7 @@ impl CrownImpostor {
         }
         impostor.texels = views.into_iter().flat_map(|(texels, _)| texels).collect();
         impostor.wood_visibility = WoodVisibility::from_counts(&counts, &impostor.crown_radii(), impostor.half_width);
+        impostor.crown_density = CrownDensity::measure(needles.iter().copied(), &impostor);
         Some(impostor)
     }
 
@@ -1191,6 +1346,7 @@ mod tests {
             texel,
             texels,
             wood_visibility: WoodVisibility::default(),
+            crown_density: CrownDensity::default(),
         };
         let radii = impostor.crown_radii();
         for (step, radius) in radii.iter().enumerate() {
@@ -1224,7 +1380,7 @@ mod tests {
             let half = (radius * radius - offset * offset).sqrt();
             let mut previous_deepest = f32::NEG_INFINITY;
             for coverage in [0.05f32, 0.5, 0.9, 0.99] {
-                let depths = shadow_sample_depths(coverage, offset, radius);
+                let depths = shadow_sample_depths(coverage, offset, radius, &[1.0; CROWN_DENSITY_RINGS]);
                 for (q, depth) in [1.0f32 / 6.0, 0.5, 5.0 / 6.0].into_iter().zip(depths) {
                     assert!(depth <= half && depth >= -half, "{depth} inside ±{half}");
                     // Share of the seen needles in front of `depth`, by a
@@ -1250,12 +1406,97 @@ mod tests {
                 previous_deepest = depths[2];
             }
         }
-        assert_eq!(shadow_sample_depths(0.5, 4.0, 3.0), [0.0; 3]);
-        assert_eq!(shadow_sample_depths(f32::NAN, 0.0, 3.0), [0.0; 3]);
-        assert_eq!(shadow_sample_depths(0.5, 0.0, f32::INFINITY), [0.0; 3]);
+        let even = [1.0; CROWN_DENSITY_RINGS];
+        assert_eq!(shadow_sample_depths(0.5, 4.0, 3.0, &even), [0.0; 3]);
+        assert_eq!(shadow_sample_depths(f32::NAN, 0.0, 3.0, &even), [0.0; 3]);
+        assert_eq!(shadow_sample_depths(0.5, 0.0, f32::INFINITY, &even), [0.0; 3]);
+        // Rings without needles read as even ones.
+        assert_eq!(
+            shadow_sample_depths(0.5, 1.0, 3.0, &[0.0; CROWN_DENSITY_RINGS]),
+            shadow_sample_depths(0.5, 1.0, 3.0, &even)
+        );
     }
     use super::*;
     use crate::model::look::tests::needle;
+
+    /// A crown of branches spread from its axis (16 a whorl, a whorl
+    /// every 10 cm, needles even along each) holds as much of a branch's
+    /// needles in every ring, so its density falls as one over the
+    /// distance: measured, each ring's over the second's within 10 % of
+    /// `3 / (2k + 1)` (the ring's volume), but the last, which holds the
+    /// tips past the radius as well.
+    /// The shadow samples on a chord through such a crown sit where a sum
+    /// over 10,000 slices of the chord, with the density read at each
+    /// slice's distance from the axis, finds the texel's needles seen;
+    /// on chords that pass within half the radius of the axis, deeper than
+    /// the even crown puts them (the middle one, and the three's mean).
+    #[test]
+    fn a_crown_of_branches_is_densest_at_its_axis_and_seen_there() {
+        let mut needles = Vec::new();
+        for whorl in 0..60 {
+            let y = 1.0 + 0.1 * whorl as f32;
+            for branch in 0..16 {
+                let angle = std::f32::consts::TAU * (branch as f32 + 0.37 * whorl as f32) / 16.0;
+                let out = Vec3::new(angle.cos(), 0.0, angle.sin());
+                for k in 0..200 {
+                    let base = Vec3::new(0.0, y, 0.0) + out * (2.0 * (k as f32 + 0.5) / 200.0);
+                    needles.push(needle(
+                        base,
+                        base + Vec3::new(0.0, 0.02, 0.0) + out.cross(Vec3::Y) * 0.01,
+                        0.001,
+                    ));
+                }
+            }
+        }
+        let impostor = CrownImpostor::bake(&needles, &[], &TriangleMesh::default(), ImpostorOptions::default())
+            .expect("an impostor");
+        let density = &impostor.crown_density;
+        let middle_row = density.row_at(impostor.bottom, impostor.top(), 4.0);
+        for ring in 1..CROWN_DENSITY_RINGS - 1 {
+            let expected = 1.5 / (ring as f32 + 0.5);
+            assert!(
+                (middle_row[ring] / middle_row[1] - expected).abs() < 0.1 * expected,
+                "ring {ring}: {:?}",
+                middle_row
+            );
+        }
+        // The last ring also holds the branch tips past the radius, which
+        // leaves out the outermost 5 % of the pictures' coverage.
+        assert!(middle_row[CROWN_DENSITY_RINGS - 1] / middle_row[1] > 1.5 / 7.5);
+        let radius = 2.0f32;
+        for offset in [0.0f32, 0.6, 1.4] {
+            let half = (radius * radius - offset * offset).sqrt();
+            for coverage in [0.3f32, 0.8, 0.99] {
+                let depths = shadow_sample_depths(coverage, offset, radius, &middle_row);
+                let even = shadow_sample_depths(coverage, offset, radius, &[1.0; CROWN_DENSITY_RINGS]);
+                let slices = 10_000;
+                let step = 2.0 * half / slices as f32;
+                let at = |k: usize| half - (k as f32 + 0.5) * step;
+                let dense = |d: f32| density_across(&middle_row, (offset * offset + d * d).sqrt() / radius);
+                let total: f32 = (0..slices).map(|k| dense(at(k))).sum();
+                let through = -(1.0 - coverage).ln();
+                for (q, depth) in [1.0f32 / 6.0, 0.5, 5.0 / 6.0].into_iter().zip(depths) {
+                    assert!(depth <= half && depth >= -half, "{depth} inside ±{half}");
+                    let in_front: f32 = (0..slices).filter(|&k| at(k) > depth).map(|k| dense(at(k))).sum();
+                    let seen = (1.0 - (-through * in_front / total).exp()) / coverage;
+                    assert!(
+                        (seen - q).abs() < 0.01,
+                        "offset {offset}, coverage {coverage}: {seen} for {q}"
+                    );
+                }
+                assert!(depths[0] > depths[1] && depths[1] > depths[2]);
+                if offset < 1.0 {
+                    assert!(
+                        depths[1] < even[1] && depths.iter().sum::<f32>() < even.iter().sum::<f32>(),
+                        "deeper: {depths:?} against {even:?}"
+                    );
+                }
+            }
+        }
+        // The table round-trips through bytes; another length is refused.
+        assert_eq!(CrownDensity::from_bytes(&density.to_bytes()).as_ref(), Some(density));
+        assert_eq!(CrownDensity::from_bytes(&[0; 3]), None);
+    }
 
     proptest::proptest! {
         /// Leaned by `shadow_card_lean`, the card spans across the light
@@ -1308,6 +1549,7 @@ mod tests {
                 texel: 0.1,
                 texels,
                 wood_visibility: WoodVisibility::default(),
+                crown_density: CrownDensity::default(),
             };
             let chain = impostor.mip_chain();
             proptest::prop_assert_eq!((chain[0].0, chain[0].1), (columns, rows));

@@ -162,7 +162,17 @@ struct SpeciesParams {
     // (SKY_VISIBILITY_RINGS lanes; `model::crown_shade::SkyVisibility`;
     // all 1 with `ConiferLodSettings::sky_occlusion` off)
     sky_visibility: array<vec4<f32>, 32>,
+    // how densely the needles fill the crown, by height
+    // (CROWN_PROFILE_STEPS) and ring (CROWN_DENSITY_RINGS, even shares of
+    // the radius from the axis), four a row, two rows a height
+    // (`model::impostor::CrownDensity`): where an impostor texel's shadow
+    // samples go
+    crown_density: array<vec4<f32>, 64>,
 }
+
+const CROWN_DENSITY_RINGS: u32 = 8u;
+
+const SHADOW_DEPTH_STEPS: u32 = 16u;
 
 const SKY_VISIBILITY_RINGS: u32 = 4u;
 

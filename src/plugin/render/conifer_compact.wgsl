@@ -42,7 +42,7 @@
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, CROWN_SHADE_STEPS, CROWN_SHADE_CLASSES, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
-    SKY_VISIBILITY_RINGS, WOOD_JOINED_START, WOOD_JOINED_END,
+    SKY_VISIBILITY_RINGS, CROWN_DENSITY_RINGS, SHADOW_DEPTH_STEPS, WOOD_JOINED_START, WOOD_JOINED_END,
     instance_world_from_local, log_decode, placement_matrix,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -1743,35 +1743,47 @@ fn view_depth(position: vec4<f32>) -> f32 {
 
 #ifdef CONIFER_IMPOSTOR
 // `model::impostor::SHADOW_SAMPLES` points on the view ray through the
-// crown where an impostor texel takes the shadows it receives, and the
-// directional lights' shadows averaged over them (the first
-// IMPOSTOR_CACHED_LIGHTS lights; set once a fragment by
-// `impostor_shadow_samples`, read by every share's lighting).
+// crown where an impostor texel takes the shadows it receives from the
+// shadow maps (where the crown's rings put its needles), the points where
+// it takes the crown's own shade past them (where an even crown puts
+// them: the crown's shade is an even medium's), and the directional
+// lights' shadows averaged over them (the first IMPOSTOR_CACHED_LIGHTS
+// lights; set once a fragment by `impostor_shadow_samples`, read by every
+// share's lighting).
 const IMPOSTOR_SHADOW_SAMPLES: u32 = 3u;
 const IMPOSTOR_CACHED_LIGHTS: u32 = 4u;
 var<private> impostor_shadow_points: array<vec4<f32>, 3>;
+var<private> impostor_crown_points: array<vec4<f32>, 3>;
 var<private> impostor_directional_shadows: array<f32, 4>;
 
 // Places the texel's shadow samples on the view ray `V` through the crown
-// from the card point `card` (world; `scale` world metres a tree metre) and
-// averages the directional lights' shadows over them.
-fn impostor_shadow_samples(card: vec3<f32>, V: vec3<f32>, depths: vec3<f32>, scale: f32, frag: vec2<f32>) {
+// from the card point `card` (world; `scale` world metres a tree metre),
+// `depths` for the shadow maps and `crown_depths` for the crown's shade,
+// and averages the directional lights' shadows over them.
+fn impostor_shadow_samples(card: vec3<f32>, V: vec3<f32>, depths: vec3<f32>, crown_depths: vec3<f32>, scale: f32, frag: vec2<f32>) {
     for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
         impostor_shadow_points[k] = vec4<f32>(card + V * (depths[k] * scale), 1.0);
+        impostor_crown_points[k] = vec4<f32>(card + V * (crown_depths[k] * scale), 1.0);
     }
     for (var i = 0u; i < min(view_bindings::lights.n_directional_lights, IMPOSTOR_CACHED_LIGHTS); i++) {
         var shadow = 1.0;
         if (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
-            shadow = 0.0;
-            for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
-                let p = impostor_shadow_points[k];
-                let z = view_depth(p);
-                shadow += with_crown_shade(i, shadows::fetch_directional_shadow(i, p, V, z, frag), p.xyz, -z);
-            }
-            shadow /= f32(IMPOSTOR_SHADOW_SAMPLES);
+            shadow = impostor_directional_shadow(i, V, frag);
         }
         impostor_directional_shadows[i] = shadow;
     }
+}
+
+// Directional light `i`'s shadow averaged over the texel's samples: the
+// maps' at its map points, the crown's own at its crown points.
+fn impostor_directional_shadow(i: u32, toward: vec3<f32>, frag: vec2<f32>) -> f32 {
+    var sum = 0.0;
+    for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
+        let p = impostor_shadow_points[k];
+        let z = view_depth(p);
+        sum += with_crown_shade(i, shadows::fetch_directional_shadow(i, p, toward, z, frag), impostor_crown_points[k].xyz, -z);
+    }
+    return sum / f32(IMPOSTOR_SHADOW_SAMPLES);
 }
 #endif
 
@@ -1782,13 +1794,7 @@ fn directional_shadow(i: u32, position: vec4<f32>, toward: vec3<f32>, view_z: f3
     if i < IMPOSTOR_CACHED_LIGHTS {
         return impostor_directional_shadows[i];
     }
-    var sum = 0.0;
-    for (var k = 0u; k < IMPOSTOR_SHADOW_SAMPLES; k++) {
-        let p = impostor_shadow_points[k];
-        let z = view_depth(p);
-        sum += with_crown_shade(i, shadows::fetch_directional_shadow(i, p, toward, z, frag), p.xyz, -z);
-    }
-    return sum / f32(IMPOSTOR_SHADOW_SAMPLES);
+    return impostor_directional_shadow(i, toward, frag);
 #else
     let shadow = shadows::fetch_directional_shadow(i, position, toward, view_z, frag);
     return with_crown_shade(i, shadow, position.xyz, -view_z);
@@ -1952,20 +1958,79 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
 #endif
 
 #ifdef CONIFER_IMPOSTOR
+// The crown's ring densities at tree-local `height`, linear between the
+// profile's heights (CPU reference:
+// `model::impostor::CrownDensity::row_at`).
+fn crown_density_row(height: f32) -> array<f32, 8> {
+    let step = crown_profile_step(height);
+    let k = u32(step.x);
+    var row: array<f32, 8>;
+    for (var ring = 0u; ring < CROWN_DENSITY_RINGS; ring++) {
+        let below = k * CROWN_DENSITY_RINGS + ring;
+        let above = below + CROWN_DENSITY_RINGS;
+        row[ring] = mix(species.crown_density[below / 4u][below % 4u], species.crown_density[above / 4u][above % 4u], step.y);
+    }
+    return row;
+}
+
+// A density row's density at `share` of the crown's radius from the axis,
+// linear between the rings' middles (CPU reference:
+// `model::impostor::density_across`).
+fn density_across(row: ptr<function, array<f32, 8>>, share: f32) -> f32 {
+    let rings = f32(CROWN_DENSITY_RINGS);
+    var f = clamp(share * rings - 0.5, 0.0, rings - 1.0);
+    if !(f == f) {
+        f = 0.0;
+    }
+    let k = min(u32(f), CROWN_DENSITY_RINGS - 2u);
+    return mix((*row)[k], (*row)[k + 1u], f - f32(k));
+}
+
 // Depths (tree metres toward the camera from the card) of the texel's
 // shadow samples: the 1/6, 1/2 and 5/6 quantiles of where its visible
-// needles lie on the chord through a crown of `radius`, the texel `offset`
-// from the axis, needles even along the chord and `coverage` seen (CPU
-// reference: `model::impostor::shadow_sample_depths`).
-fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> {
+// needles lie on the chord through a crown of `radius` at tree-local
+// `height`, the texel `offset` from the axis, the needles as dense along
+// it as the density `row` says at each point's distance from the axis
+// (the crown's rings at the texel's height, or all 1 for an even crown)
+// and `coverage` seen (CPU reference:
+// `model::impostor::shadow_sample_depths`).
+fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32, row: ptr<function, array<f32, 8>>) -> vec3<f32> {
     let half_chord = sqrt(max(radius * radius - offset * offset, 0.0));
     if !(half_chord > 0.0 && half_chord < 1e30 && coverage == coverage) {
         return vec3<f32>(0.0);
     }
     let c = clamp(coverage, 1e-4, 0.999);
+    let step = 2.0 * half_chord / f32(SHADOW_DEPTH_STEPS);
+    // The chord's needles in front of each step's far end, from the near
+    // side.
+    var in_front: array<f32, 17>;
+    in_front[0] = 0.0;
+    for (var k = 0u; k < SHADOW_DEPTH_STEPS; k++) {
+        let depth = half_chord - (f32(k) + 0.5) * step;
+        let share = sqrt(offset * offset + depth * depth) / radius;
+        in_front[k + 1u] = in_front[k] + density_across(row, share);
+    }
+    if !(in_front[SHADOW_DEPTH_STEPS] > 0.0 && in_front[SHADOW_DEPTH_STEPS] < 1e30) {
+        for (var k = 0u; k <= SHADOW_DEPTH_STEPS; k++) {
+            in_front[k] = f32(k);
+        }
+    }
     let through = log(1.0 - c);
     let q = vec3<f32>(1.0 / 6.0, 0.5, 5.0 / 6.0);
-    return vec3<f32>(half_chord) - 2.0 * half_chord * log(vec3<f32>(1.0) - q * c) / through;
+    var depths: vec3<f32>;
+    for (var i = 0u; i < 3u; i++) {
+        let wanted = in_front[SHADOW_DEPTH_STEPS] * log(1.0 - q[i] * c) / through;
+        var k = SHADOW_DEPTH_STEPS - 1u;
+        for (var j = 0u; j < SHADOW_DEPTH_STEPS - 1u; j++) {
+            if in_front[j + 1u] >= wanted {
+                k = j;
+                break;
+            }
+        }
+        let within = clamp((wanted - in_front[k]) / max(in_front[k + 1u] - in_front[k], 1e-12), 0.0, 1.0);
+        depths[i] = half_chord - (f32(k) + within) * step;
+    }
+    return depths;
 }
 #endif
 
@@ -2268,21 +2333,36 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     // of a texel are needles spread along its ray through the crown, nearer
     // its near side the denser it is. Shadows are averaged over three
     // points where they lie, lights taken at the middle one.
-    let depths = impostor_shadow_depths(texel.r, (2.0 * uv.x - 1.0) * species.impostor_box.z, crown_radius_at(height));
+    // The shadow maps hold the crown's needles: their samples go where the
+    // crown's rings put the texel's needles. The crown's own shade past
+    // the maps is an even medium's: its samples go where an even crown
+    // puts them, as the lines' shade past the maps and in them agree.
+    let offset = (2.0 * uv.x - 1.0) * species.impostor_box.z;
+    let radius = crown_radius_at(height);
+    var density = crown_density_row(height);
+    var even = array<f32, 8>(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0);
+    let depths = impostor_shadow_depths(texel.r, offset, radius, &density);
+    let crown_depths = impostor_shadow_depths(texel.r, offset, radius, &even);
 #ifdef CONIFER_FACING_STRIP
     // Bevy's own lighting takes one shadow, at the middle sample.
     pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * (depths[1] * tree_scale), 1.0);
 #else
-    impostor_shadow_samples(in.world_position.xyz, pbr_input.V, depths, tree_scale, in.position.xy);
+    impostor_shadow_samples(in.world_position.xyz, pbr_input.V, depths, crown_depths, tree_scale, in.position.xy);
     pbr_input.world_position = impostor_shadow_points[1];
 #endif
+    let crown_point = in.world_position.xyz + pbr_input.V * (crown_depths[1] * tree_scale);
 #endif
     pbr_input.N = pbr_input.world_normal;
     pbr_input.flags = MESH_FLAGS_SHADOW_RECEIVER_BIT;
     // The ambient light reaches a point inside the crown through it
     // (`ConiferLodSettings::sky_occlusion`), at the point the fragment is
-    // lit at (an impostor's middle shadow sample).
+    // lit at (an impostor's middle crown sample: the sky's table is the
+    // even crown's).
+#ifdef CONIFER_IMPOSTOR
+    let sky = sky_visibility_at(tree_local_point(world_from_local, tree_scale, crown_point));
+#else
     let sky = sky_visibility_at(tree_local_point(world_from_local, tree_scale, pbr_input.world_position.xyz));
+#endif
     pbr_input.diffuse_occlusion = vec3<f32>(sky);
     pbr_input.specular_occlusion = sky;
 #ifdef CONIFER_FACING_STRIP

@@ -294,6 +294,11 @@ pub struct SpeciesParams {
     /// [`crate::plugin::ConiferLodSettings::sky_occlusion`] is on.
     pub sky_visibility:
         [[f32; crate::model::crown_shade::SKY_VISIBILITY_RINGS]; crate::model::impostor::CROWN_PROFILE_STEPS],
+    /// How densely the needles fill the crown, by height and ring, four a
+    /// row ([`crate::model::impostor::CrownDensity::rings`], heights
+    /// major): where an impostor texel's shadow samples go
+    /// ([`crate::model::impostor::shadow_sample_depths`]).
+    pub crown_density: [[f32; 4]; CROWN_DENSITY_ROWS],
 }
 
 impl Default for SpeciesParams {
@@ -307,6 +312,11 @@ impl Default for SpeciesParams {
 /// [`crate::model::impostor::WoodVisibility`].
 pub const WOOD_VISIBILITY_ROWS: usize =
     crate::model::impostor::CROWN_PROFILE_STEPS * crate::model::impostor::WOOD_NEARNESS_BINS / 4;
+
+/// Rows of four densities that hold a
+/// [`crate::model::impostor::CrownDensity`].
+pub const CROWN_DENSITY_ROWS: usize =
+    crate::model::impostor::CROWN_PROFILE_STEPS * crate::model::impostor::CROWN_DENSITY_RINGS / 4;
 
 /// Rows of four scales that hold a
 /// [`crate::model::calibration::LineCalibration`].
@@ -375,6 +385,12 @@ impl SpeciesParams {
     /// cover the picture ([`crate::model::impostor::WoodVisibility`]).
     pub fn set_wood_visibility(&mut self, visibility: &crate::model::impostor::WoodVisibility) {
         self.wood_visibility = four_a_row(visibility.shares.as_flattened());
+    }
+
+    /// Sets how densely the needles fill the crown
+    /// ([`crate::model::impostor::CrownDensity`]).
+    pub fn set_crown_density(&mut self, density: &crate::model::impostor::CrownDensity) {
+        self.crown_density = four_a_row(density.rings.as_flattened());
     }
 
     /// Sets the wind fields: `wind` over a tree of `shape` at `seconds`,
@@ -633,6 +649,17 @@ mod tests {
         let steps = crate::model::impostor::CROWN_PROFILE_STEPS;
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_radii", super::CROWN_RADII_ROWS);
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_extinction", steps);
+        assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_density", super::CROWN_DENSITY_ROWS);
+        let types = include_str!("compact_types.wgsl");
+        for (constant, value) in [
+            ("CROWN_DENSITY_RINGS", crate::model::impostor::CROWN_DENSITY_RINGS),
+            ("SHADOW_DEPTH_STEPS", crate::model::impostor::SHADOW_DEPTH_STEPS),
+        ] {
+            assert!(
+                types.contains(&format!("const {constant}: u32 = {value}u;")),
+                "{constant}"
+            );
+        }
         let types = include_str!("compact_types.wgsl");
         let shade_steps = crate::model::crown_shade::CROWN_SHADE_STEPS;
         assert!(types.contains(&format!("const CROWN_SHADE_STEPS: u32 = {shade_steps}u;")));

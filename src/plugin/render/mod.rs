@@ -639,6 +639,7 @@ fn extract_compact(
         // Without an impostor the wood lines are drawn once, unlayered.
         if let Some(impostor) = &entry.impostor {
             entry.params.set_wood_visibility(&impostor.wood_visibility);
+            entry.params.set_crown_density(&impostor.crown_density);
         }
         entry.params.instance_count = entry.instances.len() as u32;
     }
