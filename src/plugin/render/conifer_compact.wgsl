@@ -1961,10 +1961,10 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
 // The crown's ring densities at tree-local `height`, linear between the
 // profile's heights (CPU reference:
 // `model::impostor::CrownDensity::row_at`).
-fn crown_density_row(height: f32) -> array<f32, 8> {
+fn crown_density_row(height: f32) -> array<f32, CROWN_DENSITY_RINGS> {
     let step = crown_profile_step(height);
     let k = u32(step.x);
-    var row: array<f32, 8>;
+    var row: array<f32, CROWN_DENSITY_RINGS>;
     for (var ring = 0u; ring < CROWN_DENSITY_RINGS; ring++) {
         let below = k * CROWN_DENSITY_RINGS + ring;
         let above = below + CROWN_DENSITY_RINGS;
@@ -1976,7 +1976,7 @@ fn crown_density_row(height: f32) -> array<f32, 8> {
 // A density row's density at `share` of the crown's radius from the axis,
 // linear between the rings' middles (CPU reference:
 // `model::impostor::density_across`).
-fn density_across(row: ptr<function, array<f32, 8>>, share: f32) -> f32 {
+fn density_across(row: ptr<function, array<f32, CROWN_DENSITY_RINGS>>, share: f32) -> f32 {
     let rings = f32(CROWN_DENSITY_RINGS);
     var f = clamp(share * rings - 0.5, 0.0, rings - 1.0);
     if !(f == f) {
@@ -1994,7 +1994,7 @@ fn density_across(row: ptr<function, array<f32, 8>>, share: f32) -> f32 {
 // (the crown's rings at the texel's height, or all 1 for an even crown)
 // and `coverage` seen (CPU reference:
 // `model::impostor::shadow_sample_depths`).
-fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32, row: ptr<function, array<f32, 8>>) -> vec3<f32> {
+fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32, row: ptr<function, array<f32, CROWN_DENSITY_RINGS>>) -> vec3<f32> {
     let half_chord = sqrt(max(radius * radius - offset * offset, 0.0));
     if !(half_chord > 0.0 && half_chord < 1e30 && coverage == coverage) {
         return vec3<f32>(0.0);
@@ -2003,7 +2003,7 @@ fn impostor_shadow_depths(coverage: f32, offset: f32, radius: f32, row: ptr<func
     let step = 2.0 * half_chord / f32(SHADOW_DEPTH_STEPS);
     // The chord's needles in front of each step's far end, from the near
     // side.
-    var in_front: array<f32, 17>;
+    var in_front: array<f32, SHADOW_DEPTH_STEPS + 1u>;
     in_front[0] = 0.0;
     for (var k = 0u; k < SHADOW_DEPTH_STEPS; k++) {
         let depth = half_chord - (f32(k) + 0.5) * step;
@@ -2340,7 +2340,10 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     let offset = (2.0 * uv.x - 1.0) * species.impostor_box.z;
     let radius = crown_radius_at(height);
     var density = crown_density_row(height);
-    var even = array<f32, 8>(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0);
+    var even: array<f32, CROWN_DENSITY_RINGS>;
+    for (var ring = 0u; ring < CROWN_DENSITY_RINGS; ring++) {
+        even[ring] = 1.0;
+    }
     let depths = impostor_shadow_depths(texel.r, offset, radius, &density);
     let crown_depths = impostor_shadow_depths(texel.r, offset, radius, &even);
 #ifdef CONIFER_FACING_STRIP

@@ -660,7 +660,6 @@ mod tests {
                 "{constant}"
             );
         }
-        let types = include_str!("compact_types.wgsl");
         let shade_steps = crate::model::crown_shade::CROWN_SHADE_STEPS;
         assert!(types.contains(&format!("const CROWN_SHADE_STEPS: u32 = {shade_steps}u;")));
         let classes = crate::model::crown_shade::CROWN_SHADE_CLASSES;
