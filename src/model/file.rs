@@ -1122,15 +1122,9 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     // Format 10: the impostor's wood visibility, which older impostors
     // lack: they are dropped (the plugin bakes the impostor at load).
     let (impostor, rest) = if version >= 10 {
-        let (stored, rest) = postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(malformed)?;
-        let impostor = both_or_neither(impostor, stored, "impostor: a wood visibility without its impostor")?
-            .map(|(mut impostor, bytes)| {
-                impostor.wood_visibility = WoodVisibility::from_bytes(&bytes)
-                    .ok_or_else(|| RecordError::Malformed("impostor: a wood visibility of another size".into()))?;
-                Ok::<_, RecordError>(impostor)
-            })
-            .transpose()?;
-        (impostor, rest)
+        impostor_table(impostor, rest, "wood visibility", |impostor, bytes| {
+            WoodVisibility::from_bytes(bytes).map(|table| impostor.wood_visibility = table)
+        })?
     } else {
         (None, rest)
     };
@@ -1154,15 +1148,9 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
     // Format 13: the impostor's crown density; an older impostor's
     // needles are even through its crown.
     let (impostor, rest) = if version >= 13 {
-        let (stored, rest) = postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(malformed)?;
-        let impostor = both_or_neither(impostor, stored, "impostor: a crown density without its impostor")?
-            .map(|(mut impostor, bytes)| {
-                impostor.crown_density = CrownDensity::from_bytes(&bytes)
-                    .ok_or_else(|| RecordError::Malformed("impostor: a crown density of another size".into()))?;
-                Ok::<_, RecordError>(impostor)
-            })
-            .transpose()?;
-        (impostor, rest)
+        impostor_table(impostor, rest, "crown density", |impostor, bytes| {
+            CrownDensity::from_bytes(bytes).map(|table| impostor.crown_density = table)
+        })?
     } else {
         (impostor, rest)
     };
@@ -1190,6 +1178,28 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
             line_calibration,
         },
     ))
+}
+
+/// Reads one of the impostor's tables (`what`), stored as bytes after
+/// `impostor` (`rest` starts with it) and present exactly when the
+/// impostor is, into it with `set` (`None`: bytes of another length);
+/// returns the impostor and the bytes after the table.
+fn impostor_table<'a>(
+    impostor: Option<CrownImpostor>,
+    rest: &'a [u8],
+    what: &str,
+    set: impl FnOnce(&mut CrownImpostor, &[u8]) -> Option<()>,
+) -> Result<(Option<CrownImpostor>, &'a [u8]), RecordError> {
+    let (stored, rest) =
+        postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(|e| RecordError::Malformed(e.to_string()))?;
+    let impostor = both_or_neither(impostor, stored, &format!("impostor: a {what} without its impostor"))?
+        .map(|(mut impostor, bytes)| {
+            set(&mut impostor, &bytes)
+                .ok_or_else(|| RecordError::Malformed(format!("impostor: a {what} of another size")))?;
+            Ok::<_, RecordError>(impostor)
+        })
+        .transpose()?;
+    Ok((impostor, rest))
 }
 
 /// `part` and `extra`, which a record stores together: both, neither, or

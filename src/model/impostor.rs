@@ -266,24 +266,13 @@ fn clamp_share(value: f32) -> f32 {
 impl WoodVisibility {
     /// The shares as bytes (`share · 255`), heights major.
     pub fn to_bytes(&self) -> Vec<u8> {
-        self.shares
-            .iter()
-            .flatten()
-            .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect()
+        unit_table_bytes(&self.shares)
     }
 
     /// The table [`WoodVisibility::to_bytes`] gave; `None` for another
     /// length.
     pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
-        if bytes.len() != CROWN_PROFILE_STEPS * WOOD_NEARNESS_BINS {
-            return None;
-        }
-        let mut visibility = Self::default();
-        for (k, &byte) in bytes.iter().enumerate() {
-            visibility.shares[k / WOOD_NEARNESS_BINS][k % WOOD_NEARNESS_BINS] = f32::from(byte) / 255.0;
-        }
-        Some(visibility)
+        unit_table_from_bytes(bytes).map(|shares| Self { shares })
     }
 
     /// The share `g` at tree-local `height` and `nearness`
@@ -494,25 +483,35 @@ impl CrownDensity {
 
     /// The densities as bytes (`density · 255`), heights major.
     pub fn to_bytes(&self) -> Vec<u8> {
-        self.rings
-            .iter()
-            .flatten()
-            .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect()
+        unit_table_bytes(&self.rings)
     }
 
     /// The table [`CrownDensity::to_bytes`] gave; `None` for another
     /// length.
     pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
-        if bytes.len() != CROWN_PROFILE_STEPS * CROWN_DENSITY_RINGS {
-            return None;
-        }
-        let mut density = Self::default();
-        for (k, &byte) in bytes.iter().enumerate() {
-            density.rings[k / CROWN_DENSITY_RINGS][k % CROWN_DENSITY_RINGS] = f32::from(byte) / 255.0;
-        }
-        Some(density)
+        unit_table_from_bytes(bytes).map(|rings| Self { rings })
     }
+}
+
+/// A table of values in `[0, 1]` as bytes (`value · 255`, rounded), rows
+/// major.
+fn unit_table_bytes<const COLUMNS: usize>(rows: &[[f32; COLUMNS]]) -> Vec<u8> {
+    rows.iter()
+        .flatten()
+        .map(|&v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
+        .collect()
+}
+
+/// The table [`unit_table_bytes`] gave; `None` for another length.
+fn unit_table_from_bytes<const COLUMNS: usize, const ROWS: usize>(bytes: &[u8]) -> Option<[[f32; COLUMNS]; ROWS]> {
+    if bytes.len() != COLUMNS * ROWS {
+        return None;
+    }
+    let mut table = [[0.0; COLUMNS]; ROWS];
+    for (k, &byte) in bytes.iter().enumerate() {
+        table[k / COLUMNS][k % COLUMNS] = f32::from(byte) / 255.0;
+    }
+    Some(table)
 }
 
 /// The density of a [`CrownDensity::row_at`] row `density` at `share` of

@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 3,232 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 4,256 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -620,8 +620,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_3232_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 3232);
+    fn species_params_is_4256_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 4256);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`
