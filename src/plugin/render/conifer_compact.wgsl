@@ -1988,8 +1988,8 @@ fn density_across(row: ptr<function, array<f32, CROWN_DENSITY_RINGS>>, share: f3
 
 // Depths (tree metres toward the camera from the card) of the texel's
 // shadow samples: the 1/6, 1/2 and 5/6 quantiles of where its visible
-// needles lie on the chord through a crown of `radius` at tree-local
-// `height`, the texel `offset` from the axis, the needles as dense along
+// needles lie on the chord through a crown of `radius`, the texel
+// `offset` from the axis, the needles as dense along
 // it as the density `row` says at each point's distance from the axis
 // (the crown's rings at the texel's height, or all 1 for an even crown)
 // and `coverage` seen (CPU reference:
