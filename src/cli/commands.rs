@@ -329,12 +329,14 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         // Format 12 measures the impostor and the line calibration against
         // the needles' capped silhouettes: older ones are baked again.
         let measured_without_caps = version.is_none_or(|v| v < 12);
-        if (record.impostor.is_none() || measured_without_caps) && !args.no_impostor {
+        let rebake = (record.impostor.is_none() || measured_without_caps) && !args.no_impostor;
+        if rebake {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
         // Format 13 stores how densely the needles fill the impostor's
-        // crown: an older impostor's is measured from the needles.
-        if version.is_none_or(|v| v < 13) && record.impostor.is_some() {
+        // crown: an older impostor's is measured from the needles (a
+        // fresh bake measured it already).
+        if !rebake && version.is_none_or(|v| v < 13) && record.impostor.is_some() {
             let needles = record.placed_needles();
             if let Some(impostor) = record.impostor.as_mut() {
                 let density = crate::model::impostor::CrownDensity::measure(&needles, impostor);

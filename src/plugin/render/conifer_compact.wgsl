@@ -1958,6 +1958,20 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
 #endif
 
 #ifdef CONIFER_IMPOSTOR
+// `impostor_shadow_depths` for a crown whose needles are even along the
+// chord, in closed form: `½ chord − chord · ln(1 − q · coverage) /
+// ln(1 − coverage)` (CPU reference: `model::impostor::shadow_sample_depths`
+// with every ring's density 1, which its steps give exactly).
+fn even_crown_shadow_depths(coverage: f32, offset: f32, radius: f32) -> vec3<f32> {
+    let half_chord = sqrt(max(radius * radius - offset * offset, 0.0));
+    if !(half_chord > 0.0 && half_chord < 1e30 && coverage == coverage) {
+        return vec3<f32>(0.0);
+    }
+    let c = clamp(coverage, 1e-4, 0.999);
+    let q = vec3<f32>(1.0 / 6.0, 0.5, 5.0 / 6.0);
+    return vec3<f32>(half_chord) - 2.0 * half_chord * log(vec3<f32>(1.0) - q * c) / log(1.0 - c);
+}
+
 // The crown's ring densities at tree-local `height`, linear between the
 // profile's heights (CPU reference:
 // `model::impostor::CrownDensity::row_at`).
@@ -2340,12 +2354,8 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     let offset = (2.0 * uv.x - 1.0) * species.impostor_box.z;
     let radius = crown_radius_at(height);
     var density = crown_density_row(height);
-    var even: array<f32, CROWN_DENSITY_RINGS>;
-    for (var ring = 0u; ring < CROWN_DENSITY_RINGS; ring++) {
-        even[ring] = 1.0;
-    }
     let depths = impostor_shadow_depths(texel.r, offset, radius, &density);
-    let crown_depths = impostor_shadow_depths(texel.r, offset, radius, &even);
+    let crown_depths = even_crown_shadow_depths(texel.r, offset, radius);
 #ifdef CONIFER_FACING_STRIP
     // Bevy's own lighting takes one shadow, at the middle sample.
     pbr_input.world_position = vec4<f32>(in.world_position.xyz + pbr_input.V * (depths[1] * tree_scale), 1.0);
