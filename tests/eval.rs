@@ -330,9 +330,13 @@ fn the_reference_shades_sub_pixel_needles_where_they_are() {
         perceptual_roughness: 0.5,
         ..default()
     });
-    let reference = world
-        .resource_mut::<Assets<ReferenceMaterial>>()
-        .add(ReferenceMaterial::new(albedo, 0.5, 0.5));
+    let plain = ReferenceMaterial::new(
+        &mut world.resource_mut::<Assets<bevy::render::storage::ShaderBuffer>>(),
+        albedo,
+        0.5,
+        0.5,
+    );
+    let reference = world.resource_mut::<Assets<ReferenceMaterial>>().add(plain);
     // 41 needles across the view, 3 mm apart in a vertical plane, tilted
     // 7° so each crosses rows of samples (level, a needle a tenth of a
     // pixel thick covers a whole row of samples or none).
@@ -400,6 +404,182 @@ fn the_reference_shades_sub_pixel_needles_where_they_are() {
     );
     assert!((reference_far / reference_near - 1.0).abs() < 0.05);
     assert!(standard_far / standard_near > 1.3);
+}
+
+/// The reference takes the tree's colours as the plugin gives them
+/// (`model::color`): three flat shoots side by side, this year's, a
+/// 4-year-old one and one turned on its back, each needle coloured by its
+/// shoot (`eval::reference::spawn_reference_tree`), and a branch whose
+/// bark turns from one colour to another with height. Lit by a sun behind
+/// the camera with no ambient light and no specular (reflectance 0),
+/// every pixel's linear colour is its albedo times a grey factor: each
+/// patch's mean colour has its albedo's proportions.
+#[test]
+fn the_reference_colours_needles_by_their_shoot_and_bark_by_height() {
+    use bevy::camera::visibility::RenderLayers;
+    use bevy::core_pipeline::tonemapping::Tonemapping;
+    use bevy::prelude::*;
+    use bevy_conifer_lod::eval::reference::{ReferenceMaterialPlugin, spawn_reference_tree};
+    use bevy_conifer_lod::model::color::shoot_colors;
+    use bevy_conifer_lod::model::{FoliageMaterial, Needle, Placement, PrototypeInput, WoodSegment, bake_prototypes};
+    use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
+    let _turn = common::gpu_turn();
+
+    let (young, mature, underside) = ([0.40, 0.08, 0.08], [0.08, 0.40, 0.08], [0.08, 0.08, 0.40]);
+    let (lower_bark, upper_bark) = ([0.30, 0.30, 0.05], [0.05, 0.30, 0.30]);
+    let rgba = |[r, g, b]: [f32; 3]| [r, g, b, 1.0];
+    // A flat shoot 3 cm wide and 6 cm tall, its needles' normals +Z.
+    let shoot: Vec<Needle> = (0..15)
+        .map(|k| Needle {
+            base: Vec3::new(-0.014 + 0.002 * k as f32, -0.03, 0.0),
+            tip: Vec3::new(-0.014 + 0.002 * k as f32, 0.03, 0.0),
+            radius: 0.001,
+            normal: Vec3::Z,
+            group: 0,
+        })
+        .collect();
+    let at = |x: f32, needle_age: u8, rotation: Quat| Placement {
+        translation: Vec3::new(x, 0.0, 0.0),
+        rotation,
+        needle_age,
+        ..Placement::identity(0)
+    };
+    let input = PrototypeInput {
+        name: "three shoots and a branch".into(),
+        prototypes: vec![shoot],
+        placements: vec![
+            at(-0.06, 0, Quat::IDENTITY),
+            at(0.0, 4, Quat::IDENTITY),
+            at(0.06, 4, Quat::from_rotation_y(std::f32::consts::PI)),
+        ],
+        // Bark turning between 0 and 6 cm up.
+        wood: vec![WoodSegment {
+            start: Vec3::new(0.12, -0.04, 0.0),
+            end: Vec3::new(0.12, 0.10, 0.0),
+            start_radius: 0.01,
+            end_radius: 0.01,
+        }],
+        material: FoliageMaterial {
+            young_needle_color: rgba(young),
+            needle_underside_color: rgba(underside),
+            upper_wood_color: rgba(upper_bark),
+            upper_wood_heights: [0.0, 0.06],
+            ..FoliageMaterial::uniform(rgba(mature), rgba(lower_bark), 0.6, 0.0)
+        },
+        ..Default::default()
+    };
+    let record = bake_prototypes(&input, &bevy_conifer_lod::model::BakeOptions::default(), &()).unwrap();
+    let flat = record.flatten().unwrap();
+
+    let mut renderer = HeadlessRenderer::with_setup(".", |app| {
+        app.add_plugins(ReferenceMaterialPlugin);
+    });
+    let size = 128;
+    let target = renderer.render_target(size, size);
+    let world = renderer.world_mut();
+    world.insert_resource(GlobalAmbientLight {
+        brightness: 0.0,
+        ..default()
+    });
+    // 2,000 lux: the brightest albedo (0.4) stays under white.
+    world.spawn((
+        DirectionalLight {
+            illuminance: 2_000.0,
+            shadow_maps_enabled: false,
+            ..default()
+        },
+        Transform::from_xyz(0.03, 0.03, 1.0).looking_at(Vec3::new(0.03, 0.03, 0.0), Vec3::Y),
+        RenderLayers::layer(1),
+    ));
+    let shoots = shoot_colors(&record);
+    spawn_reference_tree(world, &flat, Some(&shoots), RenderLayers::layer(1));
+    // 0.2 m across at 1 m: a pixel is 1.6 mm.
+    let fov = 2.0 * (0.1f32).atan();
+    let centre = Vec3::new(0.03, 0.03, 0.0);
+    world.spawn((
+        HeadlessRenderer::camera_bundle(
+            &target,
+            Transform::from_xyz(0.03, 0.03, 1.0).looking_at(centre, Vec3::Y),
+            fov,
+        ),
+        Camera {
+            clear_color: ClearColorConfig::Custom(Color::NONE),
+            ..default()
+        },
+        Tonemapping::None,
+        RenderLayers::layer(1),
+    ));
+    for _ in 0..HeadlessRenderer::SETTLE_FRAMES {
+        renderer.update().unwrap();
+    }
+    let picture = renderer.capture(&target, 8).unwrap();
+    let out = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/test-output/eval");
+    std::fs::create_dir_all(&out).unwrap();
+    picture.save(out.join("reference_shoot_colours.png")).unwrap();
+
+    // The mean linear colour over the covered pixels of the box
+    // [x0, x1] × [y0, y1] (metres in the plane z = 0), normalised to sum 1.
+    let pixel = |x: f32, y: f32| {
+        let scale = size as f32 / 0.2;
+        (
+            ((x - centre.x) * scale + size as f32 / 2.0) as u32,
+            ((centre.y - y) * scale + size as f32 / 2.0) as u32,
+        )
+    };
+    let proportions = |x0: f32, x1: f32, y0: f32, y1: f32, name: &str| {
+        let ((px0, py0), (px1, py1)) = (pixel(x0, y1), pixel(x1, y0));
+        let (mut sum, mut covered) = ([0.0f64; 3], 0u32);
+        for py in py0..py1 {
+            for px in px0..px1 {
+                let p = picture.get_pixel(px, py).0;
+                if p[3] == 255 {
+                    for c in 0..3 {
+                        sum[c] += f64::from(common::linear(p[c]));
+                    }
+                    covered += 1;
+                }
+            }
+        }
+        assert!(covered > 40, "{name}: {covered} covered pixels");
+        let total: f64 = sum.iter().sum();
+        sum.map(|c| (c / total) as f32)
+    };
+    let expect = |seen: [f32; 3], albedo: [f32; 3], name: &str| {
+        let total: f32 = albedo.iter().sum();
+        for c in 0..3 {
+            assert!(
+                (seen[c] - albedo[c] / total).abs() < 0.03,
+                "{name}: proportions {seen:?}, albedo {albedo:?}"
+            );
+        }
+    };
+    // Inside each shoot, clear of its edges.
+    expect(
+        proportions(-0.07, -0.05, -0.02, 0.02, "young"),
+        young,
+        "this year's shoot",
+    );
+    expect(
+        proportions(-0.01, 0.01, -0.02, 0.02, "mature"),
+        mature,
+        "the 4-year-old shoot",
+    );
+    expect(
+        proportions(0.05, 0.07, -0.02, 0.02, "underside"),
+        underside,
+        "the shoot on its back",
+    );
+    // The bark below its turn and above it.
+    expect(
+        proportions(0.115, 0.125, -0.035, -0.005, "lower bark"),
+        lower_bark,
+        "the lower bark",
+    );
+    expect(
+        proportions(0.115, 0.125, 0.065, 0.095, "upper bark"),
+        upper_bark,
+        "the upper bark",
+    );
 }
 
 /// The reference's CPU tone map against Bevy's own pass: cameras with

@@ -2,7 +2,7 @@
 
 use super::parse_merge_error;
 use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
-use crate::eval::scene::{EvalSun, EvalView, Method};
+use crate::eval::scene::{EvalSun, EvalTree, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::{read_prototype_record, read_record};
 use crate::plugin::{LineLighting, LineOpacity, LineRaster, WoodLineOrder};
@@ -229,12 +229,19 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let mut record = read_record(&args.file).with_context(|| format!("{}: cannot load record", args.file.display()))?;
-    if let Some(bound) = args.merge_error {
-        record = record
+    // A tree of shared prototypes is drawn by its placements, as a game
+    // loading the record draws it; recomputed merge errors are the
+    // flattened record's.
+    let tree: EvalTree = match args.merge_error {
+        Some(bound) => read_record(&args.file)
+            .with_context(|| format!("{}: cannot load record", args.file.display()))?
             .with_error_bound(bound)
-            .with_context(|| format!("{}: cannot recompute its merge errors", args.file.display()))?;
-    }
+            .with_context(|| format!("{}: cannot recompute its merge errors", args.file.display()))?
+            .into(),
+        None => read_prototype_record(&args.file)
+            .with_context(|| format!("{}: cannot load record", args.file.display()))?
+            .into(),
+    };
     let options = EvalOptions {
         methods,
         distances,
@@ -247,7 +254,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         orbit_steps: args.orbit_steps,
         pan_steps: args.pan_steps,
     };
-    let report = evaluate(record, &options, &mut |line| eprintln!("eval: {line}"))
+    let report = evaluate(tree, &options, &mut |line| eprintln!("eval: {line}"))
         .with_context(|| format!("{}: evaluation failed", args.file.display()))?;
     if args.json {
         println!("{}", serde_json::to_string(&report)?);

@@ -21,13 +21,29 @@ pub fn raw_needle_mesh(record: &LodRecord) -> TriangleMesh {
 pub fn needle_mesh_with_corners_at(record: &LodRecord, scale: f32) -> TriangleMesh {
     let mut mesh = TriangleMesh::default();
     for needle in &record.needles {
-        let scaled = Needle {
-            radius: needle.radius * scale,
-            ..*needle
-        };
-        append_prism(&mut mesh, &scaled, record.max_sides);
+        append_scaled_prism(&mut mesh, needle, scale, record.max_sides);
     }
     mesh
+}
+
+/// [`needle_mesh_with_corners_at`] with each vertex's needle group, in
+/// vertex order (a flattened tree's groups are its placements).
+pub fn needle_mesh_and_groups(record: &LodRecord, scale: f32) -> (TriangleMesh, Vec<u32>) {
+    let mut mesh = TriangleMesh::default();
+    let mut groups = Vec::new();
+    for needle in &record.needles {
+        append_scaled_prism(&mut mesh, needle, scale, record.max_sides);
+        groups.resize(mesh.positions.len(), needle.group);
+    }
+    (mesh, groups)
+}
+
+fn append_scaled_prism(mesh: &mut TriangleMesh, needle: &Needle, scale: f32, sides: u8) {
+    let scaled = Needle {
+        radius: needle.radius * scale,
+        ..*needle
+    };
+    append_prism(mesh, &scaled, sides);
 }
 
 /// One level of a decimated chain.

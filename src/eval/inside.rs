@@ -13,13 +13,13 @@
 //! `render_prototypes`).
 
 use super::measure::{self, PixelRect};
-use super::reference::{ReferenceMaterialPlugin, reference_materials};
-use super::scene::{EvalError, EvalView, RawTree, resolve_reference, wood_counts, wood_counts_by};
+use super::reference::{ReferenceMaterialPlugin, spawn_reference_tree};
+use super::scene::{EvalError, EvalView, resolve_reference, wood_counts, wood_counts_by};
 use super::tonemap::ToneMap;
 use super::{EvaluateError, flip_error};
 use crate::model::{Cut, LodRecord, PrototypeRecord, Sphere, ViewPoint};
 use crate::plugin::headless::HeadlessRenderer;
-use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, ErrorScope, triangle_mesh};
+use crate::plugin::{ConiferFoliage, ConiferLodSettings, ConiferSpecies, ErrorScope};
 use bevy::camera::visibility::RenderLayers;
 use bevy::prelude::*;
 use serde::Serialize;
@@ -132,6 +132,9 @@ pub fn evaluate_inside(
 
     progress("building the scene (placed species, raw reference)");
     let species = ConiferSpecies::from_prototype_record(record).map_err(EvalError::from)?;
+    // The reference colours each needle by its shoot where the plugin
+    // draws the placements (see `EvalScene::new_in_wind`).
+    let species_has_no_placements = species.compact.placements.is_empty();
     let mut renderer = HeadlessRenderer::with_setup(".", |app| {
         app.add_plugins(ReferenceMaterialPlugin);
     });
@@ -150,22 +153,10 @@ pub fn evaluate_inside(
         .insert((RenderLayers::from_layers(&[0, 1]), view.sun.transform()));
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY, RenderLayers::layer(0)));
-    let (needle_material, wood_material) = reference_materials(world, &flat);
-    let reference = RawTree::reference(&flat);
-    let reference_triangles = (reference.needles.triangle_count() + reference.wood.triangle_count()) as u64;
-    for (mesh, material) in [
-        (&reference.needles, &needle_material),
-        (&reference.wood, &wood_material),
-    ] {
-        let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
-        world.spawn((
-            Mesh3d(handle),
-            MeshMaterial3d(material.clone()),
-            Transform::IDENTITY,
-            RenderLayers::layer(1),
-        ));
-    }
-    drop(reference);
+    let shoots = (!species_has_no_placements).then(|| crate::model::color::shoot_colors(record));
+    let [needle_triangles, wood_triangles] =
+        spawn_reference_tree(world, &flat, shoots.as_deref(), RenderLayers::layer(1));
+    let reference_triangles = needle_triangles + wood_triangles;
     let transform = Transform::from_translation(camera).looking_at(target, Vec3::Y);
     let s = view.supersampling.max(1);
     let mut targets = Vec::new();

@@ -377,12 +377,13 @@ pub fn flip_error(
 /// A render whose mean coverage over the tree's box is below this is blank.
 pub const BLANK_COVERAGE: f64 = 1e-4;
 
-/// Renders `record` by every method of `options` and the reference, at every
-/// distance and along the dolly; measures, writes the pictures and plots
-/// (if `options.out_dir`), and returns the report. `progress` hears a line
-/// per stage.
+/// Renders `tree` (a flat record, or a tree of shared prototypes drawn by
+/// its placements: [`scene::EvalTree`]) by every method of `options` and
+/// the reference, at every distance and along the dolly; measures, writes
+/// the pictures and plots (if `options.out_dir`), and returns the report.
+/// `progress` hears a line per stage.
 pub fn evaluate(
-    record: crate::model::LodRecord,
+    tree: impl Into<scene::EvalTree>,
     options: &EvalOptions,
     progress: &mut dyn FnMut(&str),
 ) -> Result<EvalReport, EvaluateError> {
@@ -399,7 +400,8 @@ pub fn evaluate(
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|e| EvaluateError::OutDir(dir.clone(), e))?;
     }
-    let needles = record.needle_count();
+    let tree = tree.into();
+    let needles = tree.needle_count() as usize;
     progress("building the scene (raw mesh, meshoptimizer LODs, plugin)");
     let wind = options.wind.filter(|s| *s > 0.0 && s.is_finite());
     let conifer_wind = wind.map(|strength| crate::plugin::ConiferWind {
@@ -407,7 +409,7 @@ pub fn evaluate(
         strength,
         ..Default::default()
     });
-    let mut scene = EvalScene::new_in_wind(record, &options.methods, options.view, conifer_wind)?;
+    let mut scene = EvalScene::new_in_wind(tree, &options.methods, options.view, conifer_wind)?;
     let methods = scene.methods().to_vec();
     let mut files = Vec::new();
     let mut blank = Vec::new();

@@ -8,6 +8,12 @@
 // edge: a needle a tenth of a sample wide has its normal extrapolated ten
 // times past its ring, where it points sideways. The centroid lies in the
 // triangle, so every needle is shaded with a normal of its own surface.
+//
+// Colour as the plugin gives it (`model::color`): needles by their shoot
+// (`REFERENCE_SHOOTS`: a shoot index per vertex into `shoots`, each
+// shoot's age colour mixed with the underside colour as the viewer sees
+// its upper side, the vertex shader's `placed_needle_albedo`), bark by
+// height (`bark_heights`, the fragment shader's `bark_albedo`).
 
 #import bevy_pbr::{
     mesh_bindings::mesh,
@@ -19,18 +25,41 @@
 }
 
 struct ReferenceSurface {
-    // Linear RGBA.
+    // Linear RGBA: the needles' colour where they have no shoots, the
+    // bark's below `bark_heights.x`.
     base_color: vec4<f32>,
+    // Linear RGBA: needles seen from under their shoot.
+    underside_color: vec4<f32>,
+    // Linear RGBA: the bark's above `bark_heights.y`.
+    upper_bark_color: vec4<f32>,
+    // Where the bark turns (local metres), with `bark_by_height`.
+    bark_heights: vec2<f32>,
     perceptual_roughness: f32,
     reflectance: f32,
+    // 1: the surface is bark, coloured by height.
+    bark_by_height: u32,
+}
+
+// One placed shoot (`model::color::ShootColor`, local metres).
+struct Shoot {
+    // Linear RGB of its needles seen from above.
+    age_color: vec4<f32>,
+    // Where the viewer's direction is taken from.
+    center: vec4<f32>,
+    // Its upper side (length: how consistently its needles face one way).
+    upper: vec4<f32>,
 }
 
 @group(#{MATERIAL_BIND_GROUP}) @binding(0) var<uniform> surface: ReferenceSurface;
+@group(#{MATERIAL_BIND_GROUP}) @binding(1) var<storage, read> shoots: array<Shoot>;
 
 struct Vertex {
     @builtin(instance_index) instance_index: u32,
     @location(0) position: vec3<f32>,
     @location(1) normal: vec3<f32>,
+#ifdef REFERENCE_SHOOTS
+    @location(2) shoot: u32,
+#endif
 }
 
 struct VertexOutput {
@@ -38,6 +67,44 @@ struct VertexOutput {
     @location(0) @interpolate(perspective, centroid) world_position: vec4<f32>,
     @location(1) @interpolate(perspective, centroid) world_normal: vec3<f32>,
     @location(2) @interpolate(flat) instance_index: u32,
+    @location(3) @interpolate(flat) albedo: vec3<f32>,
+    @location(4) @interpolate(perspective, centroid) local_height: f32,
+}
+
+// How much of a shoot's lower side a viewer sees (`model::color::underside_weight`).
+fn underside_weight(upper: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
+    let consistency = min(length(upper), 1.0);
+    if consistency < 1e-6 {
+        return 0.0;
+    }
+    let facing = dot(upper, to_viewer) / length(upper);
+    return clamp(0.5 - 2.0 * facing, 0.0, 1.0) * consistency;
+}
+
+// The needles of `shoot` seen from the view (`model::color::ShootColor::seen_from`).
+fn shoot_albedo(shoot: Shoot, world_from_local: mat4x4<f32>) -> vec3<f32> {
+    let placed = (world_from_local * vec4<f32>(shoot.upper.xyz, 0.0)).xyz;
+    var upper = vec3<f32>(0.0);
+    if dot(placed, placed) > 1e-24 {
+        upper = normalize(placed) * length(shoot.upper.xyz);
+    }
+    let center = (world_from_local * vec4<f32>(shoot.center.xyz, 1.0)).xyz;
+    var to_viewer = view.world_position - center;
+    if dot(to_viewer, to_viewer) > 1e-24 {
+        to_viewer = normalize(to_viewer);
+    }
+    return mix(shoot.age_color.rgb, surface.underside_color.rgb, underside_weight(upper, to_viewer));
+}
+
+// Bark at local `height` (`model::color::bark_color`).
+fn bark_albedo(height: f32) -> vec3<f32> {
+    let start = surface.bark_heights.x;
+    let end = surface.bark_heights.y;
+    var t = select(0.0, 1.0, height >= end);
+    if end > start {
+        t = clamp((height - start) / (end - start), 0.0, 1.0);
+    }
+    return mix(surface.base_color.rgb, surface.upper_bark_color.rgb, t);
 }
 
 @vertex
@@ -48,13 +115,22 @@ fn vertex(vertex: Vertex) -> VertexOutput {
     out.position = position_world_to_clip(out.world_position.xyz);
     out.world_normal = mesh_functions::mesh_normal_local_to_world(vertex.normal, vertex.instance_index);
     out.instance_index = vertex.instance_index;
+    out.local_height = vertex.position.y;
+    out.albedo = surface.base_color.rgb;
+#ifdef REFERENCE_SHOOTS
+    out.albedo = shoot_albedo(shoots[vertex.shoot], world_from_local);
+#endif
     return out;
 }
 
 @fragment
 fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> @location(0) vec4<f32> {
     var pbr_input = pbr_types::pbr_input_new();
-    pbr_input.material.base_color = surface.base_color;
+    var albedo = in.albedo;
+    if surface.bark_by_height != 0u {
+        albedo = bark_albedo(in.local_height);
+    }
+    pbr_input.material.base_color = vec4<f32>(albedo, 1.0);
     pbr_input.material.perceptual_roughness = surface.perceptual_roughness;
     pbr_input.material.reflectance = vec3<f32>(surface.reflectance);
     pbr_input.material.flags = pbr_types::STANDARD_MATERIAL_FLAGS_FOG_ENABLED_BIT

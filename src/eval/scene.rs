@@ -22,7 +22,7 @@
 //!   lines blended with their opacity as vertex alpha).
 
 use super::decimate::{DecimatedLevel, decimate, needle_mesh_with_corners_at};
-use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_materials};
+use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, spawn_reference_tree};
 use super::tonemap::ToneMap;
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
@@ -32,10 +32,10 @@ use crate::model::prism::{
     wood_segment_error,
 };
 use crate::model::wind::{TreeWindPhase, Wind, WindClock, WindShape, wind_offset};
-use crate::model::{CutCounter, LodRecord, PixelError, ViewParams};
+use crate::model::{CutCounter, LodRecord, PixelError, PrototypeRecord, ViewParams};
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
-    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind,
+    ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope,
     LineLighting, LineOpacity, LineRaster, WoodLineOrder, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
@@ -114,10 +114,10 @@ impl Method {
 /// `record` made a species (not yet added to the assets). Both eval scenes
 /// start here.
 pub(super) fn renderer_with_species(
-    record: LodRecord,
+    tree: EvalTree,
     view: &EvalView,
 ) -> Result<(HeadlessRenderer, ConiferSpecies), EvalError> {
-    if record.needle_count() == 0 {
+    if tree.needle_count() == 0 {
         return Err(EvalError::NoNeedles);
     }
     if view.width == 0 || view.height == 0 {
@@ -132,10 +132,52 @@ pub(super) fn renderer_with_species(
         line_lighting: view.line_lighting,
         line_raster: view.line_raster,
         wood_line_order: view.wood_line_order,
+        // One error per tree, as the CPU cut the counts come from
+        // (`EvalScene::counts`); `conifer eval --inside` measures each
+        // placement's own.
+        error_scope: ErrorScope::Tree,
         ..ConiferLodSettings::default()
     };
-    let species = ConiferSpecies::from_record(record)?;
+    let species = match tree {
+        EvalTree::Flat(record) => ConiferSpecies::from_record(record)?,
+        EvalTree::Placed(record) => ConiferSpecies::from_prototype_record(&record)?,
+    };
     Ok((renderer, species))
+}
+
+/// The tree `conifer eval` measures, as a game would load it: a flat
+/// record, or a tree of shared prototypes, which the plugin draws by its
+/// placements (each shoot in its own colour, [`crate::model::color`]) and
+/// the reference colours needle by needle alike
+/// ([`super::reference::spawn_reference_tree`]).
+#[derive(Clone, Debug)]
+pub enum EvalTree {
+    /// A flat record: one needle colour.
+    Flat(LodRecord),
+    /// A tree of shared prototypes (the mature presets' records).
+    Placed(PrototypeRecord),
+}
+
+impl EvalTree {
+    /// Its needles.
+    pub fn needle_count(&self) -> u64 {
+        match self {
+            EvalTree::Flat(record) => record.needle_count() as u64,
+            EvalTree::Placed(record) => record.needle_count(),
+        }
+    }
+}
+
+impl From<LodRecord> for EvalTree {
+    fn from(record: LodRecord) -> Self {
+        EvalTree::Flat(record)
+    }
+}
+
+impl From<PrototypeRecord> for EvalTree {
+    fn from(record: PrototypeRecord) -> Self {
+        EvalTree::Placed(record)
+    }
 }
 
 /// The species the plugin's methods draw, in the app's assets: ours (the
@@ -577,8 +619,8 @@ pub const DOLLY_STEP_SECONDS: f64 = 1.0 / 30.0;
 impl EvalScene {
     /// Builds the scene for `record` with `methods` (the reference is always
     /// there), loads it and lets it reach the GPU.
-    pub fn new(record: LodRecord, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
-        Self::new_in_wind(record, methods, view, None)
+    pub fn new(tree: impl Into<EvalTree>, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
+        Self::new_in_wind(tree, methods, view, None)
     }
 
     /// [`EvalScene::new`] in `wind` (`None` or calm: calm), its clock set
@@ -587,14 +629,21 @@ impl EvalScene {
     /// same field. The meshes' calm copies are kept for it (as much memory
     /// again).
     pub fn new_in_wind(
-        record: LodRecord,
+        tree: impl Into<EvalTree>,
         methods: &[Method],
         view: EvalView,
         wind: Option<ConiferWind>,
     ) -> Result<Self, EvalError> {
         let wind = wind.filter(|w| !w.model().is_calm());
-        let (mut renderer, species) = renderer_with_species(record, &view)?;
+        let (mut renderer, species) = renderer_with_species(tree.into(), &view)?;
         let record = species.record().clone();
+        // The reference colours each needle by its shoot where the plugin
+        // does: a tree drawn by its placements (a fallback to the flat
+        // layout draws every needle in the needle colour).
+        let shoots = species
+            .prototypes()
+            .filter(|_| !species.compact.placements.is_empty())
+            .map(|prototypes| crate::model::color::shoot_colors(prototypes));
         let impostor_texel = species.impostor.as_ref().map(|i| i.texel);
         let wind_shape = species.wind_shape;
         let mut methods: Vec<Method> = methods.to_vec();
@@ -627,16 +676,10 @@ impl EvalScene {
             }
         }
 
-        // The reference's geometry (round silhouettes), and the raw one
-        // only where `raw` or `bevy-lod` draws it: the same prisms, so the
-        // reference's counts are raw's (a mature tree's mesh is large).
+        // The raw geometry only where `raw` or `bevy-lod` draws it: the
+        // same prisms as the reference's, so the reference's counts are
+        // raw's (a mature tree's mesh is large).
         let (needle_material, wood_material) = raw_materials(world, &record);
-        let reference = RawTree::reference(&record);
-        let raw_counts = DrawCounts {
-            triangles: (reference.needles.triangle_count() + reference.wood.triangle_count()) as u64,
-            lines: 0,
-            needle_primitives: reference.needles.triangle_count() as u64,
-        };
         let raw = (methods.contains(&Method::Raw) || methods.contains(&Method::BevyLod)).then(|| RawTree::new(&record));
         let spawn_mesh = |world: &mut World, mesh: &TriangleMesh, material: &Handle<StandardMaterial>, layer: usize| {
             let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
@@ -655,22 +698,16 @@ impl EvalScene {
             }
         }
         // The reference draws its own geometry (`RawTree::reference`: each
-        // prism as wide as its needle on average) with its own material, on
-        // its own layer; in wind it sways as every mesh of the scene does.
-        let (reference_needles, reference_wood) = reference_materials(world, &record);
-        for (mesh, material) in [
-            (&reference.needles, reference_needles),
-            (&reference.wood, reference_wood),
-        ] {
-            let handle = world.resource_mut::<Assets<Mesh>>().add(triangle_mesh(mesh));
-            world.spawn((
-                Mesh3d(handle),
-                MeshMaterial3d(material),
-                Transform::IDENTITY,
-                RenderLayers::layer(REFERENCE_LAYER),
-            ));
-        }
-        drop(reference);
+        // prism as wide as its needle on average) with its own material
+        // and the tree's colours (each needle its shoot's), on its own
+        // layer; in wind it sways as every mesh of the scene does.
+        let [needle_triangles, wood_triangles] =
+            spawn_reference_tree(world, &record, shoots.as_deref(), RenderLayers::layer(REFERENCE_LAYER));
+        let raw_counts = DrawCounts {
+            triangles: needle_triangles + wood_triangles,
+            lines: 0,
+            needle_primitives: needle_triangles,
+        };
 
         // bevy-lod: the raw level and four simplifications.
         let params = view.params();
@@ -1269,15 +1306,33 @@ impl RawTree {
     /// needle or branch it stands for (`2R`, the width lines and the line
     /// calibration take; the inscribed octagon is 2.55 % narrower). The
     /// shadow reference (`super::shadow::reference_darkening`) is round
-    /// already.
-    pub fn reference(record: &LodRecord) -> Self {
-        Self::with_corners_at(record, round_silhouette_scale(record.max_sides))
+    /// already. With each needle vertex's needle group (a flattened tree's
+    /// placement), in vertex order.
+    pub fn reference(record: &LodRecord) -> (Self, Vec<u32>) {
+        let scale = round_silhouette_scale(record.max_sides);
+        let (needles, groups) = super::decimate::needle_mesh_and_groups(record, scale);
+        (
+            Self {
+                needles,
+                wood: Self::wood_with_corners_at(record, scale),
+            },
+            groups,
+        )
     }
 
     /// Every needle's prism and wood segment's cone of `Lmax` sides with
     /// its corners `scale` radii from the axis (imported wood triangles as
     /// they are).
     fn with_corners_at(record: &LodRecord, scale: f32) -> Self {
+        Self {
+            needles: needle_mesh_with_corners_at(record, scale),
+            wood: Self::wood_with_corners_at(record, scale),
+        }
+    }
+
+    /// The wood of [`Self::with_corners_at`]: each segment's cone with its
+    /// corners `scale` radii from the axis, after the imported triangles.
+    fn wood_with_corners_at(record: &LodRecord, scale: f32) -> TriangleMesh {
         let mut wood = record.wood_mesh.clone();
         for segment in &record.wood {
             let scaled = WoodSegment {
@@ -1287,10 +1342,7 @@ impl RawTree {
             };
             append_wood_segment(&mut wood, &scaled, u32::from(record.max_sides));
         }
-        Self {
-            needles: needle_mesh_with_corners_at(record, scale),
-            wood,
-        }
+        wood
     }
 }
 
@@ -1370,20 +1422,29 @@ pub fn visibility_range(enters: &[f32], k: usize, to_range: impl Fn(f32) -> f32)
 
 /// The surfaces of a raw tree, needles and wood: the record's colours, the
 /// needles' roughness and the bark's ([`crate::model::needle::BARK_ROUGHNESS`]),
-/// the material's reflectance, as the plugin's own materials use them. The
-/// raw methods' `StandardMaterial`s ([`raw_materials`]) and the reference's
-/// materials ([`super::reference::reference_materials`]) are made of them.
+/// the material's reflectance, as the plugin's own materials use them; the
+/// needles' underside colour (for needles coloured by shoot) and the
+/// bark's turn by height. The raw methods' `StandardMaterial`s
+/// ([`raw_materials`]: the base colours only) and the reference's
+/// materials ([`super::reference::spawn_reference_tree`]) are made of them.
 pub fn raw_surfaces(record: &LodRecord) -> [ReferenceSurface; 2] {
     let m = &record.material;
-    let surface = |[r, g, b, _]: [f32; 4], perceptual_roughness: f32| ReferenceSurface {
-        base_color: Vec4::new(r, g, b, 1.0),
-        perceptual_roughness,
-        reflectance: m.reflectance,
+    let linear = |[r, g, b, _]: [f32; 4]| Vec4::new(r, g, b, 1.0);
+    let needles = ReferenceSurface {
+        underside_color: linear(m.needle_underside_color),
+        ..ReferenceSurface::plain(linear(m.needle_color), m.roughness, m.reflectance)
     };
-    [
-        surface(m.needle_color, m.roughness),
-        surface(m.wood_color, crate::model::needle::BARK_ROUGHNESS),
-    ]
+    let wood = ReferenceSurface {
+        upper_bark_color: linear(m.upper_wood_color),
+        bark_heights: Vec2::from(m.upper_wood_heights),
+        bark_by_height: 1,
+        ..ReferenceSurface::plain(
+            linear(m.wood_color),
+            crate::model::needle::BARK_ROUGHNESS,
+            m.reflectance,
+        )
+    };
+    [needles, wood]
 }
 
 /// The `StandardMaterial`s of a raw tree's [`raw_surfaces`]: needles, wood.

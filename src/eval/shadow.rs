@@ -128,7 +128,7 @@ impl ShadowScene {
         view: EvalView,
         wind: Option<ConiferWind>,
     ) -> Result<Self, EvalError> {
-        let (mut renderer, species) = renderer_with_species(record, &view)?;
+        let (mut renderer, species) = renderer_with_species(record.into(), &view)?;
         let record = match wind.filter(|w| !w.model().is_calm()) {
             Some(wind) => {
                 renderer.world_mut().insert_resource(ConiferWind {

@@ -125,6 +125,64 @@ pub fn far_needle_color(record: &PrototypeRecord) -> Vec3 {
     }
 }
 
+/// What colours one placed shoot's needles ([`needle_color`]), in the
+/// tree's frame: the colour of their age seen from above, the shoot's
+/// upper side and the point the viewer is taken from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShootColor {
+    /// Linear RGB of the shoot's needles seen from above
+    /// ([`needle_age_color`] of its placement's age).
+    pub age_color: Vec3,
+    /// The placed prototype's bounding-sphere centre, tree metres: the
+    /// point [`underside_weight`]'s viewer direction is taken from.
+    pub center: Vec3,
+    /// The shoot's upper side ([`upper_side`] of its prototype, rotated
+    /// into the tree; its length says how consistently the needles face
+    /// one way).
+    pub upper: Vec3,
+}
+
+impl ShootColor {
+    /// Linear RGB of the shoot's needles seen from `eye` (tree metres):
+    /// [`needle_color`] with the viewer's direction from [`Self::center`];
+    /// from the centre itself, as seen edge-on (the shader's rule).
+    pub fn seen_from(&self, material: &FoliageMaterial, eye: Vec3) -> Vec3 {
+        let to_viewer = (eye - self.center).normalize_or_zero();
+        self.age_color.lerp(
+            rgb(material.needle_underside_color),
+            underside_weight(self.upper, to_viewer),
+        )
+    }
+}
+
+/// Every placement's [`ShootColor`], in placement order: what the vertex
+/// shader's `placed_needle_albedo` reads from a placement and its
+/// prototype. A [`PrototypeRecord::flatten`]ed needle's group is its
+/// placement, so `shoot_colors(record)[needle.group]` colours it.
+///
+/// [`PrototypeRecord::flatten`]: super::PrototypeRecord::flatten
+pub fn shoot_colors(record: &PrototypeRecord) -> Vec<ShootColor> {
+    let uppers: Vec<Vec3> = record.prototypes.iter().map(|p| upper_side(&p.needles)).collect();
+    record
+        .placements
+        .iter()
+        .map(|placement| {
+            let k = placement.prototype as usize;
+            let upper_local = uppers.get(k).copied().unwrap_or(Vec3::ZERO);
+            let center = if k < record.prototypes.len() {
+                placement.place_point(record.prototype_sphere(k).center)
+            } else {
+                placement.translation
+            };
+            ShootColor {
+                age_color: needle_age_color(&record.material, placement.needle_age),
+                center,
+                upper: (placement.rotation * upper_local).normalize_or_zero() * upper_local.length(),
+            }
+        })
+        .collect()
+}
+
 fn rgb(color: [f32; 4]) -> Vec3 {
     Vec3::new(color[0], color[1], color[2])
 }
@@ -215,6 +273,83 @@ mod tests {
             "{} against {expected}",
             far_needle_color(&record)
         );
+    }
+
+    #[test]
+    fn each_flattened_needle_finds_its_shoots_colour_by_its_group() {
+        use crate::model::{BakeOptions, PrototypeInput, bake_prototypes};
+        use glam::Quat;
+        // A flat shoot facing +Z, placed upright, turned on its back, and
+        // small and young.
+        let shoot: Vec<Needle> = (0..4)
+            .map(|k| Needle {
+                base: Vec3::new(k as f32 * 0.01, 0.0, 0.0),
+                tip: Vec3::new(k as f32 * 0.01, 0.05, 0.0),
+                radius: 5e-4,
+                normal: Vec3::Z,
+                group: 0,
+            })
+            .collect();
+        let placements = vec![
+            Placement {
+                translation: Vec3::new(0.0, 1.0, 0.0),
+                needle_age: 4,
+                ..Placement::identity(0)
+            },
+            Placement {
+                translation: Vec3::new(2.0, 1.0, 0.0),
+                rotation: Quat::from_rotation_x(std::f32::consts::PI),
+                needle_age: 4,
+                ..Placement::identity(0)
+            },
+            Placement {
+                translation: Vec3::new(4.0, 1.0, 0.0),
+                scale: 0.5,
+                needle_age: 0,
+                ..Placement::identity(0)
+            },
+        ];
+        let input = PrototypeInput {
+            name: "three shoots".into(),
+            prototypes: vec![shoot],
+            placements,
+            material: material(),
+            ..Default::default()
+        };
+        let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+        let m = material();
+        let shoots = shoot_colors(&record);
+        assert_eq!(shoots.len(), 3);
+        // (The record stores needle normals quantized.)
+        assert!(shoots[1].upper.distance(-Vec3::Z) < 1e-4);
+        assert!(shoots[2].upper.distance(Vec3::Z) < 1e-4);
+        assert_eq!(shoots[2].age_color, needle_age_color(&m, 0));
+        // Every needle of the flat record lies in the sphere of the shoot
+        // its group names.
+        let flat = record.flatten().unwrap();
+        for needle in &flat.needles {
+            let shoot = shoots[needle.group as usize];
+            let placement = record.placements[needle.group as usize];
+            let reach = record.prototype_sphere(0).radius * placement.scale + 1e-5;
+            assert!(needle.base.distance(shoot.center) <= reach && needle.tip.distance(shoot.center) <= reach);
+        }
+        // Seen from in front (+Z) the first shows its upper side, the
+        // second (on its back) its underside; from its own centre, half
+        // of each, as edge-on.
+        let front = Vec3::new(0.0, 1.0, 50.0);
+        assert_eq!(shoots[0].seen_from(&m, front), needle_age_color(&m, 4));
+        assert!(shoots[1].seen_from(&m, front).distance(rgb(m.needle_underside_color)) < 1e-6);
+        let edge_on = needle_age_color(&m, 4).lerp(rgb(m.needle_underside_color), 0.5);
+        assert!(shoots[0].seen_from(&m, shoots[0].center).distance(edge_on) < 1e-6);
+        // The shader's rule, placement by placement.
+        let side = Vec3::new(60.0, 1.0, 0.0);
+        for shoot in &shoots {
+            let to_viewer = (side - shoot.center).normalize();
+            let expected = shoot
+                .age_color
+                .lerp(rgb(m.needle_underside_color), underside_weight(shoot.upper, to_viewer));
+            assert!(shoot.seen_from(&m, side).distance(expected) < 1e-6);
+        }
     }
 
     #[test]
