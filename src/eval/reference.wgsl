@@ -23,6 +23,7 @@
     pbr_types,
     pbr_functions,
 }
+#import bevy_conifer_lod::compact_types::{shoot_needle_color, bark_between}
 
 struct ReferenceSurface {
     // Linear RGBA: the needles' colour where they have no shoots, the
@@ -71,40 +72,21 @@ struct VertexOutput {
     @location(4) @interpolate(perspective, centroid) local_height: f32,
 }
 
-// How much of a shoot's lower side a viewer sees (`model::color::underside_weight`).
-fn underside_weight(upper: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
-    let consistency = min(length(upper), 1.0);
-    if consistency < 1e-6 {
-        return 0.0;
-    }
-    let facing = dot(upper, to_viewer) / length(upper);
-    return clamp(0.5 - 2.0 * facing, 0.0, 1.0) * consistency;
-}
-
 // The needles of `shoot` seen from the view (`model::color::ShootColor::seen_from`).
 fn shoot_albedo(shoot: Shoot, world_from_local: mat4x4<f32>) -> vec3<f32> {
-    let placed = (world_from_local * vec4<f32>(shoot.upper.xyz, 0.0)).xyz;
-    var upper = vec3<f32>(0.0);
-    if dot(placed, placed) > 1e-24 {
-        upper = normalize(placed) * length(shoot.upper.xyz);
-    }
-    let center = (world_from_local * vec4<f32>(shoot.center.xyz, 1.0)).xyz;
-    var to_viewer = view.world_position - center;
-    if dot(to_viewer, to_viewer) > 1e-24 {
-        to_viewer = normalize(to_viewer);
-    }
-    return mix(shoot.age_color.rgb, surface.underside_color.rgb, underside_weight(upper, to_viewer));
+    return shoot_needle_color(
+        shoot.age_color.rgb,
+        surface.underside_color.rgb,
+        shoot.upper.xyz,
+        shoot.center.xyz,
+        world_from_local,
+        view.world_position,
+    );
 }
 
 // Bark at local `height` (`model::color::bark_color`).
 fn bark_albedo(height: f32) -> vec3<f32> {
-    let start = surface.bark_heights.x;
-    let end = surface.bark_heights.y;
-    var t = select(0.0, 1.0, height >= end);
-    if end > start {
-        t = clamp((height - start) / (end - start), 0.0, 1.0);
-    }
-    return mix(surface.base_color.rgb, surface.upper_bark_color.rgb, t);
+    return bark_between(surface.base_color.rgb, surface.upper_bark_color.rgb, surface.bark_heights, height);
 }
 
 @vertex

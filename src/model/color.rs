@@ -202,6 +202,19 @@ mod tests {
         }
     }
 
+    /// Four parallel needles in a plane, their normals +Z: a flat shoot.
+    fn flat_shoot() -> Vec<Needle> {
+        (0..4)
+            .map(|k| Needle {
+                base: Vec3::new(k as f32 * 0.01, 0.0, 0.0),
+                tip: Vec3::new(k as f32 * 0.01, 0.05, 0.0),
+                radius: 5e-4,
+                normal: Vec3::Z,
+                group: 0,
+            })
+            .collect()
+    }
+
     #[test]
     fn needles_age_from_the_young_colour_to_the_base_colour() {
         let m = material();
@@ -240,15 +253,7 @@ mod tests {
     #[test]
     fn the_far_colour_is_the_area_weighted_mean_seen_edge_on() {
         use crate::model::{BakeOptions, PrototypeInput, bake_prototypes};
-        let shoot: Vec<Needle> = (0..4)
-            .map(|k| Needle {
-                base: Vec3::new(k as f32 * 0.01, 0.0, 0.0),
-                tip: Vec3::new(k as f32 * 0.01, 0.05, 0.0),
-                radius: 5e-4,
-                normal: Vec3::Z,
-                group: 0,
-            })
-            .collect();
+        let shoot = flat_shoot();
         let placed = |x: f32, scale: f32, needle_age: u8| Placement {
             translation: Vec3::new(x, 0.0, 0.0),
             scale,
@@ -279,17 +284,9 @@ mod tests {
     fn each_flattened_needle_finds_its_shoots_colour_by_its_group() {
         use crate::model::{BakeOptions, PrototypeInput, bake_prototypes};
         use glam::Quat;
-        // A flat shoot facing +Z, placed upright, turned on its back, and
-        // small and young.
-        let shoot: Vec<Needle> = (0..4)
-            .map(|k| Needle {
-                base: Vec3::new(k as f32 * 0.01, 0.0, 0.0),
-                tip: Vec3::new(k as f32 * 0.01, 0.05, 0.0),
-                radius: 5e-4,
-                normal: Vec3::Z,
-                group: 0,
-            })
-            .collect();
+        // A flat shoot placed upright, turned on its back, and small and
+        // young.
+        let shoot = flat_shoot();
         let placements = vec![
             Placement {
                 translation: Vec3::new(0.0, 1.0, 0.0),

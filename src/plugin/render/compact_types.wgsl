@@ -308,6 +308,54 @@ const ARRAY_OFFSET: u32 = 6u;
 const ARRAY_FLAGS: u32 = 7u;
 const ARRAY_MERGED_BY_OWN: u32 = 8u;
 
+// Colour within a tree (`model::color`), shared with the eval's reference
+// (`eval/reference.wgsl`).
+
+// How much of a shoot's lower side a viewer sees (`model::color::underside_weight`).
+fn underside_weight(upper: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
+    let consistency = min(length(upper), 1.0);
+    if consistency < 1e-6 {
+        return 0.0;
+    }
+    let facing = dot(upper, to_viewer) / length(upper);
+    return clamp(0.5 - 2.0 * facing, 0.0, 1.0) * consistency;
+}
+
+// A shoot's needles seen from `eye` (`model::color::ShootColor::seen_from`):
+// `age_color` from above, `underside_color` from beneath; `upper_local`
+// its upper side and `center_local` the point the viewer's direction is
+// taken from, both in the frame `world_from_local` places.
+fn shoot_needle_color(
+    age_color: vec3<f32>,
+    underside_color: vec3<f32>,
+    upper_local: vec3<f32>,
+    center_local: vec3<f32>,
+    world_from_local: mat4x4<f32>,
+    eye: vec3<f32>,
+) -> vec3<f32> {
+    let placed = (world_from_local * vec4<f32>(upper_local, 0.0)).xyz;
+    var upper = vec3<f32>(0.0);
+    if dot(placed, placed) > 1e-24 {
+        upper = normalize(placed) * length(upper_local);
+    }
+    let center = (world_from_local * vec4<f32>(center_local, 1.0)).xyz;
+    var to_viewer = eye - center;
+    if dot(to_viewer, to_viewer) > 1e-24 {
+        to_viewer = normalize(to_viewer);
+    }
+    return mix(age_color, underside_color, underside_weight(upper, to_viewer));
+}
+
+// Bark at `height` (`model::color::bark_color`): `lower` turning into
+// `upper` between `heights.x` and `heights.y`.
+fn bark_between(lower: vec3<f32>, upper: vec3<f32>, heights: vec2<f32>, height: f32) -> vec3<f32> {
+    var t = select(0.0, 1.0, height >= heights.y);
+    if heights.y > heights.x {
+        t = clamp((height - heights.x) / (heights.y - heights.x), 0.0, 1.0);
+    }
+    return mix(lower, upper, t);
+}
+
 // The band of `prototype` a placement at threshold code `code` is drawn in
 // (`model::compact::CompactSpecies::placement_band`).
 fn placement_band(prototype: Prototype, code: u32) -> u32 {

@@ -43,7 +43,7 @@
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, CROWN_SHADE_STEPS, CROWN_SHADE_CLASSES, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
     SKY_VISIBILITY_RINGS, CROWN_DENSITY_RINGS, SHADOW_DEPTH_STEPS, WOOD_JOINED_START, WOOD_JOINED_END,
-    instance_world_from_local, log_decode, placement_matrix,
+    instance_world_from_local, log_decode, placement_matrix, shoot_needle_color, bark_between,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
 
@@ -711,43 +711,22 @@ fn needle_age_albedo(age: u32) -> vec3<f32> {
     return mix(species.young_needle_color.rgb, species.needle_color.rgb, t);
 }
 
-// How much of a shoot's lower side a viewer sees (`model::color::underside_weight`).
-fn underside_weight(upper: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
-    let consistency = min(length(upper), 1.0);
-    if consistency < 1e-6 {
-        return 0.0;
-    }
-    let facing = dot(upper, to_viewer) / length(upper);
-    return clamp(0.5 - 2.0 * facing, 0.0, 1.0) * consistency;
-}
-
 // A placed shoot's needles seen from the view (`model::color::needle_color`,
 // from the centre of the prototype's sphere).
 fn placed_needle_albedo(placement: Placement, prototype: Prototype, world_from_local: mat4x4<f32>) -> vec3<f32> {
-    let upper_local = unpack4x8snorm(prototype.upper_side).xyz;
-    let placed = (world_from_local * vec4<f32>(upper_local, 0.0)).xyz;
-    var upper = vec3<f32>(0.0);
-    if dot(placed, placed) > 1e-24 {
-        upper = normalize(placed) * length(upper_local);
-    }
-    let centre = (world_from_local * vec4<f32>(prototype.sphere.xyz, 1.0)).xyz;
-    var to_viewer = view.world_position - centre;
-    if dot(to_viewer, to_viewer) > 1e-24 {
-        to_viewer = normalize(to_viewer);
-    }
-    let weight = underside_weight(upper, to_viewer);
-    return mix(needle_age_albedo(placement.needle_age), species.needle_underside_color.rgb, weight);
+    return shoot_needle_color(
+        needle_age_albedo(placement.needle_age),
+        species.needle_underside_color.rgb,
+        unpack4x8snorm(prototype.upper_side).xyz,
+        prototype.sphere.xyz,
+        world_from_local,
+        view.world_position,
+    );
 }
 
 // Bark at tree-local `height` (`model::color::bark_color`).
 fn bark_albedo(height: f32) -> vec3<f32> {
-    let start = species.wood_heights.x;
-    let end = species.wood_heights.y;
-    var t = select(0.0, 1.0, height >= end);
-    if end > start {
-        t = clamp((height - start) / (end - start), 0.0, 1.0);
-    }
-    return mix(species.wood_color.rgb, species.upper_wood_color.rgb, t);
+    return bark_between(species.wood_color.rgb, species.upper_wood_color.rgb, species.wood_heights.xy, height);
 }
 
 // A line of equivalent width `width` (metres) as coverage of its one-pixel
