@@ -1,5 +1,6 @@
 // Shared by the compact render path's compute pass (`conifer_cull.wgsl`)
-// and its vertex and fragment shaders (`conifer_compact.wgsl`). The Rust
+// and its vertex and fragment shaders (`conifer_compact.wgsl`); the eval's
+// reference (`src/eval/reference.wgsl`) takes the colour rules. The Rust
 // mirrors are in `src/plugin/render/gpu.rs`.
 
 #define_import_path bevy_conifer_lod::compact_types
