@@ -110,9 +110,9 @@ impl Method {
     }
 }
 
-/// A headless renderer with the plugin set to `view`'s ε and δ, and
-/// `record` made a species (not yet added to the assets). Both eval scenes
-/// start here.
+/// A headless renderer with the plugin set to `view`'s ε and δ (one error
+/// per tree), and `tree` made a species as a game loading it would (not
+/// yet added to the assets). Both eval scenes start here.
 pub(super) fn renderer_with_species(
     tree: EvalTree,
     view: &EvalView,
@@ -617,7 +617,8 @@ impl CameraPath {
 pub const DOLLY_STEP_SECONDS: f64 = 1.0 / 30.0;
 
 impl EvalScene {
-    /// Builds the scene for `record` with `methods` (the reference is always
+    /// Builds the scene for `tree` (a flat record or a tree of shared
+    /// prototypes, [`EvalTree`]) with `methods` (the reference is always
     /// there), loads it and lets it reach the GPU.
     pub fn new(tree: impl Into<EvalTree>, methods: &[Method], view: EvalView) -> Result<Self, EvalError> {
         Self::new_in_wind(tree, methods, view, None)
