@@ -13,7 +13,7 @@
 //! `render_prototypes`).
 
 use super::measure::{self, PixelRect};
-use super::reference::{ReferenceMaterialPlugin, spawn_reference_tree};
+use super::reference::{ReferenceMaterialPlugin, reference_shoots, spawn_reference_tree};
 use super::scene::{EvalError, EvalView, resolve_reference, wood_counts, wood_counts_by};
 use super::tonemap::ToneMap;
 use super::{EvaluateError, flip_error};
@@ -132,9 +132,7 @@ pub fn evaluate_inside(
 
     progress("building the scene (placed species, raw reference)");
     let species = ConiferSpecies::from_prototype_record(record).map_err(EvalError::from)?;
-    // The reference colours each needle by its shoot where the plugin
-    // draws the placements (see `EvalScene::new_in_wind`).
-    let species_has_no_placements = species.compact.placements.is_empty();
+    let shoots = reference_shoots(&species);
     let mut renderer = HeadlessRenderer::with_setup(".", |app| {
         app.add_plugins(ReferenceMaterialPlugin);
     });
@@ -153,7 +151,6 @@ pub fn evaluate_inside(
         .insert((RenderLayers::from_layers(&[0, 1]), view.sun.transform()));
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY, RenderLayers::layer(0)));
-    let shoots = (!species_has_no_placements).then(|| crate::model::color::shoot_colors(record));
     let [needle_triangles, wood_triangles] =
         spawn_reference_tree(world, &flat, shoots.as_deref(), RenderLayers::layer(1));
     let reference_triangles = needle_triangles + wood_triangles;

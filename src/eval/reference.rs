@@ -17,10 +17,9 @@
 //! The reference takes the tree's colours as the plugin gives them
 //! ([`crate::model::color`]): each needle its shoot's, by the shoot's age
 //! and by how much of its underside the viewer sees, and the bark its
-//! height's. With one colour for every needle, the mature silver fir's
-//! reference was darker than its own far colour (young shoots and pale
-//! undersides), and every method's crown colour error at 250 m carried
-//! the difference.
+//! height's ([`reference_shoots`], [`spawn_reference_tree`]). It had one
+//! needle colour and one bark colour, which a tree drawn by its placements
+//! (the mature records, as a game loads them) does not have.
 
 use bevy::asset::{embedded_asset, embedded_path};
 use bevy::camera::visibility::RenderLayers;
@@ -207,6 +206,18 @@ impl Plugin for ReferenceMaterialPlugin {
         embedded_asset!(app, "reference.wgsl");
         app.add_plugins(MaterialPlugin::<ReferenceMaterial>::default());
     }
+}
+
+/// The shoots the reference colours `species`' needles by: its
+/// placements' ([`crate::model::color::shoot_colors`]) where the plugin
+/// draws the tree by its placements; `None` for a flat species, or a tree
+/// of prototypes the compact layout fell back to drawing flat, whose
+/// needles all take the needle colour.
+pub fn reference_shoots(species: &crate::plugin::ConiferSpecies) -> Option<Vec<ShootColor>> {
+    species
+        .prototypes()
+        .filter(|_| !species.compact.placements.is_empty())
+        .map(|prototypes| crate::model::color::shoot_colors(prototypes))
 }
 
 /// Spawns the reference tree of `record` into `world` on `layers`: its

@@ -22,7 +22,7 @@
 //!   lines blended with their opacity as vertex alpha).
 
 use super::decimate::{DecimatedLevel, decimate, needle_mesh_with_corners_at};
-use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, spawn_reference_tree};
+use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_shoots, spawn_reference_tree};
 use super::tonemap::ToneMap;
 use crate::model::impostor::impostor_fade;
 use crate::model::metric::{line_error, prism_sides};
@@ -638,13 +638,7 @@ impl EvalScene {
         let wind = wind.filter(|w| !w.model().is_calm());
         let (mut renderer, species) = renderer_with_species(tree.into(), &view)?;
         let record = species.record().clone();
-        // The reference colours each needle by its shoot where the plugin
-        // does: a tree drawn by its placements (a fallback to the flat
-        // layout draws every needle in the needle colour).
-        let shoots = species
-            .prototypes()
-            .filter(|_| !species.compact.placements.is_empty())
-            .map(|prototypes| crate::model::color::shoot_colors(prototypes));
+        let shoots = reference_shoots(&species);
         let impostor_texel = species.impostor.as_ref().map(|i| i.texel);
         let wind_shape = species.wind_shape;
         let mut methods: Vec<Method> = methods.to_vec();
