@@ -183,6 +183,112 @@ pub const SHADOW_SAMPLES: usize = 3;
 /// Heights a [`CrownImpostor::crown_radii`] profile holds, bottom to top.
 pub const CROWN_PROFILE_STEPS: usize = 32;
 
+/// The trunk where an impostor's pictures show it: its centre (tree-local
+/// `x`, `z`) and radius at [`CROWN_PROFILE_STEPS`] heights, the middles of
+/// even steps from the pictures' bottom to their top (as
+/// [`CrownImpostor::crown_radii`]), radius 0 where no trunk stands.
+///
+/// A texel keeps how its needles and wood are lit as shares of two
+/// cylinders and a sphere, each averaged over its whole width: right for
+/// pieces far thinner than a texel, but a trunk several texels wide came
+/// out one flat shade across, where the tree's own trunk is lit on one
+/// side and dark on the other. With the profile the fragment lights the
+/// wood it sees over the trunk as the band of the trunk's round surface
+/// its pixel covers ([`crate::model::shading::band_average`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrunkProfile {
+    /// The trunk's centre at each height (tree-local `x`, `z`).
+    pub centres: [Vec2; CROWN_PROFILE_STEPS],
+    /// Its radius at each height, metres; 0 where no trunk stands.
+    pub radii: [f32; CROWN_PROFILE_STEPS],
+}
+
+impl Default for TrunkProfile {
+    /// No trunk anywhere.
+    fn default() -> Self {
+        Self {
+            centres: [Vec2::ZERO; CROWN_PROFILE_STEPS],
+            radii: [0.0; CROWN_PROFILE_STEPS],
+        }
+    }
+}
+
+impl TrunkProfile {
+    /// Segments steeper than this (the sine of their angle above the
+    /// horizontal) can be the trunk: a stem leans, a branch does not stand
+    /// that upright where it is the widest wood at its height.
+    pub const UPRIGHT: f32 = 0.7;
+
+    /// The trunk of `wood` over heights `bottom` to `top`: at each step's
+    /// middle height, the widest upright segment ([`Self::UPRIGHT`]) that
+    /// spans it, its centre and radius taken where it crosses that height.
+    /// Invalid segments are skipped; no trunk (all radii 0) for an empty
+    /// or non-finite span, and for wood given only as a triangle mesh.
+    pub fn of(wood: &[WoodSegment], bottom: f32, top: f32) -> Self {
+        let mut profile = Self::default();
+        if !(bottom.is_finite() && top.is_finite() && top > bottom) {
+            return profile;
+        }
+        for step in 0..CROWN_PROFILE_STEPS {
+            let height = bottom + (step as f32 + 0.5) / CROWN_PROFILE_STEPS as f32 * (top - bottom);
+            let widest = wood
+                .iter()
+                .filter(|w| w.is_valid())
+                .filter_map(|w| {
+                    let d = w.end - w.start;
+                    let length = d.length();
+                    if length <= 0.0 || d.y.abs() < Self::UPRIGHT * length {
+                        return None;
+                    }
+                    let t = (height - w.start.y) / d.y;
+                    (0.0..=1.0).contains(&t).then(|| {
+                        let at = w.start + d * t;
+                        (
+                            Vec2::new(at.x, at.z),
+                            w.start_radius + (w.end_radius - w.start_radius) * t,
+                        )
+                    })
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((centre, radius)) = widest {
+                profile.centres[step] = centre;
+                profile.radii[step] = radius;
+            }
+        }
+        profile
+    }
+
+    /// The trunk's centre and radius at tree-local `height` in a profile
+    /// from `bottom` to `top`: linear between the steps' middles, the end
+    /// steps' outside them ([`CrownImpostor::profile_step`]). CPU reference
+    /// of the impostor fragment's `trunk_at`.
+    pub fn at(&self, bottom: f32, top: f32, height: f32) -> (Vec2, f32) {
+        let (k, t) = CrownImpostor::profile_step(bottom, top, height);
+        (
+            self.centres[k].lerp(self.centres[k + 1], t),
+            self.radii[k] + (self.radii[k + 1] - self.radii[k]) * t,
+        )
+    }
+
+    /// The band `[s0, s1]` of the trunk's projected width (offsets across
+    /// it over its radius, `−1` at its left edge as the camera sees it)
+    /// that a pixel covers: the pixel's centre `offset` metres right of the
+    /// trunk's axis, its footprint `footprint` metres wide across it. `None`
+    /// where the band misses the trunk (or there is none: `radius` 0). CPU
+    /// reference of the impostor fragment's `trunk_band`.
+    pub fn band(offset: f32, footprint: f32, radius: f32) -> Option<(f32, f32)> {
+        if !(radius > 0.0 && offset.is_finite() && footprint.is_finite()) {
+            return None;
+        }
+        let half = 0.5 * footprint.abs();
+        let (s0, s1) = (
+            ((offset - half) / radius).max(-1.0),
+            ((offset + half) / radius).min(1.0),
+        );
+        (s1 > s0).then_some((s0, s1))
+    }
+}
+
 /// Bins of a [`WoodVisibility`] across the crown, from its far side to its
 /// near side at each height.
 pub const WOOD_NEARNESS_BINS: usize = 8;
@@ -1721,6 +1827,69 @@ mod tests {
                 "sun {k}: {shares_error} vs {axis_error}"
             );
         }
+    }
+
+    /// The trunk profile finds the stem among the wood: the widest upright
+    /// segment at each height, not a wider branch lying flat nor a thin
+    /// upright twig; nothing above the stem's top; and the pixel's band
+    /// across it.
+    #[test]
+    fn the_trunk_profile_follows_the_stem() {
+        let segment = |start: Vec3, end: Vec3, start_radius: f32, end_radius: f32| WoodSegment {
+            start,
+            end,
+            start_radius,
+            end_radius,
+        };
+        let wood = [
+            // A stem leaning toward +x, 0.4 m wide at the foot, to 8 m.
+            segment(Vec3::ZERO, Vec3::new(0.2, 4.0, 0.0), 0.2, 0.15),
+            segment(Vec3::new(0.2, 4.0, 0.0), Vec3::new(0.4, 8.0, 0.0), 0.15, 0.05),
+            // A thick branch lying flat at 3 m, wider than the stem there.
+            segment(Vec3::new(0.0, 3.0, 0.0), Vec3::new(3.0, 3.2, 0.0), 0.5, 0.3),
+            // A thin upright twig beside the stem.
+            segment(Vec3::new(2.0, 2.0, 1.0), Vec3::new(2.0, 6.0, 1.0), 0.02, 0.01),
+            // Invalid wood is skipped.
+            segment(Vec3::NAN, Vec3::Y, 1.0, 1.0),
+        ];
+        let profile = TrunkProfile::of(&wood, 0.0, 10.0);
+        for step in 0..CROWN_PROFILE_STEPS {
+            let height = (step as f32 + 0.5) / CROWN_PROFILE_STEPS as f32 * 10.0;
+            let (centre, radius) = (profile.centres[step], profile.radii[step]);
+            if height > 8.0 {
+                assert_eq!(radius, 0.0, "step {step}");
+                continue;
+            }
+            let (expected_x, expected_radius) = if height <= 4.0 {
+                (0.2 * height / 4.0, 0.2 - 0.05 * height / 4.0)
+            } else {
+                (0.2 + 0.2 * (height - 4.0) / 4.0, 0.15 - 0.1 * (height - 4.0) / 4.0)
+            };
+            assert!(
+                (centre.x - expected_x).abs() < 1e-5 && centre.y.abs() < 1e-6,
+                "step {step}: {centre}"
+            );
+            assert!((radius - expected_radius).abs() < 1e-5, "step {step}: {radius}");
+        }
+        // Between two steps' middles: linear.
+        let (k, t) = CrownImpostor::profile_step(0.0, 10.0, 2.0);
+        let (centre, radius) = profile.at(0.0, 10.0, 2.0);
+        assert!((radius - (profile.radii[k] * (1.0 - t) + profile.radii[k + 1] * t)).abs() < 1e-6);
+        assert!((centre.x - 0.1).abs() < 1e-4, "{centre}");
+        // No trunk for an empty span or no wood.
+        assert_eq!(TrunkProfile::of(&wood, 5.0, 5.0), TrunkProfile::default());
+        assert_eq!(TrunkProfile::of(&[], 0.0, 10.0), TrunkProfile::default());
+        assert_eq!(TrunkProfile::of(&wood, f32::NAN, 10.0), TrunkProfile::default());
+        // The band a pixel covers: clipped to the trunk, none beside it.
+        let close = |band: Option<(f32, f32)>, expected: (f32, f32)| {
+            band.is_some_and(|(s0, s1)| (s0 - expected.0).abs() < 1e-6 && (s1 - expected.1).abs() < 1e-6)
+        };
+        assert!(close(TrunkProfile::band(0.0, 0.1, 0.2), (-0.25, 0.25)));
+        assert!(close(TrunkProfile::band(0.15, 0.2, 0.2), (0.25, 1.0)));
+        assert_eq!(TrunkProfile::band(0.35, 0.2, 0.2), None);
+        assert_eq!(TrunkProfile::band(0.0, 1.0, 0.2), Some((-1.0, 1.0)));
+        assert_eq!(TrunkProfile::band(0.0, 0.1, 0.0), None);
+        assert_eq!(TrunkProfile::band(f32::NAN, 0.1, 0.2), None);
     }
 
     #[test]

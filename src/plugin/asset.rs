@@ -2,7 +2,7 @@
 
 use crate::model::calibration::LineCalibration;
 use crate::model::compact::{CompactError, CompactSpecies};
-use crate::model::impostor::{CrownImpostor, ImpostorOptions};
+use crate::model::impostor::{CrownImpostor, ImpostorOptions, TrunkProfile};
 use crate::model::metric::line_error;
 use crate::model::prism::{TriangleMesh, append_wood_segment, wood_segment_error};
 use crate::model::wind::WindShape;
@@ -53,6 +53,10 @@ pub struct ConiferSpecies {
     /// else baked from the needles and wood when the record loads (`None`
     /// when they have no extent).
     pub impostor: Option<Arc<CrownImpostor>>,
+    /// The trunk over the impostor's height ([`TrunkProfile`]): where its
+    /// pictures show the trunk, the impostor lights it as the round stem's
+    /// band under each pixel. No trunk without an impostor.
+    pub trunk: TrunkProfile,
     /// The lines' opacity scales by pixel size the record was calibrated
     /// with ([`crate::model::calibration`]; `None` for a record baked
     /// without or before format 9: every line keeps its opacity). The
@@ -192,11 +196,18 @@ impl ConiferSpecies {
     /// another pixel error (the fade follows the texel,
     /// [`crate::model::impostor::FADE_START`]).
     pub fn with_impostor(mut self, options: ImpostorOptions) -> Self {
-        self.impostor = match &self.prototypes {
-            Some(prototypes) => bake_impostor(prototypes, options),
+        (self.impostor, self.trunk) = match &self.prototypes {
+            Some(prototypes) => {
+                let impostor = bake_impostor(prototypes, options);
+                let trunk = trunk_profile(&prototypes.wood, impostor.as_deref());
+                (impostor, trunk)
+            }
             None => {
                 let record = self.record();
-                CrownImpostor::bake(&record.needles, &record.wood, &record.wood_mesh, options).map(Arc::new)
+                let impostor =
+                    CrownImpostor::bake(&record.needles, &record.wood, &record.wood_mesh, options).map(Arc::new);
+                let trunk = trunk_profile(&record.wood, impostor.as_deref());
+                (impostor, trunk)
             }
         };
         self
@@ -258,10 +269,18 @@ impl ConiferSpecies {
             max_line_error: parts.line_errors.1,
             min_line_error: parts.line_errors.0,
             compact: Arc::new(parts.compact),
+            trunk: trunk_profile(parts.wood, parts.impostor.as_deref()),
             impostor: parts.impostor,
             line_calibration: parts.line_calibration,
         })
     }
+}
+
+/// The trunk of `wood` over `impostor`'s height (none without one).
+fn trunk_profile(wood: &[WoodSegment], impostor: Option<&CrownImpostor>) -> TrunkProfile {
+    impostor.map_or_else(TrunkProfile::default, |impostor| {
+        TrunkProfile::of(wood, impostor.bottom, impostor.top())
+    })
 }
 
 /// What a species needs of its record, flat or of prototypes.

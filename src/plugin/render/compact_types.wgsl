@@ -169,6 +169,11 @@ struct SpeciesParams {
     // (`model::impostor::CrownDensity`): where an impostor texel's shadow
     // samples go
     crown_density: array<vec4<f32>, 64>,
+    // the trunk at the crown profile's CROWN_PROFILE_STEPS heights: its
+    // centre (tree-local x, z) and radius (0: none there)
+    // (`model::impostor::TrunkProfile`): where the impostor lights its
+    // wood as the round stem
+    trunk: array<vec4<f32>, 32>,
 }
 
 const CROWN_DENSITY_RINGS: u32 = 8u;

@@ -1552,6 +1552,10 @@ struct Surface {
     toward: vec3<f32>,
     side: vec3<f32>,
     is_sphere: bool,
+    // A cylinder's band `[s0, s1]` of its projected width the pixel sees
+    // (the impostor's trunk, `trunk_band`); the whole width where
+    // `s1 ≤ s0` (a zeroed surface's).
+    band: vec2<f32>,
 }
 
 // The part `[s0, s1]` of a cylinder's projected width whose normals face
@@ -1575,11 +1579,19 @@ fn lit_across(surface: Surface, to_light: vec3<f32>) -> vec2<f32> {
 // width the light reaches. Over the whole width, a light from behind
 // lights only a band at one edge, which the nodes missed (under half the
 // light a cylinder's bright rim shows from behind).
+// On a band of the width (`Surface::band`) the nodes span the part of it
+// the light reaches and the weights sum to that part's share of the band
+// (CPU reference: `model::shading::band_average`).
 fn cylinder_normal(surface: Surface, k: u32, to_light: vec3<f32>) -> vec4<f32> {
-    let lit = lit_across(surface, to_light);
-    let half = 0.5 * (lit.y - lit.x);
+    var lit = lit_across(surface, to_light);
+    var width = 2.0;
+    if surface.band.y > surface.band.x {
+        lit = vec2<f32>(max(lit.x, surface.band.x), min(lit.y, surface.band.y));
+        width = surface.band.y - surface.band.x;
+    }
+    let half = 0.5 * max(lit.y - lit.x, 0.0);
     let s = 0.5 * (lit.x + lit.y) + half * across_offset(k);
-    return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, 0.5 * half * across_weight(k));
+    return vec4<f32>(sqrt(max(1.0 - s * s, 0.0)) * surface.toward + s * surface.side, half * across_weight(k) / width);
 }
 
 // View cosine `k` (n·V) at which a cylinder's (or a sphere's) indirect
@@ -1700,6 +1712,20 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
     return surface_lighting(in, surface);
 }
 
+// The band `[s0, s1]` of a cylinder along `axis` the pixel sees (offsets
+// across its projected width, `−1` at its left edge): Bevy's BRDF at four
+// normals over the band's lit part (`cylinder_normal`).
+fn band_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, band: vec2<f32>) -> vec4<f32> {
+    let T = normalize(axis);
+    let toward = facing_axis(T, in.V);
+    var surface: Surface;
+    surface.toward = toward;
+    surface.side = cross(T, toward);
+    surface.is_sphere = false;
+    surface.band = band;
+    return surface_lighting(in, surface);
+}
+
 // Needles spread every way are lit as a sphere: the mean of Bevy's BRDF
 // over its projected disk, from the species' table
 // (`model::shading::SphereLight`).
@@ -1709,6 +1735,26 @@ fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
     surface.is_sphere = true;
     return surface_lighting(in, surface);
 }
+
+#ifdef CONIFER_IMPOSTOR
+// A texel's needles lit as shares of a vertical cylinder, one across the
+// view and, for the rest, a sphere (CPU reference:
+// `model::shading::TexelShares::lambert`).
+fn shares_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, across_axis: vec3<f32>, vertical_share: f32, across_share: f32) -> vec4<f32> {
+    var color = vec4<f32>(0.0);
+    if vertical_share > 1.0 / 512.0 {
+        color += vertical_share * cylinder_lighting(in, axis);
+    }
+    if across_share > 1.0 / 512.0 {
+        color += across_share * cylinder_lighting(in, across_axis);
+    }
+    let sphere_share = 1.0 - vertical_share - across_share;
+    if sphere_share > 1.0 / 512.0 {
+        color += sphere_share * sphere_lighting(in);
+    }
+    return color;
+}
+#endif
 
 // View depth of a world point (directional cascades are chosen by it).
 fn view_depth(position: vec4<f32>) -> f32 {
@@ -1913,8 +1959,14 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
     // the normal facing the viewer.
     let F0 = pbr_functions::calculate_F0(base, 0.0, in.material.reflectance);
     var indirect = vec3<f32>(0.0);
+    let band = surface.band;
     for (var k = 0u; k < 4u; k = k + 1u) {
-        let node = indirect_node(k, surface.is_sphere);
+        var node = indirect_node(k, surface.is_sphere);
+        if band.y > band.x {
+            // A band of a cylinder: four Gauss–Legendre nodes across it.
+            let s = 0.5 * (band.x + band.y) + 0.5 * (band.y - band.x) * across_offset(k);
+            node = vec2<f32>(sqrt(max(1.0 - s * s, 1e-8)), 0.5 * across_weight(k));
+        }
         indirect += node.y * ambient::ambient_light(
             in.world_position,
             toward,
@@ -2050,6 +2102,27 @@ fn crown_radius_at(height: f32) -> f32 {
     let a = species.crown_radii[k / 4u][k % 4u];
     let b = species.crown_radii[(k + 1u) / 4u][(k + 1u) % 4u];
     return mix(a, b, step.y);
+}
+
+// The trunk at tree-local `height`: its centre (tree-local x, z) and
+// radius, 0 where none stands (CPU reference:
+// `model::impostor::TrunkProfile::at`).
+fn trunk_at(height: f32) -> vec3<f32> {
+    let step = crown_profile_step(height);
+    let k = u32(step.x);
+    return mix(species.trunk[k].xyz, species.trunk[k + 1u].xyz, step.y);
+}
+
+// The band `[s0, s1]` of the trunk's projected width a pixel covers, its
+// centre `offset` metres right of the trunk's axis and its footprint
+// `footprint` metres wide across it; `s1 ≤ s0` where it misses the trunk
+// (CPU reference: `model::impostor::TrunkProfile::band`).
+fn trunk_band(offset: f32, footprint: f32, radius: f32) -> vec2<f32> {
+    if !(radius > 0.0) {
+        return vec2<f32>(0.0);
+    }
+    let half = 0.5 * abs(footprint);
+    return vec2<f32>(max((offset - half) / radius, -1.0), min((offset + half) / radius, 1.0));
 }
 
 // The extinctions (per tree metre) of the crown's CROWN_SHADE_CLASSES
@@ -2285,6 +2358,25 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     }
     to_camera = normalize(to_camera);
     let across_axis = normalize((world_from_local * vec4<f32>(to_camera.y, 0.0, -to_camera.x, 0.0)).xyz);
+    // The wood the texel shows over the trunk is the round stem's band
+    // under the pixel, not a cylinder's mean across its whole width
+    // (`model::impostor::TrunkProfile`): the picture's row and column,
+    // right of the trunk's centre along the camera's right.
+    let picture_height = mix(species.impostor_span.y, species.impostor_span.x, uv.y);
+    let trunk = trunk_at(picture_height);
+    let trunk_offset = (2.0 * uv.x - 1.0) * species.impostor_box.z
+        - dot(trunk.xy - species.impostor_box.xy, vec2<f32>(to_camera.y, -to_camera.x));
+    // The pixel's footprint across it from the picture's own derivatives
+    // (as `impostor_texel` takes them): a value computed through a `var`
+    // has no derivative a dithered-away neighbour can give.
+    let trunk_footprint = 2.0 * species.impostor_box.z * length(vec2<f32>(dpdx(uv.x), dpdy(uv.x)));
+    let stem_band = trunk_band(trunk_offset, trunk_footprint, trunk.z);
+    var needle_albedo = species.far_needle_color.rgb;
+    var stem_albedo = bark_albedo(height);
+    if species.debug_colors != 0u {
+        needle_albedo = albedo;
+        stem_albedo = albedo;
+    }
 #endif
 #ifdef CONIFER_ROUND_PRISMS
     // A prism is shaded as the round cylinder it stands for: the normal at
@@ -2369,16 +2461,21 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
 #else ifdef CONIFER_IMPOSTOR
     // The texel's needles lit as shares of two cylinders and a sphere
     // (CPU reference: `model::shading::TexelShares::lambert`).
-    var color = vec4<f32>(0.0);
-    if vertical_share > 1.0 / 512.0 {
-        color += vertical_share * cylinder_lighting(pbr_input, axis);
-    }
-    if across_share > 1.0 / 512.0 {
-        color += across_share * cylinder_lighting(pbr_input, across_axis);
-    }
-    let sphere_share = 1.0 - vertical_share - across_share;
-    if sphere_share > 1.0 / 512.0 {
-        color += sphere_share * sphere_lighting(pbr_input);
+    var color = shares_lighting(pbr_input, axis, across_axis, vertical_share, across_share);
+    if stem_band.y > stem_band.x && wood > 0.0 {
+        // Over the trunk the needles keep their shares and the wood is the
+        // stem's band (`model::shading::band_average`), in the bark's
+        // roughness.
+        var needles = pbr_input;
+        needles.material.base_color = vec4<f32>(needle_albedo, texel.r);
+        var stem = pbr_input;
+        stem.material.base_color = vec4<f32>(stem_albedo, texel.r);
+        stem.material.perceptual_roughness = BARK_ROUGHNESS;
+        color = mix(
+            shares_lighting(needles, axis, across_axis, vertical_share, across_share),
+            band_lighting(stem, axis, stem_band),
+            wood
+        );
     }
     color.a = pbr_input.material.base_color.a;
 #else ifdef CONIFER_LINES

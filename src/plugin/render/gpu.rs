@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 4,256 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 4,768 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -299,6 +299,11 @@ pub struct SpeciesParams {
     /// major): where an impostor texel's shadow samples go
     /// ([`crate::model::impostor::shadow_sample_depths`]).
     pub crown_density: [[f32; 4]; CROWN_DENSITY_ROWS],
+    /// The trunk at the crown profile's heights: its centre (tree-local
+    /// x, z) and radius (0: none there), w unused
+    /// ([`crate::model::impostor::TrunkProfile`]): where the impostor
+    /// lights its wood as the round stem.
+    pub trunk: [[f32; 4]; crate::model::impostor::CROWN_PROFILE_STEPS],
 }
 
 impl Default for SpeciesParams {
@@ -385,6 +390,14 @@ impl SpeciesParams {
     /// cover the picture ([`crate::model::impostor::WoodVisibility`]).
     pub fn set_wood_visibility(&mut self, visibility: &crate::model::impostor::WoodVisibility) {
         self.wood_visibility = four_a_row(visibility.shares.as_flattened());
+    }
+
+    /// Sets the trunk the impostor lights as a round stem
+    /// ([`crate::model::impostor::TrunkProfile`]).
+    pub fn set_trunk(&mut self, trunk: &crate::model::impostor::TrunkProfile) {
+        for (row, (centre, radius)) in self.trunk.iter_mut().zip(trunk.centres.iter().zip(trunk.radii)) {
+            *row = [centre.x, centre.y, radius, 0.0];
+        }
     }
 
     /// Sets how densely the needles fill the crown
@@ -620,8 +633,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_4256_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 4256);
+    fn species_params_is_4768_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 4768);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`

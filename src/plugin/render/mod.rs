@@ -630,6 +630,7 @@ fn extract_compact(
             wind_step,
             &entry.sphere_light.1,
         );
+        entry.params.set_trunk(&asset.trunk);
         if let Some((shade, sky)) = &entry.crown_shade {
             entry.params.set_crown_shade(shade);
             if settings.sky_occlusion {
