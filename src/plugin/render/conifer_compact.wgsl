@@ -2367,8 +2367,9 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     let trunk_offset = (2.0 * uv.x - 1.0) * species.impostor_box.z
         - dot(trunk.xy - species.impostor_box.xy, vec2<f32>(to_camera.y, -to_camera.x));
     // The pixel's footprint across it from the picture's own derivatives
-    // (as `impostor_texel` takes them): a value computed through a `var`
-    // has no derivative a dithered-away neighbour can give.
+    // (as `impostor_texel` takes them): where a fading tree's dither
+    // discarded a neighbour, the derivative of a value built through a
+    // `var` after the discard is not the picture's (lavapipe).
     let trunk_footprint = 2.0 * species.impostor_box.z * length(vec2<f32>(dpdx(uv.x), dpdy(uv.x)));
     let stem_band = trunk_band(trunk_offset, trunk_footprint, trunk.z);
     var needle_albedo = species.far_needle_color.rgb;
@@ -2461,8 +2462,10 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
 #else ifdef CONIFER_IMPOSTOR
     // The texel's needles lit as shares of two cylinders and a sphere
     // (CPU reference: `model::shading::TexelShares::lambert`).
-    var color = shares_lighting(pbr_input, axis, across_axis, vertical_share, across_share);
-    if stem_band.y > stem_band.x && wood > 0.0 {
+    var color: vec4<f32>;
+    if !(stem_band.y > stem_band.x && wood > 0.0) {
+        color = shares_lighting(pbr_input, axis, across_axis, vertical_share, across_share);
+    } else {
         // Over the trunk the needles keep their shares and the wood is the
         // stem's band (`model::shading::band_average`), in the bark's
         // roughness.
