@@ -663,6 +663,7 @@ mod tests {
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_radii", super::CROWN_RADII_ROWS);
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_extinction", steps);
         assert_shader_table("CROWN_PROFILE_STEPS", steps, "crown_density", super::CROWN_DENSITY_ROWS);
+        assert_shader_table("CROWN_PROFILE_STEPS", steps, "trunk", steps);
         let types = include_str!("compact_types.wgsl");
         for (constant, value) in [
             ("CROWN_DENSITY_RINGS", crate::model::impostor::CROWN_DENSITY_RINGS),
