@@ -229,17 +229,20 @@ impl TrunkProfile {
         if !(bottom.is_finite() && top.is_finite() && top > bottom) {
             return profile;
         }
+        let upright: Vec<&WoodSegment> = wood
+            .iter()
+            .filter(|w| {
+                let d = w.end - w.start;
+                let length = d.length();
+                w.is_valid() && length > 0.0 && d.y.abs() >= Self::UPRIGHT * length
+            })
+            .collect();
         for step in 0..CROWN_PROFILE_STEPS {
             let height = bottom + (step as f32 + 0.5) / CROWN_PROFILE_STEPS as f32 * (top - bottom);
-            let widest = wood
+            let widest = upright
                 .iter()
-                .filter(|w| w.is_valid())
                 .filter_map(|w| {
                     let d = w.end - w.start;
-                    let length = d.length();
-                    if length <= 0.0 || d.y.abs() < Self::UPRIGHT * length {
-                        return None;
-                    }
                     let t = (height - w.start.y) / d.y;
                     (0.0..=1.0).contains(&t).then(|| {
                         let at = w.start + d * t;

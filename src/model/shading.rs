@@ -100,17 +100,7 @@ pub fn lit_across(axis: Vec3, to_viewer: Vec3, to_light: Vec3) -> (f32, f32) {
 /// `to_light` (0 where `n` faces away from it), by the shader's four-point
 /// rule over the part of the width the light reaches ([`lit_across`]).
 pub fn across_average(axis: Vec3, to_viewer: Vec3, to_light: Vec3, radiance: impl Fn(Vec3) -> f32) -> f32 {
-    let (toward, side) = visible_frame(axis, to_viewer);
-    let (s0, s1) = lit_across(axis, to_viewer, to_light);
-    let half = 0.5 * (s1 - s0);
-    0.5 * half
-        * ACROSS_NODES
-            .iter()
-            .map(|&(x, w)| {
-                let s = 0.5 * (s0 + s1) + half * x;
-                w * radiance((1.0 - s * s).max(0.0).sqrt() * toward + s * side)
-            })
-            .sum::<f32>()
+    band_average(axis, to_viewer, to_light, (-1.0, 1.0), radiance)
 }
 
 /// The average over the band `[s0, s1]` of a cylinder's projected width

@@ -1699,24 +1699,19 @@ fn set_normal(input: ptr<function, lighting::LightingInput>, n: vec3<f32>) {
 // sees) rather than at one normal facing the viewer, which lights every
 // line from the front. Each light's shadow is fetched once, at the axis.
 fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
+    return band_lighting(in, axis, vec2<f32>(0.0));
+}
+
+// The band `[s0, s1]` of a cylinder along `axis` the pixel sees (offsets
+// across its projected width, `−1` at its left edge; the whole width where
+// `s1 ≤ s0`): Bevy's BRDF at four normals over the band's lit part
+// (`cylinder_normal`).
+fn band_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, band: vec2<f32>) -> vec4<f32> {
     var T = axis;
     if dot(T, T) < 1e-24 {
         T = vec3<f32>(0.0, 1.0, 0.0);
     }
     T = normalize(T);
-    let toward = facing_axis(T, in.V);
-    var surface: Surface;
-    surface.toward = toward;
-    surface.side = cross(T, toward);
-    surface.is_sphere = false;
-    return surface_lighting(in, surface);
-}
-
-// The band `[s0, s1]` of a cylinder along `axis` the pixel sees (offsets
-// across its projected width, `−1` at its left edge): Bevy's BRDF at four
-// normals over the band's lit part (`cylinder_normal`).
-fn band_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, band: vec2<f32>) -> vec4<f32> {
-    let T = normalize(axis);
     let toward = facing_axis(T, in.V);
     var surface: Surface;
     surface.toward = toward;
@@ -2341,10 +2336,13 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     }
     let wood = clamp(texel.g / texel.r, 0.0, 1.0);
     let height = tree_local_point(world_from_local, tree_scale, in.world_position.xyz).y;
-    var albedo = mix(species.far_needle_color.rgb, bark_albedo(height), wood);
+    var needle_albedo = species.far_needle_color.rgb;
+    var stem_albedo = bark_albedo(height);
     if species.debug_colors != 0u {
-        albedo = vec3<f32>(0.85, 0.2, 0.85);
+        needle_albedo = vec3<f32>(0.85, 0.2, 0.85);
+        stem_albedo = needle_albedo;
     }
+    let albedo = mix(needle_albedo, stem_albedo, wood);
     pbr_input.material.base_color = vec4<f32>(albedo, texel.r);
     let vertical_share = clamp(texel.b / texel.r, 0.0, 1.0);
     let across_share = clamp(texel.a / texel.r, 0.0, 1.0 - vertical_share);
@@ -2372,12 +2370,6 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     // `var` after the discard is not the picture's (lavapipe).
     let trunk_footprint = 2.0 * species.impostor_box.z * length(vec2<f32>(dpdx(uv.x), dpdy(uv.x)));
     let stem_band = trunk_band(trunk_offset, trunk_footprint, trunk.z);
-    var needle_albedo = species.far_needle_color.rgb;
-    var stem_albedo = bark_albedo(height);
-    if species.debug_colors != 0u {
-        needle_albedo = albedo;
-        stem_albedo = albedo;
-    }
 #endif
 #ifdef CONIFER_ROUND_PRISMS
     // A prism is shaded as the round cylinder it stands for: the normal at
