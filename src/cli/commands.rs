@@ -343,6 +343,18 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
                 std::sync::Arc::make_mut(impostor).crown_density = density;
             }
         }
+        // Format 14 stores the ages and sides of the needles the
+        // impostor's views see (a fresh bake measured them already).
+        if !rebake && version.is_none_or(|v| v < 14) {
+            let needles = record.placed_needles();
+            let seen = record
+                .impostor
+                .as_deref()
+                .and_then(|impostor| crate::model::color::NeedleMix::seen(&record, &needles, impostor));
+            if let Some(impostor) = record.impostor.as_mut() {
+                std::sync::Arc::make_mut(impostor).seen_needles = seen;
+            }
+        }
         if (record.line_calibration.is_none() || measured_without_caps || elevation.is_some())
             && !args.no_line_calibration
         {

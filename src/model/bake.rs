@@ -441,10 +441,14 @@ pub fn calibrate_record_lines(
 }
 
 /// The crown impostor of `record`'s placed needles and wood, baked with
-/// `options` (`None` where [`CrownImpostor::bake`] gives none: options out
-/// of range).
+/// `options`, with the ages and sides of the needles its views see
+/// ([`super::color::NeedleMix::seen`]); `None` where
+/// [`CrownImpostor::bake`] gives none (options out of range).
 pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Option<Arc<CrownImpostor>> {
-    CrownImpostor::bake(&record.placed_needles(), &record.wood, &record.wood_mesh, options).map(Arc::new)
+    let needles = record.placed_needles();
+    let mut impostor = CrownImpostor::bake(&needles, &record.wood, &record.wood_mesh, options)?;
+    impostor.seen_needles = super::color::NeedleMix::seen(record, &needles, &impostor);
+    Some(Arc::new(impostor))
 }
 
 #[cfg(test)]

@@ -20,13 +20,20 @@
 //!
 //! Far representations (the tree-level merged lines, a flat species and
 //! the crown impostor) have no placement to take an age from: they take
-//! [`far_needle_color`], the area-weighted mean over the placements as a
-//! level view sees them, so a tree's colour does not jump when its
-//! placements merge.
+//! [`far_needle_color`], the colour of the needles a level view sees
+//! first, so a tree's colour does not jump when its placements merge.
+//! A crown's outer shoots are its youngest (a fir keeps its needles for a
+//! decade, and each year's shoots grow outside the last), so the needles
+//! seen from outside are lighter than all of them averaged by area: the
+//! record's impostor carries the mix of ages and sides its views see
+//! ([`NeedleMix::seen`]); a record without one falls back to the area mean
+//! over the placements ([`NeedleMix::of_area`]).
 
-use super::needle::{FoliageMaterial, Needle};
+use super::impostor::{CrownImpostor, SAMPLES_PER_TEXEL};
+use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prototype::PrototypeRecord;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 
 /// Age (years) from which needles have their mature colour.
 pub const NEEDLE_MATURE_YEARS: f32 = 2.0;
@@ -89,40 +96,276 @@ pub fn upper_side(needles: &[Needle]) -> Vec3 {
     if area > 0.0 { sum / area } else { Vec3::ZERO }
 }
 
-/// Linear RGB of the whole crown from afar: the needles' colours averaged
-/// by area over the placements, each seen edge-on (half its
-/// [`underside_weight`] at most).
+/// Linear RGB of the whole crown from afar: the impostor's
+/// [`NeedleMix::seen`] where the record has one, else
+/// [`NeedleMix::of_area`]; the needle colour where neither has needles.
 pub fn far_needle_color(record: &PrototypeRecord) -> Vec3 {
-    let material = &record.material;
-    let sides: Vec<(f32, f32)> = record
-        .prototypes
-        .iter()
-        .map(|p| {
-            (
-                p.needles.iter().map(Needle::side_area).sum::<f32>(),
-                upper_side(&p.needles).length().min(1.0),
-            )
+    record
+        .impostor
+        .as_deref()
+        .and_then(|impostor| impostor.seen_needles)
+        .or_else(|| NeedleMix::of_area(record))
+        .map_or(rgb(record.material.needle_color), |mix| mix.color(&record.material))
+}
+
+/// Needle ages the far colour tells apart: this year's, last year's, and
+/// [`NEEDLE_MATURE_YEARS`] or older ([`needle_age_color`] is linear in
+/// between, so the three give every age's colour exactly).
+pub const NEEDLE_AGE_CLASSES: usize = 3;
+
+/// Sample rows a texel row of the impostor's views gets in
+/// [`NeedleMix::seen`] (its columns get [`SAMPLES_PER_TEXEL`]). One, through
+/// each row's middle: on the mature records four moved no colour by more
+/// than 0.02 of 255 and took twice the time.
+pub const SEEN_ROWS_PER_TEXEL: u32 = 1;
+
+/// The mix of needles a far representation stands for, by what colours
+/// them: for each age class (this year's, last year's, mature) the share
+/// of the needles (the shares sum to 1) and that share times how much of
+/// their underside shows ([`underside_weight`]). Its [`NeedleMix::color`]
+/// under a material is their mean colour; keeping the mix rather than the
+/// colour keeps it right when a game changes the material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NeedleMix {
+    /// `[share, share × underside weight]` by age class (0, 1, 2 and
+    /// older).
+    pub by_age: [[f32; 2]; NEEDLE_AGE_CLASSES],
+}
+
+impl NeedleMix {
+    /// The mean linear RGB of the mix's needles under `material`.
+    pub fn color(&self, material: &FoliageMaterial) -> Vec3 {
+        let underside = rgb(material.needle_underside_color);
+        self.by_age
+            .iter()
+            .enumerate()
+            .map(|(age, &[share, under])| (share - under) * needle_age_color(material, age as u8) + under * underside)
+            .sum()
+    }
+
+    /// The placements' needles by area, each shoot seen edge-on (half its
+    /// [`underside_weight`] at most): every needle counted, seen or not.
+    /// `None` without needles.
+    pub fn of_area(record: &PrototypeRecord) -> Option<Self> {
+        let sides: Vec<(f32, f32)> = record
+            .prototypes
+            .iter()
+            .map(|p| {
+                (
+                    p.needles.iter().map(Needle::side_area).sum::<f32>(),
+                    upper_side(&p.needles).length().min(1.0),
+                )
+            })
+            .collect();
+        let mut sums = [[0.0f64; 2]; NEEDLE_AGE_CLASSES];
+        for placement in &record.placements {
+            let Some(&(area, consistency)) = sides.get(placement.prototype as usize) else {
+                continue;
+            };
+            let a = area * placement.scale * placement.scale;
+            if !a.is_finite() {
+                continue;
+            }
+            let sum = &mut sums[age_class(placement.needle_age)];
+            sum[0] += f64::from(a);
+            sum[1] += f64::from(a * 0.5 * consistency);
+        }
+        Self::from_sums(sums)
+    }
+
+    /// The needles the impostor's level views see first, as its bake
+    /// rasterizes them (`needles` are `record`'s placed needles, each in
+    /// its placement's group, as [`PrototypeRecord::placed_needles`] gives
+    /// them): every view, orthographic, on a grid of [`SAMPLES_PER_TEXEL`]
+    /// columns and [`SEEN_ROWS_PER_TEXEL`] rows a texel; a sample takes
+    /// the nearest needle whose silhouette holds it (a capsule of its
+    /// radius round its projected axis) unless wood lies in front, and
+    /// counts that needle's age and the underside its view sees. `None`
+    /// where no sample sees a needle.
+    pub fn seen(record: &PrototypeRecord, needles: &[Needle], impostor: &CrownImpostor) -> Option<Self> {
+        let uppers: Vec<Vec3> = shoot_colors(record).iter().map(|shoot| shoot.upper).collect();
+        let views: Vec<[[f64; 2]; NEEDLE_AGE_CLASSES]> = (0..impostor.views)
+            .into_par_iter()
+            .map(|view| seen_in_view(record, &uppers, needles, impostor, view))
+            .collect();
+        let mut sums = [[0.0f64; 2]; NEEDLE_AGE_CLASSES];
+        for view in &views {
+            for (sum, add) in sums.iter_mut().zip(view) {
+                sum[0] += add[0];
+                sum[1] += add[1];
+            }
+        }
+        Self::from_sums(sums)
+    }
+
+    /// The mix as six numbers (the record file's layout).
+    pub fn to_array(&self) -> [f32; 2 * NEEDLE_AGE_CLASSES] {
+        let mut out = [0.0; 2 * NEEDLE_AGE_CLASSES];
+        out.copy_from_slice(self.by_age.as_flattened());
+        out
+    }
+
+    /// The mix of [`Self::to_array`]'s six numbers; `None` unless every
+    /// share lies in `[0, 1]`, every underside part within its share, and
+    /// the shares sum to 1 (within 10⁻³).
+    pub fn from_array(values: [f32; 2 * NEEDLE_AGE_CLASSES]) -> Option<Self> {
+        let mut by_age = [[0.0; 2]; NEEDLE_AGE_CLASSES];
+        for (pair, chunk) in by_age.iter_mut().zip(values.chunks_exact(2)) {
+            let (share, under) = (chunk[0], chunk[1]);
+            if !((0.0..=1.0).contains(&share) && (0.0..=share).contains(&under)) {
+                return None;
+            }
+            *pair = [share, under];
+        }
+        let total: f32 = by_age.iter().map(|pair| pair[0]).sum();
+        ((total - 1.0).abs() <= 1e-3).then_some(Self { by_age })
+    }
+
+    fn from_sums(sums: [[f64; 2]; NEEDLE_AGE_CLASSES]) -> Option<Self> {
+        let total: f64 = sums.iter().map(|sum| sum[0]).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return None;
+        }
+        Some(Self {
+            by_age: sums.map(|[share, under]| {
+                [
+                    (share / total) as f32,
+                    ((under / total) as f32).min((share / total) as f32),
+                ]
+            }),
         })
-        .collect();
-    let (mut sum, mut total) = (Vec3::ZERO, 0.0f32);
-    for placement in &record.placements {
-        let Some(&(area, consistency)) = sides.get(placement.prototype as usize) else {
+    }
+}
+
+fn age_class(age: u8) -> usize {
+    usize::from(age).min(NEEDLE_AGE_CLASSES - 1)
+}
+
+/// Nothing in front at a sample of [`seen_in_view`].
+const NO_PIECE: u32 = u32::MAX;
+/// Wood in front.
+const WOOD_PIECE: u32 = u32::MAX - 1;
+
+/// One view's sums for [`NeedleMix::seen`]: by age class, the samples
+/// whose nearest piece is a needle of that age, and those times the
+/// underside the view sees of its shoot.
+fn seen_in_view(
+    record: &PrototypeRecord,
+    uppers: &[Vec3],
+    needles: &[Needle],
+    impostor: &CrownImpostor,
+    view: u32,
+) -> [[f64; 2]; NEEDLE_AGE_CLASSES] {
+    let right = impostor.view_right(view);
+    let phi = impostor.view_azimuth(view);
+    let toward = Vec3::new(phi.sin(), 0.0, phi.cos());
+    let centre = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+    let (step_x, step_y) = (
+        impostor.texel / SAMPLES_PER_TEXEL as f32,
+        impostor.texel / SEEN_ROWS_PER_TEXEL as f32,
+    );
+    let (width, height) = (
+        (impostor.columns * SAMPLES_PER_TEXEL) as usize,
+        (impostor.rows * SEEN_ROWS_PER_TEXEL) as usize,
+    );
+    let top = impostor.top();
+    let mut nearest = vec![f32::NEG_INFINITY; width * height];
+    let mut owner = vec![NO_PIECE; width * height];
+    // A point in the picture (sample units, rows down from the top) and its
+    // nearness to the camera.
+    let project = |p: Vec3| {
+        let q = p - centre;
+        (
+            Vec2::new((q.dot(right) + impostor.half_width) / step_x, (top - p.y) / step_y),
+            q.dot(toward),
+        )
+    };
+    // Stamps a tapered capsule: a sample within `radius` (metres, linear
+    // along it) of the projected axis takes `piece` where it lies nearer
+    // than what it holds.
+    let mut stamp = |a: Vec3, b: Vec3, radii: [f32; 2], front: [f32; 2], piece: u32| {
+        let ((pa, near_a), (pb, near_b)) = (project(a), project(b));
+        let reach = radii[0].max(radii[1]);
+        let (lo, hi) = (
+            pa.min(pb) - Vec2::new(reach / step_x, reach / step_y),
+            pa.max(pb) + Vec2::new(reach / step_x, reach / step_y),
+        );
+        if !(lo.is_finite() && hi.is_finite()) {
+            return;
+        }
+        // Samples whose centres (`k + 0.5`) lie in the box.
+        let first = |v: f32| (v - 0.5).ceil().max(0.0) as usize;
+        let last = |v: f32, count: usize| ((v - 0.5).floor().max(-1.0) as isize + 1).min(count as isize) as usize;
+        // In metres, so that the capsule stays round with unequal steps.
+        let (ma, mb) = (pa * Vec2::new(step_x, step_y), pb * Vec2::new(step_x, step_y));
+        let axis = mb - ma;
+        let length2 = axis.length_squared();
+        for y in first(lo.y)..last(hi.y, height) {
+            // The part of the axis within `reach` of the row, and the
+            // columns within `reach` of that part: a long slanted branch
+            // tests a strip, not its whole box.
+            let row = (y as f32 + 0.5) * step_y;
+            let (t0, t1) = if axis.y.abs() > 1e-9 {
+                let (u, v) = ((row - reach - ma.y) / axis.y, (row + reach - ma.y) / axis.y);
+                (u.min(v).max(0.0), u.max(v).min(1.0))
+            } else {
+                (0.0, 1.0)
+            };
+            if t0 > t1 {
+                continue;
+            }
+            let (xa, xb) = (ma.x + axis.x * t0, ma.x + axis.x * t1);
+            let columns = first((xa.min(xb) - reach) / step_x)..last((xa.max(xb) + reach) / step_x, width);
+            for x in columns {
+                let point = Vec2::new((x as f32 + 0.5) * step_x, (y as f32 + 0.5) * step_y);
+                let t = if length2 > 0.0 {
+                    ((point - ma).dot(axis) / length2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let radius = radii[0] + (radii[1] - radii[0]) * t;
+                if point.distance_squared(ma + axis * t) > radius * radius {
+                    continue;
+                }
+                let near = near_a + (near_b - near_a) * t + front[0] + (front[1] - front[0]) * t;
+                let index = y * width + x;
+                if near > nearest[index] {
+                    nearest[index] = near;
+                    owner[index] = piece;
+                }
+            }
+        }
+    };
+    for segment in record.wood.iter().filter(|w| w.is_valid()) {
+        let WoodSegment {
+            start,
+            end,
+            start_radius,
+            end_radius,
+        } = *segment;
+        // Its front: the axis' nearness plus its radius.
+        stamp(
+            start,
+            end,
+            [start_radius, end_radius],
+            [start_radius, end_radius],
+            WOOD_PIECE,
+        );
+    }
+    for needle in needles.iter().filter(|n| n.is_valid()) {
+        stamp(needle.base, needle.tip, [needle.radius; 2], [0.0; 2], needle.group);
+    }
+    let mut sums = [[0.0f64; 2]; NEEDLE_AGE_CLASSES];
+    for &piece in &owner {
+        let (Some(placement), Some(&upper)) = (record.placements.get(piece as usize), uppers.get(piece as usize))
+        else {
             continue;
         };
-        let a = area * placement.scale * placement.scale;
-        if !a.is_finite() {
-            continue;
-        }
-        let edge_on = needle_age_color(material, placement.needle_age)
-            .lerp(rgb(material.needle_underside_color), 0.5 * consistency);
-        sum += edge_on * a;
-        total += a;
+        let sum = &mut sums[age_class(placement.needle_age)];
+        sum[0] += 1.0;
+        sum[1] += f64::from(underside_weight(upper, toward));
     }
-    if total > 0.0 {
-        sum / total
-    } else {
-        rgb(material.needle_color)
-    }
+    sums
 }
 
 /// What colours one placed shoot's needles ([`needle_color`]), in the
@@ -269,15 +512,122 @@ mod tests {
             material: material(),
             ..Default::default()
         };
-        let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+        let mut record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
         let m = material();
         let edge_on = |age| needle_age_color(&m, age).lerp(rgb(m.needle_underside_color), 0.5);
         let expected = (edge_on(0) * 4.0 + edge_on(3)) / 5.0;
+        let area = NeedleMix::of_area(&record).expect("needles");
         assert!(
-            far_needle_color(&record).distance(expected) < 1e-4,
+            area.color(&m).distance(expected) < 1e-4,
             "{} against {expected}",
-            far_needle_color(&record)
+            area.color(&m)
         );
+        // Without an impostor's seen mix the far colour is the area mean.
+        record.impostor = None;
+        assert_eq!(far_needle_color(&record), area.color(&m));
+    }
+
+    /// A panel of 25 touching needles, 10 cm wide and 10 cm tall, in the
+    /// `x`–`y` plane, facing `+z`.
+    fn panel() -> Vec<Needle> {
+        (0..25)
+            .map(|k| Needle {
+                base: Vec3::new(-0.048 + k as f32 * 0.004, 0.0, 0.0),
+                tip: Vec3::new(-0.048 + k as f32 * 0.004, 0.1, 0.0),
+                radius: 0.0021,
+                normal: Vec3::Z,
+                group: 0,
+            })
+            .collect()
+    }
+
+    /// Panels round the `y` axis at `radius`, facing out, `per_ring` a
+    /// ring and five rings from 0 to 0.4 m, their needles `age` years old.
+    fn ring_of_panels(radius: f32, per_ring: u32, age: u8) -> Vec<Placement> {
+        use glam::Quat;
+        (0..5 * per_ring)
+            .map(|k| {
+                let angle = std::f32::consts::TAU * (k % per_ring) as f32 / per_ring as f32;
+                Placement {
+                    translation: Vec3::new(radius * angle.sin(), 0.1 * (k / per_ring) as f32, radius * angle.cos()),
+                    rotation: Quat::from_rotation_y(angle),
+                    needle_age: age,
+                    ..Placement::identity(0)
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_far_colour_is_the_colour_of_the_needles_seen_from_outside() {
+        use crate::model::{BakeOptions, PrototypeInput, bake_prototypes};
+        // A closed shell of this year's shoots round a core of old ones
+        // with as much needle area: from outside only the young show.
+        let mut placements = ring_of_panels(0.5, 40, 0);
+        let young = placements.len();
+        placements.extend(ring_of_panels(0.15, 12, 5));
+        placements.extend(ring_of_panels(0.25, 28, 5));
+        let old = placements.len() - young;
+        let input = PrototypeInput {
+            name: "shell".into(),
+            prototypes: vec![panel()],
+            placements,
+            material: material(),
+            ..Default::default()
+        };
+        let record = bake_prototypes(&input, &BakeOptions::default(), &()).unwrap();
+        let area = NeedleMix::of_area(&record).expect("needles");
+        let impostor = record.impostor.as_deref().expect("an impostor");
+        let seen = impostor.seen_needles.expect("needles seen");
+        // The area counts every shoot; the views, the shell.
+        assert!(
+            (area.by_age[2][0] - old as f32 / (old + young) as f32).abs() < 1e-4,
+            "{area:?}"
+        );
+        assert!(seen.by_age[0][0] > 0.99, "{seen:?}");
+        assert_eq!(seen.by_age[1][0], 0.0);
+        // Each view sees the panels at its sides edge-on, the rest
+        // upright: undersides between none and half.
+        assert!(
+            seen.by_age[0][1] > 0.0 && seen.by_age[0][1] < 0.5 * seen.by_age[0][0],
+            "{seen:?}"
+        );
+        let m = material();
+        assert_eq!(far_needle_color(&record), seen.color(&m));
+        assert!(
+            seen.color(&m).distance(needle_age_color(&m, 0)) < 0.06,
+            "{}",
+            seen.color(&m)
+        );
+        // Measured again from the same needles, the same mix.
+        assert_eq!(NeedleMix::seen(&record, &record.placed_needles(), impostor), Some(seen));
+    }
+
+    #[test]
+    fn a_mix_of_one_age_is_that_ages_colour_and_keeps_its_six_numbers() {
+        let m = material();
+        for age in 0..NEEDLE_AGE_CLASSES {
+            let mut by_age = [[0.0; 2]; NEEDLE_AGE_CLASSES];
+            by_age[age] = [1.0, 0.0];
+            let mix = NeedleMix { by_age };
+            assert!(mix.color(&m).distance(needle_age_color(&m, age as u8)) < 1e-6);
+            by_age[age] = [1.0, 1.0];
+            let under = NeedleMix { by_age };
+            assert!(under.color(&m).distance(rgb(m.needle_underside_color)) < 1e-6);
+            assert_eq!(NeedleMix::from_array(under.to_array()), Some(under));
+        }
+        let mixed = NeedleMix {
+            by_age: [[0.25, 0.1], [0.25, 0.0], [0.5, 0.2]],
+        };
+        assert_eq!(NeedleMix::from_array(mixed.to_array()), Some(mixed));
+        for bad in [
+            [0.5, 0.1, 0.25, 0.0, 0.5, 0.2], // sums to 1.25
+            [1.0, 1.5, 0.0, 0.0, 0.0, 0.0],  // more underside than share
+            [1.5, 0.0, -0.5, 0.0, 0.0, 0.0], // a share out of [0, 1]
+            [f32::NAN, 0.0, 1.0, 0.0, 0.0, 0.0],
+        ] {
+            assert_eq!(NeedleMix::from_array(bad), None, "{bad:?}");
+        }
     }
 
     #[test]

@@ -538,6 +538,7 @@ mod tests {
                 .collect(),
             wood_visibility: WoodVisibility::default(),
             crown_density: Default::default(),
+            seen_needles: None,
         }
     }
 

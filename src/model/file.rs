@@ -52,6 +52,11 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 14 adds the mix of needle ages and sides the impostor's views
+//! see first ([`super::color::NeedleMix::seen`]: six `f32`s, with the
+//! impostor), which colours the far crown; an older impostor's crown takes
+//! its needles' area mean, as it was drawn, and `conifer upgrade`
+//! measures the mix into the file.
 //! Version 13 adds the impostor's crown density (how its needles fill
 //! it by height and distance from the axis, where its shadow samples go:
 //! [`super::impostor::CrownDensity`]); an older impostor reads with its
@@ -90,6 +95,7 @@
 //! flattened tree, bounded by [`super::prototype::MAX_PLACED_NEEDLES`]).
 
 use super::calibration::{CALIBRATION_STEPS, LineCalibration, WOOD_OPACITY_NODES};
+use super::color::{NEEDLE_AGE_CLASSES, NeedleMix};
 use super::impostor::{CrownDensity, CrownImpostor, WoodVisibility};
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
@@ -109,7 +115,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 13;
+pub const FORMAT_VERSION: u32 = 14;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -375,6 +381,7 @@ impl StoredImpostor {
             texels,
             wood_visibility: Default::default(),
             crown_density: Default::default(),
+            seen_needles: None,
         })
     }
 }
@@ -942,6 +949,12 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
     body.extend(postcard::to_allocvec(&wood_scales).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let crown_density = record.impostor.as_deref().map(|i| i.crown_density.to_bytes());
     body.extend(postcard::to_allocvec(&crown_density).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    let seen_needles = record
+        .impostor
+        .as_deref()
+        .and_then(|i| i.seen_needles)
+        .map(|mix| mix.to_array());
+    body.extend(postcard::to_allocvec(&seen_needles).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -1151,6 +1164,27 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
         impostor_table(impostor, rest, "crown density", |impostor, bytes| {
             CrownDensity::from_bytes(bytes).map(|table| impostor.crown_density = table)
         })?
+    } else {
+        (impostor, rest)
+    };
+    // Format 14: the mix of needles the impostor's views see, which
+    // colours the far crown; an older impostor's crown takes its needles'
+    // area mean.
+    let (impostor, rest) = if version >= 14 {
+        let (stored, rest) =
+            postcard::take_from_bytes::<Option<[f32; 2 * NEEDLE_AGE_CLASSES]>>(rest).map_err(malformed)?;
+        let impostor = match (impostor, stored) {
+            (impostor, None) => impostor,
+            (None, Some(_)) => return Err(RecordError::Malformed("seen needles without an impostor".into())),
+            (Some(mut impostor), Some(values)) => {
+                let mix = NeedleMix::from_array(values).ok_or_else(|| {
+                    RecordError::Malformed("seen needles: a share out of [0, 1] or not summing to 1".into())
+                })?;
+                impostor.seen_needles = Some(mix);
+                Some(impostor)
+            }
+        };
+        (impostor, rest)
     } else {
         (impostor, rest)
     };
@@ -1582,12 +1616,26 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
+        // Format 14 ends with the needles the impostor sees: format 13
+        // stops before them, its far crown the needles' area mean.
+        let body = &bytes[HEADER_BYTES..];
+        let seen = postcard::to_allocvec(
+            &record
+                .impostor
+                .as_deref()
+                .and_then(|i| i.seen_needles)
+                .map(|m| m.to_array()),
+        )
+        .unwrap();
+        let v13 = &body[..body.len() - seen.len()];
+        let mut unseen = decode_prototype_record(&bytes).unwrap();
+        Arc::make_mut(unseen.impostor.as_mut().expect("an impostor")).seen_needles = None;
+        assert_eq!(decode_prototype_record(&file_of_version(13, v13)).unwrap(), unseen);
         // Format 13 ends with the impostor's crown density: format 12
         // stops before it, its impostor's needles even through the crown.
-        let body = &bytes[HEADER_BYTES..];
         let density = postcard::to_allocvec(&record.impostor.as_deref().map(|i| i.crown_density.to_bytes())).unwrap();
-        let v12 = &body[..body.len() - density.len()];
-        let mut even = decode_prototype_record(&bytes).unwrap();
+        let v12 = &v13[..v13.len() - density.len()];
+        let mut even = unseen.clone();
         Arc::make_mut(even.impostor.as_mut().expect("an impostor")).crown_density = CrownDensity::default();
         assert_eq!(decode_prototype_record(&file_of_version(12, v12)).unwrap(), even);
         // Format 12 is 11's layout (measured against capped silhouettes):
@@ -1677,18 +1725,20 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one (and without a line calibration), format 13 stores a
+        // Without one (and without a line calibration), format 14 stores a
         // single byte for each, for the wood visibility, for the wood
-        // scales and for the crown density.
+        // scales, for the crown density and for the seen needles.
         let mut bare = record.clone();
         bare.impostor = None;
         bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 5
+            HEADER_BYTES + v6.len() + 6
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
+        let seen = impostor.seen_needles.map(|mix| mix.to_array());
+        assert!(seen.is_some(), "the bake measures the needles it sees");
         let file = |version: u32,
                     edit: &dyn Fn(&mut StoredImpostor),
                     visibility: Option<Vec<u8>>,
@@ -1709,14 +1759,24 @@ mod tests {
             if version >= 13 {
                 body.extend(postcard::to_allocvec(&density).unwrap());
             }
+            if version >= 14 {
+                body.extend(postcard::to_allocvec(&seen).unwrap());
+            }
             decode_prototype_record(&file_of_version(version, &body))
         };
         let density = Some(impostor.crown_density.to_bytes());
         let file_with_density = |version: u32, edit: &dyn Fn(&mut StoredImpostor), density: Option<Vec<u8>>| {
             file(version, edit, Some(impostor.wood_visibility.to_bytes()), density)
         };
-        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(13, edit, density.clone());
+        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(14, edit, density.clone());
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
+        // Format 13 stored no seen needles: its crown takes the area mean.
+        let unseen = file_with_density(13, &|_| {}, density.clone())
+            .unwrap()
+            .impostor
+            .expect("a format 13 impostor");
+        assert_eq!(unseen.seen_needles, None);
+        assert_eq!(unseen.texels, impostor.texels);
         // Format 13's crown density comes with the impostor, at its size;
         // format 10 to 12 files read with the needles even through the
         // crown.
@@ -1770,6 +1830,58 @@ mod tests {
                 "{what}: {error}"
             );
         }
+    }
+
+    #[test]
+    fn seen_needles_come_with_the_impostor_and_add_up() {
+        let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
+        let bytes = encode_prototype_record(&record).unwrap();
+        let body = &bytes[HEADER_BYTES..];
+        // The last bytes are the seen needles: `Some` and six f32s.
+        let stored = postcard::to_allocvec(
+            &record
+                .impostor
+                .as_deref()
+                .and_then(|i| i.seen_needles)
+                .map(|m| m.to_array()),
+        )
+        .unwrap();
+        assert_eq!(stored.len(), 1 + 24);
+        assert!(body.ends_with(&stored));
+        let before = &body[..body.len() - stored.len()];
+        let with = |seen: Option<[f32; 6]>| {
+            let mut body = before.to_vec();
+            body.extend(postcard::to_allocvec(&seen).unwrap());
+            decode_prototype_record(&file_of_version(14, &body))
+        };
+        let mix = [0.25, 0.1, 0.25, 0.0, 0.5, 0.2];
+        assert_eq!(
+            with(Some(mix)).unwrap().impostor.and_then(|i| i.seen_needles),
+            NeedleMix::from_array(mix)
+        );
+        assert_eq!(with(None).unwrap().impostor.and_then(|i| i.seen_needles), None);
+        for bad in [
+            [0.5, 0.1, 0.25, 0.0, 0.5, 0.2],
+            [f32::NAN, 0.0, 1.0, 0.0, 0.0, 0.0],
+            [1.0, 2.0, 0.0, 0.0, 0.0, 0.0],
+        ] {
+            let error = with(Some(bad)).unwrap_err();
+            assert!(
+                matches!(&error, RecordError::Malformed(m) if m.starts_with("seen needles")),
+                "{error}"
+            );
+        }
+        // Seen needles without an impostor are malformed.
+        let mut bare = record.clone();
+        bare.impostor = None;
+        let bare_bytes = encode_prototype_record(&bare).unwrap();
+        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 1].to_vec();
+        body.extend(postcard::to_allocvec(&Some(mix)).unwrap());
+        let error = decode_prototype_record(&file_of_version(14, &body)).unwrap_err();
+        assert!(
+            matches!(&error, RecordError::Malformed(m) if m.starts_with("seen needles")),
+            "{error}"
+        );
     }
 
     #[test]

@@ -729,6 +729,10 @@ pub struct CrownImpostor {
     /// How densely the needles fill the crown, by height and distance
     /// from the axis: where a texel's shadow samples go.
     pub crown_density: CrownDensity,
+    /// The ages and sides of the needles the views see first
+    /// ([`super::color::NeedleMix::seen`]), which colour the far crown;
+    /// `None` for a tree without ages (a flat record) or an older record.
+    pub seen_needles: Option<super::color::NeedleMix>,
 }
 
 /// One texel decoded.
@@ -976,6 +980,7 @@ impl CrownImpostor {
             texels: Vec::new(),
             wood_visibility: WoodVisibility::default(),
             crown_density: CrownDensity::default(),
+            seen_needles: None,
         };
         // Views are independent: each rasterizes every piece (in parallel,
         // on the caller's rayon pool), wood first, so that each needle
@@ -1456,6 +1461,7 @@ mod tests {
             texels,
             wood_visibility: WoodVisibility::default(),
             crown_density: CrownDensity::default(),
+            seen_needles: None,
         };
         let radii = impostor.crown_radii();
         for (step, radius) in radii.iter().enumerate() {
@@ -1659,6 +1665,7 @@ mod tests {
                 texels,
                 wood_visibility: WoodVisibility::default(),
                 crown_density: CrownDensity::default(),
+                seen_needles: None,
             };
             let chain = impostor.mip_chain();
             proptest::prop_assert_eq!((chain[0].0, chain[0].1), (columns, rows));
