@@ -462,6 +462,35 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         "{scales:?}"
     );
 
+    // The bake measured the needles its impostor sees: six shares, the
+    // ages' summing to 1, and the far colour their mix.
+    let seen = inspect["impostor"]["seen_needles"].clone();
+    let shares: Vec<[f64; 2]> = serde_json::from_value(seen.clone()).expect("seen needles");
+    assert_eq!(shares.len(), 3);
+    assert!(
+        (shares.iter().map(|s| s[0]).sum::<f64>() - 1.0).abs() < 1e-3,
+        "{shares:?}"
+    );
+    assert!(shares.iter().all(|s| (0.0..=s[0]).contains(&s[1])), "{shares:?}");
+    // A format 13 copy (its last 25 bytes, the mix, cut; the header
+    // rewritten) reads with the area mean and upgrades to the same mix.
+    let old13 = dir.path().join("format13.conifer");
+    let bytes = std::fs::read(&shoots).unwrap();
+    let body = &bytes[24..bytes.len() - 25];
+    let mut v13 = bytes[..8].to_vec();
+    v13.extend_from_slice(&13u32.to_le_bytes());
+    v13.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    v13.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
+    v13.extend_from_slice(body);
+    std::fs::write(&old13, &v13).unwrap();
+    let read13 = json(&conifer(&["inspect", old13.to_str().unwrap(), "--json"]));
+    assert!(read13["impostor"]["seen_needles"].is_null());
+    let output = conifer(&["upgrade", old13.to_str().unwrap()]);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let upgraded13 = json(&conifer(&["inspect", old13.to_str().unwrap(), "--json"]));
+    assert_eq!(upgraded13["impostor"]["seen_needles"], seen);
+    assert_eq!(upgraded13["far_needle_color"], inspect["far_needle_color"]);
+
     // The flat generator: every group its own prototype.
     let flat = dir.path().join("flat.conifer");
     let output = conifer(&[

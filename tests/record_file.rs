@@ -304,6 +304,11 @@ fn shipped_mature_records_are_the_presets_current_bakes() {
             bevy_conifer_lod::model::impostor::CrownDensity::measure(&flat.needles, impostor),
             "{species}: the impostor's crown density is its needles'"
         );
+        assert_eq!(
+            impostor.seen_needles,
+            bevy_conifer_lod::model::color::NeedleMix::seen(&shipped, &shipped.placed_needles(), impostor),
+            "{species}: the impostor's seen needles are what its views see"
+        );
         let options = bevy_conifer_lod::model::impostor::ImpostorOptions::default();
         assert_eq!(impostor.views, options.views, "{species}");
         assert!(

@@ -425,6 +425,10 @@ pub struct InspectReport {
     pub weights: [f32; 3],
     /// The crown impostor stored in the record, if any.
     pub impostor: Option<ImpostorSummary>,
+    /// Linear RGB the far representations (the tree's merged lines, the
+    /// impostor) colour its needles with
+    /// ([`crate::model::color::far_needle_color`]).
+    pub far_needle_color: [f32; 3],
     /// The line opacity scales by pixel size stored in the record, if any
     /// ([`crate::model::calibration::LineCalibration`]).
     pub line_calibration: Option<crate::model::calibration::LineCalibration>,
@@ -443,6 +447,11 @@ pub struct ImpostorSummary {
     pub texel: f32,
     /// Bytes of its texels and mip levels on the GPU.
     pub gpu_bytes: u64,
+    /// The needles its views see first by age class (this year's, last
+    /// year's, mature), each `[share, share × underside shown]`
+    /// ([`crate::model::color::NeedleMix`]); `None` in an older record or
+    /// a tree without ages.
+    pub seen_needles: Option<[[f32; 2]; crate::model::color::NEEDLE_AGE_CLASSES]>,
 }
 
 pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
@@ -497,7 +506,9 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
             rows: i.rows,
             texel: i.texel,
             gpu_bytes: i.byte_size(),
+            seen_needles: i.seen_needles.map(|mix| mix.by_age),
         }),
+        far_needle_color: crate::model::color::far_needle_color(&prototypes).to_array(),
         line_calibration: prototypes.line_calibration,
     };
     if args.json {
@@ -524,6 +535,15 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
             ),
             None => println!("  no crown impostor (the plugin bakes one at load)"),
         }
+        let [r, g, b] = report.far_needle_color;
+        println!(
+            "  far needle colour {r:.4} {g:.4} {b:.4} (linear){}",
+            if report.impostor.as_ref().is_some_and(|i| i.seen_needles.is_some()) {
+                ", of the needles the impostor sees"
+            } else {
+                ", the needles' area mean"
+            }
+        );
         match &report.line_calibration {
             Some(c) => println!(
                 "  line opacity scales {} at pixels of {:.4} .. {:.4} m; wood lines' by size at opacities 1/64, 1/16, 1/4, 1: {}",
