@@ -1176,20 +1176,25 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
         impostor[1] / lines[1]
     );
     assert!(lines_ratio < 0.8, "the lines' crown shades its far half: {lines_ratio}");
-    // In the maps the impostor shades its far half (0.200 against the
-    // lines' 0.205), its sunlit half 1.28 times as light as the lines':
+    // In the maps the impostor shades its far half (0.201 against the
+    // lines' 0.205), its sunlit half 1.33 times as light as the lines':
     // its samples go where the crown's rings put its needles, still in
-    // front of where they are seen (README, "Shade through the crown").
-    // With the needles even along the chord, 0.283 and 1.41; with the
-    // trunk lit as its texels' cylinder rather than the stem's band under
-    // each pixel (`TrunkProfile`), 0.224 and 1.24.
+    // front of where they are seen (README, "Shade through the crown"),
+    // and its needles take the colour of those its views see first
+    // (`NeedleMix::seen`: the spruce's young outer shoots, 10 / 6 / 1 %
+    // lighter in red, green and blue than all its needles by area),
+    // where the lines' translucent layers let the older shoots inside
+    // show through (1.28 with the area mean). With the needles even along
+    // the chord, 0.283 and 1.41; with the trunk lit as its texels'
+    // cylinder rather than the stem's band under each pixel
+    // (`TrunkProfile`), 0.224 and 1.24.
     assert!(
         impostor_ratio < 0.25 && (impostor_ratio - lines_ratio).abs() < 0.03,
         "the impostor's far half over its sunlit half {impostor_ratio}, the lines' {lines_ratio}"
     );
     let sunlit = impostor[1] / lines[1];
     assert!(
-        sunlit > 1.0 && sunlit < 1.3,
+        sunlit > 1.0 && sunlit < 1.4,
         "the sunlit halves: impostor over lines {sunlit}"
     );
 
