@@ -29,7 +29,7 @@
 //! ([`NeedleMix::seen`]); a record without one falls back to the area mean
 //! over the placements ([`NeedleMix::of_area`]).
 
-use super::impostor::{CrownImpostor, SAMPLES_PER_TEXEL};
+use super::impostor::CrownImpostor;
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prototype::PrototypeRecord;
 use glam::{Vec2, Vec3};
@@ -113,10 +113,18 @@ pub fn far_needle_color(record: &PrototypeRecord) -> Vec3 {
 /// between, so the three give every age's colour exactly).
 pub const NEEDLE_AGE_CLASSES: usize = 3;
 
+/// Sample columns a texel column of the impostor's views gets in
+/// [`NeedleMix::seen`].
+pub const SEEN_COLUMNS_PER_TEXEL: u32 = 4;
+
+/// The impostor's views [`NeedleMix::seen`] looks from, at most, evenly
+/// spread round the ring.
+pub const SEEN_VIEWS: u32 = 4;
+
 /// Sample rows a texel row of the impostor's views gets in
-/// [`NeedleMix::seen`] (its columns get [`SAMPLES_PER_TEXEL`]). One, through
-/// each row's middle: on the mature records four moved no colour by more
-/// than 0.02 of 255 and took twice the time.
+/// [`NeedleMix::seen`]. One, through each row's middle: on the mature
+/// records four moved no colour by more than 0.02 of 255 and took twice
+/// the time.
 pub const SEEN_ROWS_PER_TEXEL: u32 = 1;
 
 /// The mix of needles a far representation stands for, by what colours
@@ -176,7 +184,7 @@ impl NeedleMix {
     /// The needles the impostor's level views see first, as its bake
     /// rasterizes them (`needles` are `record`'s placed needles, each in
     /// its placement's group, as [`PrototypeRecord::placed_needles`] gives
-    /// them): every view, orthographic, on a grid of [`SAMPLES_PER_TEXEL`]
+    /// them): [`SEEN_VIEWS`] of its views, orthographic, on a grid of [`SEEN_COLUMNS_PER_TEXEL`]
     /// columns and [`SEEN_ROWS_PER_TEXEL`] rows a texel; a sample takes
     /// the nearest needle whose silhouette holds it (a capsule of its
     /// radius round its projected axis) unless wood lies in front, and
@@ -184,9 +192,24 @@ impl NeedleMix {
     /// where no sample sees a needle.
     pub fn seen(record: &PrototypeRecord, needles: &[Needle], impostor: &CrownImpostor) -> Option<Self> {
         let uppers: Vec<Vec3> = shoot_colors(record).iter().map(|shoot| shoot.upper).collect();
-        let views: Vec<[[f64; 2]; NEEDLE_AGE_CLASSES]> = (0..impostor.views)
+        // The sample rows are level, the same in every view: a needle
+        // between two (half the mature spruce's) is dropped once, not in
+        // every view.
+        let step_y = impostor.texel / SEEN_ROWS_PER_TEXEL as f32;
+        let top = impostor.top();
+        let crosses_a_row = |needle: &&Needle| {
+            let (a, b) = ((top - needle.base.y) / step_y, (top - needle.tip.y) / step_y);
+            let reach = needle.radius / step_y;
+            // A sample row `k` lies at `k + 0.5`.
+            (a.min(b) - reach - 0.5).ceil() <= (a.max(b) + reach - 0.5).floor()
+        };
+        let crossing: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).filter(crosses_a_row).collect();
+        // Every other view of a ring of eight: a crown looks alike from
+        // neighbouring sides.
+        let views = impostor.views.min(SEEN_VIEWS);
+        let views: Vec<[[f64; 2]; NEEDLE_AGE_CLASSES]> = (0..views)
             .into_par_iter()
-            .map(|view| seen_in_view(record, &uppers, needles, impostor, view))
+            .map(|k| seen_in_view(record, &uppers, &crossing, impostor, k * impostor.views / views))
             .collect();
         let mut sums = [[0.0f64; 2]; NEEDLE_AGE_CLASSES];
         for view in &views {
@@ -252,7 +275,7 @@ const WOOD_PIECE: u32 = u32::MAX - 1;
 fn seen_in_view(
     record: &PrototypeRecord,
     uppers: &[Vec3],
-    needles: &[Needle],
+    needles: &[&Needle],
     impostor: &CrownImpostor,
     view: u32,
 ) -> [[f64; 2]; NEEDLE_AGE_CLASSES] {
@@ -261,11 +284,11 @@ fn seen_in_view(
     let toward = Vec3::new(phi.sin(), 0.0, phi.cos());
     let centre = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
     let (step_x, step_y) = (
-        impostor.texel / SAMPLES_PER_TEXEL as f32,
+        impostor.texel / SEEN_COLUMNS_PER_TEXEL as f32,
         impostor.texel / SEEN_ROWS_PER_TEXEL as f32,
     );
     let (width, height) = (
-        (impostor.columns * SAMPLES_PER_TEXEL) as usize,
+        (impostor.columns * SEEN_COLUMNS_PER_TEXEL) as usize,
         (impostor.rows * SEEN_ROWS_PER_TEXEL) as usize,
     );
     let top = impostor.top();
@@ -299,7 +322,11 @@ fn seen_in_view(
         // In metres, so that the capsule stays round with unequal steps.
         let (ma, mb) = (pa * Vec2::new(step_x, step_y), pb * Vec2::new(step_x, step_y));
         let axis = mb - ma;
-        let length2 = axis.length_squared();
+        let inverse_length2 = if axis.length_squared() > 0.0 {
+            axis.length_squared().recip()
+        } else {
+            0.0
+        };
         for y in first(lo.y)..last(hi.y, height) {
             // The part of the axis within `reach` of the row, and the
             // columns within `reach` of that part: a long slanted branch
@@ -318,11 +345,7 @@ fn seen_in_view(
             let columns = first((xa.min(xb) - reach) / step_x)..last((xa.max(xb) + reach) / step_x, width);
             for x in columns {
                 let point = Vec2::new((x as f32 + 0.5) * step_x, (y as f32 + 0.5) * step_y);
-                let t = if length2 > 0.0 {
-                    ((point - ma).dot(axis) / length2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
+                let t = ((point - ma).dot(axis) * inverse_length2).clamp(0.0, 1.0);
                 let radius = radii[0] + (radii[1] - radii[0]) * t;
                 if point.distance_squared(ma + axis * t) > radius * radius {
                     continue;
@@ -352,7 +375,7 @@ fn seen_in_view(
             WOOD_PIECE,
         );
     }
-    for needle in needles.iter().filter(|n| n.is_valid()) {
+    for needle in needles {
         stamp(needle.base, needle.tip, [needle.radius; 2], [0.0; 2], needle.group);
     }
     let mut sums = [[0.0f64; 2]; NEEDLE_AGE_CLASSES];
