@@ -1538,6 +1538,13 @@ mod tests {
     }
 
     /// A baked flat tree of three one-needle groups.
+    /// The bytes a record file ends with (format 14): its impostor's
+    /// seen needles.
+    fn stored_seen_needles(record: &PrototypeRecord) -> Vec<u8> {
+        let seen = record.impostor.as_deref().and_then(|i| i.seen_needles);
+        postcard::to_allocvec(&seen.map(|m| m.to_array())).unwrap()
+    }
+
     fn three_groups() -> LodRecord {
         let needle = |k: f32| Needle {
             base: Vec3::new(k * 0.1, 0.0, 0.0),
@@ -1619,14 +1626,7 @@ mod tests {
         // Format 14 ends with the needles the impostor sees: format 13
         // stops before them, its far crown the needles' area mean.
         let body = &bytes[HEADER_BYTES..];
-        let seen = postcard::to_allocvec(
-            &record
-                .impostor
-                .as_deref()
-                .and_then(|i| i.seen_needles)
-                .map(|m| m.to_array()),
-        )
-        .unwrap();
+        let seen = stored_seen_needles(&record);
         let v13 = &body[..body.len() - seen.len()];
         let mut unseen = decode_prototype_record(&bytes).unwrap();
         Arc::make_mut(unseen.impostor.as_mut().expect("an impostor")).seen_needles = None;
@@ -1838,14 +1838,7 @@ mod tests {
         let bytes = encode_prototype_record(&record).unwrap();
         let body = &bytes[HEADER_BYTES..];
         // The last bytes are the seen needles: `Some` and six f32s.
-        let stored = postcard::to_allocvec(
-            &record
-                .impostor
-                .as_deref()
-                .and_then(|i| i.seen_needles)
-                .map(|m| m.to_array()),
-        )
-        .unwrap();
+        let stored = stored_seen_needles(&record);
         assert_eq!(stored.len(), 1 + 24);
         assert!(body.ends_with(&stored));
         let before = &body[..body.len() - stored.len()];
