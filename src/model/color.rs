@@ -22,8 +22,8 @@
 //! the crown impostor) have no placement to take an age from: they take
 //! [`far_needle_color`], the colour of the needles a level view sees
 //! first, so a tree's colour does not jump when its placements merge.
-//! A crown's outer shoots are its youngest (a fir keeps its needles for a
-//! decade, and each year's shoots grow outside the last), so the needles
+//! A crown's outer shoots are its youngest (a fir keeps its needles for
+//! many years, and each year's shoots grow outside the last), so the needles
 //! seen from outside are lighter than all of them averaged by area: the
 //! record's impostor carries the mix of ages and sides its views see
 //! ([`NeedleMix::seen`]); a record without one falls back to the area mean
@@ -123,8 +123,8 @@ pub const SEEN_VIEWS: u32 = 4;
 
 /// Sample rows a texel row of the impostor's views gets in
 /// [`NeedleMix::seen`]. One, through each row's middle: on the mature
-/// records four moved no colour by more than 0.02 of 255 and took twice
-/// the time.
+/// records four (with 16 columns a texel, all eight views) moved no
+/// colour by more than 0.02 of 255 and took twice the time.
 pub const SEEN_ROWS_PER_TEXEL: u32 = 1;
 
 /// The mix of needles a far representation stands for, by what colours
