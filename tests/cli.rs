@@ -476,7 +476,7 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     // rewritten) reads with the area mean and upgrades to the same mix.
     let old13 = dir.path().join("format13.conifer");
     let bytes = std::fs::read(&shoots).unwrap();
-    let body = &bytes[24..bytes.len() - 25];
+    let body = &bytes[bevy_conifer_lod::model::file::HEADER_BYTES..bytes.len() - 25];
     let mut v13 = bytes[..8].to_vec();
     v13.extend_from_slice(&13u32.to_le_bytes());
     v13.extend_from_slice(&(body.len() as u64).to_le_bytes());

@@ -334,25 +334,20 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
             record.impostor = crate::model::bake_impostor(&record, Default::default());
         }
         // Format 13 stores how densely the needles fill the impostor's
-        // crown: an older impostor's is measured from the needles (a
-        // fresh bake measured it already).
-        if !rebake && version.is_none_or(|v| v < 13) && record.impostor.is_some() {
+        // crown, format 14 the ages and sides of the needles its views
+        // see: an older impostor's are measured from the needles (a fresh
+        // bake measured them already).
+        let measure_seen = !rebake && version.is_none_or(|v| v < 14);
+        let measure_density = measure_seen && version.is_none_or(|v| v < 13);
+        if let Some(impostor) = record.impostor.as_deref().filter(|_| measure_seen) {
             let needles = record.placed_needles();
-            if let Some(impostor) = record.impostor.as_mut() {
-                let density = crate::model::impostor::CrownDensity::measure(&needles, impostor);
-                std::sync::Arc::make_mut(impostor).crown_density = density;
-            }
-        }
-        // Format 14 stores the ages and sides of the needles the
-        // impostor's views see (a fresh bake measured them already).
-        if !rebake && version.is_none_or(|v| v < 14) {
-            let needles = record.placed_needles();
-            let seen = record
-                .impostor
-                .as_deref()
-                .and_then(|impostor| crate::model::color::NeedleMix::seen(&record, &needles, impostor));
-            if let Some(impostor) = record.impostor.as_mut() {
-                std::sync::Arc::make_mut(impostor).seen_needles = seen;
+            let density = measure_density.then(|| crate::model::impostor::CrownDensity::measure(&needles, impostor));
+            let seen = crate::model::color::NeedleMix::seen(&record, &needles, impostor);
+            if let Some(impostor) = record.impostor.as_mut().map(std::sync::Arc::make_mut) {
+                if let Some(density) = density {
+                    impostor.crown_density = density;
+                }
+                impostor.seen_needles = seen;
             }
         }
         if (record.line_calibration.is_none() || measured_without_caps || elevation.is_some())

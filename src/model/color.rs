@@ -279,10 +279,11 @@ fn seen_in_view(
     impostor: &CrownImpostor,
     view: u32,
 ) -> [[f64; 2]; NEEDLE_AGE_CLASSES] {
-    let right = impostor.view_right(view);
-    let phi = impostor.view_azimuth(view);
-    let toward = Vec3::new(phi.sin(), 0.0, phi.cos());
-    let centre = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
+    let (right, toward, centre) = (
+        impostor.view_right(view),
+        impostor.view_toward(view),
+        impostor.axis_point(),
+    );
     let (step_x, step_y) = (
         impostor.texel / SEEN_COLUMNS_PER_TEXEL as f32,
         impostor.texel / SEEN_ROWS_PER_TEXEL as f32,
@@ -344,7 +345,7 @@ fn seen_in_view(
             let (xa, xb) = (ma.x + axis.x * t0, ma.x + axis.x * t1);
             let columns = first((xa.min(xb) - reach) / step_x)..last((xa.max(xb) + reach) / step_x, width);
             for x in columns {
-                let point = Vec2::new((x as f32 + 0.5) * step_x, (y as f32 + 0.5) * step_y);
+                let point = Vec2::new((x as f32 + 0.5) * step_x, row);
                 let t = ((point - ma).dot(axis) * inverse_length2).clamp(0.0, 1.0);
                 let radius = radii[0] + (radii[1] - radii[0]) * t;
                 if point.distance_squared(ma + axis * t) > radius * radius {

@@ -896,10 +896,9 @@ impl ViewCanvas {
     /// View `k` of `impostor`, nothing drawn yet.
     fn new(impostor: &CrownImpostor, k: u32) -> Self {
         let (width, height) = (impostor.columns * SAMPLES_PER_TEXEL, impostor.rows * SAMPLES_PER_TEXEL);
-        let phi = impostor.view_azimuth(k);
         Self {
             right: impostor.view_right(k),
-            toward: Vec3::new(phi.sin(), 0.0, phi.cos()),
+            toward: impostor.view_toward(k),
             needles: SampleBits::new(width, height),
             wood: SampleBits::new(width, height),
             wood_hidden: SampleBits::new(width, height),
@@ -1095,6 +1094,13 @@ impl CrownImpostor {
         std::f32::consts::TAU * view as f32 / self.views.max(1) as f32
     }
 
+    /// Toward view `k`'s camera from the axis (tree-local, horizontal,
+    /// unit): `(sin φ, 0, cos φ)`.
+    pub fn view_toward(&self, view: u32) -> Vec3 {
+        let phi = self.view_azimuth(view);
+        Vec3::new(phi.sin(), 0.0, phi.cos())
+    }
+
     /// The picture's right of view `k` (tree-local, horizontal, unit).
     pub fn view_right(&self, view: u32) -> Vec3 {
         let phi = self.view_azimuth(view);
@@ -1203,7 +1209,7 @@ impl CrownImpostor {
 
     /// The tree-local point at the foot of the vertical axis the views
     /// turn around.
-    fn axis_point(&self) -> Vec3 {
+    pub fn axis_point(&self) -> Vec3 {
         Vec3::new(self.axis.x, 0.0, self.axis.y)
     }
 
