@@ -2,7 +2,7 @@
 
 use super::parse_merge_error;
 use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
-use crate::eval::scene::{EvalSun, EvalTree, EvalView, Method};
+use crate::eval::scene::{EvalLights, EvalSun, EvalTree, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::{read_prototype_record, read_record};
 use crate::plugin::{LineLighting, LineOpacity, LineRaster, WoodLineOrder};
@@ -104,6 +104,11 @@ pub struct EvalArgs {
     /// across the view) or `back` (low, behind the tree: back light).
     #[arg(long, default_value = "front")]
     pub sun: String,
+    /// Which lights shine: `both` (the sun and the ambient light, as a
+    /// game has them), `sun` or `ambient` alone (to tell which of them a
+    /// method lights differently from the reference).
+    #[arg(long, default_value = "both")]
+    pub lights: String,
     /// How the plugin lights lines: `cylinder` (the default: every line as
     /// the cylinder along its chord), `bundle` (a merged line as its
     /// needles spread about its chord) or `facing-strip` (a strip turned
@@ -168,6 +173,10 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         .into_iter()
         .find(|s| s.name() == args.sun)
         .with_context(|| format!("--sun {:?}: the suns are front, side, back", args.sun))?;
+    let lights = EvalLights::ALL
+        .into_iter()
+        .find(|l| l.name() == args.lights)
+        .with_context(|| format!("--lights {:?}: both, sun or ambient", args.lights))?;
     let line_lighting = match args.line_lighting.as_str() {
         "bundle" => LineLighting::Bundle,
         "cylinder" => LineLighting::Cylinder,
@@ -198,6 +207,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         transition: args.transition,
         supersampling,
         sun,
+        lights,
         line_lighting,
         line_raster,
         wood_line_order,

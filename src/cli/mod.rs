@@ -51,7 +51,7 @@ pub enum Command {
     /// against the paper's configuration and the peers (raw, bevy-lod,
     /// sampling), headless, against a supersampled reference.
     #[cfg(feature = "eval")]
-    Eval(eval::EvalArgs),
+    Eval(Box<eval::EvalArgs>),
     /// Benchmarks: bake scaling, record sizes, cut time, plugin CPU time per
     /// instance, and a rendered forest against raw meshes and Bevy LODs.
     #[cfg(feature = "eval")]

@@ -149,6 +149,7 @@ pub fn evaluate_inside(
     world
         .entity_mut(sun)
         .insert((RenderLayers::from_layers(&[0, 1]), view.sun.transform()));
+    view.lights.apply(world, sun);
     let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(species);
     world.spawn((ConiferFoliage(handle), Transform::IDENTITY, RenderLayers::layer(0)));
     let [needle_triangles, wood_triangles] =

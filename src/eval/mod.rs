@@ -256,6 +256,8 @@ pub struct EvalReport {
     pub transition: f32,
     /// Where the sun stood (`front`, `side`, `back`).
     pub sun: String,
+    /// Which lights shone (`both`, `sun`, `ambient`).
+    pub lights: String,
     /// How the plugin's methods lit their lines (`Cylinder`, `FacingStrip`).
     pub line_lighting: String,
     /// How the plugin's methods rasterized their lines in the cameras'
@@ -626,6 +628,7 @@ pub fn evaluate(
         pixel_error: options.view.pixel_error,
         transition: options.view.transition,
         sun: options.view.sun.name().into(),
+        lights: options.view.lights.name().into(),
         line_lighting: format!("{:?}", options.view.line_lighting),
         line_raster: format!("{:?}", options.view.drawn_line_raster()),
         wood_line_order: format!("{:?}", options.view.wood_line_order),

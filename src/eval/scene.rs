@@ -251,6 +251,8 @@ pub struct EvalView {
     pub supersampling: u32,
     /// Where the sun stands.
     pub sun: EvalSun,
+    /// Which lights shine.
+    pub lights: EvalLights,
     /// How the plugin's methods light their lines.
     pub line_lighting: LineLighting,
     /// How the plugin's methods rasterize their lines.
@@ -302,6 +304,54 @@ pub enum EvalSun {
     Back,
 }
 
+/// Which of `conifer eval`'s lights shine: the scene's sun and Bevy's
+/// ambient light together, as a game has them, or one alone, to tell which
+/// of them a method lights differently from the reference (a colour error
+/// under both is a sum of the two).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EvalLights {
+    /// The sun and the ambient light.
+    #[default]
+    Both,
+    /// The sun alone (the ambient light's brightness 0).
+    Sun,
+    /// The ambient light alone (the sun's illuminance 0).
+    Ambient,
+}
+
+impl EvalLights {
+    /// Every choice, in order.
+    pub const ALL: [EvalLights; 3] = [EvalLights::Both, EvalLights::Sun, EvalLights::Ambient];
+
+    /// Its name on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            EvalLights::Both => "both",
+            EvalLights::Sun => "sun",
+            EvalLights::Ambient => "ambient",
+        }
+    }
+
+    /// Turns off what does not shine: the `world`'s `GlobalAmbientLight`,
+    /// or the `sun`'s illuminance.
+    pub fn apply(self, world: &mut World, sun: Entity) {
+        match self {
+            EvalLights::Both => {}
+            EvalLights::Sun => {
+                if let Some(mut ambient) = world.get_resource_mut::<GlobalAmbientLight>() {
+                    ambient.brightness = 0.0;
+                }
+            }
+            EvalLights::Ambient => {
+                if let Some(mut light) = world.get_mut::<DirectionalLight>(sun) {
+                    light.illuminance = 0.0;
+                }
+            }
+        }
+    }
+}
+
 impl EvalSun {
     /// Every sun, in order.
     pub const ALL: [EvalSun; 3] = [EvalSun::Front, EvalSun::Side, EvalSun::Back];
@@ -340,6 +390,7 @@ impl EvalView {
             transition: 1.0,
             supersampling: 4,
             sun: EvalSun::default(),
+            lights: EvalLights::default(),
             line_lighting: LineLighting::default(),
             line_raster: LineRaster::default(),
             wood_line_order: WoodLineOrder::default(),
@@ -649,6 +700,7 @@ impl EvalScene {
         let world = renderer.world_mut();
         let sun = HeadlessRenderer::spawn_lights(world);
         world.entity_mut(sun).insert((all_layers, view.sun.transform()));
+        view.lights.apply(world, sun);
 
         // The plugin's methods.
         let method_species = MethodSpecies::add(world, species, &methods, None)?;
@@ -1607,4 +1659,32 @@ pub(crate) fn sway_at(model: &Wind, shape: &WindShape, seconds: f64) -> impl Fn(
     let direction = model.unit_direction();
     let (model, shape) = (*model, *shape);
     move |p| p + wind_offset(&model, &shape, &clock, &phase, p).world(direction, 1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `--lights sun` leaves the sun and darkens the ambient light;
+    /// `--lights ambient` the other way round; `both` touches neither.
+    #[test]
+    fn lights_turn_off_what_does_not_shine() {
+        for lights in EvalLights::ALL {
+            let mut world = World::new();
+            let sun = HeadlessRenderer::spawn_lights(&mut world);
+            lights.apply(&mut world, sun);
+            let ambient = world.resource::<GlobalAmbientLight>().brightness;
+            let illuminance = world.get::<DirectionalLight>(sun).unwrap().illuminance;
+            assert_eq!(
+                (ambient > 0.0, illuminance > 0.0),
+                match lights {
+                    EvalLights::Both => (true, true),
+                    EvalLights::Sun => (false, true),
+                    EvalLights::Ambient => (true, false),
+                },
+                "{}",
+                lights.name()
+            );
+        }
+    }
 }

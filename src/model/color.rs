@@ -30,9 +30,9 @@
 //! over the placements ([`NeedleMix::of_area`]).
 
 use super::impostor::CrownImpostor;
-use super::needle::{FoliageMaterial, Needle, WoodSegment};
+use super::needle::{FoliageMaterial, Needle};
 use super::prototype::PrototypeRecord;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 
 /// Age (years) from which needles have their mature colour.
@@ -264,11 +264,6 @@ fn age_class(age: u8) -> usize {
     usize::from(age).min(NEEDLE_AGE_CLASSES - 1)
 }
 
-/// Nothing in front at a sample of [`seen_in_view`].
-const NO_PIECE: u32 = u32::MAX;
-/// Wood in front.
-const WOOD_PIECE: u32 = u32::MAX - 1;
-
 /// One view's sums for [`NeedleMix::seen`]: by age class, the samples
 /// whose nearest piece is a needle of that age, and those times the
 /// underside the view sees of its shoot.
@@ -279,110 +274,17 @@ fn seen_in_view(
     impostor: &CrownImpostor,
     view: u32,
 ) -> [[f64; 2]; NEEDLE_AGE_CLASSES] {
-    let (right, toward, centre) = (
-        impostor.view_right(view),
-        impostor.view_toward(view),
-        impostor.axis_point(),
+    let toward = impostor.view_toward(view);
+    let nearest = impostor.nearest_pieces(
+        view,
+        &record.wood,
+        needles,
+        [SEEN_COLUMNS_PER_TEXEL, SEEN_ROWS_PER_TEXEL],
     );
-    let (step_x, step_y) = (
-        impostor.texel / SEEN_COLUMNS_PER_TEXEL as f32,
-        impostor.texel / SEEN_ROWS_PER_TEXEL as f32,
-    );
-    let (width, height) = (
-        (impostor.columns * SEEN_COLUMNS_PER_TEXEL) as usize,
-        (impostor.rows * SEEN_ROWS_PER_TEXEL) as usize,
-    );
-    let top = impostor.top();
-    let mut nearest = vec![f32::NEG_INFINITY; width * height];
-    let mut owner = vec![NO_PIECE; width * height];
-    // A point in the picture (sample units, rows down from the top) and its
-    // nearness to the camera.
-    let project = |p: Vec3| {
-        let q = p - centre;
-        (
-            Vec2::new((q.dot(right) + impostor.half_width) / step_x, (top - p.y) / step_y),
-            q.dot(toward),
-        )
-    };
-    // Stamps a tapered capsule: a sample within `radius` (metres, linear
-    // along it) of the projected axis takes `piece` where it lies nearer
-    // than what it holds.
-    let mut stamp = |a: Vec3, b: Vec3, radii: [f32; 2], front: [f32; 2], piece: u32| {
-        let ((pa, near_a), (pb, near_b)) = (project(a), project(b));
-        let reach = radii[0].max(radii[1]);
-        let (lo, hi) = (
-            pa.min(pb) - Vec2::new(reach / step_x, reach / step_y),
-            pa.max(pb) + Vec2::new(reach / step_x, reach / step_y),
-        );
-        if !(lo.is_finite() && hi.is_finite()) {
-            return;
-        }
-        // Samples whose centres (`k + 0.5`) lie in the box.
-        let first = |v: f32| (v - 0.5).ceil().max(0.0) as usize;
-        let last = |v: f32, count: usize| ((v - 0.5).floor().max(-1.0) as isize + 1).min(count as isize) as usize;
-        // In metres, so that the capsule stays round with unequal steps.
-        let (ma, mb) = (pa * Vec2::new(step_x, step_y), pb * Vec2::new(step_x, step_y));
-        let axis = mb - ma;
-        let inverse_length2 = if axis.length_squared() > 0.0 {
-            axis.length_squared().recip()
-        } else {
-            0.0
-        };
-        for y in first(lo.y)..last(hi.y, height) {
-            // The part of the axis within `reach` of the row, and the
-            // columns within `reach` of that part: a long slanted branch
-            // tests a strip, not its whole box.
-            let row = (y as f32 + 0.5) * step_y;
-            let (t0, t1) = if axis.y.abs() > 1e-9 {
-                let (u, v) = ((row - reach - ma.y) / axis.y, (row + reach - ma.y) / axis.y);
-                (u.min(v).max(0.0), u.max(v).min(1.0))
-            } else {
-                (0.0, 1.0)
-            };
-            if t0 > t1 {
-                continue;
-            }
-            let (xa, xb) = (ma.x + axis.x * t0, ma.x + axis.x * t1);
-            let columns = first((xa.min(xb) - reach) / step_x)..last((xa.max(xb) + reach) / step_x, width);
-            for x in columns {
-                let point = Vec2::new((x as f32 + 0.5) * step_x, row);
-                let t = ((point - ma).dot(axis) * inverse_length2).clamp(0.0, 1.0);
-                let radius = radii[0] + (radii[1] - radii[0]) * t;
-                if point.distance_squared(ma + axis * t) > radius * radius {
-                    continue;
-                }
-                let near = near_a + (near_b - near_a) * t + front[0] + (front[1] - front[0]) * t;
-                let index = y * width + x;
-                if near > nearest[index] {
-                    nearest[index] = near;
-                    owner[index] = piece;
-                }
-            }
-        }
-    };
-    for segment in record.wood.iter().filter(|w| w.is_valid()) {
-        let WoodSegment {
-            start,
-            end,
-            start_radius,
-            end_radius,
-        } = *segment;
-        // Its front: the axis' nearness plus its radius.
-        stamp(
-            start,
-            end,
-            [start_radius, end_radius],
-            [start_radius, end_radius],
-            WOOD_PIECE,
-        );
-    }
-    for needle in needles {
-        stamp(needle.base, needle.tip, [needle.radius; 2], [0.0; 2], needle.group);
-    }
     let mut sums = [[0.0f64; 2]; NEEDLE_AGE_CLASSES];
-    for &piece in &owner {
-        let (Some(placement), Some(&upper)) = (record.placements.get(piece as usize), uppers.get(piece as usize))
-        else {
+    for piece in nearest.needle_samples() {
+        let group = needles[piece].group as usize;
+        let (Some(placement), Some(&upper)) = (record.placements.get(group), uppers.get(group)) else {
             continue;
         };
         let sum = &mut sums[age_class(placement.needle_age)];
