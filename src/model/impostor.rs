@@ -1251,17 +1251,17 @@ impl CrownImpostor {
 
     /// How the needles of view `k` are lit by a light from `to_light`,
     /// given in the view's frame (`x` its right, `y` up, `z` toward the
-    /// camera), as the Lambert factor `max(n·L, 0)` averaged three ways
-    /// ([`ViewLambert`]): over every needle by its projected area, over
-    /// what the view shows (each sample of a 4 × 4 grid a texel lit at the
-    /// normal of the round needle nearest it there,
-    /// [`CrownImpostor::nearest_pieces`], or past its end at its flat
-    /// cap's, as the reference's capped prisms; a sample the round end
-    /// reaches and the cap seen at its slant does not is left out), and as
-    /// the impostor's texels
-    /// light it (their shares, [`TexelShares::lambert`], weighted by the
-    /// coverage the needles give them). `None` where the view shows no
-    /// needle.
+    /// camera), as the Lambert factor `max(n·L, 0)` averaged four ways
+    /// ([`ViewLambert`]): over every needle by its projected area; over
+    /// what the view shows (each sample of a grid of
+    /// [`VIEW_LAMBERT_SAMPLES`]² a texel lit at the normal of the round
+    /// needle nearest it there, [`CrownImpostor::nearest_pieces`], or past
+    /// its end at its flat cap's, as the reference's capped prisms; a
+    /// sample the round end reaches and the cap seen at its slant does not
+    /// is left out); as the impostor's texels light it (their shares,
+    /// [`TexelShares::lambert`], weighted by the coverage the needles give
+    /// them); and as texels would whose shares were fitted to the needles
+    /// their samples show. `None` where the view shows no needle.
     pub fn view_lambert(
         &self,
         view: u32,
@@ -1283,8 +1283,9 @@ impl CrownImpostor {
         // What the view shows: each sample lit at the normal of its needle
         // there, `√(1 − s²)·t + s·b` with `s` its offset across the
         // needle's projected width (`super::shading::visible_frame`).
-        let nearest = self.nearest_pieces(view, wood, &needles, [4, 4]);
-        let centre = self.axis_point();
+        let per_texel = VIEW_LAMBERT_SAMPLES as usize;
+        let nearest = self.nearest_pieces(view, wood, &needles, [VIEW_LAMBERT_SAMPLES; 2]);
+        let (centre, top) = (self.axis_point(), self.top());
         let in_picture = |p: Vec3| Vec2::new((p - centre).dot(right), p.y);
         let (mut seen, mut samples) = (0.0f64, 0u64);
         // Per texel: the shares of the needles it shows, summed, and their
@@ -1295,7 +1296,7 @@ impl CrownImpostor {
             let (column, row) = (index % nearest.width as usize, index / nearest.width as usize);
             let point = Vec2::new(
                 (column as f32 + 0.5) * nearest.step.x - self.half_width,
-                self.top() - (row as f32 + 0.5) * nearest.step.y,
+                top - (row as f32 + 0.5) * nearest.step.y,
             );
             let (a, b) = (in_picture(needle.base), in_picture(needle.tip));
             let along = b - a;
@@ -1329,7 +1330,7 @@ impl CrownImpostor {
             seen += f64::from(normal.dot(to_light).max(0.0));
             samples += 1;
             let shares = texel_shares(Vec3::new(axis.dot(right), axis.y, axis.dot(toward)));
-            let texel = &mut shown[(row / 4) * self.columns as usize + column / 4];
+            let texel = &mut shown[(row / per_texel) * self.columns as usize + column / per_texel];
             texel.0[0] += f64::from(shares.vertical);
             texel.0[1] += f64::from(shares.across);
             texel.1 += 1;
@@ -1657,6 +1658,11 @@ impl CrownImpostor {
         texels
     }
 }
+
+/// Samples along each side of a texel at which
+/// [`CrownImpostor::view_lambert`] takes what a view shows (2.5 cm apart
+/// at the default 10 cm texel).
+pub const VIEW_LAMBERT_SAMPLES: u32 = 4;
 
 /// What one view of a crown shows at each sample
 /// ([`CrownImpostor::nearest_pieces`]): row by row from the top, the index
