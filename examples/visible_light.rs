@@ -4,7 +4,9 @@
 //! texels' shares are fitted to), over what the views show (each sample lit
 //! at the normal of the needle nearest the camera there) and as the
 //! impostor's texels light it ([`CrownImpostor::view_lambert`]), averaged
-//! over the impostor's views. Used in the README's "The far crown lit by
+//! over the impostor's views; and the impostor's light times the record's
+//! view light scale at that sun ([`CrownImpostor::view_light_scale`]: what
+//! the plugin draws) over what the views show. Used in the README's "The far crown lit by
 //! the needles it shows".
 //!
 //! ```text
@@ -12,6 +14,7 @@
 //! ```
 //!
 //! [`CrownImpostor::view_lambert`]: bevy_conifer_lod::model::impostor::CrownImpostor::view_lambert
+//! [`CrownImpostor::view_light_scale`]: bevy_conifer_lod::model::impostor::CrownImpostor::view_light_scale
 
 use bevy_conifer_lod::model::read_prototype_record;
 use glam::Vec3;
@@ -30,13 +33,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ("back", Vec3::new(0.0, low.sin(), -low.cos())),
     ];
     println!(
-        "| record | sun | every needle | needles seen | impostor | impostor / seen | shares of the seen | their / seen |"
+        "| record | sun | every needle | needles seen | impostor | impostor / seen | shares of the seen | their / seen | scaled impostor / seen |"
     );
-    println!("|---|---|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
     for path in paths {
         let record = read_prototype_record(std::path::Path::new(&path))?;
         let impostor = record.impostor.as_deref().ok_or("the record has no crown impostor")?;
         let needles = record.placed_needles();
+        let scale = impostor.view_light_scale.unwrap_or_default();
         for (name, sun) in suns {
             let (mut sums, mut views) = ([0.0f64; 4], 0u32);
             for view in 0..impostor.views {
@@ -50,10 +54,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             let [all, seen, texels, fitted] = sums.map(|s| s / f64::from(views.max(1)));
             println!(
-                "| {} | {name} | {all:.4} | {seen:.4} | {texels:.4} | {:.3} | {fitted:.4} | {:.3} |",
+                "| {} | {name} | {all:.4} | {seen:.4} | {texels:.4} | {:.3} | {fitted:.4} | {:.3} | {:.3} |",
                 record.name,
                 texels / seen,
-                fitted / seen
+                fitted / seen,
+                texels * f64::from(scale.at(sun)) / seen
             );
         }
     }

@@ -768,7 +768,8 @@ fn the_impostor_sways_as_its_needles_do() {
 }
 
 /// The spruce's impostor under a sun alone (no ambient light), seen by
-/// [`impostor_camera`] without tonemapping.
+/// [`impostor_camera`] without tonemapping; `baked` without its view light
+/// scale (every scale 1).
 struct LitImpostor {
     record: LodRecord,
     baked: std::sync::Arc<CrownImpostor>,
@@ -783,7 +784,9 @@ fn lit_impostor() -> LitImpostor {
     use bevy::core_pipeline::tonemapping::Tonemapping;
     let record = spruce();
     let species = ConiferSpecies::from_record(record.clone()).unwrap();
-    let baked = species.impostor.clone().expect("an impostor");
+    let mut baked = species.impostor.clone().expect("an impostor");
+    // The tests set the texels' shares: lit as the shares say.
+    std::sync::Arc::make_mut(&mut baked).view_light_scale = None;
     let crown = species.crown_center;
     let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
     let world = renderer.world_mut();
@@ -999,6 +1002,58 @@ fn the_impostor_lights_its_trunk_as_a_round_stem() {
     assert!(compared > 500.0, "{compared} pixels compared");
     assert!(error < 0.1, "mean error {error}");
     assert!(darkest < 0.15 && brightest > 3.0, "drawn {darkest}–{brightest}");
+}
+
+/// The impostor's direct light is scaled by the species' view light
+/// scale at the light's direction in the view's frame (CPU reference:
+/// `model::impostor::ViewLightScale::at`): sphere texels under a sun from
+/// the camera and one from the right and above, with a table that grows
+/// with the light's angle from the camera and its roll from above, over
+/// the same texels without one (sun alone, no tonemapping), keep the
+/// table's scale there within 3 %.
+#[test]
+fn the_impostors_direct_light_is_scaled_by_its_view_light_scale() {
+    use bevy_conifer_lod::model::impostor::{VIEW_LIGHT_ANGLES, VIEW_LIGHT_ROLLS, ViewLightScale};
+    use std::sync::Arc;
+    let _turn = common::gpu_turn();
+    let mut lit = lit_impostor();
+    let (record, baked, crown, sun) = (lit.record.clone(), lit.baked.clone(), lit.crown, lit.sun);
+    let mut table = ViewLightScale::default();
+    for angle in 0..VIEW_LIGHT_ANGLES {
+        for roll in 0..VIEW_LIGHT_ROLLS {
+            table.scales[angle][roll] = 0.5 + 0.08 * angle as f32 + 0.05 * roll as f32;
+        }
+    }
+    let suns = [("front", Vec3::Z), ("right_above", Vec3::new(1.0, 1.0, 0.0).normalize())];
+    let mut drawn = [[0.0f32; 2]; 2];
+    for (v, scale) in [None, Some(table)].into_iter().enumerate() {
+        let mut impostor = (*baked).clone();
+        impostor.texels.iter_mut().for_each(|t| *t = [255, 0, 0, 0]);
+        impostor.view_light_scale = scale;
+        let mut variant = ConiferSpecies::from_record(record.clone()).unwrap();
+        variant.impostor = Some(Arc::new(impostor));
+        let world = lit.renderer.world_mut();
+        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(variant);
+        let tree = world.spawn((ConiferFoliage(handle), Transform::IDENTITY)).id();
+        for (s, (name, from)) in suns.iter().enumerate() {
+            drawn[s][v] = sunlit_opaque_light(
+                &mut lit.renderer,
+                &lit.target,
+                (sun, crown + *from * 100.0, crown),
+                &format!("impostor_view_light_scale_{v}_{name}"),
+            );
+        }
+        lit.renderer.world_mut().despawn(tree);
+    }
+    // The camera looks along −z: the view's frame is the world's.
+    let toward = (lit.eye - crown).normalize();
+    assert!(toward.z > 0.999, "a level camera on +z: {toward}");
+    for (s, (name, from)) in suns.iter().enumerate() {
+        let (ratio, expected) = (drawn[s][1] / drawn[s][0], table.at(*from));
+        println!("{name}: drawn {:?}, scaled / unscaled {ratio:.4}, table {expected:.4}", drawn[s]);
+        assert!(drawn[s][0] > 0.01, "{name}: lit {:?}", drawn[s]);
+        assert!((ratio / expected - 1.0).abs() < 0.03, "{name}: {ratio} vs {expected}");
+    }
 }
 
 /// Texels lit as a sphere glow under a sun from behind as the CPU table

@@ -335,19 +335,25 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         }
         // Format 13 stores how densely the needles fill the impostor's
         // crown, format 14 the ages and sides of the needles its views
-        // see: an older impostor's are measured from the needles (a fresh
-        // bake measured them already).
-        let measure_seen = !rebake && version.is_none_or(|v| v < 14);
+        // see, format 15 how bright those needles are lit against its
+        // texels: an older impostor's are measured from the needles (a
+        // fresh bake measured them already).
+        let measure_scale = !rebake && version.is_none_or(|v| v < 15);
+        let measure_seen = measure_scale && version.is_none_or(|v| v < 14);
         let measure_density = measure_seen && version.is_none_or(|v| v < 13);
-        if let Some(impostor) = record.impostor.as_deref().filter(|_| measure_seen) {
+        if let Some(impostor) = record.impostor.as_deref().filter(|_| measure_scale) {
             let needles = record.placed_needles();
             let density = measure_density.then(|| crate::model::impostor::CrownDensity::measure(&needles, impostor));
-            let seen = crate::model::color::NeedleMix::seen(&record, &needles, impostor);
+            let seen = measure_seen.then(|| crate::model::color::NeedleMix::seen(&record, &needles, impostor));
+            let scale = impostor.view_light_scale(&record.wood, &needles);
             if let Some(impostor) = record.impostor.as_mut().map(std::sync::Arc::make_mut) {
                 if let Some(density) = density {
                     impostor.crown_density = density;
                 }
-                impostor.seen_needles = seen;
+                if let Some(seen) = seen {
+                    impostor.seen_needles = seen;
+                }
+                impostor.view_light_scale = Some(scale);
             }
         }
         if (record.line_calibration.is_none() || measured_without_caps || elevation.is_some())
@@ -447,6 +453,12 @@ pub struct ImpostorSummary {
     /// ([`crate::model::color::NeedleMix`]); `None` in an older record or
     /// a tree without ages.
     pub seen_needles: Option<[[f32; 2]; crate::model::color::NEEDLE_AGE_CLASSES]>,
+    /// How its direct light is scaled by the light's direction in the
+    /// view's frame (`[angle][roll]`,
+    /// [`crate::model::impostor::ViewLightScale`]); `None` in an older
+    /// record.
+    pub view_light_scale:
+        Option<[[f32; crate::model::impostor::VIEW_LIGHT_ROLLS]; crate::model::impostor::VIEW_LIGHT_ANGLES]>,
 }
 
 pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
@@ -502,6 +514,7 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
             texel: i.texel,
             gpu_bytes: i.byte_size(),
             seen_needles: i.seen_needles.map(|mix| mix.by_age),
+            view_light_scale: i.view_light_scale.map(|scale| scale.scales),
         }),
         far_needle_color: crate::model::color::far_needle_color(&prototypes).to_array(),
         line_calibration: prototypes.line_calibration,
@@ -529,6 +542,17 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
                 i.views, i.columns, i.rows, i.texel, i.gpu_bytes
             ),
             None => println!("  no crown impostor (the plugin bakes one at load)"),
+        }
+        if let Some(scales) = report.impostor.as_ref().and_then(|i| i.view_light_scale) {
+            let scale = crate::model::impostor::ViewLightScale { scales };
+            let at = |x: f32, y: f32, z: f32| scale.at(glam::Vec3::new(x, y, z));
+            println!(
+                "  impostor light scale: sun behind the camera {:.3}, above {:.3}, beside {:.3}, behind the tree {:.3}",
+                at(0.0, 0.0, 1.0),
+                at(0.0, 1.0, 0.0),
+                at(1.0, 0.0, 0.0),
+                at(0.0, 0.0, -1.0)
+            );
         }
         let [r, g, b] = report.far_needle_color;
         println!(

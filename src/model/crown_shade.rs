@@ -539,6 +539,7 @@ mod tests {
             wood_visibility: WoodVisibility::default(),
             crown_density: Default::default(),
             seen_needles: None,
+            view_light_scale: None,
         }
     }
 

@@ -52,6 +52,12 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
+//! Version 15 adds how the impostor's direct light is scaled so that its
+//! texels are lit as the needles its views show
+//! ([`super::impostor::ViewLightScale`]: 91 `f32`s by the light's
+//! direction, with the impostor); an older impostor is lit as its shares
+//! say (every scale 1), and `conifer upgrade` measures the scales into the
+//! file.
 //! Version 14 adds the mix of needle ages and sides the impostor's views
 //! see first ([`super::color::NeedleMix::seen`]: six `f32`s, with the
 //! impostor), which colours the far crown; an older impostor's crown takes
@@ -96,7 +102,7 @@
 
 use super::calibration::{CALIBRATION_STEPS, LineCalibration, WOOD_OPACITY_NODES};
 use super::color::{NEEDLE_AGE_CLASSES, NeedleMix};
-use super::impostor::{CrownDensity, CrownImpostor, WoodVisibility};
+use super::impostor::{CrownDensity, CrownImpostor, VIEW_LIGHT_SCALE_RANGE, ViewLightScale, WoodVisibility};
 use super::merge::{EndpointId, MergeWeights, MergedLine};
 use super::needle::{FoliageMaterial, Needle, WoodSegment};
 use super::prism::TriangleMesh;
@@ -115,7 +121,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 14;
+pub const FORMAT_VERSION: u32 = 15;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -382,6 +388,7 @@ impl StoredImpostor {
             wood_visibility: Default::default(),
             crown_density: Default::default(),
             seen_needles: None,
+            view_light_scale: None,
         })
     }
 }
@@ -955,6 +962,12 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         .and_then(|i| i.seen_needles)
         .map(|mix| mix.to_array());
     body.extend(postcard::to_allocvec(&seen_needles).map_err(|e| RecordError::Malformed(e.to_string()))?);
+    let view_light_scale = record
+        .impostor
+        .as_deref()
+        .and_then(|i| i.view_light_scale)
+        .map(|scale| scale.to_vec());
+    body.extend(postcard::to_allocvec(&view_light_scale).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -1181,6 +1194,31 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
                     RecordError::Malformed("seen needles: a share out of [0, 1] or not summing to 1".into())
                 })?;
                 impostor.seen_needles = Some(mix);
+                Some(impostor)
+            }
+        };
+        (impostor, rest)
+    } else {
+        (impostor, rest)
+    };
+    // Format 15: how the impostor's direct light is scaled to light its
+    // texels as the needles its views show; an older impostor's is lit as
+    // its shares say.
+    let (impostor, rest) = if version >= 15 {
+        let (stored, rest) = postcard::take_from_bytes::<Option<Vec<f32>>>(rest).map_err(malformed)?;
+        let impostor = match (impostor, stored) {
+            (impostor, None) => impostor,
+            (None, Some(_)) => return Err(RecordError::Malformed("view light scale without an impostor".into())),
+            (Some(mut impostor), Some(values)) => {
+                let scale = ViewLightScale::from_slice(&values).ok_or_else(|| {
+                    RecordError::Malformed(format!(
+                        "view light scale: {} values (not {}) or one out of {:?}",
+                        values.len(),
+                        ViewLightScale::LEN,
+                        VIEW_LIGHT_SCALE_RANGE
+                    ))
+                })?;
+                impostor.view_light_scale = Some(scale);
                 Some(impostor)
             }
         };
@@ -1537,14 +1575,21 @@ mod tests {
         decode_prototype_record(&file_of_version(4, &postcard::to_allocvec(&payload).unwrap()))
     }
 
-    /// A baked flat tree of three one-needle groups.
-    /// The bytes a record file ends with (format 14): its impostor's
-    /// seen needles.
+    /// The bytes a format 14 record file ends with: its impostor's seen
+    /// needles.
     fn stored_seen_needles(record: &PrototypeRecord) -> Vec<u8> {
         let seen = record.impostor.as_deref().and_then(|i| i.seen_needles);
         postcard::to_allocvec(&seen.map(|m| m.to_array())).unwrap()
     }
 
+    /// The bytes a record file ends with (format 15): its impostor's view
+    /// light scale.
+    fn stored_view_light_scale(record: &PrototypeRecord) -> Vec<u8> {
+        let scale = record.impostor.as_deref().and_then(|i| i.view_light_scale);
+        postcard::to_allocvec(&scale.map(|s| s.to_vec())).unwrap()
+    }
+
+    /// A baked flat tree of three one-needle groups.
     fn three_groups() -> LodRecord {
         let needle = |k: f32| Needle {
             base: Vec3::new(k * 0.1, 0.0, 0.0),
@@ -1623,12 +1668,18 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
+        // Format 15 ends with the impostor's view light scale: format 14
+        // stops before it, its impostor lit as its shares say.
+        let body = &bytes[HEADER_BYTES..];
+        let v14 = &body[..body.len() - stored_view_light_scale(&record).len()];
+        let mut unscaled = decode_prototype_record(&bytes).unwrap();
+        Arc::make_mut(unscaled.impostor.as_mut().expect("an impostor")).view_light_scale = None;
+        assert_eq!(decode_prototype_record(&file_of_version(14, v14)).unwrap(), unscaled);
         // Format 14 ends with the needles the impostor sees: format 13
         // stops before them, its far crown the needles' area mean.
-        let body = &bytes[HEADER_BYTES..];
         let seen = stored_seen_needles(&record);
-        let v13 = &body[..body.len() - seen.len()];
-        let mut unseen = decode_prototype_record(&bytes).unwrap();
+        let v13 = &v14[..v14.len() - seen.len()];
+        let mut unseen = unscaled.clone();
         Arc::make_mut(unseen.impostor.as_mut().expect("an impostor")).seen_needles = None;
         assert_eq!(decode_prototype_record(&file_of_version(13, v13)).unwrap(), unseen);
         // Format 13 ends with the impostor's crown density: format 12
@@ -1725,20 +1776,23 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one (and without a line calibration), format 14 stores a
+        // Without one (and without a line calibration), format 15 stores a
         // single byte for each, for the wood visibility, for the wood
-        // scales, for the crown density and for the seen needles.
+        // scales, for the crown density, for the seen needles and for the
+        // view light scale.
         let mut bare = record.clone();
         bare.impostor = None;
         bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 6
+            HEADER_BYTES + v6.len() + 7
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
         let seen = impostor.seen_needles.map(|mix| mix.to_array());
         assert!(seen.is_some(), "the bake measures the needles it sees");
+        let scale = impostor.view_light_scale.map(|scale| scale.to_vec());
+        assert!(scale.is_some(), "the bake measures the view light scale");
         let file = |version: u32,
                     edit: &dyn Fn(&mut StoredImpostor),
                     visibility: Option<Vec<u8>>,
@@ -1762,13 +1816,16 @@ mod tests {
             if version >= 14 {
                 body.extend(postcard::to_allocvec(&seen).unwrap());
             }
+            if version >= 15 {
+                body.extend(postcard::to_allocvec(&scale).unwrap());
+            }
             decode_prototype_record(&file_of_version(version, &body))
         };
         let density = Some(impostor.crown_density.to_bytes());
         let file_with_density = |version: u32, edit: &dyn Fn(&mut StoredImpostor), density: Option<Vec<u8>>| {
             file(version, edit, Some(impostor.wood_visibility.to_bytes()), density)
         };
-        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(14, edit, density.clone());
+        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(15, edit, density.clone());
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
         // Format 13 stored no seen needles: its crown takes the area mean.
         let unseen = file_with_density(13, &|_| {}, density.clone())
@@ -1836,8 +1893,8 @@ mod tests {
     fn seen_needles_come_with_the_impostor_and_add_up() {
         let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         let bytes = encode_prototype_record(&record).unwrap();
-        let body = &bytes[HEADER_BYTES..];
-        // The last bytes are the seen needles: `Some` and six f32s.
+        // A format 14 file ends with the seen needles: `Some` and six f32s.
+        let body = &bytes[HEADER_BYTES..bytes.len() - stored_view_light_scale(&record).len()];
         let stored = stored_seen_needles(&record);
         assert_eq!(stored.len(), 1 + 24);
         assert!(body.ends_with(&stored));
@@ -1868,11 +1925,59 @@ mod tests {
         let mut bare = record.clone();
         bare.impostor = None;
         let bare_bytes = encode_prototype_record(&bare).unwrap();
-        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 1].to_vec();
+        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 2].to_vec();
         body.extend(postcard::to_allocvec(&Some(mix)).unwrap());
         let error = decode_prototype_record(&file_of_version(14, &body)).unwrap_err();
         assert!(
             matches!(&error, RecordError::Malformed(m) if m.starts_with("seen needles")),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn the_view_light_scale_comes_with_the_impostor_in_range() {
+        let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
+        let bytes = encode_prototype_record(&record).unwrap();
+        let body = &bytes[HEADER_BYTES..];
+        // The last bytes are the scale: `Some`, its length and 91 f32s.
+        let stored = stored_view_light_scale(&record);
+        assert_eq!(stored.len(), 2 + 4 * ViewLightScale::LEN);
+        assert!(body.ends_with(&stored));
+        let before = &body[..body.len() - stored.len()];
+        let with = |scale: Option<Vec<f32>>| {
+            let mut body = before.to_vec();
+            body.extend(postcard::to_allocvec(&scale).unwrap());
+            decode_prototype_record(&file_of_version(15, &body))
+        };
+        let values: Vec<f32> = (0..ViewLightScale::LEN).map(|k| 0.6 + 0.01 * k as f32).collect();
+        let read = with(Some(values.clone())).unwrap().impostor.and_then(|i| i.view_light_scale);
+        assert_eq!(read.map(|s| s.to_vec()), Some(values.clone()));
+        assert_eq!(read.unwrap().scales[1][0], values[crate::model::impostor::VIEW_LIGHT_ROLLS]);
+        assert_eq!(with(None).unwrap().impostor.and_then(|i| i.view_light_scale), None);
+        let mut bad = Vec::new();
+        for (k, value) in [(0, f32::NAN), (7, 0.4), (90, 2.5)] {
+            let mut v = values.clone();
+            v[k] = value;
+            bad.push(v);
+        }
+        bad.push(values[..90].to_vec());
+        bad.push(vec![1.0; 92]);
+        for bad in bad {
+            let error = with(Some(bad)).unwrap_err();
+            assert!(
+                matches!(&error, RecordError::Malformed(m) if m.starts_with("view light scale")),
+                "{error}"
+            );
+        }
+        // A scale without an impostor is malformed.
+        let mut bare = record.clone();
+        bare.impostor = None;
+        let bare_bytes = encode_prototype_record(&bare).unwrap();
+        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 1].to_vec();
+        body.extend(postcard::to_allocvec(&Some(values)).unwrap());
+        let error = decode_prototype_record(&file_of_version(15, &body)).unwrap_err();
+        assert!(
+            matches!(&error, RecordError::Malformed(m) if m.starts_with("view light scale")),
             "{error}"
         );
     }

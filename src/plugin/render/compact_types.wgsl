@@ -174,6 +174,12 @@ struct SpeciesParams {
     // (`model::impostor::TrunkProfile`): where the impostor lights its
     // wood as the round stem
     trunk: array<vec4<f32>, 32>,
+    // what the impostor's direct light is scaled by, by the light's
+    // direction in the view's frame: VIEW_LIGHT_ANGLES angles from the
+    // direction toward the camera (rows of the table) by VIEW_LIGHT_ROLLS
+    // rolls from above, angle major, four a row
+    // (`model::impostor::ViewLightScale`; all 1 for an older record)
+    view_light_scale: array<vec4<f32>, 23>,
 }
 
 const CROWN_DENSITY_RINGS: u32 = 8u;
@@ -195,6 +201,10 @@ const CROWN_SHADE_CLASSES: u32 = 4u;
 const WOOD_NEARNESS_BINS: u32 = 8u;
 
 const SPHERE_LIGHT_STEPS: u32 = 64u;
+
+const VIEW_LIGHT_ANGLES: u32 = 13u;
+
+const VIEW_LIGHT_ROLLS: u32 = 7u;
 
 struct CullView {
     // frustum planes (xyz normal pointing inside, w offset)

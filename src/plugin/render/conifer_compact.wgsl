@@ -42,7 +42,7 @@
     LOD_CODE_MASK, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT, LOD_FADE_SHIFT,
     ENTRY_PLACEMENT_MASK, ENTRY_TREE_MASK, ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, NO_SPHERE,
     SPHERE_LIGHT_STEPS, CROWN_PROFILE_STEPS, CROWN_SHADE_STEPS, CROWN_SHADE_CLASSES, LINE_SCALE_STEPS, WOOD_NEARNESS_BINS, WOOD_OPACITY_NODES,
-    SKY_VISIBILITY_RINGS, CROWN_DENSITY_RINGS, SHADOW_DEPTH_STEPS, WOOD_JOINED_START, WOOD_JOINED_END,
+    SKY_VISIBILITY_RINGS, CROWN_DENSITY_RINGS, SHADOW_DEPTH_STEPS, WOOD_JOINED_START, WOOD_JOINED_END, VIEW_LIGHT_ANGLES, VIEW_LIGHT_ROLLS,
     instance_world_from_local, log_decode, placement_matrix, shoot_needle_color, bark_between,
     threshold_code, sphere_error, placement_error, tree_local_point, decode_wood_segment, wood_sections,
 }
@@ -1556,6 +1556,10 @@ struct Surface {
     // (the impostor's trunk, `trunk_band`); the whole width where
     // `s1 ≤ s0` (a zeroed surface's).
     band: vec2<f32>,
+    // The impostor's needles: each light's direct term scaled by the
+    // species' view light scale (`view_light_scale`); false for a zeroed
+    // surface's.
+    light_scaled: bool,
 }
 
 // The part `[s0, s1]` of a cylinder's projected width whose normals face
@@ -1707,49 +1711,111 @@ fn cylinder_lighting(in: pbr_types::PbrInput, axis: vec3<f32>) -> vec4<f32> {
 // `s1 ≤ s0`): Bevy's BRDF at four normals over the band's lit part
 // (`cylinder_normal`).
 fn band_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, band: vec2<f32>) -> vec4<f32> {
+    return surface_lighting(in, cylinder_surface(axis, in.V, band));
+}
+
+// The cylinder along `axis` (any length; zero: upright) seen from `V`, on
+// the band `band` of its width (`Surface::band`).
+fn cylinder_surface(axis: vec3<f32>, V: vec3<f32>, band: vec2<f32>) -> Surface {
     var T = axis;
     if dot(T, T) < 1e-24 {
         T = vec3<f32>(0.0, 1.0, 0.0);
     }
     T = normalize(T);
-    let toward = facing_axis(T, in.V);
+    let toward = facing_axis(T, V);
     var surface: Surface;
     surface.toward = toward;
     surface.side = cross(T, toward);
     surface.is_sphere = false;
     surface.band = band;
-    return surface_lighting(in, surface);
+    return surface;
 }
 
 // Needles spread every way are lit as a sphere: the mean of Bevy's BRDF
 // over its projected disk, from the species' table
 // (`model::shading::SphereLight`).
 fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
+    return surface_lighting(in, sphere_surface(in.V));
+}
+
+// The sphere seen from `V`.
+fn sphere_surface(V: vec3<f32>) -> Surface {
     var surface: Surface;
-    surface.toward = in.V;
+    surface.toward = V;
     surface.is_sphere = true;
-    return surface_lighting(in, surface);
+    return surface;
 }
 
 #ifdef CONIFER_IMPOSTOR
 // A texel's needles lit as shares of a vertical cylinder, one across the
 // view and, for the rest, a sphere (CPU reference:
-// `model::shading::TexelShares::lambert`).
+// `model::shading::TexelShares::lambert`), each light's direct term scaled
+// so that the texels are lit as the needles the views show
+// (`view_light_scale`).
 fn shares_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, across_axis: vec3<f32>, vertical_share: f32, across_share: f32) -> vec4<f32> {
     var color = vec4<f32>(0.0);
+    let no_band = vec2<f32>(0.0);
     if vertical_share > 1.0 / 512.0 {
-        color += vertical_share * cylinder_lighting(in, axis);
+        var surface = cylinder_surface(axis, in.V, no_band);
+        surface.light_scaled = true;
+        color += vertical_share * surface_lighting(in, surface);
     }
     if across_share > 1.0 / 512.0 {
-        color += across_share * cylinder_lighting(in, across_axis);
+        var surface = cylinder_surface(across_axis, in.V, no_band);
+        surface.light_scaled = true;
+        color += across_share * surface_lighting(in, surface);
     }
     let sphere_share = 1.0 - vertical_share - across_share;
     if sphere_share > 1.0 / 512.0 {
-        color += sphere_share * sphere_lighting(in);
+        var surface = sphere_surface(in.V);
+        surface.light_scaled = true;
+        color += sphere_share * surface_lighting(in, surface);
     }
     return color;
 }
+
+// What the impostor's direct light from `to_light` is scaled by, seen
+// from `to_viewer`: the species' table
+// (`model::impostor::ViewLightScale`) at the light's direction in the
+// frame of the impostor view facing the viewer (toward it level, up,
+// right), bilinear in the light's angle from the toward direction and its
+// roll from above, a light from the left taken as its mirror (CPU
+// reference: `model::impostor::ViewLightScale::at`).
+fn view_light_scale(to_light: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
+    let level = vec3<f32>(to_viewer.x, 0.0, to_viewer.z);
+    let l = normalize(to_light);
+    if dot(level, level) < 1e-12 || !(dot(l, l) > 0.5) {
+        return 1.0;
+    }
+    let toward = normalize(level);
+    let right = cross(vec3<f32>(0.0, 1.0, 0.0), toward);
+    let angle = acos(clamp(dot(l, toward), -1.0, 1.0)) * (f32(VIEW_LIGHT_ANGLES - 1u) / PI);
+    let roll = atan2(abs(dot(l, right)), l.y) * (f32(VIEW_LIGHT_ROLLS - 1u) / PI);
+    let a = min(u32(angle), VIEW_LIGHT_ANGLES - 2u);
+    let r = min(u32(roll), VIEW_LIGHT_ROLLS - 2u);
+    let fa = angle - f32(a);
+    let fr = roll - f32(r);
+    let k = a * VIEW_LIGHT_ROLLS + r;
+    let below = mix(view_light_entry(k), view_light_entry(k + 1u), fr);
+    let above = mix(view_light_entry(k + VIEW_LIGHT_ROLLS), view_light_entry(k + VIEW_LIGHT_ROLLS + 1u), fr);
+    return mix(below, above, fa);
+}
+
+fn view_light_entry(k: u32) -> f32 {
+    return species.view_light_scale[k / 4u][k % 4u];
+}
 #endif
+
+// What a surface's direct light from `to_light` is scaled by: the
+// impostor's view light scale for its needles, 1 otherwise.
+fn direct_light_scale(surface: Surface, to_light: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
+#ifdef CONIFER_IMPOSTOR
+    if surface.light_scaled {
+        return view_light_scale(to_light, to_viewer);
+    }
+#endif
+    return 1.0;
+}
 
 // View depth of a world point (directional cascades are chosen by it).
 fn view_depth(position: vec4<f32>) -> f32 {
@@ -1927,7 +1993,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
-        direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow;
+        direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow * direct_light_scale(surface, to_light, V);
     }
     for (var i: u32 = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i = i + 1u) {
         let light_id = clustering::get_clusterable_object_id(i);
@@ -1936,7 +2002,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = spot_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
-        direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow;
+        direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow * direct_light_scale(surface, to_light, V);
     }
     for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
         let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
@@ -1944,7 +2010,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
-        direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
+        direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow * direct_light_scale(surface, to_light, V);
     }
 
     // Bevy's indirect light depends on the normal's angle to the view (its

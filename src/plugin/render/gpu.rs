@@ -304,6 +304,11 @@ pub struct SpeciesParams {
     /// ([`crate::model::impostor::TrunkProfile`]): where the impostor
     /// lights its wood as the round stem.
     pub trunk: [[f32; 4]; crate::model::impostor::CROWN_PROFILE_STEPS],
+    /// What the impostor's direct light is scaled by, by the light's
+    /// direction in the view's frame, angle major, four a row
+    /// ([`crate::model::impostor::ViewLightScale`]; all 1 for an older
+    /// record): its texels lit as the needles its views show.
+    pub view_light_scale: [[f32; 4]; VIEW_LIGHT_SCALE_ROWS],
 }
 
 impl Default for SpeciesParams {
@@ -330,6 +335,10 @@ pub const LINE_SCALE_ROWS: usize = crate::model::calibration::CALIBRATION_STEPS 
 /// Rows of four heights that hold a
 /// [`crate::model::impostor::CrownImpostor::crown_radii`] profile.
 pub const CROWN_RADII_ROWS: usize = crate::model::impostor::CROWN_PROFILE_STEPS / 4;
+
+/// Rows of four scales that hold a
+/// [`crate::model::impostor::ViewLightScale`].
+pub const VIEW_LIGHT_SCALE_ROWS: usize = crate::model::impostor::ViewLightScale::LEN.div_ceil(4);
 
 /// Rows of four angles that hold a [`crate::model::shading::SphereLight`]
 /// table.
@@ -398,6 +407,13 @@ impl SpeciesParams {
         for (row, (centre, radius)) in self.trunk.iter_mut().zip(trunk.centres.iter().zip(trunk.radii)) {
             *row = [centre.x, centre.y, radius, 0.0];
         }
+    }
+
+    /// Sets what the impostor's direct light is scaled by (`None`: every
+    /// scale 1, its texels lit as their shares say).
+    pub fn set_view_light_scale(&mut self, scale: Option<&crate::model::impostor::ViewLightScale>) {
+        let scale = scale.copied().unwrap_or_default();
+        self.view_light_scale = four_a_row(&scale.to_vec());
     }
 
     /// Sets how densely the needles fill the crown
@@ -633,8 +649,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_4768_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 4768);
+    fn species_params_is_5136_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 5136);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`
@@ -654,6 +670,15 @@ mod tests {
         let nodes = crate::model::calibration::WOOD_OPACITY_NODES;
         assert_eq!(nodes, 4, "a row of the wood table is one vec4");
         assert!(include_str!("compact_types.wgsl").contains(&format!("const WOOD_OPACITY_NODES: u32 = {nodes}u;")));
+    }
+
+    /// The shader's view light scale is as long as `model::impostor`'s.
+    #[test]
+    fn the_shader_has_the_view_light_scales_length() {
+        use crate::model::impostor::{VIEW_LIGHT_ANGLES, VIEW_LIGHT_ROLLS};
+        assert_shader_table("VIEW_LIGHT_ANGLES", VIEW_LIGHT_ANGLES, "view_light_scale", super::VIEW_LIGHT_SCALE_ROWS);
+        let types = include_str!("compact_types.wgsl");
+        assert!(types.contains(&format!("const VIEW_LIGHT_ROLLS: u32 = {VIEW_LIGHT_ROLLS}u;")));
     }
 
     /// The shader's crown profile is as long as `model::impostor`'s.

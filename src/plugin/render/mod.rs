@@ -637,6 +637,9 @@ fn extract_compact(
                 entry.params.set_sky_visibility(sky);
             }
         }
+        entry
+            .params
+            .set_view_light_scale(entry.impostor.as_ref().and_then(|i| i.view_light_scale.as_ref()));
         // Without an impostor the wood lines are drawn once, unlayered.
         if let Some(impostor) = &entry.impostor {
             entry.params.set_wood_visibility(&impostor.wood_visibility);
