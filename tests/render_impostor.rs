@@ -1008,9 +1008,11 @@ fn the_impostor_lights_its_trunk_as_a_round_stem() {
 /// scale at the light's direction in the view's frame (CPU reference:
 /// `model::impostor::ViewLightScale::at`): sphere texels under a sun from
 /// the camera and one from the right and above, with a table that grows
-/// with the light's angle from the camera and its roll from above, over
+/// with the light's angle from the camera and (off the poles) its roll
+/// from above, over
 /// the same texels without one (sun alone, no tonemapping), keep the
-/// table's scale there within 3 %.
+/// table's scale at each pixel's own view, weighted by the pixel's light,
+/// within 1 % (measured 0.2 %).
 #[test]
 fn the_impostors_direct_light_is_scaled_by_its_view_light_scale() {
     use bevy_conifer_lod::model::impostor::{VIEW_LIGHT_ANGLES, VIEW_LIGHT_ROLLS, ViewLightScale};
@@ -1018,13 +1020,19 @@ fn the_impostors_direct_light_is_scaled_by_its_view_light_scale() {
     let _turn = common::gpu_turn();
     let mut lit = lit_impostor();
     let (record, baked, crown, sun) = (lit.record.clone(), lit.baked.clone(), lit.crown, lit.sun);
+    // At the first and the last angle every roll is the same direction
+    // (toward the camera, away from it): one scale a row there.
     let mut table = ViewLightScale::default();
     for angle in 0..VIEW_LIGHT_ANGLES {
+        let pole = angle == 0 || angle == VIEW_LIGHT_ANGLES - 1;
         for roll in 0..VIEW_LIGHT_ROLLS {
-            table.scales[angle][roll] = 0.5 + 0.08 * angle as f32 + 0.05 * roll as f32;
+            table.scales[angle][roll] = 0.5 + 0.08 * angle as f32 + if pole { 0.0 } else { 0.05 * roll as f32 };
         }
     }
-    let suns = [("front", Vec3::Z), ("right_above", Vec3::new(1.0, 1.0, 0.0).normalize())];
+    let suns = [
+        ("front", Vec3::Z),
+        ("right_above", Vec3::new(1.0, 1.0, 0.0).normalize()),
+    ];
     let mut drawn = [[0.0f32; 2]; 2];
     for (v, scale) in [None, Some(table)].into_iter().enumerate() {
         let mut impostor = (*baked).clone();
@@ -1045,14 +1053,43 @@ fn the_impostors_direct_light_is_scaled_by_its_view_light_scale() {
         }
         lit.renderer.world_mut().despawn(tree);
     }
-    // The camera looks along −z: the view's frame is the world's.
-    let toward = (lit.eye - crown).normalize();
-    assert!(toward.z > 0.999, "a level camera on +z: {toward}");
+    // Each pixel's view: level toward the camera from where its ray
+    // meets the card, so the table's scale there, weighted by the light
+    // the pixel has without it.
+    let origin = Vec3::new(baked.axis.x, 0.0, baked.axis.y);
+    let phi = (lit.eye.x - origin.x).atan2(lit.eye.z - origin.z);
+    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
+    let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
     for (s, (name, from)) in suns.iter().enumerate() {
-        let (ratio, expected) = (drawn[s][1] / drawn[s][0], table.at(*from));
-        println!("{name}: drawn {:?}, scaled / unscaled {ratio:.4}, table {expected:.4}", drawn[s]);
+        let picture = |v: usize| {
+            image::open(out_dir().join(format!("impostor_view_light_scale_{v}_{name}.png")))
+                .unwrap()
+                .to_rgba8()
+        };
+        let (unscaled, scaled) = (picture(0), picture(1));
+        let (mut sums, mut table_sum) = ([0.0f32; 2], 0.0f32);
+        for (x, y, p) in unscaled.enumerate_pixels() {
+            let q = scaled.get_pixel(x, y);
+            if p.0[3] < 255 || q.0[3] < 255 {
+                continue;
+            }
+            let card = on_quad(x as f32 + 0.5, y as f32 + 0.5, lit.eye, origin, right);
+            let point = origin + right * card.x + Vec3::Y * card.y;
+            let toward = ((lit.eye - point) * Vec3::new(1.0, 0.0, 1.0)).normalize();
+            let side = Vec3::Y.cross(toward);
+            let in_view = Vec3::new(from.dot(side), from.y, from.dot(toward));
+            sums[0] += light(p);
+            sums[1] += light(q);
+            table_sum += light(p) * table.at(in_view);
+        }
+        let (ratio, expected) = (sums[1] / sums[0], table_sum / sums[0]);
+        println!(
+            "{name}: drawn {:?}, scaled / unscaled {ratio:.4}, table {expected:.4} (at the middle {:.4})",
+            drawn[s],
+            table.at(*from)
+        );
         assert!(drawn[s][0] > 0.01, "{name}: lit {:?}", drawn[s]);
-        assert!((ratio / expected - 1.0).abs() < 0.03, "{name}: {ratio} vs {expected}");
+        assert!((ratio / expected - 1.0).abs() < 0.01, "{name}: {ratio} vs {expected}");
     }
 }
 

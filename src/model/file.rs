@@ -1950,9 +1950,15 @@ mod tests {
             decode_prototype_record(&file_of_version(15, &body))
         };
         let values: Vec<f32> = (0..ViewLightScale::LEN).map(|k| 0.6 + 0.01 * k as f32).collect();
-        let read = with(Some(values.clone())).unwrap().impostor.and_then(|i| i.view_light_scale);
+        let read = with(Some(values.clone()))
+            .unwrap()
+            .impostor
+            .and_then(|i| i.view_light_scale);
         assert_eq!(read.map(|s| s.to_vec()), Some(values.clone()));
-        assert_eq!(read.unwrap().scales[1][0], values[crate::model::impostor::VIEW_LIGHT_ROLLS]);
+        assert_eq!(
+            read.unwrap().scales[1][0],
+            values[crate::model::impostor::VIEW_LIGHT_ROLLS]
+        );
         assert_eq!(with(None).unwrap().impostor.and_then(|i| i.view_light_scale), None);
         let mut bad = Vec::new();
         for (k, value) in [(0, f32::NAN), (7, 0.4), (90, 2.5)] {

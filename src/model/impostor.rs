@@ -1263,13 +1263,14 @@ impl CrownImpostor {
     /// toward the camera (a sample the raster's round end reaches and the
     /// cap does not is left out); and per texel the shares of the needles
     /// its samples show, summed, with their count.
-    fn seen_samples(&self, view: u32, wood: &[WoodSegment], needles: &[&Needle]) -> SeenSamples {
+    pub fn seen_samples(&self, view: u32, wood: &[WoodSegment], needles: &[&Needle]) -> SeenSamples {
         let (right, toward) = (self.view_right(view), self.view_toward(view));
         let per_texel = VIEW_LAMBERT_SAMPLES as usize;
         let nearest = self.nearest_pieces(view, wood, needles, [VIEW_LAMBERT_SAMPLES; 2]);
         let (centre, top) = (self.axis_point(), self.top());
         let in_picture = |p: Vec3| Vec2::new((p - centre).dot(right), p.y);
         let mut normals = Vec::new();
+        let mut sample_texels = Vec::new();
         let mut shown = vec![([0.0f64; 2], 0u32); (self.columns * self.rows) as usize];
         for (index, piece) in nearest.needle_samples_at() {
             let needle = needles[piece];
@@ -1307,13 +1308,18 @@ impl CrownImpostor {
                 if unit.dot(toward) < 0.0 { -unit } else { unit }
             };
             normals.push(normal);
+            sample_texels.push(((row / per_texel) * self.columns as usize + column / per_texel) as u32);
             let shares = texel_shares(Vec3::new(axis.dot(right), axis.y, axis.dot(toward)));
             let texel = &mut shown[(row / per_texel) * self.columns as usize + column / per_texel];
             texel.0[0] += f64::from(shares.vertical);
             texel.0[1] += f64::from(shares.across);
             texel.1 += 1;
         }
-        SeenSamples { normals, shown }
+        SeenSamples {
+            normals,
+            texels: sample_texels,
+            shown,
+        }
     }
 
     /// How the needles of view `k` are lit by a light from `to_light`,
@@ -1347,7 +1353,7 @@ impl CrownImpostor {
             all += f64::from(projected * cylinder_lambert(axis, toward, to_light));
             area += f64::from(projected);
         }
-        let SeenSamples { normals, shown } = self.seen_samples(view, wood, &needles);
+        let SeenSamples { normals, shown, .. } = self.seen_samples(view, wood, &needles);
         let seen: f64 = normals.iter().map(|n| f64::from(n.dot(to_light).max(0.0))).sum();
         let samples = normals.len() as u64;
         // The impostor's texels, by the coverage their needles give them.
@@ -1817,12 +1823,16 @@ pub struct ViewLambert {
 }
 
 /// What a view of the crown shows, sample by sample
-/// (`CrownImpostor::seen_samples`).
-struct SeenSamples {
+/// ([`CrownImpostor::seen_samples`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SeenSamples {
     /// Each sample's normal on the needle it shows (world frame).
-    normals: Vec<Vec3>,
-    /// Per texel: its samples' needles' shares summed, and their count.
-    shown: Vec<([f64; 2], u32)>,
+    pub normals: Vec<Vec3>,
+    /// Each sample's texel in the view (`row × columns + column`).
+    pub texels: Vec<u32>,
+    /// Per texel: the shares ([`texel_shares`]) of the needles its
+    /// samples show, summed (vertical, across), and their count.
+    pub shown: Vec<([f64; 2], u32)>,
 }
 
 /// Steps of a [`ViewLightScale`] in the angle between the light and the
@@ -1861,7 +1871,9 @@ pub const VIEW_LIGHT_SCALE_RANGE: [f32; 2] = [0.5, 2.0];
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ViewLightScale {
     /// `scales[angle][roll]`: the scale at
-    /// [`ViewLightScale::direction`]`(angle, roll)`.
+    /// [`ViewLightScale::direction`]`(angle, roll)`. At the first and the
+    /// last angle every roll is one direction (toward the camera, away
+    /// from it), and the measure gives each the same scale.
     pub scales: [[f32; VIEW_LIGHT_ROLLS]; VIEW_LIGHT_ANGLES],
 }
 
@@ -2426,7 +2438,10 @@ mod tests {
         for (angle, roll) in [(0, 0), (3, 0), (3, 3), (6, 2), (12, 5)] {
             let direction = ViewLightScale::direction(angle, roll);
             let (stored, expected) = (scale.scales[angle][roll], measured(direction));
-            assert!((stored - expected).abs() < 1e-4, "{angle}, {roll}: {stored} vs {expected}");
+            assert!(
+                (stored - expected).abs() < 1e-4,
+                "{angle}, {roll}: {stored} vs {expected}"
+            );
             assert!((scale.at(direction) - stored).abs() < 1e-5, "{angle}, {roll}");
         }
         // From the front the needles in front are lit less than the texels

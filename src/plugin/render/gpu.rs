@@ -676,7 +676,12 @@ mod tests {
     #[test]
     fn the_shader_has_the_view_light_scales_length() {
         use crate::model::impostor::{VIEW_LIGHT_ANGLES, VIEW_LIGHT_ROLLS};
-        assert_shader_table("VIEW_LIGHT_ANGLES", VIEW_LIGHT_ANGLES, "view_light_scale", super::VIEW_LIGHT_SCALE_ROWS);
+        assert_shader_table(
+            "VIEW_LIGHT_ANGLES",
+            VIEW_LIGHT_ANGLES,
+            "view_light_scale",
+            super::VIEW_LIGHT_SCALE_ROWS,
+        );
         let types = include_str!("compact_types.wgsl");
         assert!(types.contains(&format!("const VIEW_LIGHT_ROLLS: u32 = {VIEW_LIGHT_ROLLS}u;")));
     }
