@@ -472,24 +472,37 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         "{shares:?}"
     );
     assert!(shares.iter().all(|s| (0.0..=s[0]).contains(&s[1])), "{shares:?}");
-    // A format 13 copy (its last 25 bytes, the mix, cut; the header
-    // rewritten) reads with the area mean and upgrades to the same mix.
-    let old13 = dir.path().join("format13.conifer");
+    // The bake measured its impostor's view light scale.
+    let scale = inspect["impostor"]["view_light_scale"].clone();
+    assert!(scale.is_array(), "the bake measures the view light scale: {scale}");
+    // Format 14 and 13 copies (the last bytes cut: the scale, `Some`, its
+    // length and 91 f32s, then the mix's 25; the header rewritten) read
+    // without them and upgrade to the bake's.
+    let scale_bytes = 2 + 4 * bevy_conifer_lod::model::impostor::ViewLightScale::LEN;
     let bytes = std::fs::read(&shoots).unwrap();
-    let body = &bytes[bevy_conifer_lod::model::file::HEADER_BYTES..bytes.len() - 25];
-    let mut v13 = bytes[..8].to_vec();
-    v13.extend_from_slice(&13u32.to_le_bytes());
-    v13.extend_from_slice(&(body.len() as u64).to_le_bytes());
-    v13.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
-    v13.extend_from_slice(body);
-    std::fs::write(&old13, &v13).unwrap();
-    let read13 = json(&conifer(&["inspect", old13.to_str().unwrap(), "--json"]));
-    assert!(read13["impostor"]["seen_needles"].is_null());
-    let output = conifer(&["upgrade", old13.to_str().unwrap()]);
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
-    let upgraded13 = json(&conifer(&["inspect", old13.to_str().unwrap(), "--json"]));
-    assert_eq!(upgraded13["impostor"]["seen_needles"], seen);
-    assert_eq!(upgraded13["far_needle_color"], inspect["far_needle_color"]);
+    let copy = |version: u32, cut: usize| {
+        let old = dir.path().join(format!("format{version}.conifer"));
+        let body = &bytes[bevy_conifer_lod::model::file::HEADER_BYTES..bytes.len() - cut];
+        let mut file = bytes[..8].to_vec();
+        file.extend_from_slice(&version.to_le_bytes());
+        file.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        file.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
+        file.extend_from_slice(body);
+        std::fs::write(&old, &file).unwrap();
+        old
+    };
+    for (version, cut) in [(14, scale_bytes), (13, scale_bytes + 25)] {
+        let old = copy(version, cut);
+        let read = json(&conifer(&["inspect", old.to_str().unwrap(), "--json"]));
+        assert!(read["impostor"]["view_light_scale"].is_null(), "format {version}");
+        assert_eq!(read["impostor"]["seen_needles"].is_null(), version < 14);
+        let output = conifer(&["upgrade", old.to_str().unwrap()]);
+        assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+        let upgraded = json(&conifer(&["inspect", old.to_str().unwrap(), "--json"]));
+        assert_eq!(upgraded["impostor"]["seen_needles"], seen, "format {version}");
+        assert_eq!(upgraded["impostor"]["view_light_scale"], scale, "format {version}");
+        assert_eq!(upgraded["far_needle_color"], inspect["far_needle_color"]);
+    }
 
     // The flat generator: every group its own prototype.
     let flat = dir.path().join("flat.conifer");
