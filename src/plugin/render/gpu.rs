@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 4,768 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 5,136 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
