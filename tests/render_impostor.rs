@@ -449,6 +449,15 @@ fn impostor_camera(world: &mut World, target: &Handle<Image>, crown: Vec3, texel
     (camera, eye)
 }
 
+/// The impostor card of a crown whose axis is `axis` (tree-local x, z)
+/// turned toward `eye`: its foot on the axis at height 0 and its
+/// horizontal direction (what [`on_quad`] takes).
+fn card_frame(axis: Vec2, eye: Vec3) -> (Vec3, Vec3) {
+    let origin = Vec3::new(axis.x, 0.0, axis.y);
+    let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
+    (origin, Vec3::new(phi.cos(), 0.0, -phi.sin()))
+}
+
 /// Where the ray through the centre of pixel `(x, y)` of a `size²`
 /// picture from a camera at `eye` looking along `-z` (vertical field of
 /// view `FOV_DEG`) meets the vertical plane through `origin` whose
@@ -948,9 +957,7 @@ fn the_impostor_lights_its_trunk_as_a_round_stem() {
     }
     let picture = renderer.capture(&target, 8).unwrap();
     picture.save(out_dir().join("impostor_trunk_side_sun.png")).unwrap();
-    let origin = Vec3::new(impostor.axis.x, 0.0, impostor.axis.y);
-    let phi = (eye.x - origin.x).atan2(eye.z - origin.z);
-    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
+    let (origin, right) = card_frame(impostor.axis, eye);
     let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
     let (mut error, mut compared, mut darkest, mut brightest) = (0.0f32, 0.0f32, f32::MAX, 0.0f32);
     for y in 0..SIZE {
@@ -1056,9 +1063,7 @@ fn the_impostors_direct_light_is_scaled_by_its_view_light_scale() {
     // Each pixel's view: level toward the camera from where its ray
     // meets the card, so the table's scale there, weighted by the light
     // the pixel has without it.
-    let origin = Vec3::new(baked.axis.x, 0.0, baked.axis.y);
-    let phi = (lit.eye.x - origin.x).atan2(lit.eye.z - origin.z);
-    let right = Vec3::new(phi.cos(), 0.0, -phi.sin());
+    let (origin, right) = card_frame(baked.axis, lit.eye);
     let light = |p: &image::Rgba<u8>| common::linear(p.0[0]) + common::linear(p.0[1]) + common::linear(p.0[2]);
     for (s, (name, from)) in suns.iter().enumerate() {
         let picture = |v: usize| {
