@@ -1556,10 +1556,34 @@ struct Surface {
     // (the impostor's trunk, `trunk_band`); the whole width where
     // `s1 ≤ s0` (a zeroed surface's).
     band: vec2<f32>,
+}
+
+// The surfaces a pixel sees at once, each with its share of the pixel's
+// colour (an impostor texel's needles: a vertical cylinder, one across the
+// view and a sphere; a merged line's: its chord's cylinder and a sphere,
+// whose share may be negative; anything else one surface), lit in one pass
+// over the lights (`mixed_lighting`): each light's shadow and view light
+// scale, the clustered lights' lookup and the ambient light are taken once
+// for all of them. A share of 0 skips its surface.
+struct SurfaceMix {
+    first: Surface,
+    second: Surface,
+    third: Surface,
+    shares: vec3<f32>,
     // The impostor's needles: each light's direct term scaled by the
-    // species' view light scale (`view_light_scale`); false for a zeroed
-    // surface's.
+    // species' view light scale (`view_light_scale`).
     light_scaled: bool,
+}
+
+// `surface` alone, unscaled.
+fn single_surface(surface: Surface) -> SurfaceMix {
+    var surfaces: SurfaceMix;
+    surfaces.first = surface;
+    surfaces.second = surface;
+    surfaces.third = surface;
+    surfaces.shares = vec3<f32>(1.0, 0.0, 0.0);
+    surfaces.light_scaled = false;
+    return surfaces;
 }
 
 // The part `[s0, s1]` of a cylinder's projected width whose normals face
@@ -1731,14 +1755,9 @@ fn cylinder_surface(axis: vec3<f32>, V: vec3<f32>, band: vec2<f32>) -> Surface {
     return surface;
 }
 
-// Needles spread every way are lit as a sphere: the mean of Bevy's BRDF
-// over its projected disk, from the species' table
-// (`model::shading::SphereLight`).
-fn sphere_lighting(in: pbr_types::PbrInput) -> vec4<f32> {
-    return surface_lighting(in, sphere_surface(in.V));
-}
-
-// The sphere seen from `V`.
+// The sphere seen from `V`: needles spread every way, lit as the mean of
+// Bevy's BRDF over its projected disk, from the species' table
+// (`sphere_light`, `model::shading::SphereLight`).
 fn sphere_surface(V: vec3<f32>) -> Surface {
     var surface: Surface;
     surface.toward = V;
@@ -1753,25 +1772,15 @@ fn sphere_surface(V: vec3<f32>) -> Surface {
 // so that the texels are lit as the needles the views show
 // (`view_light_scale`).
 fn shares_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, across_axis: vec3<f32>, vertical_share: f32, across_share: f32) -> vec4<f32> {
-    var color = vec4<f32>(0.0);
     let no_band = vec2<f32>(0.0);
-    if vertical_share > 1.0 / 512.0 {
-        var surface = cylinder_surface(axis, in.V, no_band);
-        surface.light_scaled = true;
-        color += vertical_share * surface_lighting(in, surface);
-    }
-    if across_share > 1.0 / 512.0 {
-        var surface = cylinder_surface(across_axis, in.V, no_band);
-        surface.light_scaled = true;
-        color += across_share * surface_lighting(in, surface);
-    }
-    let sphere_share = 1.0 - vertical_share - across_share;
-    if sphere_share > 1.0 / 512.0 {
-        var surface = sphere_surface(in.V);
-        surface.light_scaled = true;
-        color += sphere_share * surface_lighting(in, surface);
-    }
-    return color;
+    var surfaces: SurfaceMix;
+    surfaces.first = cylinder_surface(axis, in.V, no_band);
+    surfaces.second = cylinder_surface(across_axis, in.V, no_band);
+    surfaces.third = sphere_surface(in.V);
+    let shares = vec3<f32>(vertical_share, across_share, 1.0 - vertical_share - across_share);
+    surfaces.shares = select(vec3<f32>(0.0), shares, shares > vec3<f32>(1.0 / 512.0));
+    surfaces.light_scaled = true;
+    return mixed_lighting(in, surfaces);
 }
 
 // What the impostor's direct light from `to_light` is scaled by, seen
@@ -1805,17 +1814,6 @@ fn view_light_entry(k: u32) -> f32 {
     return species.view_light_scale[k / 4u][k % 4u];
 }
 #endif
-
-// What a surface's direct light from `to_light` is scaled by: the
-// impostor's view light scale for its needles, 1 otherwise.
-fn direct_light_scale(surface: Surface, to_light: vec3<f32>, to_viewer: vec3<f32>) -> f32 {
-#ifdef CONIFER_IMPOSTOR
-    if surface.light_scaled {
-        return view_light_scale(to_light, to_viewer);
-    }
-#endif
-    return 1.0;
-}
 
 // View depth of a world point (directional cascades are chosen by it).
 fn view_depth(position: vec4<f32>) -> f32 {
@@ -1961,12 +1959,24 @@ fn spot_shadow(light_id: u32, position: vec4<f32>, toward: vec3<f32>, frag: vec2
 #endif
 }
 
-// The surface's radiance averaged over what the pixel sees of it; each
-// light's shadow is fetched once, at the normal facing the viewer (an
-// impostor texel's is the mean over its samples through the crown).
+// One surface's radiance under every light, ambient and environment
+// (`mixed_lighting` of it alone).
 fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
+    return mixed_lighting(in, single_surface(surface));
+}
+
+// The surfaces' radiance under every light, ambient and environment,
+// summed by their shares (`SurfaceMix`). Each light's shadow is fetched
+// once, at the first surface with a share (its `toward` the normal the
+// shadow's bias leans on; an impostor texel's is the mean over its samples
+// through the crown), and its view light scale taken once.
+fn mixed_lighting(in: pbr_types::PbrInput, mixed: SurfaceMix) -> vec4<f32> {
+    var surfaces = mixed;
     let V = in.V;
-    let toward = surface.toward;
+    var toward = surfaces.first.toward;
+    if surfaces.shares.x == 0.0 {
+        toward = select(surfaces.third.toward, surfaces.second.toward, surfaces.shares.y != 0.0);
+    }
 
     let base = in.material.base_color.rgb;
     let perceptual_roughness = in.material.perceptual_roughness;
@@ -1993,7 +2003,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = point_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
-        direct += surface_light(surface, &input, LIGHT_POINT, light_id, to_light) * shadow * direct_light_scale(surface, to_light, V);
+        direct += mixed_light(&surfaces, &input, LIGHT_POINT, light_id, to_light) * shadow;
     }
     for (var i: u32 = ranges.first_spot_light_index_offset; i < ranges.first_reflection_probe_index_offset; i = i + 1u) {
         let light_id = clustering::get_clusterable_object_id(i);
@@ -2002,7 +2012,7 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::clustered_lights.data[light_id].flags & mesh_view_types::POINT_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = spot_shadow(light_id, in.world_position, toward, in.frag_coord.xy);
         }
-        direct += surface_light(surface, &input, LIGHT_SPOT, light_id, to_light) * shadow * direct_light_scale(surface, to_light, V);
+        direct += mixed_light(&surfaces, &input, LIGHT_SPOT, light_id, to_light) * shadow;
     }
     for (var i: u32 = 0u; i < view_bindings::lights.n_directional_lights; i = i + 1u) {
         let to_light = view_bindings::lights.directional_lights[i].direction_to_light;
@@ -2010,42 +2020,128 @@ fn surface_lighting(in: pbr_types::PbrInput, surface: Surface) -> vec4<f32> {
         if receiver && (view_bindings::lights.directional_lights[i].flags & mesh_view_types::DIRECTIONAL_LIGHT_FLAGS_SHADOWS_ENABLED_BIT) != 0u {
             shadow = directional_shadow(i, in.world_position, toward, view_z, in.frag_coord.xy);
         }
-        direct += surface_light(surface, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow * direct_light_scale(surface, to_light, V);
+        direct += mixed_light(&surfaces, &input, LIGHT_DIRECTIONAL, i, to_light) * shadow;
     }
 
     // Bevy's indirect light depends on the normal's angle to the view (its
     // split-sum Fresnel grows toward a silhouette): averaged over the
     // cylinder's width or the sphere's disk at four view cosines. Bevy's
-    // ambient light reads only the cosine; the environment map is taken at
-    // the normal facing the viewer.
+    // ambient light reads only the cosine, so the surfaces over their whole
+    // width share its four calls (a cylinder's and a sphere's nodes lie at
+    // the same cosines); a band of a cylinder takes its own. The
+    // environment map is taken at each surface's normal facing the viewer.
     let F0 = pbr_functions::calculate_F0(base, 0.0, in.material.reflectance);
     var indirect = vec3<f32>(0.0);
-    let band = surface.band;
+    var node_weights = vec4<f32>(0.0);
+    indirect += surface_indirect(in, surfaces.first, surfaces.shares.x, input.diffuse_color, F0, &node_weights);
+    indirect += surface_indirect(in, surfaces.second, surfaces.shares.y, input.diffuse_color, F0, &node_weights);
+    indirect += surface_indirect(in, surfaces.third, surfaces.shares.z, input.diffuse_color, F0, &node_weights);
     for (var k = 0u; k < 4u; k = k + 1u) {
-        var node = indirect_node(k, surface.is_sphere);
-        if band.y > band.x {
-            // A band of a cylinder: four Gauss–Legendre nodes across it.
-            let s = 0.5 * (band.x + band.y) + 0.5 * (band.y - band.x) * across_offset(k);
-            node = vec2<f32>(sqrt(max(1.0 - s * s, 1e-8)), 0.5 * across_weight(k));
+        if node_weights[k] != 0.0 {
+            indirect += node_weights[k] * ambient::ambient_light(
+                in.world_position,
+                V,
+                V,
+                indirect_node(k, false).x,
+                input.diffuse_color,
+                F0,
+                perceptual_roughness,
+                in.diffuse_occlusion,
+            );
         }
-        indirect += node.y * ambient::ambient_light(
-            in.world_position,
-            toward,
-            V,
-            node.x,
-            input.diffuse_color,
-            F0,
-            perceptual_roughness,
-            in.diffuse_occlusion,
-        );
     }
-    set_normal(&input, toward);
 #ifdef ENVIRONMENT_MAP
-    let environment = environment_map::environment_map_light(&input, &ranges, false);
-    indirect += environment.diffuse * in.diffuse_occlusion + environment.specular * in.specular_occlusion;
+    indirect += surface_environment(in, surfaces.first, surfaces.shares.x, &input, &ranges);
+    indirect += surface_environment(in, surfaces.second, surfaces.shares.y, &input, &ranges);
+    indirect += surface_environment(in, surfaces.third, surfaces.shares.z, &input, &ranges);
 #endif
     return vec4<f32>(view_bindings::view.exposure * (direct + indirect), in.material.base_color.a);
 }
+
+// The surfaces' direct radiance under one light (`surface_light`), summed
+// by their shares, times the view light scale where the mix takes it.
+fn mixed_light(
+    surfaces: ptr<function, SurfaceMix>,
+    input: ptr<function, lighting::LightingInput>,
+    kind: u32,
+    light_id: u32,
+    to_light: vec3<f32>,
+) -> vec3<f32> {
+    let shares = (*surfaces).shares;
+    var sum = vec3<f32>(0.0);
+    if shares.x != 0.0 {
+        sum += shares.x * surface_light((*surfaces).first, input, kind, light_id, to_light);
+    }
+    if shares.y != 0.0 {
+        sum += shares.y * surface_light((*surfaces).second, input, kind, light_id, to_light);
+    }
+    if shares.z != 0.0 {
+        sum += shares.z * surface_light((*surfaces).third, input, kind, light_id, to_light);
+    }
+#ifdef CONIFER_IMPOSTOR
+    if (*surfaces).light_scaled {
+        sum *= view_light_scale(to_light, (*input).V);
+    }
+#endif
+    return sum;
+}
+
+// The ambient light on `surface` times its `share`: a band of a cylinder
+// at its own four nodes; over a whole width or disk the nodes' weights
+// are added to `node_weights`, at the cosines every surface shares
+// (`indirect_node`), for one call each.
+fn surface_indirect(
+    in: pbr_types::PbrInput,
+    surface: Surface,
+    share: f32,
+    diffuse_color: vec3<f32>,
+    F0: vec3<f32>,
+    node_weights: ptr<function, vec4<f32>>,
+) -> vec3<f32> {
+    var indirect = vec3<f32>(0.0);
+    if share == 0.0 {
+        return indirect;
+    }
+    let band = surface.band;
+    for (var k = 0u; k < 4u; k = k + 1u) {
+        if band.y > band.x {
+            // A band of a cylinder: four Gauss–Legendre nodes across it.
+            let s = 0.5 * (band.x + band.y) + 0.5 * (band.y - band.x) * across_offset(k);
+            indirect += share * 0.5 * across_weight(k) * ambient::ambient_light(
+                in.world_position,
+                in.V,
+                in.V,
+                sqrt(max(1.0 - s * s, 1e-8)),
+                diffuse_color,
+                F0,
+                in.material.perceptual_roughness,
+                in.diffuse_occlusion,
+            );
+        } else {
+            (*node_weights)[k] += share * indirect_node(k, surface.is_sphere).y;
+        }
+    }
+    return indirect;
+}
+
+#ifdef ENVIRONMENT_MAP
+// The environment map's light on `surface` at its normal facing the
+// viewer, times its `share`.
+fn surface_environment(
+    in: pbr_types::PbrInput,
+    surface: Surface,
+    share: f32,
+    input: ptr<function, lighting::LightingInput>,
+    ranges: ptr<function, clustering::ClusterableObjectIndexRanges>,
+) -> vec3<f32> {
+    if share == 0.0 {
+        return vec3<f32>(0.0);
+    }
+    set_normal(input, surface.toward);
+    let environment = environment_map::environment_map_light(input, ranges, false);
+    return share * (environment.diffuse * in.diffuse_occlusion + environment.specular * in.specular_occlusion);
+}
+#endif
 #endif
 #endif
 
@@ -2540,17 +2636,20 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     }
     color.a = pbr_input.material.base_color.a;
 #else ifdef CONIFER_LINES
-    var color = cylinder_lighting(pbr_input, axis);
 #ifdef CONIFER_BUNDLE
     // A merged line's needles spread about its chord: its alignment's share
-    // of the chord's cylinder, the rest lit as a sphere (CPU reference:
-    // `model::shading::bundle_lambert`).
+    // of the chord's cylinder, the rest lit as a sphere, in one pass over
+    // the lights (CPU reference: `model::shading::bundle_lambert`).
+    var surfaces = single_surface(cylinder_surface(axis, pbr_input.V, vec2<f32>(0.0)));
     let cylinder_share = 1.0 - BUNDLE_SLOPE * (1.0 - in.alignment);
     if cylinder_share < 1.0 - 1.0 / 512.0 {
-        let alpha = color.a;
-        color = max(cylinder_share * color + (1.0 - cylinder_share) * sphere_lighting(pbr_input), vec4<f32>(0.0));
-        color.a = alpha;
+        surfaces.second = sphere_surface(pbr_input.V);
+        surfaces.shares = vec3<f32>(cylinder_share, 1.0 - cylinder_share, 0.0);
     }
+    var color = mixed_lighting(pbr_input, surfaces);
+    color = vec4<f32>(max(color.rgb, vec3<f32>(0.0)), color.a);
+#else
+    var color = cylinder_lighting(pbr_input, axis);
 #endif
 #else
     var color = pbr_functions::apply_pbr_lighting(pbr_input);
