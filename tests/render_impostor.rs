@@ -1426,3 +1426,78 @@ fn sky_occlusion_dims_the_ambient_light_as_the_cpu_reference_does() {
     );
     assert!(error < 0.015, "drawn vs the CPU reference: {error}");
 }
+
+/// A camera with an environment map (Bevy's `ENVIRONMENT_MAP` shader
+/// path, which every surface of the plugin's shader takes at its normal
+/// facing the viewer) draws the spruce's lines and its impostor as it
+/// draws them without one, lit more: the same pixels covered, each part
+/// brighter by the map's light.
+#[test]
+fn an_environment_map_lights_the_lines_and_the_impostor() {
+    let _turn = common::gpu_turn();
+    let LitSpruce {
+        mut renderer,
+        target,
+        handle,
+        crown,
+        texel,
+        ..
+    } = LitSpruce::new();
+    let world = renderer.world_mut();
+    let camera = common::background_camera(world, &target);
+    world.entity_mut(camera).insert(Msaa::Off);
+    world.resource_mut::<CompactReadback>().enabled = true;
+    let environment = {
+        let mut images = world.resource_mut::<Assets<Image>>();
+        EnvironmentMapLight {
+            intensity: 3000.0,
+            ..EnvironmentMapLight::solid_color(&mut images, Color::WHITE)
+        }
+    };
+    for (texels, part) in [(0.5 * FADE_START, "lines"), (1.5 * FADE_END, "impostor")] {
+        let distance = texels * texel / error_per_metre();
+        *renderer.world_mut().get_mut::<Transform>(camera).unwrap() =
+            Transform::from_translation(crown + Vec3::Z * distance).looking_at(crown, Vec3::Y);
+        renderer.world_mut().entity_mut(camera).remove::<EnvironmentMapLight>();
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+            renderer.update().unwrap();
+        }
+        let plain = renderer.capture(&target, HeadlessRenderer::SETTLE_FRAMES + 2).unwrap();
+        let view = common::camera_readback(renderer.world(), handle.id());
+        let drawn_lines: u32 = [PartKind::OriginalLines, PartKind::MergedLines]
+            .into_iter()
+            .map(|kind| view.tree_draw(kind, 0)[0])
+            .sum();
+        if part == "lines" {
+            assert!(drawn_lines > 0, "the spruce is drawn in lines");
+        } else {
+            assert_eq!(
+                view.tree_draw(PartKind::Impostor, 0)[..2],
+                [6, 1],
+                "the spruce is its impostor"
+            );
+        }
+        renderer.world_mut().entity_mut(camera).insert(environment.clone());
+        for _ in 0..HeadlessRenderer::SETTLE_FRAMES + 2 {
+            renderer.update().unwrap();
+        }
+        let lit = renderer.capture(&target, HeadlessRenderer::SETTLE_FRAMES + 2).unwrap();
+        plain
+            .save(out_dir().join(format!("environment_map_{part}_without.png")))
+            .unwrap();
+        lit.save(out_dir().join(format!("environment_map_{part}_with.png")))
+            .unwrap();
+        let (covered_plain, covered_lit) = (common::covered_count(&plain), common::covered_count(&lit));
+        let (grey_plain, grey_lit) = (common::covered_grey(&plain), common::covered_grey(&lit));
+        println!("{part}: covered {covered_plain} / {covered_lit} pixels, grey {grey_plain:.1} / {grey_lit:.1}");
+        assert!(covered_plain > 200, "{part}: {covered_plain} pixels");
+        assert!(
+            (covered_lit as f32 - covered_plain as f32).abs() <= 0.02 * covered_plain as f32,
+            "{part}: the map changes what is covered: {covered_plain} vs {covered_lit}"
+        );
+        assert!(
+            grey_lit > grey_plain + 3.0,
+            "{part}: not lit by the map: {grey_plain} vs {grey_lit}"
+        );
+    }
+}
