@@ -11,7 +11,7 @@ mod common;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate_prototypes};
 use bevy_conifer_lod::model::compact::{
-    CompactSpecies, PLACED_BANDS, PlacedDraw, budget_error, budget_expands, shader_threshold_code,
+    CompactSpecies, PLACED_BANDS, PlacedDraw, budget_error, budget_expands, depth_bucket, shader_threshold_code,
 };
 use bevy_conifer_lod::model::{BakeOptions, PrototypeRecord, bake_prototypes};
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
@@ -372,6 +372,125 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
     assert_eq!(expanded, vec![nearest as u32]);
     assert!(!impostor_alone[nearest], "the nearest tree keeps its lines");
     assert!(impostor_alone[middle], "the tree past the budget is its impostor");
+}
+
+/// A camera draws each expanded placement's lines on their own, the
+/// farthest first (by depth bucket of its prototype's sphere centre,
+/// `model::compact::back_to_front`): blended lines drawn a prototype at a
+/// time mixed a crown's whole depth in a pixel. Three trees 6, 20 and 50 m
+/// away: every entry with lines of a part is drawn once in that part's
+/// block, with the lines its own code takes (`prototype_prefixes`) from
+/// the order its draw's flags name, and no draw is in a nearer bucket than
+/// one drawn after it (one bucket's slack for the GPU's rounding).
+#[test]
+fn a_camera_draws_each_placements_lines_back_to_front() {
+    let _turn = common::gpu_turn();
+    let mut scene = Scene::new();
+    let world = scene.renderer.world_mut();
+    world.resource_mut::<CompactReadback>().enabled = true;
+    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+    scene.look_from(6.0, 45.0);
+    let placed = scene.placed.clone();
+    let compact = scene.compact(&placed);
+    let transforms = three_trees();
+    let view = scene.read_back(&placed, &transforms, "back_to_front", true);
+    let camera = scene
+        .renderer
+        .world()
+        .get::<Transform>(scene.camera)
+        .unwrap()
+        .translation;
+    // Instance slots to trees: the spatial error grows with distance.
+    let mut slots: Vec<usize> = (0..view.lods.len()).collect();
+    slots.sort_by(|&a, &b| view.tree_lod(a).1.total_cmp(&view.tree_lod(b).1));
+    let mut nearest_first = transforms;
+    nearest_first.sort_by(|a, b| {
+        a.translation
+            .distance(camera)
+            .total_cmp(&b.translation.distance(camera))
+    });
+    let mut tree_transform = [Transform::IDENTITY; 3];
+    for (&slot, transform) in slots.iter().zip(nearest_first) {
+        tree_transform[slot] = transform;
+    }
+    let entries = &view.entries;
+    assert_eq!(expanded_trees(&view).len(), 3, "every tree expands");
+    let per_part = view.ordered_draws.len() / 2;
+    assert!(
+        per_part >= entries.len(),
+        "{per_part} draws a part for {} entries",
+        entries.len()
+    );
+    let line_vertices = view.line_vertices;
+    let mut drawn_lines = [0u64; 2];
+    for (part, drawn) in drawn_lines.iter_mut().enumerate() {
+        let block = &view.ordered_draws[part * per_part..(part + 1) * per_part];
+        let mut seen = vec![false; entries.len()];
+        let mut nearest_bucket = u32::MAX;
+        let mut buckets = Vec::new();
+        for draw in block.iter().filter(|d| d[0] > 0) {
+            let [vertices, instances, first_vertex, slot] = *draw;
+            assert_eq!(instances, 1);
+            let slot = slot as usize;
+            assert!(slot < entries.len() && !seen[slot], "entry {slot} drawn once");
+            seen[slot] = true;
+            let [tree, word] = entries[slot];
+            let placement = &compact.placements[(word & 0xffff) as usize];
+            let k = placement.prototype as usize;
+            let prototype = &compact.prototypes[k];
+            let own = compact.prototype_prefixes(k, (word >> 16) as u16);
+            let (lines, first) = match part {
+                0 if tree >> 31 == 1 => (own.after_prisms, prototype.needles[0] + own.prisms),
+                0 => (own.original_by_parent, prototype.original_lines[0]),
+                // The GPU's line orders: the original lines', then the
+                // merged lines' by own code.
+                _ if tree >> 30 & 1 == 1 => (
+                    own.merged_by_own,
+                    compact.original_lines.len() as u32 + prototype.merged_by_own,
+                ),
+                _ => (own.merged_lines, prototype.merged_lines[0]),
+            };
+            assert_eq!(
+                [vertices, first_vertex],
+                [lines, first].map(|n| n * line_vertices),
+                "part {part}"
+            );
+            *drawn += u64::from(lines);
+            let center = prototype.sphere.placed(&placement.transform).center;
+            let world = tree_transform[(tree & 0x3fff_ffff) as usize].transform_point(center);
+            let bucket = depth_bucket(world.distance(camera));
+            assert!(
+                bucket <= nearest_bucket.saturating_add(1),
+                "part {part}: bucket {bucket} drawn after bucket {nearest_bucket}"
+            );
+            nearest_bucket = nearest_bucket.min(bucket);
+            buckets.push(bucket);
+        }
+        // Every entry with lines of this part is drawn.
+        for (slot, &[tree, word]) in entries.iter().enumerate() {
+            let placement = &compact.placements[(word & 0xffff) as usize];
+            let own = compact.prototype_prefixes(placement.prototype as usize, (word >> 16) as u16);
+            let lines = match part {
+                0 if tree >> 31 == 1 => own.after_prisms,
+                0 => own.original_by_parent,
+                _ if tree >> 30 & 1 == 1 => own.merged_by_own,
+                _ => own.merged_lines,
+            };
+            assert_eq!(seen[slot], lines > 0, "part {part}, entry {slot}: {lines} lines");
+        }
+        println!(
+            "part {part}: {} placements drawn back to front, buckets {:?} .. {:?}",
+            buckets.len(),
+            buckets.first(),
+            buckets.last()
+        );
+        assert!(buckets.first() > buckets.last(), "the crowns span buckets");
+    }
+    println!(
+        "lines drawn one placement at a time: original {}, merged {}",
+        drawn_lines[0], drawn_lines[1]
+    );
+    assert!(drawn_lines[0] > 0 && drawn_lines[1] > 0);
 }
 
 /// A directional light's cascade sees every tree at the same error (its

@@ -323,6 +323,23 @@ const ARRAY_MERGED: u32 = 5u;
 const ARRAY_OFFSET: u32 = 6u;
 const ARRAY_FLAGS: u32 = 7u;
 const ARRAY_MERGED_BY_OWN: u32 = 8u;
+// After the per-draw arrays, a camera's depth order: per depth bucket the
+// expanded placements in it, the first rank of its lines' draws (back to
+// front) and its cursor.
+const DEPTH_ARRAY_COUNT: u32 = 0u;
+const DEPTH_ARRAY_OFFSET: u32 = 1u;
+const DEPTH_ARRAY_CURSOR: u32 = 2u;
+// `model::compact::DEPTH_BUCKETS`, `DEPTH_BUCKETS_PER_OCTAVE`, `DEPTH_NEAREST`.
+const DEPTH_BUCKETS: u32 = 4096u;
+const DEPTH_BUCKETS_PER_OCTAVE: f32 = 192.0;
+const DEPTH_NEAREST: f32 = 0.05;
+
+// The depth bucket of what lies `distance` world metres from the camera
+// (`model::compact::depth_bucket`).
+fn depth_bucket(distance: f32) -> u32 {
+    let octaves = log2(max(distance, DEPTH_NEAREST) / DEPTH_NEAREST);
+    return u32(clamp(floor(octaves * DEPTH_BUCKETS_PER_OCTAVE), 0.0, f32(DEPTH_BUCKETS - 1u)));
+}
 
 // Colour within a tree (`model::color`), shared with the eval's reference
 // (`eval/reference.wgsl`).

@@ -10,6 +10,11 @@
 // `prepare_dispatch` → `count_placements` → `scan_placements` →
 // `scatter_placements`). CPU reference:
 // `model::compact::CompactSpecies::placed_view`.
+//
+// A camera also draws each expanded placement's lines on their own, back
+// to front by depth bucket (`ordered_args`; CPU reference:
+// `model::compact::back_to_front`): blended lines drawn a prototype at a
+// time mix a crown's whole depth in a pixel.
 
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, CullView, DrawArgs,
@@ -18,8 +23,8 @@
     ENTRY_FROM_NEEDLES, ENTRY_MERGED_BY_OWN, ENTRY_INVALID, COUNTER_TOTAL, COUNTER_ENTRIES, COUNTER_HEADER,
     COUNTER_CUTOFF, COUNTER_CUTOFF_BASE, COUNTER_CUTOFF_TOTAL, COUNTER_DEMAND, BUDGET_BUCKETS, BUDGET_BUCKET_SHIFT,
     ARRAY_COUNT, ARRAY_CURSOR, ARRAY_PRISMS, ARRAY_AFTER_PRISMS, ARRAY_BY_PARENT, ARRAY_MERGED, ARRAY_OFFSET, ARRAY_FLAGS,
-    ARRAY_MERGED_BY_OWN,
-    placement_band,
+    ARRAY_MERGED_BY_OWN, DEPTH_ARRAY_COUNT, DEPTH_ARRAY_OFFSET, DEPTH_ARRAY_CURSOR, DEPTH_BUCKETS, depth_bucket,
+    placement_band, placement_matrix,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
     LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA, VIEW_LINE_QUADS,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
@@ -46,6 +51,10 @@
 @group(1) @binding(4) var<storage, read_write> sorted_entries: array<vec2<u32>>;
 @group(1) @binding(5) var<storage, read_write> placed_args: array<DrawArgs>;
 @group(1) @binding(6) var<storage, read> tree_spheres: array<vec4<f32>>;
+// A camera's line draws one expanded placement at a time, back to front:
+// original lines (the first half), then merged lines (the second half).
+// Other views bind a stand-in and write none.
+@group(1) @binding(7) var<storage, read_write> ordered_args: array<DrawArgs>;
 // Only `prepare_dispatch` binds it: the other passes read it as their
 // indirect dispatch.
 @group(2) @binding(0) var<storage, read_write> dispatch: array<u32>;
@@ -485,6 +494,26 @@ fn counter_index(array_index: u32, draw: u32) -> u32 {
     return COUNTER_HEADER + array_index * species.prototype_count * PLACED_BANDS + draw;
 }
 
+fn depth_counter_index(array_index: u32, bucket: u32) -> u32 {
+    return counter_index(ARRAY_MERGED_BY_OWN + 1u, 0u) + array_index * DEPTH_BUCKETS + bucket;
+}
+
+// Whether this view draws its expanded placements' lines back to front
+// (a camera, whose buffers hold a draw per entry and part).
+fn depth_ordered() -> bool {
+    return (cull_view.perspective & VIEW_CAMERA) != 0u
+        && arrayLength(&ordered_args) >= 2u * cull_view.entry_capacity;
+}
+
+// The depth bucket of expanded placement `placement` of tree `tree`: its
+// prototype's sphere centre's distance from the camera.
+fn entry_depth_bucket(tree: u32, placement: Placement) -> u32 {
+    let sphere = prototypes[placement.prototype].sphere;
+    let world_from_local = instance_world_from_local(instances[tree]) * placement_matrix(placement);
+    let center = (world_from_local * vec4<f32>(sphere.xyz, 1.0)).xyz;
+    return depth_bucket(length(center - cull_view.world_position.xyz));
+}
+
 // One thread: the entry count and the indirect dispatch over the entries.
 @compute @workgroup_size(1)
 fn prepare_dispatch() {
@@ -555,6 +584,9 @@ fn count_placements(@builtin(global_invocation_id) id: vec3<u32>) {
         merged_by_own_prefix_in(prototype.merged_by_own_first, prototype.merged_count, code),
     );
     entries[i] = vec2<u32>(entry.x, entry.y | (code << 16u));
+    if depth_ordered() {
+        atomicAdd(&counters[depth_counter_index(DEPTH_ARRAY_COUNT, entry_depth_bucket(entry.x, placement))], 1u);
+    }
 }
 
 fn write_placed(kind: u32, draw: u32, vertex_count: u32, instance_count: u32, first_vertex: u32, first_instance: u32) {
@@ -604,6 +636,25 @@ fn scan_placements() {
         atomicStore(&counters[counter_index(ARRAY_FLAGS, draw)], flags);
         offset += count;
     }
+    // A camera's depth ranks: the farthest bucket first.
+    if depth_ordered() {
+        var rank = 0u;
+        for (var b = DEPTH_BUCKETS; b > 0u; b -= 1u) {
+            atomicStore(&counters[depth_counter_index(DEPTH_ARRAY_OFFSET, b - 1u)], rank);
+            rank += atomicLoad(&counters[depth_counter_index(DEPTH_ARRAY_COUNT, b - 1u)]);
+        }
+    }
+}
+
+// The draw of one expanded placement's lines of one part: `lines` lines
+// from line `first`, instance `slot` (the entry in the draws' sorted list).
+fn ordered_draw(lines: u32, first: u32, slot: u32) -> DrawArgs {
+    var args: DrawArgs;
+    args.vertex_count = line_vertices() * lines;
+    args.instance_count = select(0u, 1u, lines > 0u);
+    args.first_vertex = line_vertices() * first;
+    args.first_instance = slot;
+    return args;
 }
 
 // Per entry: its slot in its draw's range of the sorted list.
@@ -619,4 +670,32 @@ fn scatter_placements(@builtin(global_invocation_id) id: vec3<u32>) {
         + atomicAdd(&counters[counter_index(ARRAY_CURSOR, draw)], 1u);
     let flags = atomicLoad(&counters[counter_index(ARRAY_FLAGS, draw)]);
     sorted_entries[slot] = vec2<u32>(entry.x | flags, entry.y);
+    if !depth_ordered() {
+        return;
+    }
+    // Its lines' own draws at its depth rank: as its draw's lines (the same
+    // order and first line), as many as its own code takes.
+    let bucket = entry_depth_bucket(entry.x, placement);
+    let rank = atomicLoad(&counters[depth_counter_index(DEPTH_ARRAY_OFFSET, bucket)])
+        + atomicAdd(&counters[depth_counter_index(DEPTH_ARRAY_CURSOR, bucket)], 1u);
+    let prototype = prototypes[placement.prototype];
+    let code = entry.y >> 16u;
+    var original: DrawArgs;
+    if (flags & ENTRY_FROM_NEEDLES) != 0u {
+        let prisms = prism_prefix_in(prototype.needle_first, prototype.needle_count, code);
+        original = ordered_draw(prototype.needle_count - prisms, prototype.needle_first + prisms, slot);
+    } else {
+        let lines = original_prefix_in(prototype.original_first, prototype.original_count, code);
+        original = ordered_draw(lines, prototype.original_first, slot);
+    }
+    var merged: DrawArgs;
+    if (flags & ENTRY_MERGED_BY_OWN) != 0u {
+        let lines = merged_by_own_prefix_in(prototype.merged_by_own_first, prototype.merged_count, code);
+        merged = ordered_draw(lines, prototype.merged_by_own_first, slot);
+    } else {
+        let lines = merged_prefix_in(prototype.merged_first, prototype.merged_count, code);
+        merged = ordered_draw(lines, prototype.merged_first, slot);
+    }
+    ordered_args[rank] = original;
+    ordered_args[arrayLength(&ordered_args) / 2u + rank] = merged;
 }

@@ -586,6 +586,12 @@ pub const PLACED_COUNTER_HEADER: u64 = 8 + crate::model::compact::BUDGET_BUCKETS
 /// longest prefixes, offset, flags, longest merged prefix by own code).
 pub const PLACED_COUNTER_ARRAYS: u64 = 9;
 
+/// Words of a view's placement counters after the per-draw arrays: per
+/// depth bucket ([`crate::model::compact::DEPTH_BUCKETS`]) its expanded
+/// placements, its first rank and its cursor (a camera's back-to-front
+/// order of the placements' lines, `conifer_cull.wgsl`).
+pub const PLACED_DEPTH_COUNTERS: u64 = 3 * crate::model::compact::DEPTH_BUCKETS as u64;
+
 #[cfg(test)]
 mod tests {
     use crate::model::wind;
@@ -608,6 +614,19 @@ mod tests {
             let line = format!("const {name}: f32 = {value:?};");
             assert!(shader.contains(&line), "{line}");
         }
+        let types = include_str!("compact_types.wgsl");
+        for (name, value) in [
+            (
+                "DEPTH_BUCKETS_PER_OCTAVE",
+                crate::model::compact::DEPTH_BUCKETS_PER_OCTAVE,
+            ),
+            ("DEPTH_NEAREST", crate::model::compact::DEPTH_NEAREST),
+        ] {
+            let line = format!("const {name}: f32 = {value:?};");
+            assert!(types.contains(&line), "{line}");
+        }
+        let buckets = crate::model::compact::DEPTH_BUCKETS;
+        assert!(types.contains(&format!("const DEPTH_BUCKETS: u32 = {buckets}u;")));
         for (name, v) in [
             ("WIND_BRANCH_WAVES", wind::BRANCH_WAVES),
             ("WIND_FLUTTER_WAVES", wind::FLUTTER_WAVES),

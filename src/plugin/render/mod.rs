@@ -30,8 +30,8 @@ pub use readback::{CompactReadback, ViewReadback};
 use self::gpu::{
     CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE,
     FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES,
-    OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER, PLACED_ENTRY_BYTES,
-    PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, VIEW_LINE_QUADS,
+    OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER, PLACED_DEPTH_COUNTERS,
+    PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, VIEW_LINE_QUADS,
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
@@ -854,7 +854,7 @@ struct ViewBindGroups {
 }
 
 impl ViewSpecies {
-    fn buffers(&self) -> [&Buffer; 8] {
+    fn buffers(&self) -> [&Buffer; 9] {
         let p = &self.placed;
         [
             &self.cull_view,
@@ -865,19 +865,28 @@ impl ViewSpecies {
             &p.sorted,
             &p.args,
             &p.dispatch,
+            &p.ordered,
         ]
     }
 }
 
 /// Per view and placed species: the expanded placements (as found, and
-/// sorted by draw), their counters, and the instanced draws' arguments
-/// (16-byte stand-ins for a flat species).
+/// sorted by draw), their counters, the instanced draws' arguments
+/// (16-byte stand-ins for a flat species) and a camera's draws of each
+/// placement's lines back to front.
 struct PlacedViewBuffers {
     counters: Buffer,
     entries: Buffer,
     sorted: Buffer,
     args: Buffer,
     dispatch: Buffer,
+    /// A camera's: one draw per entry of its original lines, back to
+    /// front, then as many of its merged lines; other views' a 16-byte
+    /// stand-in.
+    ordered: Buffer,
+    /// Whether `ordered` holds a camera's depth-ordered line draws (and
+    /// `counters` their depth buckets).
+    depth_ordered: bool,
     /// Entries `entries` and `sorted` hold.
     entry_capacity: u32,
     /// Draws of each placed part (prototypes × bands).
@@ -885,16 +894,30 @@ struct PlacedViewBuffers {
 }
 
 impl PlacedViewBuffers {
-    fn new(device: &RenderDevice, entry_capacity: u32, draws: u32) -> Self {
+    fn new(device: &RenderDevice, entry_capacity: u32, draws: u32, depth_ordered: bool) -> Self {
         let storage = BufferUsages::STORAGE;
         let entry_bytes = u64::from(entry_capacity) * PLACED_ENTRY_BYTES;
+        // A camera of a placed species orders its lines by depth.
+        let depth_ordered = depth_ordered && entry_capacity > 0;
+        let (ordered_bytes, depth_counters) = if depth_ordered {
+            (2 * u64::from(entry_capacity) * DRAW_ARGS_BYTES, PLACED_DEPTH_COUNTERS)
+        } else {
+            (0, 0)
+        };
         Self {
             counters: empty_buffer(
                 device,
                 "conifer placement counters",
-                4 * (PLACED_COUNTER_HEADER + PLACED_COUNTER_ARRAYS * u64::from(draws)),
+                4 * (PLACED_COUNTER_HEADER + PLACED_COUNTER_ARRAYS * u64::from(draws) + depth_counters),
                 storage,
             ),
+            ordered: empty_buffer(
+                device,
+                "conifer back-to-front line draws",
+                ordered_bytes,
+                storage | BufferUsages::INDIRECT,
+            ),
+            depth_ordered,
             entries: empty_buffer(device, "conifer placement entries", entry_bytes, storage),
             sorted: empty_buffer(device, "conifer sorted placement entries", entry_bytes, storage),
             args: empty_buffer(
@@ -1121,6 +1144,7 @@ fn init_compact_pipeline(
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
                 read(),
+                storage_buffer_sized(false, None),
             ),
         ),
     );
@@ -1621,6 +1645,7 @@ fn prepare_views(
                         placed.sorted.as_entire_binding(),
                         placed.args.as_entire_binding(),
                         gpu.tree_spheres.as_entire_binding(),
+                        placed.ordered.as_entire_binding(),
                     )),
                 );
                 let dispatch_group = device.create_bind_group(
@@ -1666,7 +1691,7 @@ fn prepare_views(
                     instance_count: 0,
                     perspective,
                     line_vertices: 2,
-                    placed: PlacedViewBuffers::new(&device, placed_capacity(0).unwrap_or(0), draws),
+                    placed: PlacedViewBuffers::new(&device, placed_capacity(0).unwrap_or(0), draws, camera),
                     groups: None,
                     bound: Vec::new(),
                     used: false,
@@ -1677,9 +1702,9 @@ fn prepare_views(
                 v.capacity = capacity;
             }
             if let Some(entry_capacity) = placed_capacity(v.placed.entry_capacity) {
-                v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws);
-            } else if v.placed.draws != draws {
-                v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws);
+                v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws, camera);
+            } else if v.placed.draws != draws || v.placed.depth_ordered != (camera && v.placed.entry_capacity > 0) {
+                v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws, camera);
             }
             let bound = bound_buffers(gpu, v);
             if bound != v.bound {
@@ -2080,6 +2105,10 @@ fn cull_trees(
     for view in compact_views.views.values() {
         if view.placed.entry_capacity > 0 {
             encoder.clear_buffer(&view.placed.counters, 0, None);
+            // Ranks past the entries written draw nothing.
+            if view.placed.depth_ordered {
+                encoder.clear_buffer(&view.placed.ordered, 0, None);
+            }
         }
     }
     let mut pass = encoder.begin_compute_pass(&ComputePassDescriptor {
@@ -2157,19 +2186,30 @@ impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
 
 /// Issues the indirect draws of one part of a view's trees, the bind
 /// groups set: one draw per tree for the tree's parts, one instanced draw
-/// per prototype and band for the placed ones (`split`: one indirect draw
-/// each instead of one multi-draw). False when the view has no placed
-/// draws for a placed part.
+/// per prototype and band for the placed ones, and for a camera's placed
+/// lines one draw per expanded placement, back to front (`split`: one
+/// indirect draw each instead of one multi-draw). False when the view has
+/// no placed draws for a placed part.
 fn draw_indirect_part<'a>(
     pass: &mut TrackedRenderPass<'a>,
     buffers: &'a ViewSpecies,
     kind: PartKind,
     split: bool,
 ) -> bool {
+    let placed = &buffers.placed;
     let (args, draws, block) = match kind.placed_index() {
         None => (&buffers.args, buffers.instance_count, kind.index()),
-        Some(_) if buffers.placed.entry_capacity == 0 => return false,
-        Some(block) => (&buffers.placed.args, buffers.placed.draws, block),
+        Some(_) if placed.entry_capacity == 0 => return false,
+        Some(_) if placed.depth_ordered && kind.is_lines() => {
+            // The shader's blocks: half the buffer each.
+            let per_part = placed.ordered.size() / (2 * DRAW_ARGS_BYTES);
+            (
+                &placed.ordered,
+                per_part as u32,
+                usize::from(kind == PartKind::PlacedMergedLines),
+            )
+        }
+        Some(block) => (&placed.args, placed.draws, block),
     };
     let offset = block as u64 * u64::from(draws) * DRAW_ARGS_BYTES;
     if split {

@@ -47,6 +47,12 @@ pub struct ViewReadback {
     /// original-lines-from-needles flag (bit 31), then placement (16 bits)
     /// and the threshold code.
     pub entries: Vec<[u32; 2]>,
+    /// A camera's draws of each expanded placement's lines, back to front:
+    /// the original lines' block, then the merged lines' (equally long;
+    /// each draw's first instance is its entry's index in `entries`, a
+    /// placement without lines of a part and every rank past the last
+    /// entry draw nothing). Empty for other views.
+    pub ordered_draws: Vec<[u32; 4]>,
 }
 
 impl ViewReadback {
@@ -112,12 +118,14 @@ struct Staged {
     perspective: bool,
     line_vertices: u32,
     buffer: Buffer,
-    /// Byte lengths of the lods, tree draws, placed draws, counters and
-    /// sorted entries in `buffer`, in that order.
-    lengths: [u64; 5],
+    /// Byte lengths of the lods, tree draws, placed draws, counters,
+    /// sorted entries and back-to-front line draws in `buffer`, in that
+    /// order.
+    lengths: [u64; 6],
     trees: usize,
     draws: usize,
     entry_capacity: usize,
+    depth_ordered: bool,
 }
 
 pub(super) fn extract_request(
@@ -140,7 +148,7 @@ pub(super) fn stage(
     }
     for ((_, species), view) in &views.views {
         let p = &view.placed;
-        let sources = [&view.lods, &view.args, &p.args, &p.counters, &p.sorted];
+        let sources = [&view.lods, &view.args, &p.args, &p.counters, &p.sorted, &p.ordered];
         let lengths = sources.map(|b| b.size());
         let buffer = device.create_buffer(&BufferDescriptor {
             label: Some("conifer compact readback"),
@@ -162,6 +170,7 @@ pub(super) fn stage(
             trees: view.instance_count as usize,
             draws: p.draws as usize,
             entry_capacity: p.entry_capacity as usize,
+            depth_ordered: p.depth_ordered,
         });
     }
 }
@@ -200,7 +209,7 @@ pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingRead
             at += s.lengths[k] as usize;
             words(&bytes[range])
         };
-        let (lods, tree, placed, counters, sorted) = (part(0), part(1), part(2), part(3), part(4));
+        let (lods, tree, placed, counters, sorted, ordered) = (part(0), part(1), part(2), part(3), part(4), part(5));
         let trees = s.trees;
         let quads = |w: &[u32], n: usize| w.chunks_exact(4).take(n).map(|c| [c[0], c[1], c[2], c[3]]).collect();
         // Entries kept (an entry whose parent line a view point reaches is
@@ -228,6 +237,11 @@ pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingRead
                 .take(entry_count.min(s.entry_capacity))
                 .map(|c| [c[0], c[1]])
                 .collect(),
+            ordered_draws: if s.depth_ordered {
+                quads(&ordered, usize::MAX)
+            } else {
+                Vec::new()
+            },
         });
     }
     pending.done = done;
