@@ -137,6 +137,10 @@ struct Args {
     /// How lines are rasterized (`ConiferLodSettings::line_raster`).
     #[arg(long, value_enum, default_value_t = Raster::Auto)]
     line_raster: Raster,
+    /// The order in which cameras blend the lines of the trees' expanded
+    /// placements (`ConiferLodSettings::line_order`).
+    #[arg(long, value_enum, default_value_t = Order::BackToFront)]
+    line_order: Order,
     /// Headless: time each render pass on the GPU (Bevy's
     /// `RenderDiagnosticsPlugin`, where the GPU has timestamp queries) and
     /// print the mean of the extra frames (`--frames`) as `gpu_ms`.
@@ -167,6 +171,15 @@ enum Lighting {
     Bundle,
     /// A strip turned toward the viewer.
     FacingStrip,
+}
+
+/// The order in which lines are blended (`--line-order`).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum Order {
+    /// Each placement's lines on their own, the farthest first (the default).
+    BackToFront,
+    /// One instanced draw per prototype and band.
+    ByPrototype,
 }
 
 /// How lines are rasterized (`--line-raster`).
@@ -554,6 +567,10 @@ fn setup(
         Lighting::Bundle => LineLighting::Bundle,
         Lighting::Cylinder => LineLighting::Cylinder,
         Lighting::FacingStrip => LineLighting::FacingStrip,
+    };
+    settings.line_order = match args.line_order {
+        Order::BackToFront => LineOrder::BackToFront,
+        Order::ByPrototype => LineOrder::ByPrototype,
     };
     settings.line_raster = match args.line_raster {
         Raster::Auto => LineRaster::Auto,

@@ -52,7 +52,7 @@ pub mod prelude {
     pub use crate::plugin::{
         ConiferFoliage, ConiferLodDebug, ConiferLodDebugPlugin, ConiferLodOverride, ConiferLodPlugin, ConiferLodSet,
         ConiferLodSettings, ConiferLodState, ConiferLodStats, ConiferPresets, ConiferSpecies, ConiferWind, ErrorScope,
-        LineLighting, LineOpacity, LineRaster, PresetCache, WoodLineOrder, conifer_lod_keys, spawn_forest,
+        LineLighting, LineOpacity, LineOrder, LineRaster, PresetCache, WoodLineOrder, conifer_lod_keys, spawn_forest,
     };
 }
 

@@ -491,6 +491,21 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
         drawn_lines[0], drawn_lines[1]
     );
     assert!(drawn_lines[0] > 0 && drawn_lines[1] > 0);
+    // By prototype: the instanced draws alone, the same pixels covered.
+    let back_to_front = scene.shot_of(&placed, &transforms, "back_to_front");
+    scene
+        .renderer
+        .world_mut()
+        .resource_mut::<ConiferLodSettings>()
+        .line_order = LineOrder::ByPrototype;
+    let view = scene.read_back(&placed, &transforms, "by_prototype", true);
+    assert!(view.ordered_draws.is_empty());
+    assert_eq!(view.entries.len(), entries.len());
+    let by_prototype = scene.shot_of(&placed, &transforms, "by_prototype");
+    let (a, b) = (covered_count(&back_to_front), covered_count(&by_prototype));
+    let diff = mean_difference(&back_to_front, &by_prototype);
+    println!("covered back to front {a}, by prototype {b}; mean grey |Δ| {diff:.2}");
+    assert!(a.abs_diff(b) <= a / 100, "{a} against {b}");
 }
 
 /// A directional light's cascade sees every tree at the same error (its

@@ -5,7 +5,7 @@ use crate::eval::inside::{InsideOptions, InsideReport, evaluate_inside};
 use crate::eval::scene::{EvalLights, EvalSun, EvalTree, EvalView, Method};
 use crate::eval::{EvalOptions, EvalReport, evaluate};
 use crate::model::{read_prototype_record, read_record};
-use crate::plugin::{LineLighting, LineOpacity, LineRaster, WoodLineOrder};
+use crate::plugin::{LineLighting, LineOpacity, LineOrder, LineRaster, WoodLineOrder};
 use anyhow::{Context, bail};
 use std::path::PathBuf;
 
@@ -127,6 +127,12 @@ pub struct EvalArgs {
     /// (once, before them).
     #[arg(long, default_value = "layered")]
     pub wood_lines: String,
+    /// The order in which the plugin blends the lines of trees of shared
+    /// prototypes: `back-to-front` (the default: each placement's lines on
+    /// their own, the farthest first) or `by-prototype` (one instanced
+    /// draw per prototype and band, in a fixed order).
+    #[arg(long, default_value = "back-to-front")]
+    pub line_order: String,
     /// The merged-line opacity `ours` draws with: `area` (the needles'
     /// summed area over the line's pixel area) or `coverage`
     /// (`1 − exp(−Σa/A)`).
@@ -194,6 +200,11 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         "under-foliage" => WoodLineOrder::UnderFoliage,
         other => bail!("--wood-lines {other:?}: layered or under-foliage"),
     };
+    let line_order = match args.line_order.as_str() {
+        "back-to-front" => LineOrder::BackToFront,
+        "by-prototype" => LineOrder::ByPrototype,
+        other => bail!("--line-order {other:?}: back-to-front or by-prototype"),
+    };
     let ours_line_opacity = match args.ours_opacity.as_str() {
         "area" => LineOpacity::AreaPreserving,
         "coverage" => LineOpacity::Coverage,
@@ -211,6 +222,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         line_lighting,
         line_raster,
         wood_line_order,
+        line_order,
         ours_line_opacity,
         ours_impostor: !args.ours_no_impostor,
         hdr: args.hdr,

@@ -142,6 +142,7 @@ pub fn evaluate_inside(
         line_lighting: view.line_lighting,
         line_raster: view.line_raster,
         wood_line_order: view.wood_line_order,
+        line_order: view.line_order,
         ..ConiferLodSettings::default()
     };
     let world = renderer.world_mut();

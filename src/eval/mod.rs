@@ -267,6 +267,9 @@ pub struct EvalReport {
     /// Where the plugin's methods drew the wood lines among the foliage
     /// lines (`Layered`, `UnderFoliage`).
     pub wood_line_order: String,
+    /// The order in which the plugin's methods blended the lines of
+    /// expanded placements (`BackToFront`, `ByPrototype`).
+    pub line_order: String,
     /// The merged-line opacity `ours` drew with (`AreaPreserving`,
     /// `Coverage`).
     pub ours_line_opacity: String,
@@ -632,6 +635,7 @@ pub fn evaluate(
         line_lighting: format!("{:?}", options.view.line_lighting),
         line_raster: format!("{:?}", options.view.drawn_line_raster()),
         wood_line_order: format!("{:?}", options.view.wood_line_order),
+        line_order: format!("{:?}", options.view.line_order),
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         ours_impostor: options.view.ours_impostor,
         hdr: options.view.hdr,

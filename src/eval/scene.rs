@@ -36,7 +36,7 @@ use crate::model::{CutCounter, LodRecord, PixelError, PrototypeRecord, ViewParam
 use crate::plugin::headless::{HeadlessError, HeadlessRenderer};
 use crate::plugin::{
     ConiferFoliage, ConiferLoadError, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope,
-    LineLighting, LineOpacity, LineRaster, WoodLineOrder, triangle_mesh,
+    LineLighting, LineOpacity, LineOrder, LineRaster, WoodLineOrder, triangle_mesh,
 };
 use bevy::asset::RenderAssetUsages;
 use bevy::camera::Hdr;
@@ -132,6 +132,7 @@ pub(super) fn renderer_with_species(
         line_lighting: view.line_lighting,
         line_raster: view.line_raster,
         wood_line_order: view.wood_line_order,
+        line_order: view.line_order,
         // One error per tree, as the CPU cut the counts come from
         // (`EvalScene::counts`); `conifer eval --inside` measures each
         // placement's own.
@@ -260,6 +261,9 @@ pub struct EvalView {
     /// Where the plugin's methods draw the wood lines among the foliage
     /// lines.
     pub wood_line_order: WoodLineOrder,
+    /// The order in which the plugin's methods blend the lines of expanded
+    /// placements.
+    pub line_order: LineOrder,
     /// The merged-line opacity `ours` draws with.
     pub ours_line_opacity: LineOpacity,
     /// Whether `ours` fades far trees into the crown impostor (its
@@ -394,6 +398,7 @@ impl EvalView {
             line_lighting: LineLighting::default(),
             line_raster: LineRaster::default(),
             wood_line_order: WoodLineOrder::default(),
+            line_order: LineOrder::default(),
             ours_line_opacity: LineOpacity::default(),
             ours_impostor: true,
             hdr: false,

@@ -255,6 +255,23 @@ pub enum WoodLineOrder {
     Layered,
 }
 
+/// The order in which a camera blends the lines of trees of shared
+/// prototypes (records with placements; a flat record's lines are drawn
+/// per tree in the record's order either way).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
+pub enum LineOrder {
+    /// Each expanded placement's lines on their own, the farthest first by
+    /// depth bucket ([`crate::model::compact::depth_bucket`], 0.36 % of
+    /// the distance deep): a pixel shows the needles the camera meets
+    /// first, as a crown does. One indirect draw per placement and part
+    /// (original lines, then merged lines), sorted on the GPU.
+    #[default]
+    BackToFront,
+    /// One instanced draw per prototype and band, in a fixed order: far
+    /// fewer draws, but a pixel mixes needles from a crown's whole depth.
+    ByPrototype,
+}
+
 /// How lines are rasterized.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Reflect)]
 pub enum LineRaster {
@@ -337,6 +354,8 @@ pub struct ConiferLodSettings {
     pub line_raster: LineRaster,
     /// Where cameras draw the wood lines among the foliage lines.
     pub wood_line_order: WoodLineOrder,
+    /// The order in which cameras blend the lines of expanded placements.
+    pub line_order: LineOrder,
     /// `false` draws every needle as a prism of `Lmax` sides (LOD off).
     pub enabled: bool,
     /// Colour needles by representation (prisms blue, original lines green,
@@ -394,6 +413,7 @@ impl Default for ConiferLodSettings {
             line_lighting: LineLighting::default(),
             line_raster: LineRaster::default(),
             wood_line_order: WoodLineOrder::default(),
+            line_order: LineOrder::default(),
             enabled: true,
             debug_colors: false,
             max_expanded_placements: 1 << 17,

@@ -35,7 +35,7 @@ use self::gpu::{
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
-    LineOpacity, LineRaster, WoodLineOrder,
+    LineOpacity, LineOrder, LineRaster, WoodLineOrder,
 };
 use crate::model::compact::CompactSpecies;
 use crate::model::compact::PLACED_BANDS;
@@ -404,6 +404,8 @@ pub struct RenderCompactSpecies {
     line_raster: LineRaster,
     /// [`ConiferLodSettings::wood_line_order`].
     wood_line_order: WoodLineOrder,
+    /// [`ConiferLodSettings::line_order`].
+    line_order: LineOrder,
     /// The wind's clock at the last extraction ([`ConiferWind::seconds`]),
     /// for the motion vectors' previous positions.
     wind_seconds: Option<f64>,
@@ -556,6 +558,7 @@ fn extract_compact(
     render.max_expanded_placements = settings.max_expanded_placements;
     render.line_lighting = settings.line_lighting;
     render.wood_line_order = settings.wood_line_order;
+    render.line_order = settings.line_order;
     render.line_raster = settings.line_raster;
     let mut gone: Vec<AssetId<ConiferSpecies>> = Vec::new();
     for &id in render.species.keys() {
@@ -1583,6 +1586,8 @@ fn prepare_views(
             }
             let placements = species.compact.placements.len();
             let draws = species.compact.prototypes.len() as u32 * PLACED_BANDS;
+            // A camera blends its expanded placements' lines back to front.
+            let depth_ordered = camera && render.line_order == LineOrder::BackToFront;
             let max_entries = u64::from(render.max_expanded_placements.max(1)).min(device_entries) as usize;
             let entries_needed = (n.saturating_mul(placements)).min(max_entries);
             let fresh = |capacity: usize| {
@@ -1691,7 +1696,7 @@ fn prepare_views(
                     instance_count: 0,
                     perspective,
                     line_vertices: 2,
-                    placed: PlacedViewBuffers::new(&device, placed_capacity(0).unwrap_or(0), draws, camera),
+                    placed: PlacedViewBuffers::new(&device, placed_capacity(0).unwrap_or(0), draws, depth_ordered),
                     groups: None,
                     bound: Vec::new(),
                     used: false,
@@ -1702,9 +1707,11 @@ fn prepare_views(
                 v.capacity = capacity;
             }
             if let Some(entry_capacity) = placed_capacity(v.placed.entry_capacity) {
-                v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws, camera);
-            } else if v.placed.draws != draws || v.placed.depth_ordered != (camera && v.placed.entry_capacity > 0) {
-                v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws, camera);
+                v.placed = PlacedViewBuffers::new(&device, entry_capacity, draws, depth_ordered);
+            } else if v.placed.draws != draws
+                || v.placed.depth_ordered != (depth_ordered && v.placed.entry_capacity > 0)
+            {
+                v.placed = PlacedViewBuffers::new(&device, v.placed.entry_capacity, draws, depth_ordered);
             }
             let bound = bound_buffers(gpu, v);
             if bound != v.bound {
