@@ -1213,7 +1213,10 @@ fn spawn_side_sun(world: &mut World, crown: Vec3, reach: f32) -> Entity {
 /// profile filled with four media measured on its pictures, taken where
 /// an even crown's needles are seen): 0.209 for the impostor and 0.191
 /// for the lines, their sunlit halves 1.062 (the impostor's in the
-/// needles' area-mean colour) and 1.008 of the lines' in the maps.
+/// needles' area-mean colour) and 1.008 of the lines' in the maps. These
+/// lines are blended a prototype at a time (`LineOrder::ByPrototype`);
+/// blended back to front (the default) they show the crown's surface and
+/// their far half is 0.272 of their sunlit half.
 #[test]
 fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
     use bevy::core_pipeline::tonemapping::Tonemapping;
@@ -1248,6 +1251,11 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
     let (camera, _) = impostor_camera(world, &target, crown, texel, 3.5);
     world.entity_mut(camera).insert(Tonemapping::None);
     world.resource_mut::<CompactReadback>().enabled = true;
+    // The impostor's shadow samples and the crown's shade were fitted to
+    // the lines blended a prototype at a time (a pixel mixing the crown's
+    // whole depth); drawn back to front (the default), the lines show
+    // their crown's surface, compared at the end.
+    world.resource_mut::<ConiferLodSettings>().line_order = LineOrder::ByPrototype;
     let tree = world.spawn((ConiferFoliage(handle.clone()), Transform::IDENTITY)).id();
     let shot = |renderer: &mut HeadlessRenderer, far_impostor: bool, name: &str| {
         renderer.world_mut().entity_mut(tree).insert(ConiferLodOverride {
@@ -1345,6 +1353,27 @@ fn the_impostor_shades_itself_through_the_crown_as_its_lines_do() {
             sunlit / lines[1]
         );
     }
+
+    // Back to front, in the maps: the lines show the needles on the
+    // crown's surface, less shaded than its inside, and their far half is
+    // lighter against their sunlit half (0.272, where the impostor's is
+    // 0.200: its far half 0.82 of theirs, its sunlit half 1.11 in its own
+    // colour; the fits above are to be made again against these lines).
+    *renderer
+        .world_mut()
+        .get_mut::<bevy::light::CascadeShadowConfig>(sun)
+        .unwrap() = one_cascade(90.0);
+    renderer.world_mut().resource_mut::<ConiferLodSettings>().line_order = LineOrder::BackToFront;
+    let surface = shot(&mut renderer, false, "impostor_self_shadow_lines_back_to_front");
+    let surface_ratio = surface[0] / surface[1];
+    println!(
+        "back to front, far half over sunlit half: lines {surface_ratio:.3} ({surface:?}), by prototype {lines_ratio:.3}, \
+         impostor {impostor_ratio:.3}"
+    );
+    assert!(
+        surface_ratio > lines_ratio + 0.03 && surface_ratio < 0.4,
+        "back to front the lines' far half over their sunlit half {surface_ratio}, by prototype {lines_ratio}"
+    );
 }
 
 /// Past the shadow maps each impostor pixel takes the light the crown
