@@ -153,6 +153,24 @@ fn three_trees() -> [Transform; 3] {
     [-44.0f32, -14.0, 0.0].map(|z| Transform::from_xyz(0.0, 0.0, z))
 }
 
+/// The scene read back, its camera 6 m from the crown, no impostor, and
+/// the placed species, its compact arrays and [`three_trees`].
+fn three_trees_scene() -> (
+    Scene,
+    Handle<ConiferSpecies>,
+    std::sync::Arc<CompactSpecies>,
+    [Transform; 3],
+) {
+    let mut scene = Scene::new();
+    let world = scene.renderer.world_mut();
+    world.resource_mut::<CompactReadback>().enabled = true;
+    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
+    scene.look_from(6.0, 45.0);
+    let placed = scene.placed.clone();
+    let compact = scene.compact(&placed);
+    (scene, placed, compact, three_trees())
+}
+
 fn assert_alike(what: &str, placed: &image::RgbaImage, flat: &image::RgbaImage) {
     let (pp, pf) = (covered_count(placed), covered_count(flat));
     let diff = mean_difference(placed, flat);
@@ -297,14 +315,7 @@ fn trees_past_the_expansion_capacity_keep_their_coarser_cut() {
 #[test]
 fn the_expansion_budget_goes_to_the_nearest_tree() {
     let _turn = common::gpu_turn();
-    let mut scene = Scene::new();
-    let world = scene.renderer.world_mut();
-    world.resource_mut::<CompactReadback>().enabled = true;
-    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
-    scene.look_from(6.0, 45.0);
-    let placed = scene.placed.clone();
-    let compact = scene.compact(&placed);
-    let transforms = three_trees();
+    let (mut scene, placed, compact, transforms) = three_trees_scene();
     // Each tree's threshold code and spatial error, by instance slot, and
     // the trees with expanded placements.
     let lods = |scene: &mut Scene, name: &str| {
@@ -385,14 +396,7 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
 #[test]
 fn a_camera_draws_each_placements_lines_back_to_front() {
     let _turn = common::gpu_turn();
-    let mut scene = Scene::new();
-    let world = scene.renderer.world_mut();
-    world.resource_mut::<CompactReadback>().enabled = true;
-    world.resource_mut::<ConiferLodSettings>().far_impostor = false;
-    scene.look_from(6.0, 45.0);
-    let placed = scene.placed.clone();
-    let compact = scene.compact(&placed);
-    let transforms = three_trees();
+    let (mut scene, placed, compact, transforms) = three_trees_scene();
     let view = scene.read_back(&placed, &transforms, "back_to_front", true);
     let camera = scene
         .renderer
