@@ -1822,6 +1822,13 @@ fn queue_compact(
                         (WoodLineLayer::OverFoliage, 1e-3, species.wood_over_entity),
                     ],
                     (PartKind::WoodLines, false) => &[(WoodLineLayer::Whole, -1e-3, entity)],
+                    // Back to front, a camera draws the expanded placements'
+                    // merged lines before their original lines: seen from
+                    // a view point, the farther placements are the merged
+                    // ones.
+                    (PartKind::PlacedMergedLines, _) if render.line_order == LineOrder::BackToFront => {
+                        &[(WoodLineLayer::Whole, -0.5e-3, entity)]
+                    }
                     _ => &[(WoodLineLayer::Whole, 0.0, entity)],
                 };
                 for &(wood_layer, depth_bias, entity) in layers {
