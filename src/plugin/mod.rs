@@ -264,7 +264,8 @@ pub enum LineOrder {
     /// depth bucket ([`crate::model::compact::depth_bucket`], 0.36 % of
     /// the distance deep): a pixel shows the needles the camera meets
     /// first, as a crown does. One indirect draw per placement and part
-    /// (original lines, then merged lines), sorted on the GPU.
+    /// (the merged lines' draws, then the original lines'), sorted on the
+    /// GPU.
     #[default]
     BackToFront,
     /// One instanced draw per prototype and band, in a fixed order: far
