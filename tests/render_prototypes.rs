@@ -108,6 +108,11 @@ impl Scene {
         image
     }
 
+    /// Where the camera stands.
+    fn camera_position(&self) -> Vec3 {
+        self.renderer.world().get::<Transform>(self.camera).unwrap().translation
+    }
+
     /// The compact arrays of `species`.
     fn compact(&self, species: &Handle<ConiferSpecies>) -> std::sync::Arc<CompactSpecies> {
         let assets = self.renderer.world().resource::<Assets<ConiferSpecies>>();
@@ -398,12 +403,7 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
     let _turn = common::gpu_turn();
     let (mut scene, placed, compact, transforms) = three_trees_scene();
     let view = scene.read_back(&placed, &transforms, "back_to_front", true);
-    let camera = scene
-        .renderer
-        .world()
-        .get::<Transform>(scene.camera)
-        .unwrap()
-        .translation;
+    let camera = scene.camera_position();
     // Instance slots to trees: the spatial error grows with distance.
     let mut slots: Vec<usize> = (0..view.lods.len()).collect();
     slots.sort_by(|&a, &b| view.tree_lod(a).1.total_cmp(&view.tree_lod(b).1));
@@ -671,12 +671,7 @@ fn gpu_draws_equal_the_cpu_reference() {
             // origin) and the tree's error from its sphere's nearest point.
             let seen = view.view_point(0);
             if let Some(seen) = &seen {
-                let camera = scene
-                    .renderer
-                    .world()
-                    .get::<Transform>(scene.camera)
-                    .unwrap()
-                    .translation;
+                let camera = scene.camera_position();
                 assert!(
                     seen.camera.distance(camera) < 1e-3,
                     "view point {seen:?}, camera {camera}"
