@@ -426,6 +426,26 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
         entries.len()
     );
     let line_vertices = view.line_vertices;
+    // The lines of part `part` (0 original, 1 merged) entry `[tree,
+    // word]`'s own code takes, and the first, from the order its draw's
+    // flags name.
+    let own_lines = |part: usize, [tree, word]: [u32; 2]| -> (u32, u32) {
+        let placement = &compact.placements[(word & 0xffff) as usize];
+        let k = placement.prototype as usize;
+        let prototype = &compact.prototypes[k];
+        let own = compact.prototype_prefixes(k, (word >> 16) as u16);
+        match part {
+            0 if tree >> 31 == 1 => (own.after_prisms, prototype.needles[0] + own.prisms),
+            0 => (own.original_by_parent, prototype.original_lines[0]),
+            // The GPU's line orders: the original lines', then the
+            // merged lines' by own code.
+            _ if tree >> 30 & 1 == 1 => (
+                own.merged_by_own,
+                compact.original_lines.len() as u32 + prototype.merged_by_own,
+            ),
+            _ => (own.merged_lines, prototype.merged_lines[0]),
+        }
+    };
     let mut drawn_lines = [0u64; 2];
     for (part, drawn) in drawn_lines.iter_mut().enumerate() {
         let block = &view.ordered_draws[part * per_part..(part + 1) * per_part];
@@ -440,20 +460,8 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
             seen[slot] = true;
             let [tree, word] = entries[slot];
             let placement = &compact.placements[(word & 0xffff) as usize];
-            let k = placement.prototype as usize;
-            let prototype = &compact.prototypes[k];
-            let own = compact.prototype_prefixes(k, (word >> 16) as u16);
-            let (lines, first) = match part {
-                0 if tree >> 31 == 1 => (own.after_prisms, prototype.needles[0] + own.prisms),
-                0 => (own.original_by_parent, prototype.original_lines[0]),
-                // The GPU's line orders: the original lines', then the
-                // merged lines' by own code.
-                _ if tree >> 30 & 1 == 1 => (
-                    own.merged_by_own,
-                    compact.original_lines.len() as u32 + prototype.merged_by_own,
-                ),
-                _ => (own.merged_lines, prototype.merged_lines[0]),
-            };
+            let prototype = &compact.prototypes[placement.prototype as usize];
+            let (lines, first) = own_lines(part, entries[slot]);
             assert_eq!(
                 [vertices, first_vertex],
                 [lines, first].map(|n| n * line_vertices),
@@ -471,15 +479,8 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
             buckets.push(bucket);
         }
         // Every entry with lines of this part is drawn.
-        for (slot, &[tree, word]) in entries.iter().enumerate() {
-            let placement = &compact.placements[(word & 0xffff) as usize];
-            let own = compact.prototype_prefixes(placement.prototype as usize, (word >> 16) as u16);
-            let lines = match part {
-                0 if tree >> 31 == 1 => own.after_prisms,
-                0 => own.original_by_parent,
-                _ if tree >> 30 & 1 == 1 => own.merged_by_own,
-                _ => own.merged_lines,
-            };
+        for (slot, &entry) in entries.iter().enumerate() {
+            let (lines, _) = own_lines(part, entry);
             assert_eq!(seen[slot], lines > 0, "part {part}, entry {slot}: {lines} lines");
         }
         println!(
