@@ -208,10 +208,10 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     // 3,000 trees: a 4,096-slot instance buffer (64 B each) and the
     // species' 5,136-byte parameters, and per view its 144-byte culling
     // inputs, 4,096 LOD slots (32 B)
-    // and 7 × 4,096 indirect draws (16 B), and five 16-byte stand-ins for
+    // and 7 × 4,096 indirect draws (16 B), and six 16-byte stand-ins for
     // the placement buffers a flat species leaves empty and its counters'
     // header (136 words: the expansion budget's).
-    let placed_stand_ins = 5 * 16 + 4 * 136;
+    let placed_stand_ins = 6 * 16 + 4 * 136;
     assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 5136);
     // The impostor's texture: every mip level of every view, as uploaded.
     let impostor = record_species_impostor_bytes(&scene, id);

@@ -394,9 +394,10 @@ fn the_expansion_budget_goes_to_the_nearest_tree() {
 /// farthest first (by depth bucket of its prototype's sphere centre,
 /// `model::compact::back_to_front`): blended lines drawn a prototype at a
 /// time mixed a crown's whole depth in a pixel. Three trees 6, 20 and 50 m
-/// away: every entry with lines of a part is drawn once in that part's
-/// block, with the lines its own code takes (`prototype_prefixes`) from
-/// the order its draw's flags name, and no draw is in a nearer bucket than
+/// away: every entry with lines is drawn once, its merged lines then its
+/// original lines in one draw, with the lines its own code takes from the
+/// orders its draw's flags name and the split the vertex shader reads
+/// (`CompactSpecies::entry_lines`), and no draw is in a nearer bucket than
 /// one drawn after it (one bucket's slack for the GPU's rounding).
 #[test]
 fn a_camera_draws_each_placements_lines_back_to_front() {
@@ -419,78 +420,69 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
     }
     let entries = &view.entries;
     assert_eq!(expanded_trees(&view).len(), 3, "every tree expands");
-    let per_part = view.ordered_draws.len() / 2;
     assert!(
-        per_part >= entries.len(),
-        "{per_part} draws a part for {} entries",
+        view.ordered_draws.len() >= entries.len(),
+        "{} draws for {} entries",
+        view.ordered_draws.len(),
         entries.len()
     );
+    assert_eq!(view.ordered_splits.len(), entries.len());
     let line_vertices = view.line_vertices;
-    // The lines of part `part` (0 original, 1 merged) entry `[tree,
-    // word]`'s own code takes, and the first, from the order its draw's
-    // flags name.
-    let own_lines = |part: usize, [tree, word]: [u32; 2]| -> (u32, u32) {
+    // Entry `[tree, word]`'s lines: its draw's choices of order (bits 31
+    // and 30 of `tree`) at its own code.
+    let own_lines = |[tree, word]: [u32; 2]| {
         let placement = &compact.placements[(word & 0xffff) as usize];
-        let k = placement.prototype as usize;
-        let prototype = &compact.prototypes[k];
-        let own = compact.prototype_prefixes(k, (word >> 16) as u16);
-        match part {
-            0 if tree >> 31 == 1 => (own.after_prisms, prototype.needles[0] + own.prisms),
-            0 => (own.original_by_parent, prototype.original_lines[0]),
-            // The GPU's line orders: the original lines', then the
-            // merged lines' by own code.
-            _ if tree >> 30 & 1 == 1 => (
-                own.merged_by_own,
-                compact.original_lines.len() as u32 + prototype.merged_by_own,
-            ),
-            _ => (own.merged_lines, prototype.merged_lines[0]),
-        }
+        compact.entry_lines(
+            placement.prototype as usize,
+            (word >> 16) as u16,
+            tree >> 31 == 1,
+            tree >> 30 & 1 == 1,
+        )
     };
     let mut drawn_lines = [0u64; 2];
-    for (part, drawn) in drawn_lines.iter_mut().enumerate() {
-        let block = &view.ordered_draws[part * per_part..(part + 1) * per_part];
-        let mut seen = vec![false; entries.len()];
-        let mut nearest_bucket = u32::MAX;
-        let mut buckets = Vec::new();
-        for draw in block.iter().filter(|d| d[0] > 0) {
-            let [vertices, instances, first_vertex, slot] = *draw;
-            assert_eq!(instances, 1);
-            let slot = slot as usize;
-            assert!(slot < entries.len() && !seen[slot], "entry {slot} drawn once");
-            seen[slot] = true;
-            let [tree, word] = entries[slot];
-            let placement = &compact.placements[(word & 0xffff) as usize];
-            let prototype = &compact.prototypes[placement.prototype as usize];
-            let (lines, first) = own_lines(part, entries[slot]);
-            assert_eq!(
-                [vertices, first_vertex],
-                [lines, first].map(|n| n * line_vertices),
-                "part {part}"
-            );
-            *drawn += u64::from(lines);
-            let center = prototype.sphere.placed(&placement.transform).center;
-            let world = tree_transform[(tree & 0x3fff_ffff) as usize].transform_point(center);
-            let bucket = depth_bucket(world.distance(camera));
-            assert!(
-                bucket <= nearest_bucket.saturating_add(1),
-                "part {part}: bucket {bucket} drawn after bucket {nearest_bucket}"
-            );
-            nearest_bucket = nearest_bucket.min(bucket);
-            buckets.push(bucket);
-        }
-        // Every entry with lines of this part is drawn.
-        for (slot, &entry) in entries.iter().enumerate() {
-            let (lines, _) = own_lines(part, entry);
-            assert_eq!(seen[slot], lines > 0, "part {part}, entry {slot}: {lines} lines");
-        }
-        println!(
-            "part {part}: {} placements drawn back to front, buckets {:?} .. {:?}",
-            buckets.len(),
-            buckets.first(),
-            buckets.last()
+    let mut seen = vec![false; entries.len()];
+    let mut nearest_bucket = u32::MAX;
+    let mut buckets = Vec::new();
+    for draw in view.ordered_draws.iter().filter(|d| d[0] > 0) {
+        let [vertices, instances, first_vertex, slot] = *draw;
+        assert_eq!(instances, 1);
+        let slot = slot as usize;
+        assert!(slot < entries.len() && !seen[slot], "entry {slot} drawn once");
+        seen[slot] = true;
+        let [tree, word] = entries[slot];
+        let placement = &compact.placements[(word & 0xffff) as usize];
+        let prototype = &compact.prototypes[placement.prototype as usize];
+        let lines = own_lines(entries[slot]);
+        assert_eq!(
+            [vertices, first_vertex],
+            [lines.lines(), lines.first()].map(|n| n * line_vertices),
+            "entry {slot}"
         );
-        assert!(buckets.first() > buckets.last(), "the crowns span buckets");
+        assert_eq!(view.ordered_splits[slot], lines.split(), "entry {slot}");
+        drawn_lines[0] += u64::from(lines.original);
+        drawn_lines[1] += u64::from(lines.merged);
+        let center = prototype.sphere.placed(&placement.transform).center;
+        let world = tree_transform[(tree & 0x3fff_ffff) as usize].transform_point(center);
+        let bucket = depth_bucket(world.distance(camera));
+        assert!(
+            bucket <= nearest_bucket.saturating_add(1),
+            "bucket {bucket} drawn after bucket {nearest_bucket}"
+        );
+        nearest_bucket = nearest_bucket.min(bucket);
+        buckets.push(bucket);
     }
+    // Every entry with lines is drawn.
+    for (slot, &entry) in entries.iter().enumerate() {
+        let lines = own_lines(entry).lines();
+        assert_eq!(seen[slot], lines > 0, "entry {slot}: {lines} lines");
+    }
+    println!(
+        "{} placements drawn back to front, buckets {:?} .. {:?}",
+        buckets.len(),
+        buckets.first(),
+        buckets.last()
+    );
+    assert!(buckets.first() > buckets.last(), "the crowns span buckets");
     println!(
         "lines drawn one placement at a time: original {}, merged {}",
         drawn_lines[0], drawn_lines[1]
@@ -504,7 +496,7 @@ fn a_camera_draws_each_placements_lines_back_to_front() {
         .resource_mut::<ConiferLodSettings>()
         .line_order = LineOrder::ByPrototype;
     let view = scene.read_back(&placed, &transforms, "by_prototype", true);
-    assert!(view.ordered_draws.is_empty());
+    assert!(view.ordered_draws.is_empty() && view.ordered_splits.is_empty());
     assert_eq!(view.entries.len(), entries.len());
     let by_prototype = scene.shot_of(&placed, &transforms, "by_prototype");
     let (a, b) = (covered_count(&back_to_front), covered_count(&by_prototype));

@@ -411,6 +411,43 @@ pub struct SectionPrefixes {
     pub merged_by_own: u32,
 }
 
+/// An expanded placement's line draw in a camera's back-to-front order
+/// ([`CompactSpecies::entry_lines`]): `merged` lines from `merged_first`,
+/// then `original` lines from `original_first`, in one draw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EntryLines {
+    /// Its first merged line: in the GPU's line orders (the original-line
+    /// order, then [`CompactSpecies::merged_by_own`]) where its draw takes
+    /// the merged lines by own code, else in [`CompactSpecies::merged_lines`].
+    pub merged_first: u32,
+    /// Merged lines it draws.
+    pub merged: u32,
+    /// Its first original line: a needle where its draw takes the original
+    /// lines from the needles after the prisms, else in
+    /// [`CompactSpecies::original_lines`].
+    pub original_first: u32,
+    /// Original lines it draws.
+    pub original: u32,
+}
+
+impl EntryLines {
+    /// Lines of the draw.
+    pub fn lines(&self) -> u32 {
+        self.merged + self.original
+    }
+
+    /// The draw's first line (its first vertex over the vertices a line).
+    pub fn first(&self) -> u32 {
+        self.merged_first
+    }
+
+    /// The draw's split as the vertex shader reads it: the line its merged
+    /// lines end at, and its first original line.
+    pub fn split(&self) -> [u32; 2] {
+        [self.merged_first + self.merged, self.original_first]
+    }
+}
+
 impl SectionPrefixes {
     /// Whether the original lines are drawn from the needles after the
     /// prisms rather than from the parent-sorted order: the shorter range.
@@ -1004,6 +1041,40 @@ impl CompactSpecies {
     pub fn prototype_prefixes(&self, k: usize, code: u16) -> SectionPrefixes {
         let p = &self.prototypes[k];
         self.section_prefixes(p.needles, p.original_lines, p.merged_lines, Some(p.merged_by_own), code)
+    }
+
+    /// The line draw of an expanded placement of prototype `k` at
+    /// threshold code `code` in a camera's back-to-front order: its merged
+    /// lines, then its original lines. `from_needles` and `merged_by_own`
+    /// are the choices of the instanced draw it belongs to (its prototype
+    /// and band: [`SectionPrefixes::original_from_needles`],
+    /// [`SectionPrefixes::merged_from_own`] at the band's lowest code).
+    /// CPU reference of `conifer_cull.wgsl`'s `scatter_placements` and
+    /// `conifer_compact.wgsl`'s `CONIFER_LINES_BY_ENTRY`.
+    pub fn entry_lines(&self, k: usize, code: u16, from_needles: bool, merged_by_own: bool) -> EntryLines {
+        let prototype = &self.prototypes[k];
+        let own = self.prototype_prefixes(k, code);
+        let (original_first, original) = if from_needles {
+            (prototype.needles[0] + own.prisms, own.after_prisms)
+        } else {
+            (prototype.original_lines[0], own.original_by_parent)
+        };
+        // The GPU's line orders: the original lines', then the merged
+        // lines' by own code.
+        let (merged_first, merged) = if merged_by_own {
+            (
+                self.original_lines.len() as u32 + prototype.merged_by_own,
+                own.merged_by_own,
+            )
+        } else {
+            (prototype.merged_lines[0], own.merged_lines)
+        };
+        EntryLines {
+            merged_first,
+            merged,
+            original_first,
+            original,
+        }
     }
 
     /// Binary searches of one section (`[first, length]` of each array;

@@ -263,9 +263,8 @@ pub enum LineOrder {
     /// Each expanded placement's lines on their own, the farthest first by
     /// depth bucket ([`crate::model::compact::depth_bucket`], 0.36 % of
     /// the distance deep): a pixel shows the needles the camera meets
-    /// first, as a crown does. One indirect draw per placement and part
-    /// (the merged lines' draws, then the original lines'), sorted on the
-    /// GPU.
+    /// first, as a crown does. One indirect draw per placement, its
+    /// merged lines then its original lines, sorted on the GPU.
     #[default]
     BackToFront,
     /// One instanced draw per prototype and band, in a fixed order: far

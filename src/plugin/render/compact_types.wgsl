@@ -61,6 +61,9 @@ const VIEW_PERSPECTIVE: u32 = 1u;
 const VIEW_CAMERA: u32 = 2u;
 // The view's line draws are quads (`model::raster`), six vertices a line.
 const VIEW_LINE_QUADS: u32 = 4u;
+// The view draws each expanded placement's lines on their own, back to
+// front (`ordered_args`).
+const VIEW_DEPTH_ORDERED: u32 = 8u;
 
 struct SpeciesParams {
     // tree-local crown centre (xyz) and the radius of a sphere round it
@@ -212,7 +215,7 @@ struct CullView {
     world_position: vec4<f32>,
     // spatial error per metre of distance per unit pixel error: 2/(P₁₁·H)
     error_slope: f32,
-    // VIEW_PERSPECTIVE | VIEW_CAMERA | VIEW_LINE_QUADS
+    // VIEW_PERSPECTIVE | VIEW_CAMERA | VIEW_LINE_QUADS | VIEW_DEPTH_ORDERED
     perspective: u32,
     layers: u32,
     // expanded placements the view's entry buffers hold

@@ -64,6 +64,12 @@
 // The crown impostor's views (`model::impostor`), one layer each.
 @group(2) @binding(13) var impostor_texture: texture_2d_array<f32>;
 @group(2) @binding(14) var impostor_sampler: sampler;
+// A camera's back-to-front line draws, one per expanded placement (by its
+// index in `placed_entries`): where its merged lines end (the draw's first
+// lines) and its first original line after them (CPU reference:
+// `model::compact::CompactSpecies::entry_lines`). Other views bind a
+// stand-in.
+@group(2) @binding(15) var<storage, read> ordered_splits: array<vec2<u32>>;
 
 const PI: f32 = 3.14159265358979;
 // A line blends its motion into a pixel's where it covers at least this
@@ -891,6 +897,98 @@ fn wood_segment_error(lod: InstanceLod, start: vec4<f32>, end: vec4<f32>, tree_e
     return tree_error;
 }
 
+// What a foliage line's vertex takes from the tree or the expanded
+// placement it is drawn in (`vertex`'s opening).
+struct LineFrame {
+    lod: InstanceLod,
+    code: u32,
+    spatial_error: f32,
+    world_from_local: mat4x4<f32>,
+    grid: vec4<f32>,
+    needle_albedo: vec3<f32>,
+    hash_tree: u32,
+    original_from_needles: bool,
+    merged_by_own: bool,
+}
+
+// Vertex `vertex_index` (its corner: `% LINE_VERTICES`) of original line
+// `line` of the draw's order: the needle itself, or with
+// `original_from_needles` off, the original-line order's `line`-th.
+fn original_line_vertex(frame: LineFrame, line: u32, vertex_index: u32) -> VertexOutput {
+    var k = line;
+    if !frame.original_from_needles {
+        k = line_orders[line];
+    }
+    let w = needles[k].w;
+    let own = w & 0xffffu;
+    if !(own <= frame.code && frame.code < (w >> 16u)) {
+        return culled();
+    }
+    let width = log_decode(own);
+    let scale = line_calibration(frame.lod, frame.spatial_error);
+    let alpha = min(line_alpha(frame.lod, frame.spatial_error, width, width) * scale, 1.0) * frame.lod.transition;
+    let base = needle_base(frame.grid, k);
+    let tip = needle_tip(frame.grid, k);
+    let at_end = line_vertex_at_end(vertex_index);
+    let position = select(base, tip, at_end);
+    var out = finish(position, tip - base, frame.world_from_local, line_color(base_color(0, 0.0, alpha, frame.needle_albedo), k, frame.hash_tree));
+    out.alignment = 1.0;
+    out = with_line_width(out, line_pixels(frame.lod, frame.spatial_error, width) * scale);
+    return with_line_quad(swayed_line(out, base, tip, frame.world_from_local, at_end), base, tip, frame.world_from_local, vertex_index);
+}
+
+// Vertex `vertex_index` (its corner: `% LINE_VERTICES`) of merged line
+// `index` of the draw's order: the merged line itself, or with
+// `merged_by_own`, the order by own code's `index`-th.
+fn merged_line_vertex(frame: LineFrame, index: u32, vertex_index: u32) -> VertexOutput {
+    var line = index;
+    if frame.merged_by_own {
+        line = line_orders[index];
+    }
+    let a = merged_lines[3u * line];
+    let b = merged_lines[3u * line + 1u];
+    let codes = merged_lines[3u * line + 2u];
+    let own = codes & 0xffffu;
+    // Seen from a view point, a tree's level-2 line takes its own sphere's
+    // code and its parent's sphere's (CPU reference:
+    // `model::compact::CompactSpecies::placed_drawn`).
+    var line_code = frame.code;
+    var parent_view_code = frame.code;
+    var line_error = frame.spatial_error;
+#ifndef CONIFER_PLACED
+    if frame.lod.view.w > 0.0 && species.placement_count > 0u {
+        line_error = sphere_error(frame.lod, tree_spheres[line], species.wind_motion.y);
+        line_code = threshold_code(line_error);
+        let parent = tree_line_parents[line];
+        parent_view_code = 0u;
+        if parent != NO_SPHERE {
+            parent_view_code = threshold_code(sphere_error(frame.lod, tree_spheres[parent], species.wind_motion.y));
+        }
+    }
+#endif
+    if !(own <= line_code && parent_view_code < (codes >> 16u)) {
+        return culled();
+    }
+    // The width code's top 12 bits (`model::compact::CompactSpecies::merged_width_code`).
+    let width = log_decode(((a >> 24u) | (((b >> 24u) & 0xfu) << 8u)) << 4u);
+    let scale = line_calibration(frame.lod, line_error);
+    let alpha = min(merged_line_alpha(frame.lod, line_error, width, log_decode(own)) * scale, 1.0);
+    // Wider than a pixel its strip keeps its area, under the
+    // area-preserving rule (the coverage rule's opacity saturates instead).
+    let merged_pixels = select(0.0, line_pixels(frame.lod, line_error, width) * scale, ((frame.lod.code >> LOD_OPACITY_SHIFT) & 3u) == 1u);
+    let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
+    let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
+    let start = end_position(frame.grid, a);
+    let end = end_position(frame.grid, b);
+    let at_end = line_vertex_at_end(vertex_index);
+    let position = select(start, end, at_end);
+    var out = finish(position, end - start, frame.world_from_local, line_color(base_color(1, amount, alpha, frame.needle_albedo), species.total_needle_count + line, frame.hash_tree));
+    // `model::compact::CompactSpecies::merged_alignment`.
+    out.alignment = f32(b >> 28u) / ALIGNMENT_STEPS;
+    out = with_line_width(out, merged_pixels);
+    return with_line_quad(swayed_line(out, start, end, frame.world_from_local, at_end), start, end, frame.world_from_local, vertex_index);
+}
+
 // Draws of the tree's own parts have one instance, the tree; placed draws
 // one instance per expanded placement, whose entry names its tree,
 // placement and threshold code. Either way the vertex works in the frame
@@ -976,76 +1074,24 @@ fn vertex(@builtin(vertex_index) vertex_index: u32, @builtin(instance_index) ins
 #endif
 
 #ifdef CONIFER_ORIGINAL_LINES
+    let frame = LineFrame(lod, code, spatial_error, world_from_local, grid, needle_albedo, hash_tree, original_from_needles, merged_by_own);
+#ifdef CONIFER_LINES_BY_ENTRY
+    // An expanded placement's merged lines, then its original lines, in
+    // one draw (`ordered_splits`).
+    let split = ordered_splits[instance_index];
     let line = vertex_index / LINE_VERTICES;
-    var k = line;
-    if !original_from_needles {
-        k = line_orders[line];
+    if line < split.x {
+        return merged_line_vertex(frame, line, vertex_index);
     }
-    let w = needles[k].w;
-    let own = w & 0xffffu;
-    if !(own <= code && code < (w >> 16u)) {
-        return culled();
-    }
-    let width = log_decode(own);
-    let scale = line_calibration(lod, spatial_error);
-    let alpha = min(line_alpha(lod, spatial_error, width, width) * scale, 1.0) * lod.transition;
-    let base = needle_base(grid, k);
-    let tip = needle_tip(grid, k);
-    let at_end = line_vertex_at_end(vertex_index);
-    let position = select(base, tip, at_end);
-    var out = finish(position, tip - base, world_from_local, line_color(base_color(0, 0.0, alpha, needle_albedo), k, hash_tree));
-    out.alignment = 1.0;
-    out = with_line_width(out, line_pixels(lod, spatial_error, width) * scale);
-    return with_line_quad(swayed_line(out, base, tip, world_from_local, at_end), base, tip, world_from_local, vertex_index);
+    return original_line_vertex(frame, line - split.x + split.y, vertex_index);
+#else
+    return original_line_vertex(frame, vertex_index / LINE_VERTICES, vertex_index);
+#endif
 #endif
 
 #ifdef CONIFER_MERGED_LINES
-    var line = vertex_index / LINE_VERTICES;
-    if merged_by_own {
-        line = line_orders[line];
-    }
-    let a = merged_lines[3u * line];
-    let b = merged_lines[3u * line + 1u];
-    let codes = merged_lines[3u * line + 2u];
-    let own = codes & 0xffffu;
-    // Seen from a view point, a tree's level-2 line takes its own sphere's
-    // code and its parent's sphere's (CPU reference:
-    // `model::compact::CompactSpecies::placed_drawn`).
-    var line_code = code;
-    var parent_view_code = code;
-    var line_error = spatial_error;
-#ifndef CONIFER_PLACED
-    if lod.view.w > 0.0 && species.placement_count > 0u {
-        line_error = sphere_error(lod, tree_spheres[line], species.wind_motion.y);
-        line_code = threshold_code(line_error);
-        let parent = tree_line_parents[line];
-        parent_view_code = 0u;
-        if parent != NO_SPHERE {
-            parent_view_code = threshold_code(sphere_error(lod, tree_spheres[parent], species.wind_motion.y));
-        }
-    }
-#endif
-    if !(own <= line_code && parent_view_code < (codes >> 16u)) {
-        return culled();
-    }
-    // The width code's top 12 bits (`model::compact::CompactSpecies::merged_width_code`).
-    let width = log_decode(((a >> 24u) | (((b >> 24u) & 0xfu) << 8u)) << 4u);
-    let scale = line_calibration(lod, line_error);
-    let alpha = min(merged_line_alpha(lod, line_error, width, log_decode(own)) * scale, 1.0);
-    // Wider than a pixel its strip keeps its area, under the
-    // area-preserving rule (the coverage rule's opacity saturates instead).
-    let merged_pixels = select(0.0, line_pixels(lod, line_error, width) * scale, ((lod.code >> LOD_OPACITY_SHIFT) & 3u) == 1u);
-    let span = f32(max(species.merged_code_max, species.merged_code_min + 1u) - species.merged_code_min);
-    let amount = clamp(f32(own - min(own, species.merged_code_min)) / span, 0.0, 1.0);
-    let start = end_position(grid, a);
-    let end = end_position(grid, b);
-    let at_end = line_vertex_at_end(vertex_index);
-    let position = select(start, end, at_end);
-    var out = finish(position, end - start, world_from_local, line_color(base_color(1, amount, alpha, needle_albedo), species.total_needle_count + line, hash_tree));
-    // `model::compact::CompactSpecies::merged_alignment`.
-    out.alignment = f32(b >> 28u) / ALIGNMENT_STEPS;
-    out = with_line_width(out, merged_pixels);
-    return with_line_quad(swayed_line(out, start, end, world_from_local, at_end), start, end, world_from_local, vertex_index);
+    let frame = LineFrame(lod, code, spatial_error, world_from_local, grid, needle_albedo, hash_tree, original_from_needles, merged_by_own);
+    return merged_line_vertex(frame, vertex_index / LINE_VERTICES, vertex_index);
 #endif
 
 #ifdef CONIFER_WOOD_LINES

@@ -12,9 +12,10 @@
 // `model::compact::CompactSpecies::placed_view`.
 //
 // A camera also draws each expanded placement's lines on their own, back
-// to front by depth bucket (`ordered_args`; CPU reference:
-// `model::compact::back_to_front`): blended lines drawn a prototype at a
-// time mix a crown's whole depth in a pixel.
+// to front by depth bucket, its merged and original lines in one draw
+// (`ordered_args`; CPU reference: `model::compact::back_to_front`,
+// `model::compact::CompactSpecies::entry_lines`): blended lines drawn a
+// prototype at a time mix a crown's whole depth in a pixel.
 
 #import bevy_conifer_lod::compact_types::{
     Instance, InstanceLod, SpeciesParams, CullView, DrawArgs,
@@ -26,7 +27,7 @@
     ARRAY_MERGED_BY_OWN, DEPTH_ARRAY_COUNT, DEPTH_ARRAY_OFFSET, DEPTH_ARRAY_CURSOR, DEPTH_BUCKETS, depth_bucket,
     placement_band, placement_matrix,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
-    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA, VIEW_LINE_QUADS,
+    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA, VIEW_LINE_QUADS, VIEW_DEPTH_ORDERED,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale, tree_local_point,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
@@ -51,10 +52,13 @@
 @group(1) @binding(4) var<storage, read_write> sorted_entries: array<vec2<u32>>;
 @group(1) @binding(5) var<storage, read_write> placed_args: array<DrawArgs>;
 @group(1) @binding(6) var<storage, read> tree_spheres: array<vec4<f32>>;
-// A camera's line draws one expanded placement at a time, back to front:
-// original lines (the first half), then merged lines (the second half).
-// Other views bind a stand-in and write none.
+// A camera's line draws one expanded placement at a time, back to front,
+// each its merged lines then its original lines; and per entry (by its
+// index in `sorted_entries`) where its merged lines end and its original
+// lines start (`conifer_compact.wgsl`'s `CONIFER_LINES_BY_ENTRY`). Other
+// views bind stand-ins and write none.
 @group(1) @binding(7) var<storage, read_write> ordered_args: array<DrawArgs>;
+@group(1) @binding(8) var<storage, read_write> ordered_splits: array<vec2<u32>>;
 // Only `prepare_dispatch` binds it: the other passes read it as their
 // indirect dispatch.
 @group(2) @binding(0) var<storage, read_write> dispatch: array<u32>;
@@ -499,10 +503,9 @@ fn depth_counter_index(array_index: u32, bucket: u32) -> u32 {
 }
 
 // Whether this view draws its expanded placements' lines back to front
-// (a camera, whose buffers hold a draw per entry and part).
+// (a camera, whose buffers hold a draw and a split per entry).
 fn depth_ordered() -> bool {
-    return (cull_view.perspective & VIEW_CAMERA) != 0u
-        && arrayLength(&ordered_args) >= 2u * cull_view.entry_capacity;
+    return (cull_view.perspective & VIEW_DEPTH_ORDERED) != 0u;
 }
 
 // The depth bucket of expanded placement `placement` of tree `tree`: its
@@ -673,29 +676,34 @@ fn scatter_placements(@builtin(global_invocation_id) id: vec3<u32>) {
     if !depth_ordered() {
         return;
     }
-    // Its lines' own draws at its depth rank: as its draw's lines (the same
-    // order and first line), as many as its own code takes.
+    // Its lines' draw at its depth rank: its merged lines, then its
+    // original lines, each as its draw's lines (the same order and first
+    // line), as many as its own code takes (CPU reference:
+    // `model::compact::CompactSpecies::entry_lines`).
     let bucket = entry_depth_bucket(entry.x, placement);
     let rank = atomicLoad(&counters[depth_counter_index(DEPTH_ARRAY_OFFSET, bucket)])
         + atomicAdd(&counters[depth_counter_index(DEPTH_ARRAY_CURSOR, bucket)], 1u);
     let prototype = prototypes[placement.prototype];
     let code = entry.y >> 16u;
-    var original: DrawArgs;
+    var original_first: u32;
+    var original: u32;
     if (flags & ENTRY_FROM_NEEDLES) != 0u {
         let prisms = prism_prefix_in(prototype.needle_first, prototype.needle_count, code);
-        original = ordered_draw(prototype.needle_count - prisms, prototype.needle_first + prisms, slot);
+        original_first = prototype.needle_first + prisms;
+        original = prototype.needle_count - prisms;
     } else {
-        let lines = original_prefix_in(prototype.original_first, prototype.original_count, code);
-        original = ordered_draw(lines, prototype.original_first, slot);
+        original_first = prototype.original_first;
+        original = original_prefix_in(prototype.original_first, prototype.original_count, code);
     }
-    var merged: DrawArgs;
+    var merged_first: u32;
+    var merged: u32;
     if (flags & ENTRY_MERGED_BY_OWN) != 0u {
-        let lines = merged_by_own_prefix_in(prototype.merged_by_own_first, prototype.merged_count, code);
-        merged = ordered_draw(lines, prototype.merged_by_own_first, slot);
+        merged_first = prototype.merged_by_own_first;
+        merged = merged_by_own_prefix_in(prototype.merged_by_own_first, prototype.merged_count, code);
     } else {
-        let lines = merged_prefix_in(prototype.merged_first, prototype.merged_count, code);
-        merged = ordered_draw(lines, prototype.merged_first, slot);
+        merged_first = prototype.merged_first;
+        merged = merged_prefix_in(prototype.merged_first, prototype.merged_count, code);
     }
-    ordered_args[rank] = original;
-    ordered_args[arrayLength(&ordered_args) / 2u + rank] = merged;
+    ordered_args[rank] = ordered_draw(merged + original, merged_first, slot);
+    ordered_splits[slot] = vec2<u32>(merged_first + merged, original_first);
 }

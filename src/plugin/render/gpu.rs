@@ -451,6 +451,11 @@ pub const VIEW_CAMERA: u32 = 2;
 /// vertices a line ([`crate::plugin::LineRaster::Area`]; cameras only).
 pub const VIEW_LINE_QUADS: u32 = 4;
 
+/// [`CullView::perspective`] flag: the view draws each expanded
+/// placement's lines on their own, back to front (a camera under
+/// [`crate::plugin::LineOrder::BackToFront`] with room for placements).
+pub const VIEW_DEPTH_ORDERED: u32 = 8;
+
 /// A view as the compute pass sees it (`CullView` in WGSL), 144 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
@@ -462,7 +467,8 @@ pub struct CullView {
     /// `2 / (P₁₁ · H)`.
     pub error_slope: f32,
     /// 1 for a perspective view, plus [`VIEW_CAMERA`] for a camera, plus
-    /// [`VIEW_LINE_QUADS`] where it draws lines as quads.
+    /// [`VIEW_LINE_QUADS`] where it draws lines as quads, plus
+    /// [`VIEW_DEPTH_ORDERED`] where it draws its lines back to front.
     pub perspective: u32,
     /// Render layers 0–31 the view sees.
     pub layers: u32,
@@ -481,6 +487,10 @@ pub struct CullView {
 pub const INSTANCE_LOD_BYTES: u64 = 32;
 /// One indirect draw (`DrawArgs`), 16 bytes.
 pub const DRAW_ARGS_BYTES: u64 = 16;
+
+/// Bytes of one entry's split of its back-to-front line draw (where its
+/// merged lines end, where its original lines start).
+pub const ORDERED_SPLIT_BYTES: u64 = 8;
 
 /// A prototype of a placed species (`Prototype` in WGSL), 96 bytes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
@@ -596,7 +606,8 @@ pub const PLACED_DEPTH_COUNTERS: u64 = 3 * crate::model::compact::DEPTH_BUCKETS 
 mod tests {
     use crate::model::wind;
 
-    /// The shader's copies of `model::wind`'s constants and the bark's.
+    /// The shader's copies of `model::wind`'s constants, the bark's, the
+    /// depth buckets' and the view flags.
     #[test]
     fn the_shader_has_the_models_constants() {
         let shader = include_str!("conifer_compact.wgsl");
@@ -627,6 +638,14 @@ mod tests {
         }
         let buckets = crate::model::compact::DEPTH_BUCKETS;
         assert!(types.contains(&format!("const DEPTH_BUCKETS: u32 = {buckets}u;")));
+        for (name, value) in [
+            ("VIEW_CAMERA", super::VIEW_CAMERA),
+            ("VIEW_LINE_QUADS", super::VIEW_LINE_QUADS),
+            ("VIEW_DEPTH_ORDERED", super::VIEW_DEPTH_ORDERED),
+        ] {
+            let line = format!("const {name}: u32 = {value}u;");
+            assert!(types.contains(&line), "{line}");
+        }
         for (name, v) in [
             ("WIND_BRANCH_WAVES", wind::BRANCH_WAVES),
             ("WIND_FLUTTER_WAVES", wind::FLUTTER_WAVES),

@@ -30,8 +30,9 @@ pub use readback::{CompactReadback, ViewReadback};
 use self::gpu::{
     CullView, DRAW_ARGS_BYTES, FLAG_IMPOSTOR_ON, FLAG_IMPOSTOR_OVERRIDE, FLAG_PIXEL_ERROR_OVERRIDE,
     FLAG_TRANSITION_OVERRIDE, FLAG_VISIBLE, GpuInstance, GpuPlacement, GpuPrototype, INSTANCE_LOD_BYTES,
-    OPACITY_OVERRIDE_SHIFT, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER, PLACED_DEPTH_COUNTERS,
-    PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS, VIEW_CAMERA, VIEW_LINE_QUADS,
+    OPACITY_OVERRIDE_SHIFT, ORDERED_SPLIT_BYTES, PART_KINDS, PLACED_COUNTER_ARRAYS, PLACED_COUNTER_HEADER,
+    PLACED_DEPTH_COUNTERS, PLACED_ENTRY_BYTES, PLACED_PART_KINDS, PartKind, SpeciesParams, TREE_PART_KINDS,
+    VIEW_CAMERA, VIEW_DEPTH_ORDERED, VIEW_LINE_QUADS,
 };
 use super::{
     ConiferFoliage, ConiferLodOverride, ConiferLodSettings, ConiferSpecies, ConiferWind, ErrorScope, LineLighting,
@@ -330,6 +331,27 @@ impl RenderSpecies {
             _ => kind.present_in(&self.compact),
         }
     }
+
+    /// Whether a camera draws `kind` of the species, with `by_entry` (its
+    /// lines back to front, [`lines_by_entry`]): each expanded placement's
+    /// merged and original lines are then one draw, the original lines'.
+    fn camera_draws(&self, kind: PartKind, by_entry: bool) -> bool {
+        match kind {
+            PartKind::PlacedOriginalLines if by_entry => {
+                self.draws(PartKind::PlacedOriginalLines) || self.draws(PartKind::PlacedMergedLines)
+            }
+            PartKind::PlacedMergedLines if by_entry => false,
+            _ => self.draws(kind),
+        }
+    }
+}
+
+/// Whether a camera draws each expanded placement's lines on their own, its
+/// merged lines then its original lines in one draw (`CONIFER_LINES_BY_ENTRY`):
+/// under [`LineOrder::BackToFront`]. Its view buffers hold the draws when it
+/// has room for placements ([`PlacedViewBuffers::depth_ordered`]).
+fn lines_by_entry(line_order: LineOrder) -> bool {
+    line_order == LineOrder::BackToFront
 }
 
 /// A species' GPU buffers.
@@ -857,7 +879,7 @@ struct ViewBindGroups {
 }
 
 impl ViewSpecies {
-    fn buffers(&self) -> [&Buffer; 9] {
+    fn buffers(&self) -> [&Buffer; 10] {
         let p = &self.placed;
         [
             &self.cull_view,
@@ -869,6 +891,7 @@ impl ViewSpecies {
             &p.args,
             &p.dispatch,
             &p.ordered,
+            &p.ordered_splits,
         ]
     }
 }
@@ -883,10 +906,13 @@ struct PlacedViewBuffers {
     sorted: Buffer,
     args: Buffer,
     dispatch: Buffer,
-    /// A camera's: one draw per entry of its original lines, back to
-    /// front, then as many of its merged lines; other views' a 16-byte
-    /// stand-in.
+    /// A camera's: one draw of its merged and original lines per entry,
+    /// back to front; other views' a 16-byte stand-in.
     ordered: Buffer,
+    /// A camera's: where each entry's merged lines end and its original
+    /// lines start in its draw (8 bytes an entry, by its index in
+    /// `sorted`); other views' a 16-byte stand-in.
+    ordered_splits: Buffer,
     /// Whether `ordered` holds a camera's depth-ordered line draws (and
     /// `counters` their depth buckets).
     depth_ordered: bool,
@@ -902,10 +928,14 @@ impl PlacedViewBuffers {
         let entry_bytes = u64::from(entry_capacity) * PLACED_ENTRY_BYTES;
         // A camera of a placed species orders its lines by depth.
         let depth_ordered = depth_ordered && entry_capacity > 0;
-        let (ordered_bytes, depth_counters) = if depth_ordered {
-            (2 * u64::from(entry_capacity) * DRAW_ARGS_BYTES, PLACED_DEPTH_COUNTERS)
+        let (ordered_bytes, split_bytes, depth_counters) = if depth_ordered {
+            (
+                u64::from(entry_capacity) * DRAW_ARGS_BYTES,
+                u64::from(entry_capacity) * ORDERED_SPLIT_BYTES,
+                PLACED_DEPTH_COUNTERS,
+            )
         } else {
-            (0, 0)
+            (0, 0, 0)
         };
         Self {
             counters: empty_buffer(
@@ -920,6 +950,7 @@ impl PlacedViewBuffers {
                 ordered_bytes,
                 storage | BufferUsages::INDIRECT,
             ),
+            ordered_splits: empty_buffer(device, "conifer back-to-front line splits", split_bytes, storage),
             depth_ordered,
             entries: empty_buffer(device, "conifer placement entries", entry_bytes, storage),
             sorted: empty_buffer(device, "conifer sorted placement entries", entry_bytes, storage),
@@ -1006,6 +1037,10 @@ pub struct CompactPipelineKey {
     /// Which of the wood lines' draws this is ([`WoodLineLayer::Whole`]
     /// for every other part and pass).
     wood_layer: WoodLineLayer,
+    /// A camera's expanded placements' lines drawn one placement at a
+    /// time, its merged and original lines in one draw ([`lines_by_entry`];
+    /// the placed original lines' key only).
+    lines_by_entry: bool,
 }
 
 /// The wood lines' draws. Blended lines are not sorted one by one, so the
@@ -1115,6 +1150,7 @@ fn init_compact_pipeline(
                 read(),
                 texture_2d_array(TextureSampleType::Float { filterable: true }),
                 sampler(SamplerBindingType::Filtering),
+                read(),
             ),
         ),
     );
@@ -1147,6 +1183,7 @@ fn init_compact_pipeline(
                 storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
                 read(),
+                storage_buffer_sized(false, None),
                 storage_buffer_sized(false, None),
             ),
         ),
@@ -1224,7 +1261,14 @@ impl SpecializedRenderPipeline for CompactPipeline {
                 writes_depth,
                 normals,
             } => {
-                return self.motion_descriptor(key.kind, samples, writes_depth, normals, key.line_quads);
+                return self.motion_descriptor(
+                    key.kind,
+                    samples,
+                    writes_depth,
+                    normals,
+                    key.line_quads,
+                    key.lines_by_entry,
+                );
             }
         }
         // A layout with positions never misses an attribute; an error here
@@ -1254,6 +1298,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
         }
         if key.kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
+        }
+        if key.lines_by_entry {
+            defs.push("CONIFER_LINES_BY_ENTRY".into());
         }
         if key.line_quads {
             defs.push("CONIFER_LINE_QUADS".into());
@@ -1397,6 +1444,7 @@ impl CompactPipeline {
         writes_depth: bool,
         normals: bool,
         line_quads: bool,
+        lines_by_entry: bool,
     ) -> RenderPipelineDescriptor {
         let Some(view_layout) = self.motion_view_layout.clone() else {
             return RenderPipelineDescriptor::default();
@@ -1414,6 +1462,9 @@ impl CompactPipeline {
         }
         if line_quads {
             defs.push("CONIFER_LINE_QUADS".into());
+        }
+        if lines_by_entry {
+            defs.push("CONIFER_LINES_BY_ENTRY".into());
         }
         let writes_surface = writes_depth && !kind.is_blended();
         if normals {
@@ -1651,6 +1702,7 @@ fn prepare_views(
                         placed.args.as_entire_binding(),
                         gpu.tree_spheres.as_entire_binding(),
                         placed.ordered.as_entire_binding(),
+                        placed.ordered_splits.as_entire_binding(),
                     )),
                 );
                 let dispatch_group = device.create_bind_group(
@@ -1677,6 +1729,7 @@ fn prepare_views(
                         gpu.tree_line_parents.as_entire_binding(),
                         &gpu.impostor,
                         &pipeline.impostor_sampler,
+                        placed.ordered_splits.as_entire_binding(),
                     )),
                 );
                 ViewBindGroups {
@@ -1731,6 +1784,7 @@ fn prepare_views(
             // (they shrink only well below their length).
             let cull_view = CullView {
                 entry_capacity: v.placed.entry_capacity.min(max_entries as u32),
+                perspective: cull_view.perspective | if v.placed.depth_ordered { VIEW_DEPTH_ORDERED } else { 0 },
                 ..cull_view
             };
             queue.write_buffer(&v.cull_view, 0, bytemuck::bytes_of(&cull_view));
@@ -1792,7 +1846,8 @@ fn queue_compact(
                 if !kind.is_blended() {
                     opaque.remove(main_entity);
                 }
-                if !drawn || !species.draws(kind) {
+                let by_entry = lines_by_entry(render.line_order);
+                if !drawn || !species.camera_draws(kind, by_entry) {
                     continue;
                 }
                 let line_quads = kind.is_lines() && render.camera_line_quads(view.target_format);
@@ -1822,13 +1877,6 @@ fn queue_compact(
                         (WoodLineLayer::OverFoliage, 1e-3, species.wood_over_entity),
                     ],
                     (PartKind::WoodLines, false) => &[(WoodLineLayer::Whole, -1e-3, entity)],
-                    // Back to front, a camera draws the expanded placements'
-                    // merged lines before their original lines: seen from
-                    // a view point, the farther placements are the merged
-                    // ones.
-                    (PartKind::PlacedMergedLines, _) if render.line_order == LineOrder::BackToFront => {
-                        &[(WoodLineLayer::Whole, -0.5e-3, entity)]
-                    }
                     _ => &[(WoodLineLayer::Whole, 0.0, entity)],
                 };
                 for &(wood_layer, depth_bias, entity) in layers {
@@ -1845,6 +1893,7 @@ fn queue_compact(
                         },
                         line_quads,
                         wood_layer,
+                        lines_by_entry: by_entry && kind == PartKind::PlacedOriginalLines,
                     };
                     let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                     if kind.is_blended() {
@@ -1927,6 +1976,7 @@ fn queue_compact_shadows(
                     line_lighting: LineLighting::default(),
                     line_quads: false,
                     wood_layer: WoodLineLayer::Whole,
+                    lines_by_entry: false,
                 };
                 let pipeline_id = pipelines.specialize(&pipeline_cache, &pipeline, key);
                 phase.add(
@@ -1983,8 +2033,12 @@ fn queue_compact_motion_vectors(
                 if species.instances.is_empty() {
                     continue;
                 }
+                let by_entry = lines_by_entry(render.line_order);
                 for kind in PartKind::ALL {
-                    if kind == PartKind::Impostor || kind.is_blended() != blended || !species.draws(kind) {
+                    if kind == PartKind::Impostor
+                        || kind.is_blended() != blended
+                        || !species.camera_draws(kind, by_entry)
+                    {
                         continue;
                     }
                     let key = CompactPipelineKey {
@@ -1994,6 +2048,7 @@ fn queue_compact_motion_vectors(
                         line_lighting: LineLighting::default(),
                         line_quads: kind.is_lines() && render.camera_line_quads(extracted.target_format),
                         wood_layer: WoodLineLayer::Whole,
+                        lines_by_entry: by_entry && kind == PartKind::PlacedOriginalLines,
                     };
                     list.push((id, kind, pipelines.specialize(&pipeline_cache, &pipeline, key)));
                 }
@@ -2201,7 +2256,8 @@ impl<P: PhaseItem> RenderCommand<P> for DrawCompactPart {
 /// Issues the indirect draws of one part of a view's trees, the bind
 /// groups set: one draw per tree for the tree's parts, one instanced draw
 /// per prototype and band for the placed ones, and for a camera's placed
-/// lines one draw per expanded placement, back to front (`split`: one
+/// lines one draw per expanded placement, back to front, its merged and
+/// original lines together (the original lines' part; `split`: one
 /// indirect draw each instead of one multi-draw). False when the view has
 /// no placed draws for a placed part.
 fn draw_indirect_part<'a>(
@@ -2214,14 +2270,10 @@ fn draw_indirect_part<'a>(
     let (args, draws, block) = match kind.placed_index() {
         None => (&buffers.args, buffers.instance_count, kind.index()),
         Some(_) if placed.entry_capacity == 0 => return false,
-        Some(_) if placed.depth_ordered && kind.is_lines() => {
-            // The shader's blocks: half the buffer each.
-            let per_part = placed.ordered.size() / (2 * DRAW_ARGS_BYTES);
-            (
-                &placed.ordered,
-                per_part as u32,
-                usize::from(kind == PartKind::PlacedMergedLines),
-            )
+        // The original lines' draws hold the merged lines too.
+        Some(_) if placed.depth_ordered && kind == PartKind::PlacedMergedLines => return false,
+        Some(_) if placed.depth_ordered && kind == PartKind::PlacedOriginalLines => {
+            (&placed.ordered, (placed.ordered.size() / DRAW_ARGS_BYTES) as u32, 0)
         }
         Some(block) => (&placed.args, placed.draws, block),
     };

@@ -47,12 +47,17 @@ pub struct ViewReadback {
     /// original-lines-from-needles flag (bit 31), then placement (16 bits)
     /// and the threshold code.
     pub entries: Vec<[u32; 2]>,
-    /// A camera's draws of each expanded placement's lines, back to front:
-    /// the original lines' block, then the merged lines' (equally long;
-    /// each draw's first instance is its entry's index in `entries`, a
-    /// placement without lines of a part and every rank past the last
-    /// entry draw nothing). Empty for other views.
+    /// A camera's draws of each expanded placement's lines, back to front,
+    /// its merged lines then its original lines (each draw's first
+    /// instance is its entry's index in `entries`; a placement without
+    /// lines and every rank past the last entry draw nothing). Empty for
+    /// other views.
     pub ordered_draws: Vec<[u32; 4]>,
+    /// Per entry of `entries` (by index), the split of its draw in
+    /// `ordered_draws`: the line its merged lines end at (in the merged
+    /// lines' order) and its first original line (in the original lines'
+    /// order; `model::compact::EntryLines`). Empty for other views.
+    pub ordered_splits: Vec<[u32; 2]>,
 }
 
 impl ViewReadback {
@@ -119,9 +124,9 @@ struct Staged {
     line_vertices: u32,
     buffer: Buffer,
     /// Byte lengths of the lods, tree draws, placed draws, counters,
-    /// sorted entries and back-to-front line draws in `buffer`, in that
-    /// order.
-    lengths: [u64; 6],
+    /// sorted entries, back-to-front line draws and their splits in
+    /// `buffer`, in that order.
+    lengths: [u64; 7],
     trees: usize,
     draws: usize,
     entry_capacity: usize,
@@ -148,7 +153,15 @@ pub(super) fn stage(
     }
     for ((_, species), view) in &views.views {
         let p = &view.placed;
-        let sources = [&view.lods, &view.args, &p.args, &p.counters, &p.sorted, &p.ordered];
+        let sources = [
+            &view.lods,
+            &view.args,
+            &p.args,
+            &p.counters,
+            &p.sorted,
+            &p.ordered,
+            &p.ordered_splits,
+        ];
         let lengths = sources.map(|b| b.size());
         let buffer = device.create_buffer(&BufferDescriptor {
             label: Some("conifer compact readback"),
@@ -209,7 +222,8 @@ pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingRead
             at += s.lengths[k] as usize;
             words(&bytes[range])
         };
-        let (lods, tree, placed, counters, sorted, ordered) = (part(0), part(1), part(2), part(3), part(4), part(5));
+        let (lods, tree, placed, counters, sorted, ordered, splits) =
+            (part(0), part(1), part(2), part(3), part(4), part(5), part(6));
         let trees = s.trees;
         let quads = |w: &[u32], n: usize| w.chunks_exact(4).take(n).map(|c| [c[0], c[1], c[2], c[3]]).collect();
         // Entries kept (an entry whose parent line a view point reaches is
@@ -239,6 +253,15 @@ pub(super) fn collect(device: Res<RenderDevice>, mut pending: ResMut<PendingRead
                 .collect(),
             ordered_draws: if s.depth_ordered {
                 quads(&ordered, usize::MAX)
+            } else {
+                Vec::new()
+            },
+            ordered_splits: if s.depth_ordered {
+                splits
+                    .chunks_exact(2)
+                    .take(entry_count.min(s.entry_capacity))
+                    .map(|c| [c[0], c[1]])
+                    .collect()
             } else {
                 Vec::new()
             },
