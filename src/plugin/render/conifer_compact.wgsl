@@ -2072,10 +2072,11 @@ fn mixed_lighting(in: pbr_types::PbrInput, mixed: SurfaceMix) -> vec4<f32> {
     // Bevy's indirect light depends on the normal's angle to the view (its
     // split-sum Fresnel grows toward a silhouette): averaged over the
     // cylinder's width or the sphere's disk at four view cosines. Bevy's
-    // ambient light reads only the cosine, so the surfaces over their whole
-    // width share its four calls (a cylinder's and a sphere's nodes lie at
-    // the same cosines); a band of a cylinder takes its own. The
-    // environment map is taken at each surface's normal facing the viewer.
+    // ambient light reads only the cosine, so the spheres and the
+    // cylinders seen square-on share its four calls (their nodes lie at
+    // the same cosines); a band of a cylinder, and a cylinder seen along
+    // its axis, take their own (`surface_indirect`). The environment map
+    // is taken at each surface's normal facing the viewer.
     let F0 = pbr_functions::calculate_F0(base, 0.0, in.material.reflectance);
     var indirect = vec3<f32>(0.0);
     var node_weights = vec4<f32>(0.0);
@@ -2132,10 +2133,15 @@ fn mixed_light(
     return sum;
 }
 
-// The ambient light on `surface` times its `share`: a band of a cylinder
-// at its own four nodes; over a whole width or disk the nodes' weights
-// are added to `node_weights`, at the cosines every surface shares
-// (`indirect_node`), for one call each.
+// The ambient light on `surface` times its `share`. A cylinder seen at
+// angle β to its axis turns its normal at angle φ from the viewer to
+// `n·V = sin β · cos φ` (`toward·V = sin β`; a sphere's is 1): a band of a
+// cylinder at its own four nodes, a whole width seen from aside at the
+// shared nodes' cosines times `sin β`, each one call; a sphere's disk and
+// a whole width seen square-on (`sin β` within 10⁻³ of 1) add the nodes'
+// weights to `node_weights`, at the cosines those surfaces share
+// (`indirect_node`), for one call each (CPU reference:
+// `model::shading::cylinder_indirect_cosines`).
 fn surface_indirect(
     in: pbr_types::PbrInput,
     surface: Surface,
@@ -2149,23 +2155,33 @@ fn surface_indirect(
         return indirect;
     }
     let band = surface.band;
+    let tilt = clamp(dot(surface.toward, in.V), 0.0, 1.0);
     for (var k = 0u; k < 4u; k = k + 1u) {
+        var weight = share;
+        var cosine = 0.0;
         if band.y > band.x {
             // A band of a cylinder: four Gauss–Legendre nodes across it.
             let s = 0.5 * (band.x + band.y) + 0.5 * (band.y - band.x) * across_offset(k);
-            indirect += share * 0.5 * across_weight(k) * ambient::ambient_light(
-                in.world_position,
-                in.V,
-                in.V,
-                sqrt(max(1.0 - s * s, 1e-8)),
-                diffuse_color,
-                F0,
-                in.material.perceptual_roughness,
-                in.diffuse_occlusion,
-            );
-        } else {
+            weight *= 0.5 * across_weight(k);
+            cosine = sqrt(max(1.0 - s * s, 1e-8)) * tilt;
+        } else if surface.is_sphere || tilt > 0.999 {
             (*node_weights)[k] += share * indirect_node(k, surface.is_sphere).y;
+            continue;
+        } else {
+            let node = indirect_node(k, false);
+            weight *= node.y;
+            cosine = node.x * tilt;
         }
+        indirect += weight * ambient::ambient_light(
+            in.world_position,
+            in.V,
+            in.V,
+            max(cosine, 1e-4),
+            diffuse_color,
+            F0,
+            in.material.perceptual_roughness,
+            in.diffuse_occlusion,
+        );
     }
     return indirect;
 }
