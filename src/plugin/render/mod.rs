@@ -1638,7 +1638,7 @@ fn prepare_views(
             let placements = species.compact.placements.len();
             let draws = species.compact.prototypes.len() as u32 * PLACED_BANDS;
             // A camera blends its expanded placements' lines back to front.
-            let depth_ordered = camera && render.line_order == LineOrder::BackToFront;
+            let depth_ordered = camera && lines_by_entry(render.line_order);
             let max_entries = u64::from(render.max_expanded_placements.max(1)).min(device_entries) as usize;
             let entries_needed = (n.saturating_mul(placements)).min(max_entries);
             let fresh = |capacity: usize| {
@@ -1839,14 +1839,13 @@ fn queue_compact(
             // species with trees is queued, and its draw skips a view whose
             // buffers could not be made.
             let drawn = !species.instances.is_empty();
-
+            let by_entry = lines_by_entry(render.line_order);
             for kind in PartKind::ALL {
                 let entity = species.draw_entities[kind.index()];
                 let main_entity = species.phase_keys[kind.index()];
                 if !kind.is_blended() {
                     opaque.remove(main_entity);
                 }
-                let by_entry = lines_by_entry(render.line_order);
                 if !drawn || !species.camera_draws(kind, by_entry) {
                     continue;
                 }
