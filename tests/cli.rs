@@ -475,23 +475,11 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
     // The bake measured its impostor's view light scale.
     let scale = inspect["impostor"]["view_light_scale"].clone();
     assert!(scale.is_array(), "the bake measures the view light scale: {scale}");
-    // And its seen normals.
-    let lean = inspect["impostor"]["seen_lean"].clone();
-    assert!(
-        lean["shown"].as_u64().unwrap() > 0,
-        "the bake measures the seen normals: {lean}"
-    );
-    // Format 15, 14 and 13 copies (the last bytes cut: the seen normals,
-    // then the scale, `Some`, its length and 91 f32s, then the mix's 25;
-    // the header rewritten) read without them and upgrade to the bake's.
+    // Format 14 and 13 copies (the last bytes cut: the scale, `Some`, its
+    // length and 91 f32s, then the mix's 25; the header rewritten) read
+    // without them and upgrade to the bake's.
+    let scale_bytes = 2 + 4 * bevy_conifer_lod::model::impostor::ViewLightScale::LEN;
     let bytes = std::fs::read(&shoots).unwrap();
-    let normals_bytes = {
-        let mut record = bevy_conifer_lod::model::decode_prototype_record(&bytes).unwrap();
-        std::sync::Arc::make_mut(record.impostor.as_mut().unwrap()).seen_normals = None;
-        // Without them the file ends with one byte, `None`.
-        bytes.len() - (bevy_conifer_lod::model::encode_prototype_record(&record).unwrap().len() - 1)
-    };
-    let scale_bytes = 2 + 4 * bevy_conifer_lod::model::impostor::ViewLightScale::LEN + normals_bytes;
     let copy = |version: u32, cut: usize| {
         let old = dir.path().join(format!("format{version}.conifer"));
         let body = &bytes[bevy_conifer_lod::model::file::HEADER_BYTES..bytes.len() - cut];
@@ -503,18 +491,16 @@ fn presets_bake_as_shared_shoots_and_upgrade_rewrites_old_records() {
         std::fs::write(&old, &file).unwrap();
         old
     };
-    for (version, cut) in [(15, normals_bytes), (14, scale_bytes), (13, scale_bytes + 25)] {
+    for (version, cut) in [(14, scale_bytes), (13, scale_bytes + 25)] {
         let old = copy(version, cut);
         let read = json(&conifer(&["inspect", old.to_str().unwrap(), "--json"]));
-        assert!(read["impostor"]["seen_lean"].is_null(), "format {version}");
-        assert_eq!(read["impostor"]["view_light_scale"].is_null(), version < 15);
+        assert!(read["impostor"]["view_light_scale"].is_null(), "format {version}");
         assert_eq!(read["impostor"]["seen_needles"].is_null(), version < 14);
         let output = conifer(&["upgrade", old.to_str().unwrap()]);
         assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
         let upgraded = json(&conifer(&["inspect", old.to_str().unwrap(), "--json"]));
         assert_eq!(upgraded["impostor"]["seen_needles"], seen, "format {version}");
         assert_eq!(upgraded["impostor"]["view_light_scale"], scale, "format {version}");
-        assert_eq!(upgraded["impostor"]["seen_lean"], lean, "format {version}");
         assert_eq!(upgraded["far_needle_color"], inspect["far_needle_color"]);
     }
 

@@ -464,44 +464,6 @@ pub struct ImpostorSummary {
     /// record.
     pub view_light_scale:
         Option<[[f32; crate::model::impostor::VIEW_LIGHT_ROLLS]; crate::model::impostor::VIEW_LIGHT_ANGLES]>,
-    /// How the needles its views show lean off what its texels' shares
-    /// light ([`crate::model::impostor::CrownImpostor::seen_normals`]);
-    /// `None` in an older record.
-    pub seen_lean: Option<SeenLeanSummary>,
-}
-
-/// The seen normals of an impostor in short, over the blocks whose
-/// samples show a needle, each weighted by the share that does.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SeenLeanSummary {
-    /// Blocks of 2 × 2 texels, every view.
-    pub blocks: usize,
-    /// Blocks whose samples show a needle.
-    pub shown: usize,
-    /// The mean lean (view frame: right, up, toward the camera).
-    pub mean: [f32; 3],
-    /// The mean length of a block's lean off that mean.
-    pub spread: f32,
-}
-
-impl SeenLeanSummary {
-    fn of(impostor: &crate::model::impostor::CrownImpostor) -> Option<Self> {
-        let normals = impostor.seen_normals.as_deref()?;
-        let (columns, rows) = impostor.seen_normal_size();
-        let leans: Vec<(glam::Vec3, f32)> = (0..impostor.views)
-            .flat_map(|view| (0..rows).flat_map(move |row| (0..columns).map(move |column| (view, column, row))))
-            .filter_map(|(view, column, row)| impostor.seen_normal_at(view, column, row))
-            .collect();
-        let weight: f32 = leans.iter().map(|(_, w)| w).sum();
-        let mean = leans.iter().map(|(d, w)| *d * *w).sum::<glam::Vec3>() / weight.max(f32::MIN_POSITIVE);
-        let spread = leans.iter().map(|(d, w)| (*d - mean).length() * w).sum::<f32>() / weight.max(f32::MIN_POSITIVE);
-        Some(Self {
-            blocks: normals.len(),
-            shown: leans.len(),
-            mean: mean.to_array(),
-            spread,
-        })
-    }
 }
 
 pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
@@ -558,7 +520,6 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
             gpu_bytes: i.byte_size(),
             seen_needles: i.seen_needles.map(|mix| mix.by_age),
             view_light_scale: i.view_light_scale.map(|scale| scale.scales),
-            seen_lean: SeenLeanSummary::of(i),
         }),
         far_needle_color: crate::model::color::far_needle_color(&prototypes).to_array(),
         line_calibration: prototypes.line_calibration,
@@ -596,13 +557,6 @@ pub(super) fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
                 at(0.0, 1.0, 0.0),
                 at(1.0, 0.0, 0.0),
                 at(0.0, 0.0, -1.0)
-            );
-        }
-        if let Some(lean) = report.impostor.as_ref().and_then(|i| i.seen_lean.as_ref()) {
-            let [x, y, z] = lean.mean;
-            println!(
-                "  seen normals: {} of {} blocks show needles, lean {x:+.3} {y:+.3} {z:+.3} (right, up, toward) ± {:.3}",
-                lean.shown, lean.blocks, lean.spread
             );
         }
         let [r, g, b] = report.far_needle_color;

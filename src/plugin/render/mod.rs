@@ -735,8 +735,7 @@ fn prepare_species(
             let mut wood_mesh: Vec<u32> = c.wood_indices.clone();
             wood_mesh.extend(c.wood_vertices.iter().flatten());
             let capacity = initial_capacity(species.instances.len());
-            let (impostor, seen_normals, impostor_bytes) =
-                impostor_textures(&device, &queue, species.impostor.as_deref());
+            let (impostor, seen_normals, impostor_bytes) = impostor_textures(&device, &queue, species.impostor.as_deref());
             species.gpu = Some(SpeciesBuffers {
                 params: device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
                     label: Some("conifer species params"),
