@@ -796,7 +796,6 @@ fn lit_impostor() -> LitImpostor {
     let mut baked = species.impostor.clone().expect("an impostor");
     // The tests set the texels' shares: lit as the shares say.
     std::sync::Arc::make_mut(&mut baked).view_light_scale = None;
-    std::sync::Arc::make_mut(&mut baked).seen_normals = None;
     let crown = species.crown_center;
     let (mut renderer, target, sun) = common::sun_lit_renderer(SIZE);
     let world = renderer.world_mut();
@@ -1144,68 +1143,6 @@ fn a_sphere_texel_glows_from_behind_as_the_table_says() {
         (ratio / table_ratio - 1.0).abs() < 0.1,
         "drawn {ratio} vs table {table_ratio}"
     );
-}
-
-/// The seen normals' lean is lit as a diffuse term (CPU reference:
-/// `model::shading::seen_normal_lambert`, Lambert's `albedo / π` of the
-/// sun): sphere texels whose needles lean toward the camera's right, and
-/// the same leaning left, under a sun from the right and in front, over
-/// the same texels with no lean, keep the ratio the sphere's table plus
-/// the lean's Lambert give (no ambient light or tonemapping), within 3 %
-/// of the light the lean adds; the lean to the left darkens as much as
-/// the one to the right brightens.
-#[test]
-fn the_seen_normals_lean_is_lit_as_the_cpu_says() {
-    use bevy_conifer_lod::model::impostor::SEEN_NORMAL_BLOCK;
-    use bevy_conifer_lod::model::shading::{SphereLight, seen_normal_lambert};
-    use std::sync::Arc;
-    let _turn = common::gpu_turn();
-    let mut lit = lit_impostor();
-    let (record, baked, crown, sun) = (lit.record.clone(), lit.baked.clone(), lit.crown, lit.sun);
-    let from = Vec3::new(1.0, 0.0, 1.0).normalize();
-    let lean = 0.3f32;
-    let mut drawn = [0.0f32; 3];
-    let mut albedo = Vec3::ZERO;
-    for (k, x) in [0.0, lean, -lean].into_iter().enumerate() {
-        let mut impostor = (*baked).clone();
-        impostor.texels.iter_mut().for_each(|t| *t = [255, 0, 0, 0]);
-        let (columns, rows) = impostor.seen_normal_size();
-        assert_eq!(columns, impostor.columns / SEEN_NORMAL_BLOCK);
-        let byte = (x * 127.0f32).round() as i8;
-        impostor.seen_normals = Some(vec![[byte, 0, 0, 127]; (impostor.views * columns * rows) as usize]);
-        let mut variant = ConiferSpecies::from_record(record.clone()).unwrap();
-        variant.impostor = Some(Arc::new(impostor));
-        albedo = Vec3::from_slice(&variant.compact.far_needle_color.to_array());
-        let world = lit.renderer.world_mut();
-        let handle = world.resource_mut::<Assets<ConiferSpecies>>().add(variant);
-        let tree = world.spawn((ConiferFoliage(handle), Transform::IDENTITY)).id();
-        drawn[k] = sunlit_opaque_light(
-            &mut lit.renderer,
-            &lit.target,
-            (sun, crown + from * 100.0, crown),
-            &format!("impostor_seen_normals_{k}"),
-        );
-        lit.renderer.world_mut().despawn(tree);
-    }
-    let record_material = ConiferSpecies::from_record(record).unwrap().material;
-    let table = SphereLight::new(record_material.roughness, record_material.reflectance);
-    let to_viewer = (lit.eye - crown).normalize();
-    let (diffuse, specular) = table.at(to_viewer, from);
-    let plain = (albedo * diffuse + Vec3::splat(specular)).element_sum();
-    // The lean toward the camera's right (+x here) in the world.
-    let added = albedo.element_sum() * seen_normal_lambert(Vec3::X * lean, to_viewer, from) / std::f32::consts::PI;
-    let expected = [1.0, (plain + added) / plain, (plain - added) / plain];
-    let ratios = drawn.map(|d| d / drawn[0]);
-    println!("drawn {drawn:?}; ratios {ratios:?}, expected {expected:?}");
-    assert!(drawn[0] > 0.01, "lit: {drawn:?}");
-    assert!(expected[1] > 1.2, "the lean is worth measuring: {expected:?}");
-    for k in 1..3 {
-        let (change, expected_change) = (ratios[k] - 1.0, expected[k] - 1.0);
-        assert!(
-            (change / expected_change - 1.0).abs() < 0.03,
-            "{k}: drawn {change:+.4} vs {expected_change:+.4}"
-        );
-    }
 }
 
 /// Mean linear light (red + green + blue over alpha: the picture is

@@ -70,10 +70,6 @@
 // `model::compact::CompactSpecies::entry_lines`). Other views bind a
 // stand-in.
 @group(2) @binding(15) var<storage, read> ordered_splits: array<vec2<u32>>;
-// The impostor's seen normals (`model::impostor::CrownImpostor::seen_normals`),
-// one layer a view at half its texels: a block's lean times the share of
-// its samples that show a needle, and that share (a blank layer without).
-@group(2) @binding(16) var impostor_seen_normals: texture_2d_array<f32>;
 
 const PI: f32 = 3.14159265358979;
 // A line blends its motion into a pixel's where it covers at least this
@@ -1357,24 +1353,6 @@ fn impostor_footprint(uv: vec2<f32>, du: vec2<f32>, dv: vec2<f32>, layer: i32) -
     return sum / (taps * taps);
 }
 
-// The lean of the needles the impostor shows under this fragment, in the
-// frame of the view facing the camera (x right, y up, z toward it): its
-// two views' seen normals at the pixel's footprint (trilinear), blended
-// by `color.z` as the texels are, over their share of samples; zero where
-// none shows a needle (CPU reference: `model::impostor::CrownImpostor::texel_deviation`).
-fn impostor_lean(uv: vec2<f32>, color: vec4<f32>) -> vec3<f32> {
-    let du = dpdx(uv);
-    let dv = dpdy(uv);
-    let at = clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0));
-    let first = textureSampleGrad(impostor_seen_normals, impostor_sampler, at, i32(round(color.x)), du, dv);
-    let second = textureSampleGrad(impostor_seen_normals, impostor_sampler, at, i32(round(color.y)), du, dv);
-    let lean = mix(first, second, color.z);
-    if !(lean.w > 1.0 / 254.0) {
-        return vec3<f32>(0.0);
-    }
-    return lean.xyz / lean.w;
-}
-
 // The impostor's texel under this fragment: its two views nearest the
 // camera's azimuth (layers `color.x` and `color.y`), each over the pixel's
 // footprint, blended by `color.z`.
@@ -1641,10 +1619,6 @@ struct SurfaceMix {
     // The impostor's needles: each light's direct term scaled by the
     // species' view light scale (`view_light_scale`).
     light_scaled: bool,
-    // The impostor's needles: how the normals they show lean off the
-    // shares' (world frame; `impostor_lean`), lit as
-    // `seen_normal_lambert`. Zero for anything else.
-    lean: vec3<f32>,
 }
 
 // `surface` alone, unscaled.
@@ -1843,7 +1817,7 @@ fn sphere_surface(V: vec3<f32>) -> Surface {
 // `model::shading::TexelShares::lambert`), each light's direct term scaled
 // so that the texels are lit as the needles the views show
 // (`view_light_scale`).
-fn shares_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, across_axis: vec3<f32>, vertical_share: f32, across_share: f32, lean: vec3<f32>) -> vec4<f32> {
+fn shares_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, across_axis: vec3<f32>, vertical_share: f32, across_share: f32) -> vec4<f32> {
     let no_band = vec2<f32>(0.0);
     var surfaces: SurfaceMix;
     surfaces.first = cylinder_surface(axis, in.V, no_band);
@@ -1852,17 +1826,7 @@ fn shares_lighting(in: pbr_types::PbrInput, axis: vec3<f32>, across_axis: vec3<f
     let shares = vec3<f32>(vertical_share, across_share, 1.0 - vertical_share - across_share);
     surfaces.shares = select(vec3<f32>(0.0), shares, shares > vec3<f32>(1.0 / 512.0));
     surfaces.light_scaled = true;
-    surfaces.lean = lean;
     return mixed_lighting(in, surfaces);
-}
-
-// What the needles a texel shows add to its shares' Lambert factor under
-// a light from `to_light`, seen from `to_viewer`, by how their normals
-// lean (`lean`, off the shares' own): the mean of `n·L` moves by
-// `lean·L`, of which the normals turned toward the light take about
-// `½ + ½ V·L` (CPU reference: `model::shading::seen_normal_lambert`).
-fn seen_normal_lambert(lean: vec3<f32>, to_viewer: vec3<f32>, to_light: vec3<f32>) -> f32 {
-    return clamp(0.5 + 0.5 * dot(to_viewer, to_light), 0.0, 1.0) * dot(lean, to_light);
 }
 
 // What the impostor's direct light from `to_light` is scaled by, seen
@@ -2163,13 +2127,6 @@ fn mixed_light(
     }
 #ifdef CONIFER_IMPOSTOR
     if (*surfaces).light_scaled {
-        // The lean's Lambert as a diffuse term (Lambert's `albedo / π` of
-        // the light's irradiance), never below no light.
-        let lean = seen_normal_lambert((*surfaces).lean, (*input).V, to_light);
-        if lean != 0.0 {
-            let irradiance = light_irradiance(kind, light_id, (*input).P, to_light);
-            sum = max(sum + irradiance * (*input).diffuse_color * (lean / PI), vec3<f32>(0.0));
-        }
         sum *= view_light_scale(to_light, (*input).V);
     }
 #endif
@@ -2598,7 +2555,6 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     // (both times coverage; the rest is lit as a sphere).
     let uv = impostor_swayed_uv(in.uv, in.tree, in.card_point, in.card_right, in.card_up, in.world_position.xyz);
     let texel = impostor_texel(uv, in.color);
-    let seen_lean = impostor_lean(uv, in.color);
     if !(texel.r > 1.0 / 512.0) {
         discard;
     }
@@ -2624,10 +2580,6 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     }
     to_camera = normalize(to_camera);
     let across_axis = normalize((world_from_local * vec4<f32>(to_camera.y, 0.0, -to_camera.x, 0.0)).xyz);
-    // The lean in the world: the frame of the view facing the camera, as
-    // the shares' across axis is.
-    let toward_camera = normalize((world_from_local * vec4<f32>(to_camera.x, 0.0, to_camera.y, 0.0)).xyz);
-    let lean = seen_lean.x * across_axis + seen_lean.y * axis + seen_lean.z * toward_camera;
     // The wood the texel shows over the trunk is the round stem's band
     // under the pixel, not a cylinder's mean across its whole width
     // (`model::impostor::TrunkProfile`): the picture's row and column,
@@ -2728,7 +2680,7 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
     // (CPU reference: `model::shading::TexelShares::lambert`).
     var color: vec4<f32>;
     if !(stem_band.y > stem_band.x && wood > 0.0) {
-        color = shares_lighting(pbr_input, axis, across_axis, vertical_share, across_share, lean);
+        color = shares_lighting(pbr_input, axis, across_axis, vertical_share, across_share);
     } else {
         // Over the trunk the needles keep their shares and the wood is the
         // stem's band (`model::shading::band_average`), in the bark's
@@ -2739,7 +2691,7 @@ fn fragment(in: VertexOutput) -> FragmentOutput {
         stem.material.base_color = vec4<f32>(stem_albedo, texel.r);
         stem.material.perceptual_roughness = BARK_ROUGHNESS;
         color = mix(
-            shares_lighting(needles, axis, across_axis, vertical_share, across_share, lean),
+            shares_lighting(needles, axis, across_axis, vertical_share, across_share),
             band_lighting(stem, axis, stem_band),
             wood
         );

@@ -372,10 +372,7 @@ struct SpeciesBuffers {
     /// The crown impostor's views, one layer each, with their mips (a
     /// blank 1×1 layer for a species without one).
     impostor: TextureView,
-    /// Its seen normals (`CrownImpostor::seen_normals`), a layer a view,
-    /// with their mips (a blank 1×1 layer, no lean, without them).
-    seen_normals: TextureView,
-    /// Bytes of the impostor's textures, every mip level.
+    /// Bytes of the impostor texture, every mip level.
     impostor_bytes: u64,
 }
 
@@ -735,7 +732,7 @@ fn prepare_species(
             let mut wood_mesh: Vec<u32> = c.wood_indices.clone();
             wood_mesh.extend(c.wood_vertices.iter().flatten());
             let capacity = initial_capacity(species.instances.len());
-            let (impostor, seen_normals, impostor_bytes) = impostor_textures(&device, &queue, species.impostor.as_deref());
+            let (impostor, impostor_bytes) = impostor_texture(&device, &queue, species.impostor.as_deref());
             species.gpu = Some(SpeciesBuffers {
                 params: device.create_buffer_with_data(&bevy::render::render_resource::BufferInitDescriptor {
                     label: Some("conifer species params"),
@@ -774,7 +771,6 @@ fn prepare_species(
                     bytemuck::cast_slice(&c.tree_line_parents),
                 ),
                 impostor,
-                seen_normals,
                 impostor_bytes,
             });
             species.instances_dirty = true;
@@ -797,96 +793,48 @@ fn prepare_species(
     }
 }
 
-/// The textures of `impostor`'s views and of their seen normals (an
-/// array layer a view, every mip level) and their bytes; a blank 1×1
-/// layer for what it lacks (a species without an impostor, an older
-/// record without seen normals, whose zero share of samples leans by
-/// nothing).
-fn impostor_textures(
+/// The texture of `impostor`'s views (an array layer each, every mip
+/// level) and its bytes; a blank 1×1 layer without one.
+fn impostor_texture(
     device: &RenderDevice,
     queue: &RenderQueue,
     impostor: Option<&CrownImpostor>,
-) -> (TextureView, TextureView, u64) {
-    let (texels, texel_bytes) = match impostor {
-        Some(impostor) => layered_texture(
-            device,
-            queue,
-            "conifer impostor",
-            TextureFormat::Rgba8Unorm,
-            impostor.views,
-            &impostor.mip_chain(),
-        ),
-        None => layered_texture(
-            device,
-            queue,
-            "conifer impostor",
-            TextureFormat::Rgba8Unorm,
-            1,
-            &[(1, 1, vec![[0; 4]])],
-        ),
-    };
-    // Signed bytes as `Rgba8Snorm` reads them.
-    let normals: Vec<(u32, u32, Vec<[u8; 4]>)> = impostor
-        .map(|i| i.seen_normal_mip_chain())
-        .unwrap_or_default()
-        .into_iter()
-        .map(|(w, h, values)| (w, h, values.into_iter().map(|v| v.map(|b| b as u8)).collect()))
-        .collect();
-    let (normals, normal_bytes) = match impostor.filter(|_| !normals.is_empty()) {
-        Some(impostor) => layered_texture(
-            device,
-            queue,
-            "conifer impostor seen normals",
-            TextureFormat::Rgba8Snorm,
-            impostor.views,
-            &normals,
-        ),
-        None => layered_texture(
-            device,
-            queue,
-            "conifer impostor seen normals",
-            TextureFormat::Rgba8Snorm,
-            1,
-            &[(1, 1, vec![[0; 4]])],
-        ),
-    };
-    (texels, normals, texel_bytes + normal_bytes)
-}
-
-/// A 2D array texture of `layers` layers of four-byte texels from its mip
-/// chain (`(width, height, texels)` a level, each level's texels layer
-/// after layer) and its bytes.
-fn layered_texture(
-    device: &RenderDevice,
-    queue: &RenderQueue,
-    label: &'static str,
-    format: TextureFormat,
-    layers: u32,
-    chain: &[(u32, u32, Vec<[u8; 4]>)],
 ) -> (TextureView, u64) {
-    // Layer-major: each layer's levels, then the next layer's.
-    let mut data = Vec::new();
-    for layer in 0..layers {
-        for (w, h, texels) in chain {
-            let size = (w * h) as usize;
-            let first = layer as usize * size;
-            data.extend(texels[first..first + size].iter().flatten());
+    let (views, columns, rows, levels, data) = match impostor {
+        Some(impostor) => {
+            let chain = impostor.mip_chain();
+            // Layer-major: each view's levels, then the next view's.
+            let mut data = Vec::new();
+            for view in 0..impostor.views {
+                for (w, h, texels) in &chain {
+                    let size = (w * h) as usize;
+                    let first = view as usize * size;
+                    data.extend(texels[first..first + size].iter().flatten());
+                }
+            }
+            (
+                impostor.views,
+                impostor.columns,
+                impostor.rows,
+                chain.len() as u32,
+                data,
+            )
         }
-    }
-    let (columns, rows) = chain.first().map_or((1, 1), |&(w, h, _)| (w, h));
+        None => (1, 1, 1, 1, vec![0u8; 4]),
+    };
     let texture = device.create_texture_with_data(
         queue,
         &TextureDescriptor {
-            label: Some(label),
+            label: Some("conifer impostor"),
             size: Extent3d {
                 width: columns,
                 height: rows,
-                depth_or_array_layers: layers,
+                depth_or_array_layers: views,
             },
-            mip_level_count: chain.len() as u32,
+            mip_level_count: levels,
             sample_count: 1,
             dimension: TextureDimension::D2,
-            format,
+            format: TextureFormat::Rgba8Unorm,
             usage: TextureUsages::TEXTURE_BINDING | TextureUsages::COPY_DST,
             view_formats: &[],
         },
@@ -894,7 +842,7 @@ fn layered_texture(
         &data,
     );
     let view = texture.create_view(&TextureViewDescriptor {
-        label: Some(label),
+        label: Some("conifer impostor"),
         dimension: Some(TextureViewDimension::D2Array),
         ..default()
     });
@@ -1203,7 +1151,6 @@ fn init_compact_pipeline(
                 texture_2d_array(TextureSampleType::Float { filterable: true }),
                 sampler(SamplerBindingType::Filtering),
                 read(),
-                texture_2d_array(TextureSampleType::Float { filterable: true }),
             ),
         ),
     );
@@ -1783,7 +1730,6 @@ fn prepare_views(
                         &gpu.impostor,
                         &pipeline.impostor_sampler,
                         placed.ordered_splits.as_entire_binding(),
-                        &gpu.seen_normals,
                     )),
                 );
                 ViewBindGroups {
