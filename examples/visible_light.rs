@@ -13,11 +13,8 @@
 //! Lambert of what each block shows varies from block to block, how much
 //! the texels' shares vary, the mean error of the shares once their bias
 //! over the crown is taken out, and the mean error of the best line in
-//! the block's mean seen normal · L, and the same errors for shares
-//! fitted to the needles each block shows and for the shares with the
-//! impostor's seen normals ([`CrownImpostor::seen_normals`], measured here
-//! where the record has none). Used in the README's "The far crown lit
-//! by the needles it shows" and "Seen normals".
+//! the block's mean seen normal · L. Used in the README's "The far crown lit by
+//! the needles it shows".
 //!
 //! ```text
 //! cargo run --release --no-default-features --example visible_light -- RECORD...
@@ -25,10 +22,8 @@
 //!
 //! [`CrownImpostor::view_lambert`]: bevy_conifer_lod::model::impostor::CrownImpostor::view_lambert
 //! [`CrownImpostor::view_light_scale`]: bevy_conifer_lod::model::impostor::CrownImpostor::view_light_scale
-//! [`CrownImpostor::seen_normals`]: bevy_conifer_lod::model::impostor::CrownImpostor::seen_normals
 
 use bevy_conifer_lod::model::impostor::CrownImpostor;
-use bevy_conifer_lod::model::shading::{TexelShares, seen_normal_lambert};
 use bevy_conifer_lod::model::{Needle, WoodSegment, read_prototype_record};
 use glam::Vec3;
 
@@ -50,21 +45,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
     let mut blocks_table = vec![
-        "| record | sun | blocks | seen Lambert | its spread (sd) | shares' spread (sd) | shares' error, bias out | shares of the needles shown, bias out | error of a line in mean normal · L | shares and seen normals, bias out | the same, mean |".to_string(),
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|".to_string(),
+        "| record | sun | blocks | seen Lambert | its spread (sd) | shares' spread (sd) | shares' error, bias out | error of a line in mean normal · L |".to_string(),
+        "|---|---|---:|---:|---:|---:|---:|---:|".to_string(),
     ];
     for path in paths {
         let record = read_prototype_record(std::path::Path::new(&path))?;
+        let impostor = record.impostor.as_deref().ok_or("the record has no crown impostor")?;
         let needles = record.placed_needles();
-        let mut impostor = record
-            .impostor
-            .as_deref()
-            .ok_or("the record has no crown impostor")?
-            .clone();
-        if impostor.seen_normals.is_none() {
-            impostor.seen_normals = Some(impostor.measure_seen_normals(&record.wood, &needles));
-        }
-        let impostor = &impostor;
         let scale = impostor.view_light_scale.unwrap_or_default();
         for (name, sun) in suns {
             let (mut sums, mut views) = ([0.0f64; 4], 0u32);
@@ -87,17 +74,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             );
             let b = blocks(impostor, &record.wood, &needles, sun);
             blocks_table.push(format!(
-                "| {} | {name} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} | {:+.4} |",
-                record.name,
-                b.count,
-                b.seen_mean,
-                b.seen_spread,
-                b.shares_spread,
-                b.shares_error,
-                b.shown_shares_error,
-                b.normal_error,
-                b.leaning_error,
-                b.leaning_bias
+                "| {} | {name} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                record.name, b.count, b.seen_mean, b.seen_spread, b.shares_spread, b.shares_error, b.normal_error
             ));
         }
     }
@@ -115,23 +93,17 @@ struct Blocks {
     seen_spread: f64,
     shares_spread: f64,
     shares_error: f64,
-    shown_shares_error: f64,
     normal_error: f64,
-    leaning_error: f64,
-    leaning_bias: f64,
 }
 
 /// Over every view's 2 × 2 blocks of texels whose needles cover them
 /// (each texel 90 %, 56 of the block's 64 samples a needle): the Lambert
 /// of what the block shows, of its texels' shares (by coverage), and its
-/// mean seen normal · L; and as shares fitted to the needles the block's
-/// samples show would light it, and as its shares with the impostor's seen
-/// normals do.
+/// mean seen normal · L.
 fn blocks(impostor: &CrownImpostor, wood: &[WoodSegment], needles: &[Needle], sun: Vec3) -> Blocks {
     let valid: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
     let (columns, rows) = (impostor.columns as usize, impostor.rows as usize);
     let (mut seen, mut shares, mut normal) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut shown_shares, mut leaning) = (Vec::new(), Vec::new());
     for view in 0..impostor.views {
         let (right, toward) = (impostor.view_right(view), impostor.view_toward(view));
         let to_light = sun.x * right + sun.y * Vec3::Y + sun.z * toward;
@@ -146,25 +118,17 @@ fn blocks(impostor: &CrownImpostor, wood: &[WoodSegment], needles: &[Needle], su
         for row in (0..rows.saturating_sub(1)).step_by(2) {
             for column in (0..columns.saturating_sub(1)).step_by(2) {
                 let (mut lambert, mut sum, mut count, mut lit, mut covered) = (0.0, Vec3::ZERO, 0, 0.0, 0.0);
-                let (mut shown, mut shown_count, mut leaned) = ([0.0f64; 2], 0u32, 0.0);
                 let mut whole = true;
                 for (dr, dc) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
                     let (r, c) = (row + dr, column + dc);
                     let t = texels[r * columns + c];
                     (lambert, sum, count) = (lambert + t.0, sum + t.1, count + t.2);
-                    let (shares_sum, samples_shown) = samples.shown[r * columns + c];
-                    shown = [shown[0] + shares_sum[0], shown[1] + shares_sum[1]];
-                    shown_count += samples_shown;
                     let Some(texel) = impostor.texel_at(view, c as u32, r as u32) else {
                         whole = false;
                         continue;
                     };
                     whole &= texel.coverage >= 0.9;
-                    let by_shares = texel.shares.lambert(Vec3::Y, right, toward, to_light);
-                    lit += f64::from(texel.coverage * by_shares);
-                    let d = impostor.texel_deviation(view, c as u32, r as u32);
-                    let lean = seen_normal_lambert(d.x * right + d.y * Vec3::Y + d.z * toward, toward, to_light);
-                    leaned += f64::from(texel.coverage * (by_shares + lean).max(0.0));
+                    lit += f64::from(texel.coverage * texel.shares.lambert(Vec3::Y, right, toward, to_light));
                     covered += f64::from(texel.coverage);
                 }
                 if !whole || count < 56 {
@@ -173,30 +137,19 @@ fn blocks(impostor: &CrownImpostor, wood: &[WoodSegment], needles: &[Needle], su
                 seen.push(lambert / f64::from(count));
                 shares.push(lit / covered);
                 normal.push(f64::from((sum / count as f32).dot(to_light)));
-                leaning.push(leaned / covered);
-                let fitted = TexelShares {
-                    vertical: (shown[0] / f64::from(shown_count.max(1))) as f32,
-                    across: (shown[1] / f64::from(shown_count.max(1))) as f32,
-                }
-                .clamped();
-                shown_shares.push(f64::from(fitted.lambert(Vec3::Y, right, toward, to_light)));
             }
         }
     }
     let n = seen.len().max(1) as f64;
     let mean = |v: &[f64]| v.iter().sum::<f64>() / n;
     let spread = |v: &[f64]| (v.iter().map(|x| (x - mean(v)).powi(2)).sum::<f64>() / n).sqrt();
-    let seen_mean = mean(&seen);
-    // The mean error once each's bias over the crown is taken out.
-    let unbiased = |fitted: &[f64]| {
-        let fitted_mean = mean(fitted);
-        seen.iter()
-            .zip(fitted)
-            .map(|(s, t)| (s - seen_mean - t + fitted_mean).abs())
-            .sum::<f64>()
-            / n
-    };
-    let shares_error = unbiased(&shares);
+    let (seen_mean, shares_mean) = (mean(&seen), mean(&shares));
+    let shares_error = seen
+        .iter()
+        .zip(&shares)
+        .map(|(s, t)| (s - seen_mean - t + shares_mean).abs())
+        .sum::<f64>()
+        / n;
     // The least-squares line seen ≈ a + b · (mean normal · L).
     let normal_mean = mean(&normal);
     let (mut sxy, mut sxx) = (0.0, 0.0);
@@ -217,9 +170,6 @@ fn blocks(impostor: &CrownImpostor, wood: &[WoodSegment], needles: &[Needle], su
         seen_spread: spread(&seen),
         shares_spread: spread(&shares),
         shares_error,
-        shown_shares_error: unbiased(&shown_shares),
         normal_error,
-        leaning_error: unbiased(&leaning),
-        leaning_bias: mean(&leaning) - seen_mean,
     }
 }

@@ -336,22 +336,17 @@ pub(super) fn upgrade(args: &super::UpgradeArgs) -> anyhow::Result<()> {
         // Format 13 stores how densely the needles fill the impostor's
         // crown, format 14 the ages and sides of the needles its views
         // see, format 15 how bright those needles are lit against its
-        // texels, format 16 how their normals lean off what the texels'
-        // shares light (and 15's scale again, with them): an older
-        // impostor's are measured from the needles (a fresh bake measured
-        // them already).
-        let measure_scale = !rebake && version.is_none_or(|v| v < 16);
+        // texels: an older impostor's are measured from the needles (a
+        // fresh bake measured them already).
+        let measure_scale = !rebake && version.is_none_or(|v| v < 15);
         let measure_seen = measure_scale && version.is_none_or(|v| v < 14);
         let measure_density = measure_seen && version.is_none_or(|v| v < 13);
         if let Some(impostor) = record.impostor.as_deref().filter(|_| measure_scale) {
             let needles = record.placed_needles();
             let density = measure_density.then(|| crate::model::impostor::CrownDensity::measure(&needles, impostor));
             let seen = measure_seen.then(|| crate::model::color::NeedleMix::seen(&record, &needles, impostor));
-            let mut leaning = impostor.clone();
-            leaning.seen_normals = Some(impostor.measure_seen_normals(&record.wood, &needles));
-            let scale = leaning.view_light_scale(&record.wood, &needles);
+            let scale = impostor.view_light_scale(&record.wood, &needles);
             if let Some(impostor) = record.impostor.as_mut().map(std::sync::Arc::make_mut) {
-                impostor.seen_normals = leaning.seen_normals;
                 if let Some(density) = density {
                     impostor.crown_density = density;
                 }

@@ -442,16 +442,13 @@ pub fn calibrate_record_lines(
 
 /// The crown impostor of `record`'s placed needles and wood, baked with
 /// `options`, with the ages and sides of the needles its views see
-/// ([`super::color::NeedleMix::seen`]), how their normals lean off what
-/// its texels' shares light ([`CrownImpostor::measure_seen_normals`]) and
-/// how bright they are lit against its texels
-/// ([`CrownImpostor::view_light_scale`], with those normals); `None` where
+/// ([`super::color::NeedleMix::seen`]) and how bright they are lit against
+/// its texels ([`CrownImpostor::view_light_scale`]); `None` where
 /// [`CrownImpostor::bake`] gives none (options out of range).
 pub fn bake_impostor(record: &PrototypeRecord, options: ImpostorOptions) -> Option<Arc<CrownImpostor>> {
     let needles = record.placed_needles();
     let mut impostor = CrownImpostor::bake(&needles, &record.wood, &record.wood_mesh, options)?;
     impostor.seen_needles = super::color::NeedleMix::seen(record, &needles, &impostor);
-    impostor.seen_normals = Some(impostor.measure_seen_normals(&record.wood, &needles));
     impostor.view_light_scale = Some(impostor.view_light_scale(&record.wood, &needles));
     Some(Arc::new(impostor))
 }

@@ -540,7 +540,6 @@ mod tests {
             crown_density: Default::default(),
             seen_needles: None,
             view_light_scale: None,
-            seen_normals: None,
         }
     }
 

@@ -52,12 +52,6 @@
 //! a prototype placed once ([`PrototypeRecord::from_flat`]); reading gives
 //! either view ([`decode_record`] flattens).
 //!
-//! Version 16 adds how the needles the impostor's views show lean off
-//! what its texels' shares light ([`super::impostor::CrownImpostor::seen_normals`]:
-//! four signed bytes per block of 2 × 2 texels, deflated as four planes,
-//! with the impostor); an older impostor is lit by its shares alone, and
-//! `conifer upgrade` measures the normals, and the view light scale with
-//! them, into the file.
 //! Version 15 adds how the impostor's direct light is scaled so that its
 //! texels are lit as the needles its views show
 //! ([`super::impostor::ViewLightScale`]: 91 `f32`s by the light's
@@ -127,7 +121,7 @@ use std::sync::Arc;
 pub const MAGIC: [u8; 8] = *b"CONIFLOD";
 
 /// Format version written.
-pub const FORMAT_VERSION: u32 = 16;
+pub const FORMAT_VERSION: u32 = 15;
 
 /// The oldest format version still read (converted on load).
 pub const OLDEST_READ_VERSION: u32 = 2;
@@ -336,6 +330,12 @@ const MAX_STORED_IMPOSTOR_BYTES: u64 = 64 * 512 * 1024 * 4;
 
 impl StoredImpostor {
     fn encode(impostor: &CrownImpostor) -> Result<Self, RecordError> {
+        let mut planes = Vec::with_capacity(4 * impostor.texels.len());
+        for channel in 0..4 {
+            planes.extend(impostor.texels.iter().map(|texel| texel[channel]));
+        }
+        let mut deflater = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::best());
+        deflater.write_all(&planes)?;
         Ok(Self {
             views: impostor.views,
             columns: impostor.columns,
@@ -344,7 +344,7 @@ impl StoredImpostor {
             half_width: impostor.half_width,
             bottom: impostor.bottom,
             texel: impostor.texel,
-            planes: deflate_planes(&impostor.texels)?,
+            planes: deflater.finish()?,
         })
     }
 
@@ -363,8 +363,19 @@ impl StoredImpostor {
         if !(positive && frame.iter().all(|v| v.is_finite())) {
             return Err(malformed("its frame is not finite and positive"));
         }
-        let texels =
-            inflate_planes(&self.planes, texel_bytes as usize / 4).map_err(|e| malformed(&format!("texels {e}")))?;
+        let mut planes = Vec::with_capacity(texel_bytes as usize);
+        flate2::read::DeflateDecoder::new(self.planes.as_slice())
+            .take(texel_bytes + 1)
+            .read_to_end(&mut planes)
+            .map_err(|e| malformed(&format!("texels do not inflate ({e})")))?;
+        if planes.len() as u64 != texel_bytes {
+            return Err(malformed("texels of another size than its frame"));
+        }
+        let texel_count = planes.len() / 4;
+        let plane = |channel: usize, k: usize| planes[channel * texel_count + k];
+        let texels = (0..texel_count)
+            .map(|k| [plane(0, k), plane(1, k), plane(2, k), plane(3, k)])
+            .collect();
         Ok(CrownImpostor {
             views: self.views,
             columns: self.columns,
@@ -378,39 +389,8 @@ impl StoredImpostor {
             crown_density: Default::default(),
             seen_needles: None,
             view_light_scale: None,
-            seen_normals: None,
         })
     }
-}
-
-/// Four-byte texels as four planes (each byte of every texel, then the
-/// next), deflated: neighbouring texels are alike byte by byte.
-fn deflate_planes(texels: &[[u8; 4]]) -> Result<Vec<u8>, RecordError> {
-    let mut planes = Vec::with_capacity(4 * texels.len());
-    for channel in 0..4 {
-        planes.extend(texels.iter().map(|texel| texel[channel]));
-    }
-    let mut deflater = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::best());
-    deflater.write_all(&planes)?;
-    Ok(deflater.finish()?)
-}
-
-/// [`deflate_planes`]' `count` texels back; an error (what is wrong) where
-/// they do not inflate to exactly that many (reading at most one byte
-/// more).
-fn inflate_planes(deflated: &[u8], count: usize) -> Result<Vec<[u8; 4]>, String> {
-    let mut planes = Vec::with_capacity(4 * count);
-    flate2::read::DeflateDecoder::new(deflated)
-        .take(4 * count as u64 + 1)
-        .read_to_end(&mut planes)
-        .map_err(|e| format!("do not inflate ({e})"))?;
-    if planes.len() != 4 * count {
-        return Err("of another size than its frame".into());
-    }
-    let plane = |channel: usize, k: usize| planes[channel * count + k];
-    Ok((0..count)
-        .map(|k| [plane(0, k), plane(1, k), plane(2, k), plane(3, k)])
-        .collect())
 }
 
 #[derive(Serialize, Deserialize)]
@@ -988,13 +968,6 @@ pub fn encode_prototype_record(record: &PrototypeRecord) -> Result<Vec<u8>, Reco
         .and_then(|i| i.view_light_scale)
         .map(|scale| scale.to_vec());
     body.extend(postcard::to_allocvec(&view_light_scale).map_err(|e| RecordError::Malformed(e.to_string()))?);
-    let seen_normals = record
-        .impostor
-        .as_deref()
-        .and_then(|i| i.seen_normals.as_deref())
-        .map(|normals| deflate_planes(&normals.iter().map(|n| n.map(|v| v as u8)).collect::<Vec<_>>()))
-        .transpose()?;
-    body.extend(postcard::to_allocvec(&seen_normals).map_err(|e| RecordError::Malformed(e.to_string()))?);
     let mut bytes = Vec::with_capacity(HEADER_BYTES + body.len());
     bytes.extend_from_slice(&MAGIC);
     bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -1246,35 +1219,6 @@ fn decode_payload(version: u32, body: &[u8]) -> Result<(DecodedPayload, AfterPay
                     ))
                 })?;
                 impostor.view_light_scale = Some(scale);
-                Some(impostor)
-            }
-        };
-        (impostor, rest)
-    } else {
-        (impostor, rest)
-    };
-    // Format 16: how the needles the impostor's views show lean off what
-    // its texels' shares light; an older impostor is lit by its shares
-    // alone.
-    let (impostor, rest) = if version >= 16 {
-        let (stored, rest) = postcard::take_from_bytes::<Option<Vec<u8>>>(rest).map_err(malformed)?;
-        let impostor = match (impostor, stored) {
-            (impostor, None) => impostor,
-            (None, Some(_)) => return Err(RecordError::Malformed("seen normals without an impostor".into())),
-            (Some(mut impostor), Some(deflated)) => {
-                let (columns, rows) = impostor.seen_normal_size();
-                let count = impostor.views as usize * columns as usize * rows as usize;
-                let normals: Vec<[i8; 4]> = inflate_planes(&deflated, count)
-                    .map_err(|e| RecordError::Malformed(format!("seen normals {e}")))?
-                    .into_iter()
-                    .map(|n| n.map(|v| v as i8))
-                    .collect();
-                if normals.iter().any(|n| n[3] < 0) {
-                    return Err(RecordError::Malformed(
-                        "seen normals: a negative share of samples".into(),
-                    ));
-                }
-                impostor.seen_normals = Some(normals);
                 Some(impostor)
             }
         };
@@ -1638,16 +1582,7 @@ mod tests {
         postcard::to_allocvec(&seen.map(|m| m.to_array())).unwrap()
     }
 
-    /// The bytes a record file ends with (format 16): its impostor's seen
-    /// normals.
-    fn stored_seen_normals(record: &PrototypeRecord) -> Vec<u8> {
-        let normals = record.impostor.as_deref().and_then(|i| i.seen_normals.as_deref());
-        let deflated =
-            normals.map(|n| deflate_planes(&n.iter().map(|v| v.map(|b| b as u8)).collect::<Vec<_>>()).unwrap());
-        postcard::to_allocvec(&deflated).unwrap()
-    }
-
-    /// The bytes before those (format 15's last): its impostor's view
+    /// The bytes a record file ends with (format 15): its impostor's view
     /// light scale.
     fn stored_view_light_scale(record: &PrototypeRecord) -> Vec<u8> {
         let scale = record.impostor.as_deref().and_then(|i| i.view_light_scale);
@@ -1733,18 +1668,11 @@ mod tests {
             Some(calibration)
         );
         assert_eq!(decode_record(&bytes).unwrap().line_calibration, Some(calibration));
-        // Format 16 ends with the impostor's seen normals: format 15 stops
-        // before them, its impostor lit by its shares alone.
-        let body = &bytes[HEADER_BYTES..];
-        let v15 = &body[..body.len() - stored_seen_normals(&record).len()];
-        let mut flat = decode_prototype_record(&bytes).unwrap();
-        assert!(flat.impostor.as_deref().is_some_and(|i| i.seen_normals.is_some()));
-        Arc::make_mut(flat.impostor.as_mut().expect("an impostor")).seen_normals = None;
-        assert_eq!(decode_prototype_record(&file_of_version(15, v15)).unwrap(), flat);
         // Format 15 ends with the impostor's view light scale: format 14
         // stops before it, its impostor lit as its shares say.
-        let v14 = &v15[..v15.len() - stored_view_light_scale(&record).len()];
-        let mut unscaled = flat.clone();
+        let body = &bytes[HEADER_BYTES..];
+        let v14 = &body[..body.len() - stored_view_light_scale(&record).len()];
+        let mut unscaled = decode_prototype_record(&bytes).unwrap();
         Arc::make_mut(unscaled.impostor.as_mut().expect("an impostor")).view_light_scale = None;
         assert_eq!(decode_prototype_record(&file_of_version(14, v14)).unwrap(), unscaled);
         // Format 14 ends with the needles the impostor sees: format 13
@@ -1848,16 +1776,16 @@ mod tests {
         let old = decode_prototype_record(&file_of_version(6, v6)).unwrap();
         assert!(old.impostor.is_none());
         assert_eq!(old.placements, record.placements);
-        // Without one (and without a line calibration), format 16 stores a
+        // Without one (and without a line calibration), format 15 stores a
         // single byte for each, for the wood visibility, for the wood
-        // scales, for the crown density, for the seen needles, for the
-        // view light scale and for the seen normals.
+        // scales, for the crown density, for the seen needles and for the
+        // view light scale.
         let mut bare = record.clone();
         bare.impostor = None;
         bare.line_calibration = None;
         assert_eq!(
             encode_prototype_record(&bare).unwrap().len(),
-            HEADER_BYTES + v6.len() + 8
+            HEADER_BYTES + v6.len() + 7
         );
         // A stored impostor that breaks its frame is malformed, never a
         // panic or an allocation past its frame.
@@ -1865,11 +1793,6 @@ mod tests {
         assert!(seen.is_some(), "the bake measures the needles it sees");
         let scale = impostor.view_light_scale.map(|scale| scale.to_vec());
         assert!(scale.is_some(), "the bake measures the view light scale");
-        let normals = impostor
-            .seen_normals
-            .as_deref()
-            .map(|n| deflate_planes(&n.iter().map(|v| v.map(|b| b as u8)).collect::<Vec<_>>()).unwrap());
-        assert!(normals.is_some(), "the bake measures the seen normals");
         let file = |version: u32,
                     edit: &dyn Fn(&mut StoredImpostor),
                     visibility: Option<Vec<u8>>,
@@ -1896,16 +1819,13 @@ mod tests {
             if version >= 15 {
                 body.extend(postcard::to_allocvec(&scale).unwrap());
             }
-            if version >= 16 {
-                body.extend(postcard::to_allocvec(&normals).unwrap());
-            }
             decode_prototype_record(&file_of_version(version, &body))
         };
         let density = Some(impostor.crown_density.to_bytes());
         let file_with_density = |version: u32, edit: &dyn Fn(&mut StoredImpostor), density: Option<Vec<u8>>| {
             file(version, edit, Some(impostor.wood_visibility.to_bytes()), density)
         };
-        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(16, edit, density.clone());
+        let with = |edit: &dyn Fn(&mut StoredImpostor)| file_with_density(15, edit, density.clone());
         assert_eq!(with(&|_| {}).unwrap().impostor.as_deref(), Some(&*impostor));
         // Format 13 stored no seen needles: its crown takes the area mean.
         let unseen = file_with_density(13, &|_| {}, density.clone())
@@ -1974,8 +1894,7 @@ mod tests {
         let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         let bytes = encode_prototype_record(&record).unwrap();
         // A format 14 file ends with the seen needles: `Some` and six f32s.
-        let tail = stored_view_light_scale(&record).len() + stored_seen_normals(&record).len();
-        let body = &bytes[HEADER_BYTES..bytes.len() - tail];
+        let body = &bytes[HEADER_BYTES..bytes.len() - stored_view_light_scale(&record).len()];
         let stored = stored_seen_needles(&record);
         assert_eq!(stored.len(), 1 + 24);
         assert!(body.ends_with(&stored));
@@ -2006,7 +1925,7 @@ mod tests {
         let mut bare = record.clone();
         bare.impostor = None;
         let bare_bytes = encode_prototype_record(&bare).unwrap();
-        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 3].to_vec();
+        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 2].to_vec();
         body.extend(postcard::to_allocvec(&Some(mix)).unwrap());
         let error = decode_prototype_record(&file_of_version(14, &body)).unwrap_err();
         assert!(
@@ -2019,9 +1938,8 @@ mod tests {
     fn the_view_light_scale_comes_with_the_impostor_in_range() {
         let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
         let bytes = encode_prototype_record(&record).unwrap();
-        let body = &bytes[HEADER_BYTES..bytes.len() - stored_seen_normals(&record).len()];
-        // The last bytes of format 15 are the scale: `Some`, its length
-        // and 91 f32s.
+        let body = &bytes[HEADER_BYTES..];
+        // The last bytes are the scale: `Some`, its length and 91 f32s.
         let stored = stored_view_light_scale(&record);
         assert_eq!(stored.len(), 2 + 4 * ViewLightScale::LEN);
         assert!(body.ends_with(&stored));
@@ -2061,72 +1979,11 @@ mod tests {
         let mut bare = record.clone();
         bare.impostor = None;
         let bare_bytes = encode_prototype_record(&bare).unwrap();
-        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 2].to_vec();
+        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 1].to_vec();
         body.extend(postcard::to_allocvec(&Some(values)).unwrap());
         let error = decode_prototype_record(&file_of_version(15, &body)).unwrap_err();
         assert!(
             matches!(&error, RecordError::Malformed(m) if m.starts_with("view light scale")),
-            "{error}"
-        );
-    }
-
-    #[test]
-    fn seen_normals_come_with_the_impostor_whole() {
-        let record = PrototypeRecord::from_flat(&three_groups()).unwrap();
-        let impostor = record.impostor.as_deref().expect("an impostor");
-        let normals = impostor.seen_normals.clone().expect("baked seen normals");
-        let (columns, rows) = impostor.seen_normal_size();
-        assert_eq!(normals.len(), (impostor.views * columns * rows) as usize);
-        assert!(normals.iter().any(|n| n[3] > 0), "some block shows a needle");
-        let bytes = encode_prototype_record(&record).unwrap();
-        assert_eq!(
-            decode_prototype_record(&bytes)
-                .unwrap()
-                .impostor
-                .and_then(|i| i.seen_normals.clone()),
-            Some(normals.clone())
-        );
-        let stored = stored_seen_normals(&record);
-        let before = &bytes[HEADER_BYTES..bytes.len() - stored.len()];
-        let with = |normals: Option<Vec<[i8; 4]>>| {
-            let mut body = before.to_vec();
-            let deflated =
-                normals.map(|n| deflate_planes(&n.iter().map(|v| v.map(|b| b as u8)).collect::<Vec<_>>()).unwrap());
-            body.extend(postcard::to_allocvec(&deflated).unwrap());
-            decode_prototype_record(&file_of_version(16, &body))
-        };
-        assert_eq!(with(None).unwrap().impostor.and_then(|i| i.seen_normals.clone()), None);
-        // Of another size than the impostor's blocks, or with a negative
-        // share of samples: malformed.
-        let mut negative = normals.clone();
-        negative[0][3] = -1;
-        for bad in [
-            normals[1..].to_vec(),
-            [normals.clone(), vec![[0; 4]]].concat(),
-            negative,
-        ] {
-            let error = with(Some(bad)).unwrap_err();
-            assert!(
-                matches!(&error, RecordError::Malformed(m) if m.starts_with("seen normals")),
-                "{error}"
-            );
-        }
-        // Bytes that do not inflate.
-        let mut body = before.to_vec();
-        body.extend(postcard::to_allocvec(&Some(vec![0xffu8; 7])).unwrap());
-        assert!(matches!(
-            decode_prototype_record(&file_of_version(16, &body)),
-            Err(RecordError::Malformed(m)) if m.starts_with("seen normals")
-        ));
-        // Seen normals without an impostor are malformed.
-        let mut bare = record.clone();
-        bare.impostor = None;
-        let bare_bytes = encode_prototype_record(&bare).unwrap();
-        let mut body = bare_bytes[HEADER_BYTES..bare_bytes.len() - 1].to_vec();
-        body.extend(postcard::to_allocvec(&Some(vec![0u8; 4])).unwrap());
-        let error = decode_prototype_record(&file_of_version(16, &body)).unwrap_err();
-        assert!(
-            matches!(&error, RecordError::Malformed(m) if m.starts_with("seen normals")),
             "{error}"
         );
     }

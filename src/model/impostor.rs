@@ -64,9 +64,7 @@
 use super::look::{PieceEnds, SampleBits};
 use super::needle::{Needle, WoodSegment};
 use super::prism::TriangleMesh;
-use super::shading::{
-    TexelShares, cylinder_lambert, seen_normal_lambert, shares_mean_normal, texel_shares, visible_frame,
-};
+use super::shading::{TexelShares, cylinder_lambert, texel_shares, visible_frame};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -739,18 +737,6 @@ pub struct CrownImpostor {
     /// needles its views show ([`CrownImpostor::view_light_scale`]);
     /// `None` (every scale 1) for an older record.
     pub view_light_scale: Option<ViewLightScale>,
-    /// How the needles its views show lean off what its texels' shares
-    /// light, per block of [`SEEN_NORMAL_BLOCK`]² texels
-    /// ([`CrownImpostor::measure_seen_normals`]): `views ×
-    /// seen_normal_size()` values, each the block's deviation (the mean
-    /// normal of the needles its samples show less the shares' mean
-    /// normal, [`super::shading::shares_mean_normal`], in the view's frame:
-    /// `x` right, `y` up, `z` toward the camera) times the share of its
-    /// samples that show a needle, and that share, as signed bytes
-    /// (`v · 127`, as a GPU's `Rgba8Snorm`), so that filtering averages
-    /// them by what they show. `None` (lit by the shares alone) for an
-    /// older record.
-    pub seen_normals: Option<Vec<[i8; 4]>>,
 }
 
 /// One texel decoded.
@@ -999,7 +985,6 @@ impl CrownImpostor {
             crown_density: CrownDensity::default(),
             seen_needles: None,
             view_light_scale: None,
-            seen_normals: None,
         };
         // Views are independent: each rasterizes every piece (in parallel,
         // on the caller's rayon pool), wood first, so that each needle
@@ -1379,10 +1364,7 @@ impl CrownImpostor {
                     continue;
                 };
                 let weight = f64::from((texel.coverage - texel.wood).max(0.0));
-                let d = self.texel_deviation(view, column, row);
-                let lean = seen_normal_lambert(d.x * right + d.y * Vec3::Y + d.z * toward, toward, to_light);
-                let lambert = (texel.shares.lambert(Vec3::Y, right, toward, to_light) + lean).max(0.0);
-                texels += weight * f64::from(lambert);
+                texels += weight * f64::from(texel.shares.lambert(Vec3::Y, right, toward, to_light));
                 covered += weight;
             }
         }
@@ -1431,7 +1413,6 @@ impl CrownImpostor {
                 // The texels' shares summed by weight: a texel's Lambert is
                 // linear in them, so three sums light every texel at once.
                 let (mut vertical, mut across, mut sphere, mut covered) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-                let mut leaning = glam::DVec3::ZERO;
                 for row in 0..self.rows {
                     for column in 0..self.columns {
                         let Some(texel) = self.texel_at(view, column, row) else {
@@ -1441,7 +1422,6 @@ impl CrownImpostor {
                         vertical += weight * f64::from(texel.shares.vertical);
                         across += weight * f64::from(texel.shares.across);
                         sphere += weight * f64::from(texel.shares.sphere());
-                        leaning += weight * self.texel_deviation(view, column, row).as_dvec3();
                         covered += weight;
                     }
                 }
@@ -1459,8 +1439,7 @@ impl CrownImpostor {
                     let (up, across_view, to_viewer) = (Vec3::Y, Vec3::X, Vec3::Z);
                     let texels = vertical * f64::from(cylinder_lambert(up, to_viewer, to_light))
                         + across * f64::from(cylinder_lambert(across_view, to_viewer, to_light))
-                        + sphere * f64::from(super::shading::sphere_lambert(to_viewer, to_light))
-                        + f64::from(seen_normal_lambert(leaning.as_vec3(), to_viewer, to_light));
+                        + sphere * f64::from(super::shading::sphere_lambert(to_viewer, to_light));
                     [seen / normals.len() as f64, texels / covered]
                 };
                 Some(
@@ -1515,127 +1494,54 @@ impl CrownImpostor {
     /// level), and a level of odd size below it drops no row or column.
     /// Returns each level's `(columns, rows, texels)`.
     pub fn mip_chain(&self) -> Vec<(u32, u32, Vec<[u8; 4]>)> {
-        mip_levels(
-            self.views,
-            (self.columns, self.rows),
-            &self.texels,
-            |t| t.map(f64::from),
-            |v| v.map(|c| c.round().clamp(0.0, 255.0) as u8),
-        )
-    }
-
-    /// Blocks across and up of the seen normals
-    /// ([`CrownImpostor::seen_normals`]): the pictures' texels over
-    /// [`SEEN_NORMAL_BLOCK`], rounded up.
-    pub fn seen_normal_size(&self) -> (u32, u32) {
-        (
-            self.columns.div_ceil(SEEN_NORMAL_BLOCK),
-            self.rows.div_ceil(SEEN_NORMAL_BLOCK),
-        )
-    }
-
-    /// The mip chain of the seen normals (level 0 first), as
-    /// [`CrownImpostor::mip_chain`]'s: each a mean by area of the values
-    /// below it (they are weighted by the share of samples showing a
-    /// needle, so the mean is by what they show); empty without them.
-    pub fn seen_normal_mip_chain(&self) -> Vec<(u32, u32, Vec<[i8; 4]>)> {
-        let Some(normals) = self.seen_normals.as_deref() else {
-            return Vec::new();
-        };
-        mip_levels(
-            self.views,
-            self.seen_normal_size(),
-            normals,
-            |t| t.map(|b| f64::from(snorm_value(b))),
-            |v| v.map(|c| snorm_byte(c as f32)),
-        )
-    }
-
-    /// Block `(column, row)` of view `k`'s seen normals, decoded: its
-    /// deviation (view frame) and the share of its samples that show a
-    /// needle. `None` outside, without seen normals, or where no sample
-    /// shows a needle.
-    pub fn seen_normal_at(&self, view: u32, column: u32, row: u32) -> Option<(Vec3, f32)> {
-        let (columns, rows) = self.seen_normal_size();
-        if view >= self.views || column >= columns || row >= rows {
-            return None;
-        }
-        let [x, y, z, w] =
-            self.seen_normals.as_deref()?[((view * rows + row) * columns + column) as usize].map(snorm_value);
-        (w > 0.0).then(|| (Vec3::new(x, y, z) / w, w))
-    }
-
-    /// The seen normals of this impostor's views
-    /// ([`CrownImpostor::seen_normals`]), measured on what each view shows
-    /// of `needles` and `wood` ([`CrownImpostor::seen_samples`]): per
-    /// block of [`SEEN_NORMAL_BLOCK`]² texels, the mean normal of the
-    /// samples that show a needle, less the mean normal the block's texel
-    /// shares light (by coverage, [`super::shading::shares_mean_normal`]).
-    /// The shares are fitted to every needle through the crown's depth,
-    /// whose mix of directions is nearly the same everywhere; what a block
-    /// shows is its front needles, turned up, down or sideways by where
-    /// they sit on their shoots, and lit so.
-    pub fn measure_seen_normals(&self, wood: &[WoodSegment], needles: &[Needle]) -> Vec<[i8; 4]> {
-        let needles: Vec<&Needle> = needles.iter().filter(|n| n.is_valid()).collect();
-        let (columns, rows) = self.seen_normal_size();
-        let samples_per_block = (SEEN_NORMAL_BLOCK * VIEW_LAMBERT_SAMPLES).pow(2) as f32;
-        (0..self.views)
-            .into_par_iter()
-            .flat_map_iter(|view| {
-                let (right, toward) = (self.view_right(view), self.view_toward(view));
-                let samples = self.seen_samples(view, wood, &needles);
-                let mut sums = vec![(Vec3::ZERO, 0u32); (columns * rows) as usize];
-                for (normal, &texel) in samples.normals.iter().zip(&samples.texels) {
-                    let (column, row) = (texel % self.columns, texel / self.columns);
-                    let block = &mut sums[((row / SEEN_NORMAL_BLOCK) * columns + column / SEEN_NORMAL_BLOCK) as usize];
-                    block.0 += Vec3::new(normal.dot(right), normal.y, normal.dot(toward));
-                    block.1 += 1;
-                }
-                sums.into_iter().enumerate().map(move |(index, (sum, count))| {
-                    if count == 0 {
-                        return [0; 4];
-                    }
-                    let (column, row) = (index as u32 % columns, index as u32 / columns);
-                    // The block's shares, by coverage.
-                    let (mut cylinders, mut covered) = (0.0f32, 0.0f32);
-                    for r in row * SEEN_NORMAL_BLOCK..(row + 1) * SEEN_NORMAL_BLOCK {
-                        for c in column * SEEN_NORMAL_BLOCK..(column + 1) * SEEN_NORMAL_BLOCK {
-                            if let Some(texel) = self.texel_at(view, c, r) {
-                                cylinders += texel.coverage * (texel.shares.vertical + texel.shares.across);
-                                covered += texel.coverage;
+        let (w0, h0) = (self.columns, self.rows);
+        let mut levels = vec![(w0, h0, self.texels.clone())];
+        let (mut w, mut h) = (w0, h0);
+        while w > 1 || h > 1 {
+            (w, h) = ((w / 2).max(1), (h / 2).max(1));
+            // Each texel's footprint along one axis: the level-0 texels
+            // it overlaps and by how much (in level-0 texels).
+            let footprints = |size: u32, size0: u32| -> Vec<Vec<(u32, f64)>> {
+                (0..size)
+                    .map(|k| {
+                        let (lo, hi) = (
+                            f64::from(k) * f64::from(size0) / f64::from(size),
+                            f64::from(k + 1) * f64::from(size0) / f64::from(size),
+                        );
+                        (lo.floor() as u32..(hi.ceil() as u32).min(size0))
+                            .map(|t| (t, hi.min(f64::from(t + 1)) - lo.max(f64::from(t))))
+                            .filter(|&(_, weight)| weight > 0.0)
+                            .collect()
+                    })
+                    .collect()
+            };
+            let (across, down) = (footprints(w, w0), footprints(h, h0));
+            let mut next = Vec::with_capacity((self.views * w * h) as usize);
+            for view in 0..self.views {
+                for rows in &down {
+                    for columns in &across {
+                        let (mut sum, mut area) = ([0.0f64; 4], 0.0f64);
+                        for &(y, wy) in rows {
+                            for &(x, wx) in columns {
+                                let t = self.texels[((view * h0 + y) * w0 + x) as usize];
+                                for (s, v) in sum.iter_mut().zip(t) {
+                                    *s += wx * wy * f64::from(v);
+                                }
+                                area += wx * wy;
                             }
                         }
+                        next.push(sum.map(|s| (s / area.max(f64::MIN_POSITIVE)).round().clamp(0.0, 255.0) as u8));
                     }
-                    let shares = TexelShares {
-                        vertical: if covered > 0.0 { cylinders / covered } else { 0.0 },
-                        across: 0.0,
-                    };
-                    let deviation = sum / count as f32 - Vec3::Z * shares_mean_normal(shares);
-                    let weight = (count as f32 / samples_per_block).min(1.0);
-                    let v = deviation * weight;
-                    [v.x, v.y, v.z, weight].map(snorm_byte)
-                })
-            })
-            .collect()
+                }
+            }
+            levels.push((w, h, next));
+        }
+        levels
     }
 
     /// Bytes of the mip chain.
     pub fn byte_size(&self) -> u64 {
-        let texels: u64 = self.mip_chain().iter().map(|(_, _, t)| 4 * t.len() as u64).sum();
-        let normals: u64 = self
-            .seen_normal_mip_chain()
-            .iter()
-            .map(|(_, _, t)| 4 * t.len() as u64)
-            .sum();
-        texels + normals
-    }
-
-    /// The deviation of the seen normal over texel `(column, row)` of
-    /// view `k` (view frame, [`CrownImpostor::seen_normal_at`]); zero
-    /// where there is none.
-    pub fn texel_deviation(&self, view: u32, column: u32, row: u32) -> Vec3 {
-        self.seen_normal_at(view, column / SEEN_NORMAL_BLOCK, row / SEEN_NORMAL_BLOCK)
-            .map_or(Vec3::ZERO, |(deviation, _)| deviation)
+        self.mip_chain().iter().map(|(_, _, t)| 4 * t.len() as u64).sum()
     }
 
     /// The tree-local point at the foot of the vertical axis the views
@@ -1860,77 +1766,6 @@ impl CrownImpostor {
 /// [`CrownImpostor::view_lambert`] takes what a view shows (2.5 cm apart
 /// at the default 10 cm texel).
 pub const VIEW_LAMBERT_SAMPLES: u32 = 4;
-
-/// Texels of an impostor's pictures along each side of a block that one
-/// seen normal covers ([`CrownImpostor::seen_normals`]): a pixel at 250 m
-/// in `conifer eval`'s far views spans ~1.9 texels, and at full
-/// resolution the plane would take the Douglas fir's impostor past issue
-/// 13's 8 MB a species.
-pub const SEEN_NORMAL_BLOCK: u32 = 2;
-
-/// A value in `[−1, 1]` as a signed byte, as `Rgba8Snorm` stores it.
-fn snorm_byte(value: f32) -> i8 {
-    (value.clamp(-1.0, 1.0) * 127.0).round() as i8
-}
-
-/// A signed byte read as `Rgba8Snorm` reads it (`−128` is `−1`).
-pub fn snorm_value(byte: i8) -> f32 {
-    (f32::from(byte) / 127.0).max(-1.0)
-}
-
-/// The mip chain of `views` stacked pictures of `w0 × h0` texels (level 0
-/// first): each texel of a level the mean of the level-0 texels under it,
-/// by the area it covers of each, as `T` through `decode` and `encode`.
-fn mip_levels<T: Copy>(
-    views: u32,
-    (w0, h0): (u32, u32),
-    level0: &[T],
-    decode: impl Fn(T) -> [f64; 4],
-    encode: impl Fn([f64; 4]) -> T,
-) -> Vec<(u32, u32, Vec<T>)> {
-    let mut levels = vec![(w0, h0, level0.to_vec())];
-    let (mut w, mut h) = (w0, h0);
-    while w > 1 || h > 1 {
-        (w, h) = ((w / 2).max(1), (h / 2).max(1));
-        // Each texel's footprint along one axis: the level-0 texels it
-        // overlaps and by how much (in level-0 texels).
-        let footprints = |size: u32, size0: u32| -> Vec<Vec<(u32, f64)>> {
-            (0..size)
-                .map(|k| {
-                    let (lo, hi) = (
-                        f64::from(k) * f64::from(size0) / f64::from(size),
-                        f64::from(k + 1) * f64::from(size0) / f64::from(size),
-                    );
-                    (lo.floor() as u32..(hi.ceil() as u32).min(size0))
-                        .map(|t| (t, hi.min(f64::from(t + 1)) - lo.max(f64::from(t))))
-                        .filter(|&(_, weight)| weight > 0.0)
-                        .collect()
-                })
-                .collect()
-        };
-        let (across, down) = (footprints(w, w0), footprints(h, h0));
-        let mut next = Vec::with_capacity((views * w * h) as usize);
-        for view in 0..views {
-            for rows in &down {
-                for columns in &across {
-                    let (mut sum, mut area) = ([0.0f64; 4], 0.0f64);
-                    for &(y, wy) in rows {
-                        for &(x, wx) in columns {
-                            let t = decode(level0[((view * h0 + y) * w0 + x) as usize]);
-                            for (s, v) in sum.iter_mut().zip(t) {
-                                *s += wx * wy * v;
-                            }
-                            area += wx * wy;
-                        }
-                    }
-                    next.push(encode(sum.map(|s| s / area.max(f64::MIN_POSITIVE))));
-                }
-            }
-        }
-        levels.push((w, h, next));
-    }
-    levels
-}
 
 /// What one view of a crown shows at each sample
 /// ([`CrownImpostor::nearest_pieces`]): row by row from the top, the index
@@ -2159,7 +1994,6 @@ mod tests {
             crown_density: CrownDensity::default(),
             seen_needles: None,
             view_light_scale: None,
-            seen_normals: None,
         };
         let radii = impostor.crown_radii();
         for (step, radius) in radii.iter().enumerate() {
@@ -2365,7 +2199,6 @@ mod tests {
                 crown_density: CrownDensity::default(),
                 seen_needles: None,
                 view_light_scale: None,
-                seen_normals: None,
             };
             let chain = impostor.mip_chain();
             proptest::prop_assert_eq!((chain[0].0, chain[0].1), (columns, rows));
@@ -2568,98 +2401,6 @@ mod tests {
         }];
         let impostor = CrownImpostor::bake(&cloud, &[], &TriangleMesh::default(), options).unwrap();
         assert_eq!(impostor.view_lambert(0, &wall, &cloud, front), None);
-    }
-
-    /// A ball of outward needles shows, in front, needles pointing at the
-    /// camera, whose visible halves lean away from where they sit: up at
-    /// its bottom, left at its right. The seen normals carry that lean
-    /// block by block. Under a light from the camera every seen normal
-    /// is lit and the shares with the lean give each block's seen Lambert
-    /// to the bytes' rounding; under the low side sun and the high front
-    /// one they take the shares' block-to-block error down by more than
-    /// half. They round-trip their mip chain's first level, and a light
-    /// from behind adds nothing.
-    #[test]
-    fn seen_normals_light_each_block_as_it_shows() {
-        let options = ImpostorOptions {
-            views: 2,
-            ..ImpostorOptions::default()
-        };
-        let ball = random_needles(30_000, 0.002, |p, d| {
-            let out = direction(d[0], d[1]);
-            let base = Vec3::Y * 1.5 + out * (0.2 + 0.8 * p[0].cbrt());
-            (base, base + 0.15 * out)
-        });
-        let mut impostor = CrownImpostor::bake(&ball, &[], &TriangleMesh::default(), options).unwrap();
-        impostor.seen_normals = Some(impostor.measure_seen_normals(&[], &ball));
-        let chain = impostor.seen_normal_mip_chain();
-        assert_eq!(chain[0].2, impostor.seen_normals.clone().unwrap());
-        assert_eq!((chain[0].0, chain[0].1), impostor.seen_normal_size());
-        assert_eq!(chain.last().map(|l| (l.0, l.1)), Some((1, 1)));
-        let valid: Vec<&Needle> = ball.iter().collect();
-        let low = 15f32.to_radians();
-        let suns = [
-            Vec3::Z,
-            Vec3::new(low.cos(), low.sin(), 0.0),
-            Vec3::new(4.0, 8.0, 6.0).normalize(),
-        ];
-        // Per sun: the mean |error| over the blocks the needles cover of
-        // the shares alone and of the shares with the lean, and the
-        // largest with the lean.
-        let mut errors = [[0.0f64; 3]; 3];
-        let mut blocks = 0usize;
-        for view in 0..2 {
-            let (right, toward) = (impostor.view_right(view), impostor.view_toward(view));
-            let samples = impostor.seen_samples(view, &[], &valid);
-            let (columns, rows) = impostor.seen_normal_size();
-            let mut shown = vec![(Vec::new(), 0.0f32); (columns * rows) as usize];
-            for (n, &t) in samples.normals.iter().zip(&samples.texels) {
-                let (c, r) = (t % impostor.columns, t / impostor.columns);
-                shown[((r / SEEN_NORMAL_BLOCK) * columns + c / SEEN_NORMAL_BLOCK) as usize]
-                    .0
-                    .push(*n);
-            }
-            for (index, (normals, _)) in shown.iter_mut().enumerate() {
-                let (column, row) = (index as u32 % columns, index as u32 / columns);
-                let Some((deviation, weight)) = impostor.seen_normal_at(view, column, row) else {
-                    continue;
-                };
-                if weight < 0.9 {
-                    continue;
-                }
-                blocks += 1;
-                let lean_world = deviation.x * right + deviation.y * Vec3::Y + deviation.z * toward;
-                for (k, sun) in suns.iter().enumerate() {
-                    let to_light = sun.x * right + sun.y * Vec3::Y + sun.z * toward;
-                    let seen = normals.iter().map(|n| n.dot(to_light).max(0.0)).sum::<f32>() / normals.len() as f32;
-                    let (mut by_shares, mut covered) = (0.0, 0.0);
-                    for r in row * SEEN_NORMAL_BLOCK..(row + 1) * SEEN_NORMAL_BLOCK {
-                        for c in column * SEEN_NORMAL_BLOCK..(column + 1) * SEEN_NORMAL_BLOCK {
-                            let texel = impostor.texel_at(view, c, r).unwrap();
-                            by_shares += texel.coverage * texel.shares.lambert(Vec3::Y, right, toward, to_light);
-                            covered += texel.coverage;
-                        }
-                    }
-                    let by_shares = by_shares / covered;
-                    let leaned = by_shares + seen_normal_lambert(lean_world, toward, to_light);
-                    errors[k][0] += f64::from((by_shares - seen).abs());
-                    errors[k][1] += f64::from((leaned - seen).abs());
-                    errors[k][2] = errors[k][2].max(f64::from((leaned - seen).abs()));
-                }
-            }
-        }
-        assert!(blocks > 100, "{blocks} blocks");
-        for (k, sun) in suns.iter().enumerate() {
-            let [shares, leaned, worst] = [errors[k][0] / blocks as f64, errors[k][1] / blocks as f64, errors[k][2]];
-            println!("sun {sun}: shares {shares:.4}, with the lean {leaned:.4} (worst {worst:.4}), {blocks} blocks");
-            assert!(leaned < 0.5 * shares, "{sun}: {leaned} vs {shares}");
-            if k == 0 {
-                // The lean's bytes round to 1/127 of the share of
-                // samples, over a share ≥ 0.9.
-                assert!(worst < 0.02, "{worst}");
-            }
-        }
-        assert_eq!(seen_normal_lambert(Vec3::new(0.3, -0.2, 0.1), Vec3::Z, -Vec3::Z), 0.0);
     }
 
     /// The view light scale is what the views show over how the texels

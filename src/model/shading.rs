@@ -47,7 +47,7 @@
 //! add over children and turn with a placement) seen along the chord.
 
 use glam::{Mat3, Quat, Vec2, Vec3};
-use std::f32::consts::{FRAC_PI_4, PI};
+use std::f32::consts::PI;
 use std::sync::OnceLock;
 
 /// The four-point Gauss–Legendre rule on `[−1, 1]`: offsets across a
@@ -184,33 +184,6 @@ pub fn cylinder_lambert(axis: Vec3, to_viewer: Vec3, to_light: Vec3) -> f32 {
 pub fn sphere_lambert(to_viewer: Vec3, to_light: Vec3) -> f32 {
     let alpha = to_viewer.dot(to_light).clamp(-1.0, 1.0).acos();
     2.0 * (alpha.sin() + (PI - alpha) * alpha.cos()) / (3.0 * PI)
-}
-
-/// What the needles a texel of a crown impostor shows add to the Lambert
-/// factor its shares give ([`TexelShares::lambert`]), from how their mean
-/// normal leans off the shares' (`deviation`: the seen samples' mean
-/// normal less the mean normal of the shares' surfaces, which face the
-/// viewer, [`super::impostor::CrownImpostor::seen_normals`]), seen from
-/// unit `to_viewer` and lit from unit `to_light`:
-/// `clamp(½ + ½ V·L, 0, 1) · (deviation · L)`. The mean of `n·L` over
-/// the samples is exactly the mean normal · L; the clamp of `max(n·L, 0)`
-/// lights only the normals turned toward the light, about the share
-/// `½ + ½ V·L` of a half-space of normals facing the viewer, so a lean
-/// counts fully under a light from the viewer, half from the side and
-/// not from behind. Measured on the six mature crowns against what each
-/// 2 × 2-texel block shows (`examples/visible_light.rs`), it takes the
-/// shares' block-to-block error from 0.030–0.064 to 0.011–0.020.
-pub fn seen_normal_lambert(deviation: Vec3, to_viewer: Vec3, to_light: Vec3) -> f32 {
-    (0.5 + 0.5 * to_viewer.dot(to_light)).clamp(0.0, 1.0) * deviation.dot(to_light)
-}
-
-/// The mean normal, toward the viewer, of a texel's surfaces lit by its
-/// `shares`: `π/4` of a cylinder's visible half (either cylinder), `2/3`
-/// of a sphere's disk; what [`seen_normal_lambert`]'s deviation is
-/// measured from.
-pub fn shares_mean_normal(shares: TexelShares) -> f32 {
-    let cylinders = (shares.vertical + shares.across).clamp(0.0, 1.0);
-    FRAC_PI_4 * cylinders + 2.0 / 3.0 * (1.0 - cylinders)
 }
 
 /// The normal of the round cylinder a prism stands for, where one of its
@@ -775,36 +748,6 @@ mod tests {
         (-1.0f32..1.0, -1.0f32..1.0, -1.0f32..1.0)
             .prop_filter("not zero", |(x, y, z)| x * x + y * y + z * z > 0.01)
             .prop_map(|(x, y, z)| Vec3::new(x, y, z).normalize())
-    }
-
-    proptest! {
-        /// The shares' mean normal is their Lambert under a light from
-        /// the viewer (both linear in the shares, and equal for each
-        /// surface), so a texel whose seen normals lean by nothing is lit
-        /// by its shares alone; and for normals facing the viewer, the
-        /// shares plus their lean under that light are the normals' own
-        /// mean Lambert, whatever the shares.
-        #[test]
-        fn a_lean_under_a_light_from_the_viewer_is_the_seen_normals_mean(
-            vertical in 0.0f32..1.0,
-            across in 0.0f32..1.0,
-            normals in proptest::collection::vec(direction(), 1..40),
-        ) {
-            let shares = TexelShares { vertical, across: across * (1.0 - vertical) };
-            let (up, right, viewer) = (Vec3::Y, Vec3::X, Vec3::Z);
-            let mean_normal = shares_mean_normal(shares);
-            prop_assert!((shares.lambert(up, right, viewer, viewer) - mean_normal).abs() < 1e-5);
-            // Normals turned toward the viewer, as a view shows them.
-            let shown: Vec<Vec3> = normals.iter().map(|n| Vec3::new(n.x, n.y, n.z.abs())).collect();
-            let mean = shown.iter().sum::<Vec3>() / shown.len() as f32;
-            let seen = shown.iter().map(|n| n.dot(viewer).max(0.0)).sum::<f32>() / shown.len() as f32;
-            let lit = shares.lambert(up, right, viewer, viewer) + seen_normal_lambert(mean - viewer * mean_normal, viewer, viewer);
-            prop_assert!((lit - seen).abs() < 1e-5, "{} vs {}", lit, seen);
-            // From the side half the lean, from behind none.
-            let lean = mean - viewer * mean_normal;
-            prop_assert!((seen_normal_lambert(lean, viewer, right) - 0.5 * lean.x).abs() < 1e-6);
-            prop_assert_eq!(seen_normal_lambert(lean, viewer, -viewer), 0.0);
-        }
     }
 
     /// Bevy's BRDF times `n·L` (Burley diffuse of albedo 0.05, GGX
