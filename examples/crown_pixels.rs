@@ -5,7 +5,8 @@
 //! runs), what the needles nearest the camera there show, sampled on a
 //! grid of 2.5 cm (each sample's needle as
 //! [`CrownImpostor::nearest_pieces`] finds it): the Lambert factor of the
-//! front sun at the sample's normal on the round needle, and the needle's
+//! front sun at the sample's normal on the round needle
+//! ([`CrownImpostor::seen_normal`], as the impostor's measures take it), and the needle's
 //! colour as the reference draws it (its shoot's age colour turned toward
 //! the pale underside by how much of the underside the camera sees,
 //! [`ShootColor::seen_from`]). Printed: over the pixels the reference
@@ -25,12 +26,12 @@
 //! moves a pixel at its edge by about half a pixel.
 //!
 //! [`CrownImpostor::nearest_pieces`]: bevy_conifer_lod::model::impostor::CrownImpostor::nearest_pieces
+//! [`CrownImpostor::seen_normal`]: bevy_conifer_lod::model::impostor::CrownImpostor::seen_normal
 //! [`ShootColor::seen_from`]: bevy_conifer_lod::model::color::ShootColor::seen_from
 
 use bevy_conifer_lod::model::color::shoot_colors;
 use bevy_conifer_lod::model::impostor::{CrownImpostor, ImpostorOptions};
 use bevy_conifer_lod::model::prism::TriangleMesh;
-use bevy_conifer_lod::model::shading::visible_frame;
 use bevy_conifer_lod::model::{Needle, read_prototype_record};
 use glam::{Vec2, Vec3};
 
@@ -63,46 +64,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )
     .ok_or("no impostor frame")?;
     let nearest = frame.nearest_pieces(0, &record.wood, &valid, [PER_TEXEL; 2]);
-    let (right, toward) = (frame.view_right(0), frame.view_toward(0));
+    let right = frame.view_right(0);
     let center = record.crown_center();
     let eye = center + Vec3::Z * distance;
     let sun = Vec3::new(4.0, 8.0, 6.0).normalize();
     let pixel = 2.0 * distance * (0.5 * FOV_DEG.to_radians()).tan() / HEIGHT as f32;
     let top = frame.top();
-    // Per pixel: samples, Σ Lambert, Σ albedo grey, Σ albedo grey × Lambert.
-    let mut sums = vec![[0.0f64; 4]; WIDTH * HEIGHT];
+    // Per pixel: samples that show a needle, those of them with a normal
+    // (not past a cap), and over those Σ Lambert, Σ albedo grey, Σ albedo
+    // grey × Lambert.
+    let mut sums = vec![[0.0f64; 5]; WIDTH * HEIGHT];
     for (index, piece) in nearest.needle_samples_at() {
         let needle = valid[piece];
         let (column, row) = (index % nearest.width as usize, index / nearest.width as usize);
         let across = (column as f32 + 0.5) * nearest.step.x - frame.half_width;
         let height = top - (row as f32 + 0.5) * nearest.step.y;
         let point = frame.axis_point() + right * across + Vec3::Y * height;
-        // The sample's normal on the round needle (an end cap's past its
-        // ends: toward the camera along the axis).
-        let axis = needle.tip - needle.base;
-        let (facing, side) = visible_frame(axis, toward);
-        let in_picture = |p: Vec3| Vec2::new(p.dot(right), p.y);
-        let (a, b) = (in_picture(needle.base), in_picture(needle.tip));
-        let along = b - a;
-        let at = in_picture(point);
-        let t = if along.length_squared() > 0.0 {
-            (at - a).dot(along) / along.length_squared()
-        } else {
-            0.5
-        };
-        let normal = if (0.0..=1.0).contains(&t) {
-            let side_in_picture = Vec2::new(side.dot(right), side.y);
-            let s = ((at - (a + along * t)).dot(side_in_picture) / needle.radius).clamp(-1.0, 1.0);
-            (1.0 - s * s).max(0.0).sqrt() * facing + s * side
-        } else {
-            let unit = axis.normalize_or_zero();
-            if unit.dot(toward) < 0.0 { -unit } else { unit }
-        };
-        let lambert = f64::from(normal.dot(sun).max(0.0));
-        let albedo = colors
-            .get(needle.group as usize)
-            .map_or(Vec3::splat(0.05), |c| c.seen_from(&record.material, eye));
-        let grey = f64::from(albedo.element_sum() / 3.0);
         let x = WIDTH as f32 / 2.0 + (point.x - center.x) / pixel;
         let y = HEIGHT as f32 / 2.0 - (point.y - center.y) / pixel;
         if !(0.0..WIDTH as f32).contains(&x) || !(0.0..HEIGHT as f32).contains(&y) {
@@ -110,9 +87,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let sum = &mut sums[y as usize * WIDTH + x as usize];
         sum[0] += 1.0;
-        sum[1] += lambert;
-        sum[2] += grey;
-        sum[3] += grey * lambert;
+        // The sample's normal on the round needle, as the impostor's
+        // measures light it (none where the round end reaches past the cap).
+        let Some(normal) = frame.seen_normal(0, needle, Vec2::new(across, height)) else {
+            continue;
+        };
+        let lambert = f64::from(normal.dot(sun).max(0.0));
+        let albedo = colors
+            .get(needle.group as usize)
+            .map_or(Vec3::splat(0.05), |c| c.seen_from(&record.material, eye));
+        let grey = f64::from(albedo.element_sum() / 3.0);
+        sum[1] += 1.0;
+        sum[2] += lambert;
+        sum[3] += grey;
+        sum[4] += grey * lambert;
     }
     let samples_per_pixel = f64::from((pixel / nearest.step.x) * (pixel / nearest.step.y));
     let load = |path: &str| -> Result<Vec<[f64; 4]>, Box<dyn std::error::Error>> {
@@ -130,16 +118,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut rows: Vec<[f64; 6]> = Vec::new();
     for (k, sum) in sums.iter().enumerate() {
         let covered = reference[k][3] >= 240.0 && ours.as_ref().is_none_or(|o| o[k][3] >= 240.0);
-        if !covered || sum[0] < 0.9 * samples_per_pixel {
+        if !covered || sum[0] < 0.9 * samples_per_pixel || sum[1] == 0.0 {
             continue;
         }
         let drawn = ours.as_ref().map_or(0.0, |o| grey(&o[k]));
         rows.push([
             grey(&reference[k]),
             grey(&reference[k]) - drawn,
-            sum[1] / sum[0],
-            sum[2] / sum[0],
-            sum[3] / sum[0],
+            sum[2] / sum[1],
+            sum[3] / sum[1],
+            sum[4] / sum[1],
             drawn,
         ]);
     }

@@ -1267,8 +1267,7 @@ impl CrownImpostor {
         let (right, toward) = (self.view_right(view), self.view_toward(view));
         let per_texel = VIEW_LAMBERT_SAMPLES as usize;
         let nearest = self.nearest_pieces(view, wood, needles, [VIEW_LAMBERT_SAMPLES; 2]);
-        let (centre, top) = (self.axis_point(), self.top());
-        let in_picture = |p: Vec3| Vec2::new((p - centre).dot(right), p.y);
+        let top = self.top();
         let mut normals = Vec::new();
         let mut sample_texels = Vec::new();
         let mut shown = vec![([0.0f64; 2], 0u32); (self.columns * self.rows) as usize];
@@ -1279,34 +1278,10 @@ impl CrownImpostor {
                 (column as f32 + 0.5) * nearest.step.x - self.half_width,
                 top - (row as f32 + 0.5) * nearest.step.y,
             );
-            let (a, b) = (in_picture(needle.base), in_picture(needle.tip));
-            let along = b - a;
-            let t = if along.length_squared() > 0.0 {
-                (point - a).dot(along) / along.length_squared()
-            } else {
-                0.5
+            let Some(normal) = self.seen_normal(view, needle, point) else {
+                continue;
             };
             let axis = needle.tip - needle.base;
-            let (facing, side) = visible_frame(axis, toward);
-            let side_in_picture = Vec2::new(side.dot(right), side.y);
-            let normal = if (0.0..=1.0).contains(&t) {
-                let across = ((point - (a + along * t)).dot(side_in_picture) / needle.radius).clamp(-1.0, 1.0);
-                (1.0 - across * across).max(0.0).sqrt() * facing + across * side
-            } else {
-                // Past an end: the flat cap, an ellipse `r · slant` long
-                // along the axis (the round end the raster stamped
-                // reaches `r`), lit along the axis, toward the camera.
-                let unit = axis.normalize_or_zero();
-                let slant = unit.dot(toward).abs();
-                let end = if t < 0.0 { a } else { b };
-                let offset = point - end;
-                let past = offset.dot(along.normalize_or_zero()) / (needle.radius * slant).max(1e-9);
-                let beside = offset.dot(side_in_picture) / needle.radius;
-                if past * past + beside * beside > 1.0 {
-                    continue;
-                }
-                if unit.dot(toward) < 0.0 { -unit } else { unit }
-            };
             normals.push(normal);
             sample_texels.push(((row / per_texel) * self.columns as usize + column / per_texel) as u32);
             let shares = texel_shares(Vec3::new(axis.dot(right), axis.y, axis.dot(toward)));
@@ -1320,6 +1295,43 @@ impl CrownImpostor {
             texels: sample_texels,
             shown,
         }
+    }
+
+    /// The normal (world frame) view `k` sees on round `needle` at
+    /// `point` of its picture (metres right of the axis, height):
+    /// `√(1 − s²)·t + s·b` with `s` the point's offset across the needle's
+    /// projected width ([`super::shading::visible_frame`]), or past its end
+    /// its flat cap's, a disk across its axis seen at its slant, turned
+    /// toward the camera. `None` past an end where the raster's round end
+    /// reaches and the cap does not. What [`CrownImpostor::seen_samples`]
+    /// lights each sample at.
+    pub fn seen_normal(&self, view: u32, needle: &Needle, point: Vec2) -> Option<Vec3> {
+        let (right, toward, centre) = (self.view_right(view), self.view_toward(view), self.axis_point());
+        let in_picture = |p: Vec3| Vec2::new((p - centre).dot(right), p.y);
+        let (a, b) = (in_picture(needle.base), in_picture(needle.tip));
+        let along = b - a;
+        let t = if along.length_squared() > 0.0 {
+            (point - a).dot(along) / along.length_squared()
+        } else {
+            0.5
+        };
+        let axis = needle.tip - needle.base;
+        let (facing, side) = visible_frame(axis, toward);
+        let side_in_picture = Vec2::new(side.dot(right), side.y);
+        if (0.0..=1.0).contains(&t) {
+            let across = ((point - (a + along * t)).dot(side_in_picture) / needle.radius).clamp(-1.0, 1.0);
+            return Some((1.0 - across * across).max(0.0).sqrt() * facing + across * side);
+        }
+        // Past an end: the flat cap, an ellipse `r · slant` long along the
+        // axis (the round end the raster stamped reaches `r`), lit along
+        // the axis, toward the camera.
+        let unit = axis.normalize_or_zero();
+        let slant = unit.dot(toward).abs();
+        let end = if t < 0.0 { a } else { b };
+        let offset = point - end;
+        let past = offset.dot(along.normalize_or_zero()) / (needle.radius * slant).max(1e-9);
+        let beside = offset.dot(side_in_picture) / needle.radius;
+        (past * past + beside * beside <= 1.0).then_some(if unit.dot(toward) < 0.0 { -unit } else { unit })
     }
 
     /// How the needles of view `k` are lit by a light from `to_light`,
