@@ -1331,7 +1331,10 @@ impl CrownImpostor {
         let offset = point - end;
         let past = offset.dot(along.normalize_or_zero()) / (needle.radius * slant).max(1e-9);
         let beside = offset.dot(side_in_picture) / needle.radius;
-        (past * past + beside * beside <= 1.0).then_some(if unit.dot(toward) < 0.0 { -unit } else { unit })
+        if past * past + beside * beside > 1.0 {
+            return None;
+        }
+        Some(if unit.dot(toward) < 0.0 { -unit } else { unit })
     }
 
     /// How the needles of view `k` are lit by a light from `to_light`,
