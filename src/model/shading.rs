@@ -295,6 +295,22 @@ pub fn bevy_direct(
     (diffuse * n_dot_l, specular * n_dot_l)
 }
 
+/// Bevy's ambient light on its standard material (a dielectric) at view
+/// cosine `n_dot_v`, as `ambient_light` in Bevy 0.19's `pbr_ambient.wgsl`
+/// (split-sum `EnvBRDFApprox` with the polynomial `F_AB`, the diffuse at
+/// roughness 1, the specular at the material's, its specular occlusion
+/// from `F0 = 0.16·reflectance²`): `(diffuse, specular)`, the diffuse per
+/// unit diffuse colour, both per unit ambient brightness. The diffuse does
+/// not depend on the view; the specular grows toward a silhouette.
+pub fn bevy_ambient(n_dot_v: f32, perceptual_roughness: f32, reflectance: f32) -> (f32, f32) {
+    let n_dot_v = n_dot_v.clamp(0.0001, 1.0);
+    let diffuse = bevy_f_ab(1.0, n_dot_v);
+    let f0 = 0.16 * reflectance * reflectance;
+    let specular = bevy_f_ab(perceptual_roughness, n_dot_v);
+    let occlusion = (3.0 * 50.0 * 0.33 * f0).clamp(0.0, 1.0);
+    (diffuse.x, diffuse.y + (f0 * specular.x + specular.y) * occlusion)
+}
+
 /// Bevy's polynomial scale and bias of `F0` in the split-sum specular
 /// (`F_AB` without a DFG table).
 fn bevy_f_ab(perceptual_roughness: f32, n_dot_v: f32) -> Vec2 {
@@ -971,6 +987,29 @@ mod tests {
     /// (Burley of albedo 0.05 plus GGX, F0 0.04) to 5 % (the model
     /// leaves out Bevy's multiple-scattering compensation), over random
     /// normals, viewers and lights.
+    /// Bevy's ambient light, worked by hand from `F_AB`'s polynomial: at
+    /// roughness 1 its scale is `−1.04·0.015 + 0.468 = 0.4524` at every
+    /// view cosine and its bias clamps to `5·10⁻⁵`; a surface without
+    /// reflectance has no specular past that bias (its occlusion is 0),
+    /// and the specular of `F0 = 0.04` at roughness 0.6 grows toward a
+    /// silhouette, from `0.04·(−1.04·a + 0.6968) + (1.04·a − 0.0268)`
+    /// facing the viewer, `a = 0.4·min(0.16, 2^−9.28) + 0.026`.
+    #[test]
+    fn bevy_ambient_is_bevys_split_sum() {
+        for k in 0..=10 {
+            let n_dot_v = k as f32 / 10.0;
+            let (diffuse, specular) = bevy_ambient(n_dot_v, 0.6, 0.0);
+            assert!((diffuse - 0.4524).abs() < 1e-5, "{n_dot_v}: {diffuse}");
+            assert!((specular - 0.00005).abs() < 1e-7, "{n_dot_v}: {specular}");
+        }
+        let facing = bevy_ambient(1.0, 0.6, 0.5).1;
+        let a = 0.4 * 0.16f32.min((-9.28f32).exp2()) + 0.026;
+        let expected = 0.04 * (-1.04 * a + 0.6968) + (1.04 * a - 0.0268) + 0.00005;
+        assert!((facing - expected).abs() < 1e-5, "{facing} against {expected}");
+        let grazing = bevy_ambient(0.05, 0.6, 0.5).1;
+        assert!(grazing > 1.5 * facing, "{grazing} against {facing}");
+    }
+
     #[test]
     fn bevy_direct_is_bevys_brdf() {
         let mut next = xorshift(0x9e37_79b9);
