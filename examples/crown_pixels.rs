@@ -144,9 +144,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let sun = Vec3::new(4.0, 8.0, 6.0).normalize();
     let pixel = 2.0 * distance * (0.5 * FOV_DEG.to_radians()).tan() / HEIGHT as f32;
     let top = frame.top();
-    // Per pixel: samples that show a needle, those of them with a normal
-    // (not past a cap), and over those Σ Lambert, Σ albedo grey, Σ albedo
-    // grey × Lambert.
+    // Per pixel: what its samples add up to.
     let view = Vec3::Z;
     let (roughness, reflectance) = (record.material.roughness, record.material.reflectance);
     let mut sums = vec![PixelSums::default(); WIDTH * HEIGHT];
