@@ -115,6 +115,22 @@ struct PixelRow {
     halves: [f64; 2],
 }
 
+/// Pearson's correlation of the pairs' two members (0 where either does
+/// not vary).
+fn pearson(pairs: &[(f64, f64)]) -> f64 {
+    let n = pairs.len() as f64;
+    let (sa, sb) = pairs.iter().fold((0.0, 0.0), |(a, b), p| (a + p.0, b + p.1));
+    let (ma, mb) = (sa / n, sb / n);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for &(a, b) in pairs {
+        let (da, db) = (a - ma, b - mb);
+        sab += da * db;
+        saa += da * da;
+        sbb += db * db;
+    }
+    sab / (saa * sbb).sqrt().max(f64::MIN_POSITIVE)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(record_path), Some(reference_path)) = (args.first(), args.get(1)) else {
@@ -203,7 +219,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // correlation of the reference's grey level with the samples' mean
     // albedo over whole-pixel shifts of the reference.
     let shifted = |dx: i64, dy: i64| {
-        let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let mut pairs = Vec::new();
         for (k, sum) in sums.iter().enumerate() {
             let (x, y) = ((k % WIDTH) as i64 + dx, (k / WIDTH) as i64 + dy);
             if sum.shown < 0.9 * samples_per_pixel
@@ -214,22 +230,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 continue;
             }
             let pixel = &reference[y as usize * WIDTH + x as usize];
-            if pixel[3] < OPAQUE {
-                continue;
+            if pixel[3] >= OPAQUE {
+                pairs.push((grey(pixel), sum.albedo / sum.lit));
             }
-            let (a, b) = (grey(pixel), sum.albedo / sum.lit);
-            n += 1.0;
-            sx += a;
-            sy += b;
-            sxx += a * a;
-            syy += b * b;
-            sxy += a * b;
         }
-        let covariance = sxy / n - sx * sy / (n * n);
-        covariance
-            / ((sxx / n - (sx / n).powi(2)) * (syy / n - (sy / n).powi(2)))
-                .sqrt()
-                .max(f64::MIN_POSITIVE)
+        pearson(&pairs)
     };
     let best = (-3..=3)
         .flat_map(|dx| (-3..=3).map(move |dy| (dx, dy)))
@@ -269,15 +274,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let n = rows.len() as f64;
     let correlation = |a: &dyn Fn(&PixelRow) -> f64, b: &dyn Fn(&PixelRow) -> f64| {
-        let (ma, mb) = (rows.iter().map(a).sum::<f64>() / n, rows.iter().map(b).sum::<f64>() / n);
-        let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-        for r in &rows {
-            let (da, db) = (a(r) - ma, b(r) - mb);
-            sab += da * db;
-            saa += da * da;
-            sbb += db * db;
-        }
-        sab / (saa * sbb).sqrt().max(f64::MIN_POSITIVE)
+        pearson(&rows.iter().map(|r| (a(r), b(r))).collect::<Vec<_>>())
     };
     println!(
         "{}: {} pixels (≥ {:.0} samples each), pixel {:.3} m",

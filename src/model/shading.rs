@@ -983,10 +983,6 @@ mod tests {
         assert!(worst_square_on > 0.4, "{worst_square_on}");
     }
 
-    /// `bevy_direct` is the test's independent model of Bevy's BRDF
-    /// (Burley of albedo 0.05 plus GGX, F0 0.04) to 5 % (the model
-    /// leaves out Bevy's multiple-scattering compensation), over random
-    /// normals, viewers and lights.
     /// Bevy's ambient light, worked by hand from `F_AB`'s polynomial: at
     /// roughness 1 its scale is `−1.04·0.015 + 0.468 = 0.4524` at every
     /// view cosine and its bias clamps to `5·10⁻⁵`; a surface without
@@ -1010,6 +1006,10 @@ mod tests {
         assert!(grazing > 1.5 * facing, "{grazing} against {facing}");
     }
 
+    /// `bevy_direct` is the test's independent model of Bevy's BRDF
+    /// (Burley of albedo 0.05 plus GGX, F0 0.04) to 5 % (the model
+    /// leaves out Bevy's multiple-scattering compensation), over random
+    /// normals, viewers and lights.
     #[test]
     fn bevy_direct_is_bevys_brdf() {
         let mut next = xorshift(0x9e37_79b9);
