@@ -95,6 +95,10 @@ struct Args {
     /// crown impostor.
     #[arg(long, default_value_t = 600.0, value_parser = parse_shadow_distance)]
     shadow_distance: f32,
+    /// The shadow maps' spatial error as a multiple of their texel's
+    /// (`ConiferLodSettings::shadow_error_scale`; 1 or more).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_shadow_error_scale)]
+    shadow_error_scale: f32,
     /// Start with the debug overlay on.
     #[arg(long)]
     overlay: bool,
@@ -249,6 +253,13 @@ fn sun_cascades(distance: f32) -> CascadeShadowConfig {
         config.bounds.push(distance);
     }
     config
+}
+
+fn parse_shadow_error_scale(s: &str) -> Result<f32, String> {
+    match s.trim().parse::<f32>() {
+        Ok(v) if (1.0..=1000.0).contains(&v) => Ok(v),
+        _ => Err(format!("{s}: expected a scale from 1 to 1000")),
+    }
 }
 
 fn parse_visibility(s: &str) -> Result<f32, String> {
@@ -563,6 +574,7 @@ fn setup(
     settings.pixel_error = args.pixel_error;
     settings.enabled = !args.lod_off;
     settings.sky_occlusion = !args.no_sky_occlusion;
+    settings.shadow_error_scale = args.shadow_error_scale;
     settings.line_lighting = match args.line_lighting {
         Lighting::Bundle => LineLighting::Bundle,
         Lighting::Cylinder => LineLighting::Cylinder,

@@ -674,6 +674,57 @@ fn shadow_cascades_reach_the_lod_state() {
 }
 
 #[test]
+fn the_shadow_error_scale_coarsens_the_shadow_views_only() {
+    use bevy::light::cascade::{Cascade, Cascades};
+    let (_dir, mut app, tree, far) = tree_seen_from_300_m();
+    let handle = app.world().get::<ConiferFoliage>(tree).unwrap().0.clone();
+    let wood_error = loaded_species(&app, &handle).max_wood_error;
+    assert!(wood_error > 0.0 && !far.wood_prisms_visible);
+    // One cascade over the tree whose texel is half the error below which
+    // the trunk is drawn as prisms: a scale under 2 keeps the prisms in
+    // the shadow, one over 2 casts the trunk as lines.
+    let clip_from_world = Mat4::orthographic_rh(-5.0, 5.0, -5.0, 5.0, -50.0, 50.0);
+    let cascade = Cascade {
+        world_from_cascade: Mat4::IDENTITY,
+        clip_from_cascade: clip_from_world,
+        clip_from_world,
+        texel_size: wood_error / 2.0,
+    };
+    let mut cascades = Cascades::default();
+    cascades.cascades.insert(Entity::PLACEHOLDER, vec![cascade]);
+    app.world_mut().spawn((
+        DirectionalLight {
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        cascades,
+    ));
+    // Below 1, NaN and infinity are taken as 1.
+    for (scale, prisms) in [
+        (1.0, true),
+        (1.5, true),
+        (1.9, true),
+        (2.1, false),
+        (2.5, false),
+        (0.25, true),
+        (f32::NAN, true),
+        (f32::INFINITY, true),
+    ] {
+        app.world_mut().resource_mut::<ConiferLodSettings>().shadow_error_scale = scale;
+        app.update();
+        let lit = state(&app, tree);
+        assert_eq!(
+            lit.wood_prisms_visible, prisms,
+            "shadow error scale {scale}: the trunk's shadow as prisms"
+        );
+        assert_eq!(
+            lit.min_spatial_error, far.min_spatial_error,
+            "shadow error scale {scale}: the camera's error is unchanged"
+        );
+    }
+}
+
+#[test]
 fn point_and_spot_light_shadows_reach_the_lod_state() {
     let (_dir, mut app, tree, far) = tree_seen_from_300_m();
     assert!(!far.prisms_visible, "the camera alone sees no prism at 300 m");

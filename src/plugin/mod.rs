@@ -402,6 +402,16 @@ pub struct ConiferLodSettings {
     /// as Bevy gives it, as `conifer eval`'s reference has it); the
     /// `forest` example turns it on.
     pub sky_occlusion: bool,
+    /// The shadow views' spatial error as a multiple of their own: a
+    /// directional cascade's `ε · texel`, a point or spot light's map's
+    /// `ε` texels at the tree's distance. At 1 (the default) every tree
+    /// casts the lines a view of the shadow map's resolution would draw;
+    /// above 1 the shadow passes draw a coarser cut (fewer, wider lines,
+    /// each casting the coverage it stands for), the shadow engines' "shadow
+    /// LOD bias": a forest's shadow maps draw its lines once per cascade,
+    /// which on a software renderer costs most of its frame. Cameras are
+    /// not affected. Values below 1, NaN or infinite are taken as 1.
+    pub shadow_error_scale: f32,
 }
 
 impl Default for ConiferLodSettings {
@@ -420,7 +430,17 @@ impl Default for ConiferLodSettings {
             error_scope: ErrorScope::default(),
             far_impostor: true,
             sky_occlusion: false,
+            shadow_error_scale: 1.0,
         }
+    }
+}
+
+impl ConiferLodSettings {
+    /// [`ConiferLodSettings::shadow_error_scale`] as the views apply it:
+    /// at least 1, and 1 for a value that is not a number or infinite.
+    pub fn shadow_error_factor(&self) -> f32 {
+        let scale = self.shadow_error_scale;
+        if scale.is_finite() { scale.max(1.0) } else { 1.0 }
     }
 }
 

@@ -213,14 +213,16 @@ pub(super) fn select_lod(
         let any_view = !views.is_empty();
         // The errors the parts must serve: the cameras', and those of the
         // shadow cascades covering the tree (a cascade's error is its
-        // texel's, the shader's orthographic case), so that a tree casts its
-        // shadow at the cascade's detail even where the camera sees it coarser.
+        // texel's, the shader's orthographic case, times the settings'
+        // shadow error scale), so that a tree casts its shadow at the
+        // cascade's detail even where the camera sees it coarser.
         let (mut part_min_e, mut part_max_e) = (min_e, max_e);
         if any_view && settings.enabled {
+            let shadow_factor = settings.shadow_error_factor();
             for shadow in &shadows {
                 let ndc = shadow.clip_from_world.project_point3(center);
                 if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
-                    let e = pixel_error * shadow.texel_size / scale;
+                    let e = pixel_error * shadow_factor * shadow.texel_size / scale;
                     part_min_e = part_min_e.min(e);
                     part_max_e = part_max_e.max(e);
                 }
@@ -236,7 +238,7 @@ pub(super) fn select_lod(
             };
             for light in &local_shadows {
                 if box_center.distance(light.position) <= light.range + radius {
-                    let e = pixel_error * center.distance(light.position) * light.slope / scale;
+                    let e = pixel_error * shadow_factor * center.distance(light.position) * light.slope / scale;
                     part_min_e = part_min_e.min(e);
                     part_max_e = part_max_e.max(e);
                 }

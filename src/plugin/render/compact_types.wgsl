@@ -212,6 +212,8 @@ const VIEW_LIGHT_ROLLS: u32 = 7u;
 struct CullView {
     // frustum planes (xyz normal pointing inside, w offset)
     planes: array<vec4<f32>, 6>,
+    // xyz the view's position; w the factor its trees' pixel error is
+    // multiplied by (1 in a camera, the shadow error scale in a shadow view)
     world_position: vec4<f32>,
     // spatial error per metre of distance per unit pixel error: 2/(P₁₁·H)
     error_slope: f32,

@@ -252,6 +252,12 @@ fn view_tree(i: u32) -> TreeView {
     if (instance.flags & FLAG_TRANSITION_OVERRIDE) != 0u {
         transition = instance.transition;
     }
+    // A shadow view's cut may be coarser than its texel's
+    // (`ConiferLodSettings::shadow_error_scale`): its pixel error is
+    // multiplied, so the lines' opacities still take its texel as their
+    // pixel (their pixel is the spatial error over the pixel error).
+    let budget_pixel_error = pixel_error;
+    pixel_error *= max(cull_view.world_position.w, 1.0);
     var opacity_rule = species.opacity_rule;
     let rule_override = (instance.flags >> OPACITY_OVERRIDE_SHIFT) & 3u;
     if rule_override != 0u {
@@ -319,7 +325,7 @@ fn view_tree(i: u32) -> TreeView {
     tree.budget_code = tree.code;
     if cull_view.budget_origin.w > 0.0 {
         let origin = cull_view.budget_origin;
-        tree.budget_code = threshold_code(error_from(origin.xyz, center, reach * scale, origin.w, pixel_error, scale));
+        tree.budget_code = threshold_code(error_from(origin.xyz, center, reach * scale, origin.w, budget_pixel_error, scale));
     }
     tree.fade = fade;
     tree.view_point = view_point;

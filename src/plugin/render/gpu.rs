@@ -462,7 +462,11 @@ pub const VIEW_DEPTH_ORDERED: u32 = 8;
 pub struct CullView {
     /// Frustum planes, normals pointing inside.
     pub planes: [[f32; 4]; 6],
-    /// Position of the view (w unused).
+    /// Position of the view; w the factor its trees' pixel error is
+    /// multiplied by (1 in a camera; in a shadow view
+    /// [`crate::plugin::ConiferLodSettings::shadow_error_factor`], so its
+    /// cut is that much coarser and its lines' opacities still take the
+    /// view's own texel as their pixel).
     pub world_position: [f32; 4],
     /// `2 / (P₁₁ · H)`.
     pub error_slope: f32,

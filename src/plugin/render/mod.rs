@@ -420,6 +420,8 @@ pub struct RenderCompactSpecies {
     retired: Vec<MainEntity>,
     /// [`ConiferLodSettings::max_expanded_placements`].
     max_expanded_placements: u32,
+    /// [`ConiferLodSettings::shadow_error_factor`].
+    shadow_error_factor: f32,
     /// [`ConiferLodSettings::line_lighting`].
     line_lighting: LineLighting,
     /// [`ConiferLodSettings::line_raster`].
@@ -578,6 +580,7 @@ fn extract_compact(
     let wind_step = render.wind_seconds.map_or(0.0, |previous| wind_seconds - previous);
     render.wind_seconds = Some(wind_seconds);
     render.max_expanded_placements = settings.max_expanded_placements;
+    render.shadow_error_factor = settings.shadow_error_factor();
     render.line_lighting = settings.line_lighting;
     render.wood_line_order = settings.wood_line_order;
     render.line_order = settings.line_order;
@@ -1616,7 +1619,15 @@ fn prepare_views(
         let camera = opaque_phases.contains_key(&view.retained_view_entity);
         let cull_view = CullView {
             planes,
-            world_position: view.world_from_view.translation().extend(1.0).to_array(),
+            world_position: view
+                .world_from_view
+                .translation()
+                .extend(if camera {
+                    1.0
+                } else {
+                    render.shadow_error_factor.max(1.0)
+                })
+                .to_array(),
             error_slope: slope,
             perspective: u32::from(perspective)
                 | if camera { VIEW_CAMERA } else { 0 }
