@@ -142,6 +142,11 @@ impl ShadowScene {
         ));
     }
 
+    /// The LOD settings, to change.
+    fn settings(&mut self) -> Mut<'_, ConiferLodSettings> {
+        self.renderer.world_mut().resource_mut::<ConiferLodSettings>()
+    }
+
     /// A picture, saved as `shadow_{name}.png`.
     fn shot(&mut self, name: &str) -> image::RgbaImage {
         let image = self.renderer.capture(&self.target, 20).unwrap();
@@ -160,9 +165,9 @@ impl ShadowScene {
             self.renderer.update().unwrap();
         }
         let lines = shot(self, "lines");
-        self.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = false;
+        self.settings().enabled = false;
         let prisms = shot(self, "prisms");
-        self.renderer.world_mut().resource_mut::<ConiferLodSettings>().enabled = true;
+        self.settings().enabled = true;
         self.renderer
             .world_mut()
             .entity_mut(self.tree)
@@ -235,11 +240,7 @@ fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
     // shadow's pixels, not its darkness: each line casts the coverage of
     // the needles it stands for.
     let fine = scene.shot("sun_lines_again");
-    scene
-        .renderer
-        .world_mut()
-        .resource_mut::<ConiferLodSettings>()
-        .shadow_error_scale = 4.0;
+    scene.settings().shadow_error_scale = 4.0;
     let coarse = scene.shot("sun_lines_shadow_error_4");
     let changed = fine
         .pixels()
@@ -299,28 +300,20 @@ fn a_mature_tree_past_the_shadow_budget_casts_its_impostor() {
     let scaled: Vec<(f32, f32, image::RgbaImage)> = [(1.0f32, 2.0f32), (1.0, 4.0), (3.0, 1.0), (3.0, 2.0), (3.0, 4.0)]
         .into_iter()
         .map(|(pixel_error, scale)| {
-            let mut settings = scene.renderer.world_mut().resource_mut::<ConiferLodSettings>();
+            let mut settings = scene.settings();
             settings.pixel_error = pixel_error;
             settings.shadow_error_scale = scale;
             let name = format!("mature_pixel_error_{pixel_error}_shadow_error_{scale}");
             (pixel_error, scale, scene.shot(&name))
         })
         .collect();
-    *scene.renderer.world_mut().resource_mut::<ConiferLodSettings>() = ConiferLodSettings::default();
+    *scene.settings() = ConiferLodSettings::default();
     // No view expands a placement: the sun's cascade casts the impostor
     // (before, the level-2 lines, each a few centimetres wide but one
     // texel thick, cast a fraction of the crown's shadow).
-    scene
-        .renderer
-        .world_mut()
-        .resource_mut::<ConiferLodSettings>()
-        .max_expanded_placements = 1;
+    scene.settings().max_expanded_placements = 1;
     let past = scene.shot("mature_past_budget");
-    scene
-        .renderer
-        .world_mut()
-        .resource_mut::<ConiferLodSettings>()
-        .max_expanded_placements = ConiferLodSettings::default().max_expanded_placements;
+    scene.settings().max_expanded_placements = ConiferLodSettings::default().max_expanded_placements;
     scene
         .renderer
         .world_mut()
