@@ -236,9 +236,9 @@ fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
     // shadow fills the lower part.
     scene.camera(Vec3::new(-3.5, 0.0, 0.0), 10.0, 40.0);
     scene.assert_line_shadow_like_prisms("sun", SIZE * 3 / 10..SIZE, 0.15);
-    // A coarser cut in the shadow map (fewer, wider lines) changes the
-    // shadow's pixels, not its darkness: each line casts the coverage of
-    // the needles it stands for.
+    // A coarser cut in the shadow map (fewer lines, each standing for
+    // more needles) changes the shadow's pixels, not its darkness: each
+    // line casts the coverage of the needles it stands for.
     let fine = scene.shot("sun_lines_again");
     scene.settings().shadow_error_scale = 4.0;
     let coarse = scene.shot("sun_lines_shadow_error_4");
@@ -332,19 +332,22 @@ fn a_mature_tree_past_the_shadow_budget_casts_its_impostor() {
     };
     let (past, expanded) = (total(&past), total(&expanded));
     println!("mature pine's shadow: darkening summed, expanded {expanded:.1}, past the budget {past:.1}");
-    let darkening = |pixel_error: f32, scale: f32| {
-        let (_, _, picture) = scaled
-            .iter()
-            .find(|(e, s, _)| *e == pixel_error && *s == scale)
-            .unwrap();
-        total(picture)
-    };
-    for (pixel_error, scale, _) in &scaled {
+    let darkenings: Vec<(f32, f32, f32)> = scaled
+        .iter()
+        .map(|(pixel_error, scale, picture)| (*pixel_error, *scale, total(picture)))
+        .collect();
+    for (pixel_error, scale, darkening) in &darkenings {
         println!(
-            "mature pine's shadow: darkening summed, pixel error {pixel_error}, shadow error scale {scale}: {:.1}",
-            darkening(*pixel_error, *scale)
+            "mature pine's shadow: darkening summed, pixel error {pixel_error}, shadow error scale {scale}: {darkening:.1}"
         );
     }
+    let darkening = |pixel_error: f32, scale: f32| {
+        darkenings
+            .iter()
+            .find(|(e, s, _)| *e == pixel_error && *s == scale)
+            .map(|(_, _, darkening)| *darkening)
+            .unwrap()
+    };
     // Each line casts the coverage it stands for while its bundle is
     // about a texel wide: the shadow keeps its darkness (measured: within
     // 2 %, and 3.4 % at ε = 3 and scale 2). At ε = 3 and scale 4 (lines
