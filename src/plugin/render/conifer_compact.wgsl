@@ -99,7 +99,8 @@ const WIND_FLUTTER_HZ: f32 = 3.7;
 const WIND_GUST_HZ: vec2<f32> = vec2<f32>(0.071, 0.173);
 // A line's vertices: a quad of two triangles around its strip, covering
 // each pixel by the strip's area there (`model::raster`), or a hardware
-// line (`LineRaster::Hardware`, and every shadow view).
+// line (`LineRaster::Hardware`, and shadow views whose cut is their
+// texels' own: `shadow_error_scale` 1).
 #ifdef CONIFER_LINE_QUADS
 const LINE_VERTICES: u32 = 6u;
 // `model::raster::LINE_QUAD_MARGIN`.
@@ -398,6 +399,15 @@ fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_loca
     let calm = (world_from_local * vec4<f32>(select(b, a, at_end), 1.0)).xyz;
     let there_world = calm + wind_displacement(calm);
     var there = position_world_to_clip(there_world);
+#ifdef CONIFER_SHADOW
+#ifndef CONIFER_MOTION_VECTORS
+    // A directional cascade flattens the far end onto its near plane as
+    // `finish` flattens this one: the line is cast whole, not clipped.
+    if view.clip_from_view[3][3] == 1.0 {
+        there.z = min(there.z, 1.0);
+    }
+#endif
+#endif
     var here = out.position;
     // In front of the near plane where w ≥ z (reversed Z; an orthographic
     // view's near plane is z = 1 = w).
@@ -1554,8 +1564,9 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
 #else ifdef CONIFER_SHADOW
 
 // Shadows of translucent lines: each fragment is kept with the line's
-// opacity, by a hash of its texel, line and tree, so a line casts the
-// shadow of the coverage it draws (`model::compact::shadow_texel_kept`).
+// opacity (drawn as a quad, its strip's area in the texel), by a hash of
+// its texel, line and tree, so a line casts the shadow of the coverage it
+// draws (`model::compact::shadow_texel_kept`).
 // A tree past a shadow view's budget casts its crown impostor, each
 // fragment kept with the coverage of the impostor's texels under it.
 @fragment
@@ -1566,7 +1577,13 @@ fn fragment(in: VertexOutput) {
     let line = IMPOSTOR_SHADOW_LINE;
     let tree = in.tree;
 #else
+#ifdef CONIFER_LINE_QUADS
+    // A line drawn as a quad (a shadow view whose cut is coarser than its
+    // texels): each texel kept with its strip's area in it.
+    let coverage = pixel_line_coverage(in);
+#else
     let coverage = in.color.a;
+#endif
     let line = u32(in.color.r + 0.5);
     let tree = u32(in.color.g + 0.5);
 #endif

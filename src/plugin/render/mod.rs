@@ -443,6 +443,19 @@ impl RenderCompactSpecies {
     fn camera_line_quads(&self, main_format: TextureFormat) -> bool {
         self.line_raster.draws_quads(main_format)
     }
+
+    /// Whether shadow views draw lines as quads: where their cut is
+    /// coarser than their texels ([`ConiferLodSettings::shadow_error_scale`]
+    /// over 1), unless lines are hardware lines everywhere
+    /// ([`LineRaster::Hardware`]). A line then stands for a bundle wider
+    /// than a texel and casts its strip's coverage (the hashed test keeps
+    /// each texel by the strip's area in it), where a hardware line one
+    /// texel thick would clamp it at an opacity of 1. At a scale of 1 the
+    /// lines' bundles are about a texel wide and hardware lines cast
+    /// them.
+    fn shadow_line_quads(&self) -> bool {
+        self.shadow_error_factor > 1.0 && self.line_raster != LineRaster::Hardware
+    }
 }
 
 /// GPU memory the compact path allocated, summed from the sizes of the
@@ -1258,7 +1271,7 @@ impl SpecializedRenderPipeline for CompactPipeline {
     fn specialize(&self, key: Self::Key) -> RenderPipelineDescriptor {
         match key.pass {
             CompactPass::Main => {}
-            CompactPass::Shadow => return self.shadow_descriptor(key.kind),
+            CompactPass::Shadow => return self.shadow_descriptor(key.kind, key.line_quads),
             CompactPass::MotionVectors {
                 samples,
                 writes_depth,
@@ -1348,7 +1361,7 @@ impl CompactPipeline {
     /// A depth-only pipeline for shadow maps: prisms write depth, lines
     /// keep each fragment with their opacity (hashed), the impostor with
     /// its texels' coverage (hashed).
-    fn shadow_descriptor(&self, kind: PartKind) -> RenderPipelineDescriptor {
+    fn shadow_descriptor(&self, kind: PartKind, line_quads: bool) -> RenderPipelineDescriptor {
         let Some((view_layout, _)) = self.prepass_layouts.clone() else {
             return RenderPipelineDescriptor::default();
         };
@@ -1356,9 +1369,12 @@ impl CompactPipeline {
         if kind.placed_index().is_some() {
             defs.push("CONIFER_PLACED".into());
         }
+        if line_quads {
+            defs.push("CONIFER_LINE_QUADS".into());
+        }
         let fragment = (kind.is_lines() || kind == PartKind::Impostor).then(|| self.fragment_state(&defs, Vec::new()));
         let label = format!("conifer compact shadow {kind:?}");
-        self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, None, true, false)
+        self.prepass_layout_descriptor(label, view_layout, kind, &defs, fragment, None, true, line_quads)
     }
 
     /// The fragment stage of `conifer_compact.wgsl` with `defs`, writing
@@ -1631,7 +1647,8 @@ fn prepare_views(
             error_slope: slope,
             perspective: u32::from(perspective)
                 | if camera { VIEW_CAMERA } else { 0 }
-                | if camera && render.camera_line_quads(view.target_format) {
+                | if (camera && render.camera_line_quads(view.target_format)) || (!camera && render.shadow_line_quads())
+                {
                     VIEW_LINE_QUADS
                 } else {
                     0
@@ -1984,7 +2001,7 @@ fn queue_compact_shadows(
                     kind,
                     pass: CompactPass::Shadow,
                     line_lighting: LineLighting::default(),
-                    line_quads: false,
+                    line_quads: kind.is_lines() && render.shadow_line_quads(),
                     wood_layer: WoodLineLayer::Whole,
                     lines_by_entry: false,
                 };
