@@ -345,6 +345,34 @@ pub fn line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32) -> [f
     ]
 }
 
+/// Corner `corner` (0–5, as [`line_quad_corner`]) of the quad a shadow
+/// view draws for the segment `a`–`b` (texels) whose strip is `width`
+/// wide (at most [`MAX_STRIP_WIDTH`]): the strip itself, at least a texel
+/// wide, its ends exact. A shadow view keeps each texel whose centre the
+/// quad covers with the line's opacity (hashed), and a strip thinner than
+/// a texel has its width as its opacity, so the texels kept cover the
+/// strip's area times its opacity on average, with no fragment off it
+/// (where a camera's quad reaches [`LINE_QUAD_MARGIN`] past the strip to
+/// cover each pixel by its exact area).
+pub fn shadow_line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32) -> [f32; 2] {
+    let (at_b, left) = line_quad_corner_ends(corner);
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
+    let along = if length > 1e-6 {
+        [d[0] / length, d[1] / length]
+    } else {
+        [1.0, 0.0]
+    };
+    let half_width = 0.5 * width.clamp(0.0, MAX_STRIP_WIDTH).max(1.0);
+    let end = if at_b { b } else { a };
+    let sign_across = if left { 1.0 } else { -1.0 };
+    let across = [-along[1], along[0]];
+    [
+        end[0] + half_width * sign_across * across[0],
+        end[1] + half_width * sign_across * across[1],
+    ]
+}
+
 /// Which end (`true`: `b`) and side (`true`: left) a quad corner lies at.
 pub fn line_quad_corner_ends(corner: u32) -> (bool, bool) {
     match corner % 6 {
@@ -528,6 +556,46 @@ mod tests {
             }
             prop_assert!((sum - opacity * width * length).abs() < 2e-3 * width * length, "{sum} vs {}", opacity * width * length);
             prop_assert!((thin_sum - opacity * length).abs() < 2e-3 * length);
+        }
+
+        /// A shadow view's quad (the strip, at least a texel wide) holds the
+        /// centres of as many texels as its area on average over where the
+        /// segment falls, so its texels kept with the line's opacity (a
+        /// thin strip's being its width) cover the strip's area times its
+        /// opacity, as the camera's exact coverage does.
+        #[test]
+        fn a_shadow_quad_keeps_its_strips_area(
+            angle in 0.0f32..std::f32::consts::TAU, length in 2.0f32..12.0, width in 0.05f32..10.0,
+        ) {
+            let along = [angle.cos(), angle.sin()];
+            let (mut centres, offsets) = (0u32, 16);
+            for i in 0..offsets {
+                for j in 0..offsets {
+                    let a = [20.0 + i as f32 / offsets as f32, 20.0 + j as f32 / offsets as f32];
+                    let b = [a[0] + length * along[0], a[1] + length * along[1]];
+                    let corners = [0, 1, 2, 5].map(|c| shadow_line_quad_corner(a, b, width, c));
+                    for x in 0..48 {
+                        for y in 0..48 {
+                            let p = [x as f32 + 0.5, y as f32 + 0.5];
+                            let inside = (0..4).all(|k| {
+                                let (u, v) = (corners[k], corners[(k + 1) % 4]);
+                                (v[0] - u[0]) * (p[1] - u[1]) - (v[1] - u[1]) * (p[0] - u[0]) >= 0.0
+                            }) || (0..4).all(|k| {
+                                let (u, v) = (corners[k], corners[(k + 1) % 4]);
+                                (v[0] - u[0]) * (p[1] - u[1]) - (v[1] - u[1]) * (p[0] - u[0]) <= 0.0
+                            });
+                            centres += u32::from(inside);
+                        }
+                    }
+                }
+            }
+            let strip = width.min(MAX_STRIP_WIDTH);
+            let mean = centres as f32 / (offsets * offsets) as f32;
+            // Kept with the opacity: a strip under a texel wide is drawn a
+            // texel wide at its width's opacity.
+            let kept = mean * strip.min(1.0);
+            let want = strip * length;
+            prop_assert!((kept - want).abs() <= 0.02 * want, "{kept} texels kept for a strip of {want}");
         }
 
         /// A wide straight strip drawn as pieces end to end, each joined to

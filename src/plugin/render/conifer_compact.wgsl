@@ -388,8 +388,11 @@ fn clip_to_pixel(clip: vec4<f32>) -> vec2<f32> {
 // quad: both ends clipped to the near plane and projected to pixels, the
 // corner pushed out along the segment and across it by the strip's half
 // width and `LINE_QUAD_MARGIN` (CPU reference:
-// `model::raster::line_quad_corner`), kept at its end's depth. A hardware
-// line's vertex is `out` itself.
+// `model::raster::line_quad_corner`), kept at its end's depth; in a
+// shadow view the strip itself, at least a texel wide
+// (`model::raster::shadow_line_quad_corner`), a directional cascade's
+// ends flattened onto its near plane, not clipped. A hardware line's
+// vertex is `out` itself.
 fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_local: mat4x4<f32>, vertex_index: u32) -> VertexOutput {
 #ifdef CONIFER_LINE_QUADS
     var result = out;
@@ -434,8 +437,23 @@ fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_loca
         along = d / span;
     }
     let across = vec2<f32>(-along.y, along.x);
+    var pixel: vec2<f32>;
+#ifdef CONIFER_SHADOW
+#ifndef CONIFER_MOTION_VECTORS
+    // A shadow view keeps each texel its quad covers with the line's
+    // opacity (hashed), so the quad is the strip itself, at least a texel
+    // wide (a thinner strip's opacity is its width), its ends exact: it
+    // covers the strip's area on average, with no fragment off it.
+    let half_width = 0.5 * max(strip_of(out.color.a, out.line_width), 1.0);
+    pixel = p_here + half_width * select(-1.0, 1.0, left) * across;
+#else
     let reach = 0.5 * strip_of(out.color.a, out.line_width) + LINE_QUAD_MARGIN;
-    let pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
+    pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
+#endif
+#else
+    let reach = 0.5 * strip_of(out.color.a, out.line_width) + LINE_QUAD_MARGIN;
+    pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
+#endif
     let ndc = 2.0 * (pixel - view.viewport.xy) / view.viewport.zw - vec2<f32>(1.0);
     result.position = vec4<f32>(vec2<f32>(ndc.x, -ndc.y) * here.w, here.z, here.w);
     result.line_ends = vec4<f32>(start, end);
@@ -1564,7 +1582,7 @@ fn fragment(in: VertexOutput, @builtin(front_facing) is_front: bool) -> MotionOu
 #else ifdef CONIFER_SHADOW
 
 // Shadows of translucent lines: each fragment is kept with the line's
-// opacity (drawn as a quad, its strip's area in the texel), by a hash of
+// opacity (drawn as a quad, each texel of its strip), by a hash of
 // its texel, line and tree, so a line casts the shadow of the coverage it
 // draws (`model::compact::shadow_texel_kept`).
 // A tree past a shadow view's budget casts its crown impostor, each
@@ -1577,13 +1595,10 @@ fn fragment(in: VertexOutput) {
     let line = IMPOSTOR_SHADOW_LINE;
     let tree = in.tree;
 #else
-#ifdef CONIFER_LINE_QUADS
-    // A line drawn as a quad (a shadow view whose cut is coarser than its
-    // texels): each texel kept with its strip's area in it.
-    let coverage = pixel_line_coverage(in);
-#else
+    // Drawn as a quad (a shadow view whose cut is coarser than its
+    // texels), the line covers its strip (`with_line_quad`): each texel in
+    // it is kept with the opacity too.
     let coverage = in.color.a;
-#endif
     let line = u32(in.color.r + 0.5);
     let tree = u32(in.color.g + 0.5);
 #endif

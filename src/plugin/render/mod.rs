@@ -20,7 +20,9 @@
 //! * Shadows: every shadow view (directional cascades, point-light faces,
 //!   spot lights) is culled like a camera, at its texel's error, and drawn
 //!   depth-only; lines keep each fragment with their opacity (a hashed
-//!   alpha test), so they cast the shadow of the coverage they draw.
+//!   alpha test), so they cast the shadow of the coverage they draw; under
+//!   a coarser cut (`shadow_error_scale` over 1) they are quads of their
+//!   bundle's width, each texel kept by the strip's area in it.
 
 pub mod gpu;
 mod readback;
@@ -1047,8 +1049,8 @@ pub struct CompactPipelineKey {
     /// How lines are lit (the default for every other part).
     line_lighting: LineLighting,
     /// Lines drawn as quads covering each pixel by their strip's area
-    /// ([`LineRaster::Area`]; `false` for every other part and in shadow
-    /// views).
+    /// ([`LineRaster::Area`] in cameras; in shadow views where
+    /// `shadow_error_scale` is over 1; `false` for every other part).
     line_quads: bool,
     /// Which of the wood lines' draws this is ([`WoodLineLayer::Whole`]
     /// for every other part and pass).
@@ -1359,8 +1361,9 @@ impl SpecializedRenderPipeline for CompactPipeline {
 
 impl CompactPipeline {
     /// A depth-only pipeline for shadow maps: prisms write depth, lines
-    /// keep each fragment with their opacity (hashed), the impostor with
-    /// its texels' coverage (hashed).
+    /// keep each fragment with their opacity (hashed; as quads with
+    /// `line_quads`, by their strip's area in the texel), the impostor
+    /// with its texels' coverage (hashed).
     fn shadow_descriptor(&self, kind: PartKind, line_quads: bool) -> RenderPipelineDescriptor {
         let Some((view_layout, _)) = self.prepass_layouts.clone() else {
             return RenderPipelineDescriptor::default();
