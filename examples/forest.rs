@@ -99,6 +99,10 @@ struct Args {
     /// (`ConiferLodSettings::shadow_error_scale`; 1 or more).
     #[arg(long, default_value_t = 1.0, value_parser = parse_shadow_error_scale)]
     shadow_error_scale: f32,
+    /// The shadow maps draw lines as quads of their bundle's width
+    /// (`ConiferLodSettings::shadow_line_quads`), for coarse shadow cuts.
+    #[arg(long)]
+    shadow_line_quads: bool,
     /// Start with the debug overlay on.
     #[arg(long)]
     overlay: bool,
@@ -575,6 +579,7 @@ fn setup(
     settings.enabled = !args.lod_off;
     settings.sky_occlusion = !args.no_sky_occlusion;
     settings.shadow_error_scale = args.shadow_error_scale;
+    settings.shadow_line_quads = args.shadow_line_quads;
     settings.line_lighting = match args.line_lighting {
         Lighting::Bundle => LineLighting::Bundle,
         Lighting::Cylinder => LineLighting::Cylinder,

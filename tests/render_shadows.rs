@@ -15,6 +15,7 @@ use bevy::light::CascadeShadowConfigBuilder;
 use bevy::prelude::*;
 use bevy_conifer_lod::generate::{GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::{BakeOptions, bake, write_record};
+use bevy_conifer_lod::plugin::CompactReadback;
 use bevy_conifer_lod::plugin::headless::HeadlessRenderer;
 use bevy_conifer_lod::prelude::*;
 use bevy_conifer_lod::preview::srgb_to_linear;
@@ -147,6 +148,18 @@ impl ShadowScene {
         self.renderer.world_mut().resource_mut::<ConiferLodSettings>()
     }
 
+    /// Vertices a line takes in the directional cascade's draws, as its
+    /// compute pass wrote them for the last picture.
+    fn cascade_line_vertices(&self) -> u32 {
+        let readback = self.renderer.world().resource::<CompactReadback>();
+        readback
+            .views
+            .iter()
+            .find(|v| !v.perspective)
+            .expect("the cascade's results were read back")
+            .line_vertices
+    }
+
     /// A picture, saved as `shadow_{name}.png`.
     fn shot(&mut self, name: &str) -> image::RgbaImage {
         let image = self.renderer.capture(&self.target, 20).unwrap();
@@ -241,6 +254,7 @@ fn line_shadows_are_as_dark_as_prism_shadows_under_the_sun() {
     // line casts the coverage of the needles it stands for.
     let fine = scene.shot("sun_lines_again");
     scene.settings().shadow_error_scale = 4.0;
+    scene.settings().shadow_line_quads = true;
     let coarse = scene.shot("sun_lines_shadow_error_4");
     let changed = fine
         .pixels()
@@ -268,6 +282,7 @@ fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
     // A coarser cut in the lamp's cube faces (perspective shadow views,
     // their lines drawn as quads) keeps the shadow's darkness too.
     scene.settings().shadow_error_scale = 4.0;
+    scene.settings().shadow_line_quads = true;
     scene.assert_line_shadow_like_prisms("lamp_shadow_error_4", 90..SIZE, 0.2);
 }
 
@@ -275,6 +290,7 @@ fn a_far_tree_keeps_its_shadow_under_a_near_lamp() {
 fn a_mature_tree_past_the_shadow_budget_casts_its_impostor() {
     let _turn = common::gpu_turn();
     let mut scene = ShadowScene::with_pine(Pine::Mature);
+    scene.renderer.world_mut().resource_mut::<CompactReadback>().enabled = true;
     // A sun 60° high from +x, one cascade over the 20 m tree and its
     // shadow (texels of a few centimetres, as in the forest's cascades).
     scene.renderer.world_mut().spawn((
@@ -300,28 +316,27 @@ fn a_mature_tree_past_the_shadow_budget_casts_its_impostor() {
     }
     let expanded = scene.shot("mature_expanded");
     // Coarser cuts in the shadow map (`shadow_error_scale`), at the
-    // default pixel error and at the forest example's 3.
+    // default pixel error and at the forest example's 3, lines drawn as
+    // quads of their bundle's width (`shadow_line_quads`); the cascade's
+    // draws take six vertices a line.
     let scaled: Vec<(f32, f32, image::RgbaImage)> = [(1.0f32, 2.0f32), (1.0, 4.0), (3.0, 1.0), (3.0, 2.0), (3.0, 4.0)]
         .into_iter()
         .map(|(pixel_error, scale)| {
             let mut settings = scene.settings();
             settings.pixel_error = pixel_error;
             settings.shadow_error_scale = scale;
+            settings.shadow_line_quads = true;
             let name = format!("mature_pixel_error_{pixel_error}_shadow_error_{scale}");
             (pixel_error, scale, scene.shot(&name))
         })
         .collect();
-    // With lines drawn as hardware lines everywhere (`LineRaster::Hardware`)
-    // the shadow views draw them one texel thick too: a line standing for a
-    // bundle several texels wide casts no more than an opacity of 1.
-    let hardware = {
-        let mut settings = scene.settings();
-        settings.pixel_error = 3.0;
-        settings.shadow_error_scale = 4.0;
-        settings.line_raster = LineRaster::Hardware;
-        drop(settings);
-        scene.shot("mature_pixel_error_3_shadow_error_4_hardware_lines")
-    };
+    assert_eq!(scene.cascade_line_vertices(), 6, "the cascade draws its lines as quads");
+    // As hardware lines (the default) the shadow views draw them one texel
+    // thick: a line standing for a bundle several texels wide casts no
+    // more than an opacity of 1 (at the last cut above, ε = 3, scale 4).
+    scene.settings().shadow_line_quads = false;
+    let hardware = scene.shot("mature_pixel_error_3_shadow_error_4_hardware_lines");
+    assert_eq!(scene.cascade_line_vertices(), 2, "the cascade draws hardware lines");
     *scene.settings() = ConiferLodSettings::default();
     // No view expands a placement: the sun's cascade casts the impostor
     // (before, the level-2 lines, each a few centimetres wide but one

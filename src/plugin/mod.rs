@@ -281,9 +281,8 @@ pub enum LineRaster {
     /// every blend to 8 bits, and an area line's many faint fragments (the
     /// pixels its strip only touches) then darken the picture without
     /// adding to its coverage (see the README's "Cameras: give them
-    /// `Hdr`"). Shadow views draw hardware lines at a
-    /// [`ConiferLodSettings::shadow_error_scale`] of 1 and quads above it
-    /// (their hashed test rounds no blend).
+    /// `Hdr`"). Shadow views draw hardware lines whatever this setting,
+    /// quads with [`ConiferLodSettings::shadow_line_quads`].
     #[default]
     Auto,
     /// Hardware lines, one pixel wide, every pixel they light taking the
@@ -304,11 +303,9 @@ pub enum LineRaster {
     /// pixel size, so the crown's lines cover what its needles do. The
     /// default in `Hdr` cameras ([`LineRaster::Auto`]; see the README's
     /// "Lines that cover each pixel by their area" for how it measures
-    /// against hardware lines). Shadow views draw their lines this way
-    /// where their cut is coarser than their texels
-    /// ([`ConiferLodSettings::shadow_error_scale`] over 1), each texel kept
-    /// by the strip's area in it (hashed); at a scale of 1 they draw
-    /// hardware lines, whatever the camera does. Three times the vertices of
+    /// against hardware lines). Cameras only: shadow views draw hardware
+    /// lines unless [`ConiferLodSettings::shadow_line_quads`] is on. Three
+    /// times the vertices of
     /// [`LineRaster::Hardware`] and more fragments (the quad reaches 1.25
     /// pixels past the strip; the fragments off the strip are discarded
     /// before lighting).
@@ -413,16 +410,30 @@ pub struct ConiferLodSettings {
     /// above 1 the shadow passes draw a coarser cut (fewer lines, each
     /// standing for more needles), the shadow engines' "shadow LOD bias":
     /// a forest's shadow maps draw its lines once per cascade, which on a
-    /// software renderer costs most of its frame. Above 1 the shadow views
-    /// draw lines as quads of their bundle's width (as
-    /// [`LineRaster::Area`] does; not under [`LineRaster::Hardware`]), so
-    /// a line standing for a bundle several texels wide casts its needles'
-    /// coverage, where a hardware line one texel thick would clamp it at
-    /// an opacity of 1: the shadows keep their darkness at every scale
-    /// (the README's "A coarser cut for the shadow maps" measures the
-    /// forest's frame and picture at 2 and 4). Cameras are not affected.
-    /// Values below 1, NaN or infinite are taken as 1.
+    /// software renderer costs most of its frame. Shadow views draw lines
+    /// one texel thick, so a line casts its needles' coverage while their
+    /// bundle is not much wider than a texel: up to about 6 texels of
+    /// error (`pixel_error` × this) the shadows keep their darkness (the
+    /// README forest at `pixel_error` 3 and scale 2 draws its shadow
+    /// passes in about half the time, its picture 0.5 of 255 lighter); at
+    /// scale 4 its shadows are a quarter lighter unless
+    /// [`ConiferLodSettings::shadow_line_quads`] is on. Cameras are not
+    /// affected. Values below 1, NaN or infinite are taken as 1.
     pub shadow_error_scale: f32,
+    /// Shadow views draw lines as quads of their bundle's width, each
+    /// texel of the strip kept with the line's opacity (hashed), instead
+    /// of hardware lines one texel thick, which cast a bundle several
+    /// texels wide at an opacity of at most 1. For coarse shadow cuts
+    /// ([`ConiferLodSettings::shadow_error_scale`] of 4 or more at a
+    /// `pixel_error` of 3): there the shadows keep their darkness (the
+    /// README forest at scale 4 0.4 of 255 darker than at scale 1, where
+    /// hardware lines leave it 4.1 lighter). A quad is six vertices where
+    /// a hardware line is two: on Mesa's lavapipe the same cut's shadow
+    /// passes take 1.5–2.1 times as long, so at scale 2 quads are slower
+    /// than scale 1 with hardware lines, and at 4 they cost what scale 2
+    /// does with them (the README's "A coarser cut for the shadow maps").
+    /// Default off.
+    pub shadow_line_quads: bool,
 }
 
 impl Default for ConiferLodSettings {
@@ -442,6 +453,7 @@ impl Default for ConiferLodSettings {
             far_impostor: true,
             sky_occlusion: false,
             shadow_error_scale: 1.0,
+            shadow_line_quads: false,
         }
     }
 }

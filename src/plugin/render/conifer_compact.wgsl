@@ -99,8 +99,8 @@ const WIND_FLUTTER_HZ: f32 = 3.7;
 const WIND_GUST_HZ: vec2<f32> = vec2<f32>(0.071, 0.173);
 // A line's vertices: a quad of two triangles around its strip, covering
 // each pixel by the strip's area there (`model::raster`), or a hardware
-// line (`LineRaster::Hardware`, and shadow views whose cut is their
-// texels' own: `shadow_error_scale` 1).
+// line (`LineRaster::Hardware`, and shadow views unless
+// `ConiferLodSettings::shadow_line_quads`).
 #ifdef CONIFER_LINE_QUADS
 const LINE_VERTICES: u32 = 6u;
 // `model::raster::LINE_QUAD_MARGIN`.
@@ -1595,9 +1595,9 @@ fn fragment(in: VertexOutput) {
     let line = IMPOSTOR_SHADOW_LINE;
     let tree = in.tree;
 #else
-    // Drawn as a quad (a shadow view whose cut is coarser than its
-    // texels), the line covers its strip (`with_line_quad`): each texel in
-    // it is kept with the opacity too.
+    // Drawn as a quad (`ConiferLodSettings::shadow_line_quads`), the line
+    // covers its strip (`with_line_quad`): each texel in it is kept with
+    // the opacity too.
     let coverage = in.color.a;
     let line = u32(in.color.r + 0.5);
     let tree = u32(in.color.g + 0.5);

@@ -20,9 +20,9 @@
 //! * Shadows: every shadow view (directional cascades, point-light faces,
 //!   spot lights) is culled like a camera, at its texel's error, and drawn
 //!   depth-only; lines keep each fragment with their opacity (a hashed
-//!   alpha test), so they cast the shadow of the coverage they draw; under
-//!   a coarser cut (`shadow_error_scale` over 1) they are quads of their
-//!   bundle's width, each texel kept by the strip's area in it.
+//!   alpha test), so they cast the shadow of the coverage they draw; with
+//!   `shadow_line_quads` they are quads of their bundle's width, each
+//!   texel of the strip kept with the line's opacity.
 
 pub mod gpu;
 mod readback;
@@ -424,6 +424,8 @@ pub struct RenderCompactSpecies {
     max_expanded_placements: u32,
     /// [`ConiferLodSettings::shadow_error_factor`].
     shadow_error_factor: f32,
+    /// [`ConiferLodSettings::shadow_line_quads`].
+    shadow_line_quads: bool,
     /// [`ConiferLodSettings::line_lighting`].
     line_lighting: LineLighting,
     /// [`ConiferLodSettings::line_raster`].
@@ -444,19 +446,6 @@ impl RenderCompactSpecies {
     /// triangle lists all follow this one answer.
     fn camera_line_quads(&self, main_format: TextureFormat) -> bool {
         self.line_raster.draws_quads(main_format)
-    }
-
-    /// Whether shadow views draw lines as quads: where their cut is
-    /// coarser than their texels ([`ConiferLodSettings::shadow_error_scale`]
-    /// over 1), unless lines are hardware lines everywhere
-    /// ([`LineRaster::Hardware`]). A line then stands for a bundle wider
-    /// than a texel and casts its strip's coverage (the hashed test keeps
-    /// each texel by the strip's area in it), where a hardware line one
-    /// texel thick would clamp it at an opacity of 1. At a scale of 1 the
-    /// lines' bundles are about a texel wide and hardware lines cast
-    /// them.
-    fn shadow_line_quads(&self) -> bool {
-        self.shadow_error_factor > 1.0 && self.line_raster != LineRaster::Hardware
     }
 }
 
@@ -596,6 +585,7 @@ fn extract_compact(
     render.wind_seconds = Some(wind_seconds);
     render.max_expanded_placements = settings.max_expanded_placements;
     render.shadow_error_factor = settings.shadow_error_factor();
+    render.shadow_line_quads = settings.shadow_line_quads;
     render.line_lighting = settings.line_lighting;
     render.wood_line_order = settings.wood_line_order;
     render.line_order = settings.line_order;
@@ -1049,8 +1039,9 @@ pub struct CompactPipelineKey {
     /// How lines are lit (the default for every other part).
     line_lighting: LineLighting,
     /// Lines drawn as quads covering each pixel by their strip's area
-    /// ([`LineRaster::Area`] in cameras; in shadow views where
-    /// `shadow_error_scale` is over 1; `false` for every other part).
+    /// ([`LineRaster::Area`] in cameras; in shadow views with
+    /// [`ConiferLodSettings::shadow_line_quads`]; `false` for every other
+    /// part).
     line_quads: bool,
     /// Which of the wood lines' draws this is ([`WoodLineLayer::Whole`]
     /// for every other part and pass).
@@ -1361,8 +1352,8 @@ impl SpecializedRenderPipeline for CompactPipeline {
 
 impl CompactPipeline {
     /// A depth-only pipeline for shadow maps: prisms write depth, lines
-    /// keep each fragment with their opacity (hashed; as quads with
-    /// `line_quads`, by their strip's area in the texel), the impostor
+    /// keep each fragment with their opacity (hashed; as quads of their
+    /// strip with `line_quads`), the impostor
     /// with its texels' coverage (hashed).
     fn shadow_descriptor(&self, kind: PartKind, line_quads: bool) -> RenderPipelineDescriptor {
         let Some((view_layout, _)) = self.prepass_layouts.clone() else {
@@ -1650,8 +1641,7 @@ fn prepare_views(
             error_slope: slope,
             perspective: u32::from(perspective)
                 | if camera { VIEW_CAMERA } else { 0 }
-                | if (camera && render.camera_line_quads(view.target_format)) || (!camera && render.shadow_line_quads())
-                {
+                | if (camera && render.camera_line_quads(view.target_format)) || (!camera && render.shadow_line_quads) {
                     VIEW_LINE_QUADS
                 } else {
                     0
@@ -2004,7 +1994,7 @@ fn queue_compact_shadows(
                     kind,
                     pass: CompactPass::Shadow,
                     line_lighting: LineLighting::default(),
-                    line_quads: kind.is_lines() && render.shadow_line_quads(),
+                    line_quads: kind.is_lines() && render.shadow_line_quads,
                     wood_layer: WoodLineLayer::Whole,
                     lines_by_entry: false,
                 };

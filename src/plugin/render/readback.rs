@@ -28,8 +28,9 @@ pub struct ViewReadback {
     /// lights; directional cascades are not).
     pub perspective: bool,
     /// Vertices a line takes in the view's draws: 6 where it draws lines as
-    /// quads ([`crate::plugin::LineRaster::Area`], cameras), 2 as hardware
-    /// lines.
+    /// quads ([`crate::plugin::LineRaster::Area`] in cameras, shadow views
+    /// with [`crate::plugin::ConiferLodSettings::shadow_line_quads`]), 2 as
+    /// hardware lines.
     pub line_vertices: u32,
     /// Per tree (instance slot): threshold code and flags, spatial error,
     /// pixel error and transition, then the view point (the camera in the
