@@ -328,13 +328,7 @@ pub fn strip_pieces(width: f32) -> u32 {
 /// a millionth of a pixel is taken along x.
 pub fn line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32) -> [f32; 2] {
     let (at_b, left) = line_quad_corner_ends(corner);
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
-    let along = if length > 1e-6 {
-        [d[0] / length, d[1] / length]
-    } else {
-        [1.0, 0.0]
-    };
+    let along = quad_direction(a, b);
     let reach = 0.5 * width.clamp(0.0, MAX_STRIP_WIDTH) + LINE_QUAD_MARGIN;
     let (end, sign_along) = if at_b { (b, 1.0) } else { (a, -1.0) };
     let sign_across = if left { 1.0 } else { -1.0 };
@@ -356,13 +350,7 @@ pub fn line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32) -> [f
 /// cover each pixel by its exact area).
 pub fn shadow_line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32) -> [f32; 2] {
     let (at_b, left) = line_quad_corner_ends(corner);
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
-    let along = if length > 1e-6 {
-        [d[0] / length, d[1] / length]
-    } else {
-        [1.0, 0.0]
-    };
+    let along = quad_direction(a, b);
     let half_width = 0.5 * width.clamp(0.0, MAX_STRIP_WIDTH).max(1.0);
     let end = if at_b { b } else { a };
     let sign_across = if left { 1.0 } else { -1.0 };
@@ -371,6 +359,18 @@ pub fn shadow_line_quad_corner(a: [f32; 2], b: [f32; 2], width: f32, corner: u32
         end[0] + half_width * sign_across * across[0],
         end[1] + half_width * sign_across * across[1],
     ]
+}
+
+/// The unit direction `a → b` a line's quad is laid along: along x for a
+/// segment shorter than a millionth of a pixel.
+fn quad_direction(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let length = (d[0] * d[0] + d[1] * d[1]).sqrt();
+    if length > 1e-6 {
+        [d[0] / length, d[1] / length]
+    } else {
+        [1.0, 0.0]
+    }
 }
 
 /// Which end (`true`: `b`) and side (`true`: left) a quad corner lies at.
