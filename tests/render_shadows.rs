@@ -352,8 +352,9 @@ fn a_mature_tree_past_the_shadow_budget_casts_its_impostor() {
     let lit = scene.shot("mature_no_tree");
     // Darkening summed below the trunk's foot.
     let rows = SIZE / 8..SIZE;
+    let lit = luminance(&lit);
     let total = |shaded: &image::RgbaImage| -> f32 {
-        let (lit, shaded) = (luminance(&lit), luminance(shaded));
+        let shaded = luminance(shaded);
         (rows.start * SIZE..rows.end * SIZE)
             .map(|i| i as usize)
             .filter(|&i| lit[i] > 1e-4)

@@ -577,13 +577,13 @@ mod tests {
                     for x in 0..48 {
                         for y in 0..48 {
                             let p = [x as f32 + 0.5, y as f32 + 0.5];
-                            let inside = (0..4).all(|k| {
+                            // On one side of every edge, whichever way the
+                            // corners wind.
+                            let sides = [0, 1, 2, 3].map(|k| {
                                 let (u, v) = (corners[k], corners[(k + 1) % 4]);
-                                (v[0] - u[0]) * (p[1] - u[1]) - (v[1] - u[1]) * (p[0] - u[0]) >= 0.0
-                            }) || (0..4).all(|k| {
-                                let (u, v) = (corners[k], corners[(k + 1) % 4]);
-                                (v[0] - u[0]) * (p[1] - u[1]) - (v[1] - u[1]) * (p[0] - u[0]) <= 0.0
+                                (v[0] - u[0]) * (p[1] - u[1]) - (v[1] - u[1]) * (p[0] - u[0])
                             });
+                            let inside = sides.iter().all(|&c| c >= 0.0) || sides.iter().all(|&c| c <= 0.0);
                             centres += u32::from(inside);
                         }
                     }

@@ -402,14 +402,22 @@ fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_loca
     let calm = (world_from_local * vec4<f32>(select(b, a, at_end), 1.0)).xyz;
     let there_world = calm + wind_displacement(calm);
     var there = position_world_to_clip(there_world);
-#ifdef CONIFER_SHADOW
-#ifndef CONIFER_MOTION_VECTORS
+    // How far (pixels) the quad's corners lie past the line's ends along
+    // the segment and from it across.
+    let strip = strip_of(out.color.a, out.line_width);
+    var reach_along = 0.5 * strip + LINE_QUAD_MARGIN;
+    var reach_across = reach_along;
+#ifdef CONIFER_MOTION_VECTORS
+#else ifdef CONIFER_SHADOW
     // A directional cascade flattens the far end onto its near plane as
     // `finish` flattens this one: the line is cast whole, not clipped.
-    if view.clip_from_view[3][3] == 1.0 {
-        there.z = min(there.z, 1.0);
-    }
-#endif
+    there = flattened_onto_cascade(there);
+    // A shadow view keeps each texel its quad covers with the line's
+    // opacity (hashed), so the quad is the strip itself, at least a texel
+    // wide (a thinner strip's opacity is its width), its ends exact: it
+    // covers the strip's area on average, with no fragment off it.
+    reach_along = 0.0;
+    reach_across = 0.5 * max(strip, 1.0);
 #endif
     var here = out.position;
     // In front of the near plane where w ≥ z (reversed Z; an orthographic
@@ -437,23 +445,7 @@ fn with_line_quad(out: VertexOutput, a: vec3<f32>, b: vec3<f32>, world_from_loca
         along = d / span;
     }
     let across = vec2<f32>(-along.y, along.x);
-    var pixel: vec2<f32>;
-#ifdef CONIFER_SHADOW
-#ifndef CONIFER_MOTION_VECTORS
-    // A shadow view keeps each texel its quad covers with the line's
-    // opacity (hashed), so the quad is the strip itself, at least a texel
-    // wide (a thinner strip's opacity is its width), its ends exact: it
-    // covers the strip's area on average, with no fragment off it.
-    let half_width = 0.5 * max(strip_of(out.color.a, out.line_width), 1.0);
-    pixel = p_here + half_width * select(-1.0, 1.0, left) * across;
-#else
-    let reach = 0.5 * strip_of(out.color.a, out.line_width) + LINE_QUAD_MARGIN;
-    pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
-#endif
-#else
-    let reach = 0.5 * strip_of(out.color.a, out.line_width) + LINE_QUAD_MARGIN;
-    pixel = p_here + reach * (select(-1.0, 1.0, at_end) * along + select(-1.0, 1.0, left) * across);
-#endif
+    let pixel = p_here + reach_along * select(-1.0, 1.0, at_end) * along + reach_across * select(-1.0, 1.0, left) * across;
     let ndc = 2.0 * (pixel - view.viewport.xy) / view.viewport.zw - vec2<f32>(1.0);
     result.position = vec4<f32>(vec2<f32>(ndc.x, -ndc.y) * here.w, here.z, here.w);
     result.line_ends = vec4<f32>(start, end);
@@ -533,6 +525,17 @@ fn swayed_surface_normal(world: vec3<f32>, normal: vec3<f32>) -> vec3<f32> {
     return normalize(turned);
 }
 
+// `clip` in a directional shadow map flattened onto the cascade's near
+// plane ("pancaking"): casters nearer the light than the plane still cast,
+// not clipped. Other views' positions are kept.
+fn flattened_onto_cascade(clip: vec4<f32>) -> vec4<f32> {
+    var result = clip;
+    if view.clip_from_view[3][3] == 1.0 {
+        result.z = min(result.z, 1.0);
+    }
+    return result;
+}
+
 fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: mat4x4<f32>, color: vec4<f32>) -> VertexOutput {
     var out: VertexOutput;
     let calm = (world_from_local * vec4<f32>(local_position, 1.0)).xyz;
@@ -543,11 +546,7 @@ fn finish(local_position: vec3<f32>, local_normal: vec3<f32>, world_from_local: 
     out.previous_world_position = vec4<f32>(calm + wind_displacement(calm), 1.0);
     wind_previous = false;
 #else ifdef CONIFER_SHADOW
-    // Directional shadow maps: casters nearer the light than the cascade's
-    // near plane are flattened onto it ("pancaking"), not clipped.
-    if view.clip_from_view[3][3] == 1.0 {
-        out.position.z = min(out.position.z, 1.0);
-    }
+    out.position = flattened_onto_cascade(out.position);
 #endif
     out.world_normal = normalize((world_from_local * vec4<f32>(local_normal, 0.0)).xyz);
     out.color = color;

@@ -1632,11 +1632,7 @@ fn prepare_views(
             world_position: view
                 .world_from_view
                 .translation()
-                .extend(if camera {
-                    1.0
-                } else {
-                    render.shadow_error_factor.max(1.0)
-                })
+                .extend(if camera { 1.0 } else { render.shadow_error_factor })
                 .to_array(),
             error_slope: slope,
             perspective: u32::from(perspective)
