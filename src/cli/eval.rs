@@ -97,6 +97,11 @@ pub struct EvalArgs {
     /// popping, or if any method's render is blank (what CI runs).
     #[arg(long)]
     pub check: bool,
+    /// Degrees the cameras stand above the crown centre's level, looking
+    /// at it (negative: below; 0, level, as the paper's views): how the
+    /// methods hold up seen from a hillside.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub elevation: f32,
     /// Print the report as one JSON object on stdout (otherwise a table).
     #[arg(long)]
     pub json: bool,
@@ -228,6 +233,7 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         hdr: args.hdr,
         tonemapping: !args.no_tonemapping,
         float_blending: args.float_blending,
+        elevation_deg: args.elevation,
     };
     if args.inside {
         if let Some(bound) = args.merge_error {

@@ -284,6 +284,9 @@ pub struct EvalReport {
     /// Whether the methods blended in 32-bit float and were tone-mapped on
     /// the CPU (`--float-blending`).
     pub float_blending: bool,
+    /// Degrees the cameras stood above the crown centre's level
+    /// (`--elevation`).
+    pub elevation_deg: f32,
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -638,6 +641,7 @@ pub fn evaluate(
         line_order: format!("{:?}", options.view.line_order),
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         ours_impostor: options.view.ours_impostor,
+        elevation_deg: options.view.elevation_deg,
         hdr: options.view.hdr,
         tonemapping: options.view.tonemapping,
         float_blending: options.view.float_blending,

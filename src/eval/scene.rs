@@ -290,6 +290,11 @@ pub struct EvalView {
     /// multisample `Rgba32Float` (lavapipe does; WebGPU does not promise
     /// it).
     pub float_blending: bool,
+    /// Degrees the cameras stand above the crown centre's level, looking
+    /// at it (negative: below); 0 looks level at the crown, as the paper's
+    /// views do. A crown impostor's pictures are side views: from above
+    /// they show what a side view shows.
+    pub elevation_deg: f32,
 }
 
 /// Where the sun of `conifer eval`'s scene stands (the camera looks at the
@@ -404,7 +409,24 @@ impl EvalView {
             hdr: false,
             tonemapping: true,
             float_blending: false,
+            elevation_deg: 0.0,
         }
+    }
+
+    /// The unit direction from the crown centre to a camera at azimuth
+    /// `azimuth` radians round it (0: on +Z), [`Self::elevation_deg`]
+    /// above its level (clamped to ±89°; 0 where not finite).
+    pub fn eye_direction(&self, azimuth: f32) -> Vec3 {
+        let elevation = if self.elevation_deg.is_finite() {
+            self.elevation_deg.clamp(-89.0, 89.0).to_radians()
+        } else {
+            0.0
+        };
+        Vec3::new(
+            azimuth.sin() * elevation.cos(),
+            elevation.sin(),
+            azimuth.cos() * elevation.cos(),
+        )
     }
 
     /// Gives a method's `camera` this view's main texture (`Hdr` where
@@ -957,10 +979,10 @@ impl EvalScene {
         &self.view
     }
 
-    /// Where the cameras are: `distance` metres from the crown centre, on +Z,
-    /// looking at it.
+    /// Where the cameras are: `distance` metres from the crown centre, on +Z
+    /// ([`EvalView::elevation_deg`] above its level), looking at it.
     pub fn eye(&self, distance: f32) -> Vec3 {
-        self.record.crown_center() + Vec3::Z * distance
+        self.record.crown_center() + self.view.eye_direction(0.0) * distance
     }
 
     /// The scene's world (e.g. to change a tree's `ConiferLodOverride`).
@@ -985,7 +1007,7 @@ impl EvalScene {
         match path {
             CameraPath::Orbit => {
                 let angle = std::f32::consts::TAU * step as f32 / steps.max(1) as f32;
-                let eye = crown + Vec3::new(angle.sin(), 0.0, angle.cos()) * distance;
+                let eye = crown + self.view.eye_direction(angle) * distance;
                 Transform::from_translation(eye).looking_at(crown, Vec3::Y)
             }
             CameraPath::Pan => {
@@ -1689,6 +1711,30 @@ mod tests {
                 },
                 "{}",
                 lights.name()
+            );
+        }
+    }
+
+    /// The cameras' direction from the crown is a unit vector at the
+    /// view's elevation and the asked azimuth; level and on +Z by default,
+    /// and never NaN or past straight up.
+    #[test]
+    fn the_eye_stands_at_the_views_elevation() {
+        let level = EvalView::square(64, 45.0);
+        assert_eq!(level.eye_direction(0.0), Vec3::Z);
+        for (elevation_deg, azimuth) in [(27.0f32, 0.0f32), (-15.0, 1.0), (60.0, 4.0)] {
+            let view = EvalView { elevation_deg, ..level };
+            let d = view.eye_direction(azimuth);
+            assert!((d.length() - 1.0).abs() < 1e-6);
+            assert!((d.y.asin().to_degrees() - elevation_deg).abs() < 1e-3, "{d}");
+            let level = Vec2::new(d.x, d.z).normalize();
+            assert!(level.distance(Vec2::new(azimuth.sin(), azimuth.cos())) < 1e-5, "{d}");
+        }
+        for elevation_deg in [f32::NAN, f32::INFINITY, 90.0, 1e9] {
+            let d = EvalView { elevation_deg, ..level }.eye_direction(0.0);
+            assert!(
+                d.is_finite() && d.z > 0.0 && (d.length() - 1.0).abs() < 1e-6,
+                "{elevation_deg}: {d}"
             );
         }
     }
