@@ -1727,8 +1727,11 @@ mod tests {
             let d = view.eye_direction(azimuth);
             assert!((d.length() - 1.0).abs() < 1e-6);
             assert!((d.y.asin().to_degrees() - elevation_deg).abs() < 1e-3, "{d}");
-            let level = Vec2::new(d.x, d.z).normalize();
-            assert!(level.distance(Vec2::new(azimuth.sin(), azimuth.cos())) < 1e-5, "{d}");
+            let across_the_ground = Vec2::new(d.x, d.z).normalize();
+            assert!(
+                across_the_ground.distance(Vec2::new(azimuth.sin(), azimuth.cos())) < 1e-5,
+                "{d}"
+            );
         }
         for elevation_deg in [f32::NAN, f32::INFINITY, 90.0, 1e9] {
             let d = EvalView { elevation_deg, ..level }.eye_direction(0.0);
