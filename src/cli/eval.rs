@@ -146,8 +146,8 @@ pub struct EvalArgs {
     /// Instead of the distances: the camera in the crown, 2 m from the
     /// trunk at 40 % of the tree's height, the tree drawn as its shared
     /// prototypes with one error for the tree and with each placement's
-    /// own, against the reference (`--methods`, `--distances` and the
-    /// dolly do not apply).
+    /// own, against the reference (`--methods`, `--distances`,
+    /// `--elevation` and the dolly do not apply).
     #[arg(long)]
     pub inside: bool,
 }
