@@ -159,6 +159,11 @@ struct Args {
     /// farthest first, are drawn as their impostors or level-2 lines.
     #[arg(long)]
     max_expanded: Option<u32>,
+    /// The camera elevations over a crown, `START,END` degrees, across
+    /// which a far tree's impostor gives way to its lines
+    /// (`ConiferLodSettings::impostor_steep_degrees`; default 30,45).
+    #[arg(long, value_parser = bevy_conifer_lod::model::impostor::parse_degree_band)]
+    impostor_steep: Option<[f32; 2]>,
     /// Haze: the distance in metres at which it leaves a dark object 5 % of
     /// its contrast against the horizon (Koschmieder's visibility; light
     /// haze is 5–10 km, fog under 1 km); 0 turns it off.
@@ -599,6 +604,9 @@ fn setup(
     }
     if let Some(budget) = args.max_expanded {
         settings.max_expanded_placements = budget;
+    }
+    if let Some(band) = args.impostor_steep {
+        settings.impostor_steep_degrees = band;
     }
     debug.enabled = args.overlay;
     debug.always_collect_stats = args.headless;

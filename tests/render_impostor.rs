@@ -15,7 +15,7 @@ use bevy_conifer_lod::eval::scene::{EvalScene, EvalView, Method};
 use bevy_conifer_lod::generate::{Age, GenerateOptions, Species, generate};
 use bevy_conifer_lod::model::crown_shade::CrownShade;
 use bevy_conifer_lod::model::impostor::{
-    CROWN_DENSITY_RINGS, CrownImpostor, FADE_END, FADE_START, ImpostorMips, impostor_fade, impostor_samples,
+    CROWN_DENSITY_RINGS, CrownImpostor, FADE_END, FADE_START, ImpostorMips, SteepFade, impostor_fade, impostor_samples,
     shadow_sample_depths, swayed_card_point,
 };
 use bevy_conifer_lod::model::wind::{TreeWindPhase, WindClock, impostor_margin, trunk_offset, wind_offset};
@@ -140,7 +140,7 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
         }
         let view = common::camera_readback(renderer.world(), handle.id());
         let (_, e) = view.tree_lod(0);
-        let expected = impostor_fade(e, texel, 0.0);
+        let expected = impostor_fade(e, texel, 0.0, SteepFade::DEFAULT);
         let fade = view.impostor_fade(0);
         println!("{texels} texels ({distance:.1} m): e = {e:.4} m, fade {fade:.3} (CPU {expected:.3})");
         assert!((fade - expected).abs() <= 1.0 / 255.0 + 1e-6, "{fade} vs {expected}");
@@ -179,6 +179,42 @@ fn a_camera_fades_the_cut_into_the_impostor_and_a_shadow_view_never_does() {
             let above = common::camera_readback(renderer.world(), handle.id());
             assert_eq!(above.impostor_fade(0), 0.0, "no impostor seen from above");
             assert_eq!(above.tree_draw(PartKind::Impostor, 0)[0], 0);
+            // From 15° and 25° above, under the default band (30° to 45°)
+            // and a lowered one (10° to 20°): the cull pass keeps what the
+            // CPU's band keeps of the impostor.
+            for (band, degrees) in [([30.0, 45.0], 25.0f32), ([10.0, 20.0], 15.0), ([10.0, 20.0], 25.0)] {
+                renderer
+                    .world_mut()
+                    .resource_mut::<ConiferLodSettings>()
+                    .impostor_steep_degrees = band;
+                let eye = Vec3::new(0.0, degrees.to_radians().sin(), degrees.to_radians().cos());
+                *renderer.world_mut().get_mut::<Transform>(camera).unwrap() =
+                    Transform::from_translation(crown + eye * distance).looking_at(crown, Vec3::Y);
+                for _ in 0..2 {
+                    renderer.update().unwrap();
+                }
+                let view = common::camera_readback(renderer.world(), handle.id());
+                let (_, e) = view.tree_lod(0);
+                let steep = ConiferLodSettings {
+                    impostor_steep_degrees: band,
+                    ..ConiferLodSettings::default()
+                }
+                .impostor_steep_fade();
+                let expected = impostor_fade(e, texel, degrees.to_radians().tan(), steep);
+                let fade = view.impostor_fade(0);
+                println!("{degrees}° above, band {band:?}: fade {fade:.3} (CPU {expected:.3})");
+                assert!((fade - expected).abs() <= 1.0 / 255.0 + 1e-6, "{fade} vs {expected}");
+                let expected_fade = match (band[0], degrees) {
+                    (30.0, _) => 1.0,
+                    (_, 15.0) => 0.5,
+                    _ => 0.0,
+                };
+                assert!((fade - expected_fade).abs() < 0.05, "{degrees}°, {band:?}: {fade}");
+            }
+            renderer
+                .world_mut()
+                .resource_mut::<ConiferLodSettings>()
+                .impostor_steep_degrees = ConiferLodSettings::default().impostor_steep_degrees;
         }
         let readback = renderer.world().resource::<CompactReadback>();
         // Shadow views (the sun's cascades) never draw the impostor.

@@ -102,6 +102,11 @@ pub struct EvalArgs {
     /// methods hold up seen from a hillside.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub elevation: f32,
+    /// The camera elevations over the crown, `START,END` degrees, across
+    /// which `ours`'s impostor gives way to its lines
+    /// (`ConiferLodSettings::impostor_steep_degrees`; default 30,45).
+    #[arg(long, value_name = "START,END", value_parser = crate::model::impostor::parse_degree_band)]
+    pub impostor_steep: Option<[f32; 2]>,
     /// Print the report as one JSON object on stdout (otherwise a table).
     #[arg(long)]
     pub json: bool,
@@ -234,6 +239,9 @@ pub(super) fn eval(args: &EvalArgs) -> anyhow::Result<()> {
         tonemapping: !args.no_tonemapping,
         float_blending: args.float_blending,
         elevation_deg: args.elevation,
+        impostor_steep_degrees: args
+            .impostor_steep
+            .unwrap_or(crate::plugin::ConiferLodSettings::default().impostor_steep_degrees),
     };
     if args.inside {
         if let Some(bound) = args.merge_error {

@@ -287,6 +287,9 @@ pub struct EvalReport {
     /// Degrees the cameras stood above the crown centre's level
     /// (`--elevation`).
     pub elevation_deg: f32,
+    /// The elevations, degrees, across which `ours`'s crown impostor gave
+    /// way to its lines (`--impostor-steep`).
+    pub impostor_steep_degrees: [f32; 2],
     /// Needles of the tree.
     pub needles: usize,
     /// Distances of the dolly's pictures.
@@ -642,6 +645,7 @@ pub fn evaluate(
         ours_line_opacity: format!("{:?}", options.view.ours_line_opacity),
         ours_impostor: options.view.ours_impostor,
         elevation_deg: options.view.elevation_deg,
+        impostor_steep_degrees: options.view.impostor_steep_degrees,
         hdr: options.view.hdr,
         tonemapping: options.view.tonemapping,
         float_blending: options.view.float_blending,

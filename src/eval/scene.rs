@@ -24,7 +24,7 @@
 use super::decimate::{DecimatedLevel, decimate, needle_mesh_with_corners_at};
 use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_shoots, spawn_reference_tree};
 use super::tonemap::ToneMap;
-use crate::model::impostor::impostor_fade;
+use crate::model::impostor::{SteepFade, impostor_fade};
 use crate::model::metric::{line_error, prism_sides};
 use crate::model::needle::WoodSegment;
 use crate::model::prism::{
@@ -133,6 +133,7 @@ pub(super) fn renderer_with_species(
         line_raster: view.line_raster,
         wood_line_order: view.wood_line_order,
         line_order: view.line_order,
+        impostor_steep_degrees: view.impostor_steep_degrees,
         // One error per tree, as the CPU cut the counts come from
         // (`EvalScene::counts`); `conifer eval --inside` measures each
         // placement's own.
@@ -295,6 +296,9 @@ pub struct EvalView {
     /// views do. A crown impostor's pictures are side views: from above
     /// they show what a side view shows.
     pub elevation_deg: f32,
+    /// The elevations, degrees, across which `ours`'s impostor gives way
+    /// to its lines (`ConiferLodSettings::impostor_steep_degrees`).
+    pub impostor_steep_degrees: [f32; 2],
 }
 
 /// Where the sun of `conifer eval`'s scene stands (the camera looks at the
@@ -410,6 +414,7 @@ impl EvalView {
             tonemapping: true,
             float_blending: false,
             elevation_deg: 0.0,
+            impostor_steep_degrees: ConiferLodSettings::default().impostor_steep_degrees,
         }
     }
 
@@ -1140,8 +1145,17 @@ impl EvalScene {
                 // is two triangles, and once it is opaque nothing else is
                 // drawn (the cull pass's rule, `impostor_fade`).
                 let fade = match (method, self.impostor_texel) {
-                    // The camera looks at the crown level.
-                    (Method::Ours, Some(texel)) if self.view.ours_impostor => impostor_fade(e, texel, 0.0),
+                    // The camera looks at the crown centre from the
+                    // view's elevation.
+                    (Method::Ours, Some(texel)) if self.view.ours_impostor => {
+                        let up = self.view.eye_direction(0.0);
+                        let elevation = up.y.abs() / up.x.hypot(up.z).max(1e-9);
+                        let steep = SteepFade::from_degrees(
+                            self.view.impostor_steep_degrees[0],
+                            self.view.impostor_steep_degrees[1],
+                        );
+                        impostor_fade(e, texel, elevation, steep)
+                    }
                     _ => 0.0,
                 };
                 let impostor = if fade > 0.0 { 2 } else { 0 };

@@ -287,7 +287,7 @@ fn collect_stats(
                 let e = pixel_error.max(0.0) * centre.distance(camera) * slope / scale.max(1e-6);
                 let offset = camera - centre;
                 let elevation = offset.y.abs() / Vec2::new(offset.x, offset.z).length().max(1e-9);
-                crate::model::impostor::impostor_fade(e, impostor.texel, elevation)
+                crate::model::impostor::impostor_fade(e, impostor.texel, elevation, settings.impostor_steep_fade())
             }
             _ => 0.0,
         };

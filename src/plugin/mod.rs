@@ -391,6 +391,17 @@ pub struct ConiferLodSettings {
     /// mixes both by quarters). Default on; [`ConiferLodSettings::paper`]
     /// turns it off.
     pub far_impostor: bool,
+    /// The camera elevations over a tree's crown centre, in degrees,
+    /// across which its far impostor gives way to its lines: drawn in
+    /// full up to `[0]`, not at all from `[1]`
+    /// ([`crate::model::impostor::SteepFade::from_degrees`], which clamps
+    /// them). The impostor's pictures are side views: from 27° above, the
+    /// mature spruce and pine as impostors are 2–3.5 times further from
+    /// their reference in colour than their lines are (README, "Seen from
+    /// above"). A lower band (say 15° to 30°) draws crowns seen from a
+    /// hillside or a tower truer, at the cost of the lines of every tree
+    /// it turns back (README, "What a game draws"). Default `[30.0, 45.0]`.
+    pub impostor_steep_degrees: [f32; 2],
     /// Dim the ambient light by the share of the sky each point of a
     /// crown sees through the crown
     /// ([`crate::model::crown_shade::SkyVisibility`], from the crown
@@ -451,6 +462,7 @@ impl Default for ConiferLodSettings {
             max_expanded_placements: 1 << 17,
             error_scope: ErrorScope::default(),
             far_impostor: true,
+            impostor_steep_degrees: [30.0, 45.0],
             sky_occlusion: false,
             shadow_error_scale: 1.0,
             shadow_line_quads: false,
@@ -464,6 +476,13 @@ impl ConiferLodSettings {
     pub fn shadow_error_factor(&self) -> f32 {
         let scale = self.shadow_error_scale;
         if scale.is_finite() { scale.max(1.0) } else { 1.0 }
+    }
+
+    /// [`ConiferLodSettings::impostor_steep_degrees`] as the cull pass
+    /// applies it.
+    pub fn impostor_steep_fade(&self) -> crate::model::impostor::SteepFade {
+        let [start, end] = self.impostor_steep_degrees;
+        crate::model::impostor::SteepFade::from_degrees(start, end)
     }
 
     /// The paper's configuration: `T = 2/ρ` opacity, one error per tree,

@@ -2,7 +2,7 @@
 # Mature crowns seen from above (`conifer eval --elevation`): the Norway
 # spruce and the Scots pine 80 m from the crown centre in a 256 x 256, 45°
 # view at pixel error 1 (the crown impostor in full: 2.6 texels a pixel
-# error), level and from 27° above (the impostor is drawn in full up to
+# error), level and from above (the impostor is drawn in full up to
 # 30°), `ours` as the impostor and, with --ours-no-impostor, as its lines.
 # Each run is stopped once its two pictures are written (the dolly and the
 # timings that follow are not needed); the figures come from the pictures
@@ -12,6 +12,9 @@ set -euo pipefail
 cd "$(dirname "$0")/../../.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/bevy_conifer_lod/target}"
 out=${1:-/tmp/from-above}
+shift || true
+elevations=("$@")
+[[ ${#elevations[@]} -gt 0 ]] || elevations=(0 15 27)
 mkdir -p "$out"
 cargo build --bin conifer
 conifer="$CARGO_TARGET_DIR/debug/conifer"
@@ -31,7 +34,8 @@ run() {
     echo "$tree, $elevation° above, $what: $(python3 docs/eval/crossfade/crown_colour.py "$dir/ref_80m.png" "$dir/ours_80m.png")"
 }
 for tree in norway-spruce scots-pine; do
-    run "$tree" 0 impostor
-    run "$tree" 27 impostor
-    run "$tree" 27 lines --ours-no-impostor
+    for elevation in "${elevations[@]}"; do
+        run "$tree" "$elevation" impostor
+        run "$tree" "$elevation" lines --ours-no-impostor
+    done
 done

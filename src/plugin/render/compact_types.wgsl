@@ -51,11 +51,6 @@ const LOD_FADE_SHIFT: u32 = 24u;
 // where the fade into the impostor starts and ends.
 const IMPOSTOR_FADE_START: f32 = 0.8;
 const IMPOSTOR_FADE_END: f32 = 1.6;
-// `model::impostor::STEEP_START`, `STEEP_END`: tangents of the camera's
-// elevation over the crown where the impostor starts giving way to lines
-// and where it is gone.
-const IMPOSTOR_STEEP_START: f32 = 0.57735026;
-const IMPOSTOR_STEEP_END: f32 = 1.0;
 // CullView.perspective: bit 0 a perspective view, bit 1 a camera.
 const VIEW_PERSPECTIVE: u32 = 1u;
 const VIEW_CAMERA: u32 = 2u;
@@ -117,6 +112,10 @@ struct SpeciesParams {
     // its bottom and top heights, its views, and 0 without an impostor, 1
     // with one off by default, 2 with one on by default
     impostor_span: vec4<f32>,
+    // the tangents of the camera's elevation over the crown where the
+    // impostor starts giving way to lines and where it is gone
+    // (`model::impostor::SteepFade`: x start, y end; z, w unused)
+    impostor_steep: vec4<f32>,
     // colours by age, side and height (`model::color`)
     young_needle_color: vec4<f32>,
     needle_underside_color: vec4<f32>,

@@ -27,7 +27,7 @@
     ARRAY_MERGED_BY_OWN, DEPTH_ARRAY_COUNT, DEPTH_ARRAY_OFFSET, DEPTH_ARRAY_CURSOR, DEPTH_BUCKETS, depth_bucket,
     placement_band, placement_matrix,
     KIND_PRISMS, KIND_ORIGINAL_LINES, KIND_MERGED_LINES, KIND_WOOD_PRISMS, KIND_WOOD_LINES, KIND_WOOD_MESH, KIND_IMPOSTOR,
-    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_STEEP_START, IMPOSTOR_STEEP_END, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA, VIEW_LINE_QUADS, VIEW_DEPTH_ORDERED,
+    LOD_FADE_SHIFT, FLAG_IMPOSTOR_OVERRIDE, FLAG_IMPOSTOR_ON, IMPOSTOR_FADE_START, IMPOSTOR_FADE_END, VIEW_PERSPECTIVE, VIEW_CAMERA, VIEW_LINE_QUADS, VIEW_DEPTH_ORDERED,
     FLAG_VISIBLE, FLAG_PIXEL_ERROR_OVERRIDE, FLAG_TRANSITION_OVERRIDE, OPACITY_OVERRIDE_SHIFT, LOD_ORIGINAL_FROM_NEEDLES, LOD_OPACITY_SHIFT,
     instance_world_from_local, instance_scale, tree_local_point,
     threshold_code, sphere_distance, sphere_error, placement_error, NO_SPHERE, VIEW_RANGE,
@@ -303,7 +303,8 @@ fn view_tree(i: u32) -> TreeView {
         // Side views: a camera looking down on the tree keeps its lines.
         let above = camera - species.crown_center.xyz;
         let elevation = abs(above.y) / max(length(above.xz), 1e-9);
-        let steep = clamp((elevation - IMPOSTOR_STEEP_START) / (IMPOSTOR_STEEP_END - IMPOSTOR_STEEP_START), 0.0, 1.0);
+        let band = species.impostor_steep;
+        let steep = clamp((elevation - band.x) / (band.y - band.x), 0.0, 1.0);
         fade = u32(round(t * (1.0 - steep) * 255.0));
         tree.impostor_allowed = steep < 1.0;
     }

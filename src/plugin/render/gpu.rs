@@ -149,7 +149,7 @@ pub struct GpuInstance {
     pub layers: u32,
 }
 
-/// A species' constants (`SpeciesParams` in WGSL), 5,136 bytes.
+/// A species' constants (`SpeciesParams` in WGSL), 5,152 bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct SpeciesParams {
@@ -223,6 +223,10 @@ pub struct SpeciesParams {
     /// Its bottom and top heights, its views, and 0 without an impostor,
     /// 1 with one off by default, 2 with one on by default.
     pub impostor_span: [f32; 4],
+    /// The tangents of the camera elevations across which the impostor
+    /// gives way to the lines ([`crate::model::impostor::SteepFade`]:
+    /// start, end); z, w unused.
+    pub impostor_steep: [f32; 4],
     /// Linear colour of this year's needles
     /// ([`crate::model::FoliageMaterial::young_needle_color`]).
     pub young_needle_color: [f32; 4],
@@ -691,8 +695,8 @@ mod tests {
 
     /// The Rust mirror is as long as the WGSL struct (16-byte rows).
     #[test]
-    fn species_params_is_5136_bytes() {
-        assert_eq!(size_of::<super::SpeciesParams>(), 5136);
+    fn species_params_is_5152_bytes() {
+        assert_eq!(size_of::<super::SpeciesParams>(), 5152);
     }
 
     /// The shader declares `constant` as `steps` and `field` as `rows`

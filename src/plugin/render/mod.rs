@@ -545,6 +545,10 @@ fn species_params(
         tree_sphere: compact.tree_sphere.to_array(),
         impostor_box,
         impostor_span,
+        impostor_steep: {
+            let steep = settings.impostor_steep_fade();
+            [steep.start, steep.end, 0.0, 0.0]
+        },
         young_needle_color: material.young_needle_color,
         needle_underside_color: material.needle_underside_color,
         upper_wood_color: material.upper_wood_color,
