@@ -418,6 +418,22 @@ fn bad_views_are_refused() {
     );
 }
 
+/// `--impostor-steep START,END`: a band that is not two degrees from 0 to
+/// 90 in order is refused by `conifer eval` before any record is read,
+/// naming the option and the form it expects.
+#[cfg(feature = "eval")]
+#[test]
+fn bad_impostor_steep_bands_are_refused() {
+    for bad in ["30,15", "20,20", "15", "-5,30", "15,91", "NaN,30", "a,b"] {
+        let stderr = assert_fails_naming(
+            &conifer(&["eval", "no-such.conifer", &format!("--impostor-steep={bad}")]),
+            "--impostor-steep",
+        );
+        assert!(stderr.contains("START,END"), "{bad}: {stderr}");
+        assert!(!stderr.contains("no-such.conifer"), "{bad}: read the record first: {stderr}");
+    }
+}
+
 #[test]
 fn a_failed_bake_keeps_the_previous_record() {
     let dir = tempfile::tempdir().unwrap();
