@@ -7,7 +7,8 @@
 # Each run is stopped once its two pictures are written (the dolly and the
 # timings that follow are not needed); the figures come from the pictures
 # (docs/eval/crossfade/crown_colour.py, as `conifer eval` computes the
-# crown colour error), in figures.txt.
+# crown colour error), in figures.txt. Usage: run.sh [OUT [ELEVATION...]];
+# TREES="scots-pine" runs one tree.
 set -euo pipefail
 cd "$(dirname "$0")/../../.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/bevy_conifer_lod/target}"
@@ -33,7 +34,8 @@ run() {
     wait "$pid" || true
     echo "$tree, $elevation° above, $what: $(python3 docs/eval/crossfade/crown_colour.py "$dir/ref_80m.png" "$dir/ours_80m.png")"
 }
-for tree in norway-spruce scots-pine; do
+read -ra trees <<< "${TREES:-norway-spruce scots-pine}"
+for tree in "${trees[@]}"; do
     for elevation in "${elevations[@]}"; do
         run "$tree" "$elevation" impostor
         run "$tree" "$elevation" lines --ours-no-impostor
