@@ -430,7 +430,10 @@ fn bad_impostor_steep_bands_are_refused() {
             "--impostor-steep",
         );
         assert!(stderr.contains("START,END"), "{bad}: {stderr}");
-        assert!(!stderr.contains("no-such.conifer"), "{bad}: read the record first: {stderr}");
+        assert!(
+            !stderr.contains("no-such.conifer"),
+            "{bad}: read the record first: {stderr}"
+        );
     }
 }
 
