@@ -206,13 +206,13 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     assert!(species_bytes >= compact.bytes().total() && species_bytes <= compact.bytes().total() + 9 * 128);
     assert!(per_needle <= 36.0, "{per_needle} B/needle");
     // 3,000 trees: a 4,096-slot instance buffer (64 B each) and the
-    // species' 5,136-byte parameters, and per view its 144-byte culling
+    // species' 5,152-byte parameters, and per view its 144-byte culling
     // inputs, 4,096 LOD slots (32 B)
     // and 7 × 4,096 indirect draws (16 B), and six 16-byte stand-ins for
     // the placement buffers a flat species leaves empty and its counters'
     // header (136 words: the expansion budget's).
     let placed_stand_ins = 6 * 16 + 4 * 136;
-    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 5136);
+    assert_eq!(memory.instance_bytes[&id], 4096 * 64 + 5152);
     // The impostor's texture: every mip level of every view, as uploaded.
     let impostor = record_species_impostor_bytes(&scene, id);
     assert_eq!(memory.impostor_bytes[&id], impostor);
@@ -232,7 +232,7 @@ fn compact_memory_is_what_was_allocated_and_follows_the_trees() {
     }
     scene.shot("forest_thinned");
     let memory = scene.memory();
-    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 5136);
+    assert_eq!(memory.instance_bytes[&id], 128 * 64 + 5152);
     assert_eq!(memory.view_bytes, 144 + 128 * 32 + 7 * 128 * 16 + placed_stand_ins);
     assert_eq!(memory.buffers, buffers);
     // All go: nothing is left.

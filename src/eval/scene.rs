@@ -1148,8 +1148,8 @@ impl EvalScene {
                     // The camera looks at the crown centre from the
                     // view's elevation.
                     (Method::Ours, Some(texel)) if self.view.ours_impostor => {
-                        let up = self.view.eye_direction(0.0);
-                        let elevation = up.y.abs() / up.x.hypot(up.z).max(1e-9);
+                        let eye = self.view.eye_direction(0.0);
+                        let elevation = eye.y.abs() / eye.x.hypot(eye.z).max(1e-9);
                         let steep = SteepFade::from_degrees(
                             self.view.impostor_steep_degrees[0],
                             self.view.impostor_steep_degrees[1],
