@@ -24,7 +24,7 @@
 use super::decimate::{DecimatedLevel, decimate, needle_mesh_with_corners_at};
 use super::reference::{ReferenceMaterialPlugin, ReferenceSurface, reference_shoots, spawn_reference_tree};
 use super::tonemap::ToneMap;
-use crate::model::impostor::{SteepFade, impostor_fade};
+use crate::model::impostor::{elevation_tangent, impostor_fade};
 use crate::model::metric::{line_error, prism_sides};
 use crate::model::needle::WoodSegment;
 use crate::model::prism::{
@@ -1146,15 +1146,14 @@ impl EvalScene {
                 // drawn (the cull pass's rule, `impostor_fade`).
                 let fade = match (method, self.impostor_texel) {
                     // The camera looks at the crown centre from the
-                    // view's elevation.
+                    // view's elevation, under the band the plugin draws with.
                     (Method::Ours, Some(texel)) if self.view.ours_impostor => {
-                        let eye = self.view.eye_direction(0.0);
-                        let elevation = eye.y.abs() / eye.x.hypot(eye.z).max(1e-9);
-                        let steep = SteepFade::from_degrees(
-                            self.view.impostor_steep_degrees[0],
-                            self.view.impostor_steep_degrees[1],
-                        );
-                        impostor_fade(e, texel, elevation, steep)
+                        let steep = self
+                            .renderer
+                            .world()
+                            .resource::<ConiferLodSettings>()
+                            .impostor_steep_fade();
+                        impostor_fade(e, texel, elevation_tangent(self.view.eye_direction(0.0)), steep)
                     }
                     _ => 0.0,
                 };

@@ -103,7 +103,10 @@ pub struct SteepFade {
 }
 
 impl SteepFade {
-    /// The default band, 30° to 45°.
+    /// The default band in degrees, `[start, end]`: 30° to 45°.
+    pub const DEFAULT_DEGREES: [f32; 2] = [30.0, 45.0];
+
+    /// The default band, [`SteepFade::DEFAULT_DEGREES`] as tangents.
     pub const DEFAULT: Self = Self {
         start: 0.577_350_26,
         end: 1.0,
@@ -116,15 +119,16 @@ impl SteepFade {
     /// default's (30° or 45°).
     pub fn from_degrees(start_deg: f32, end_deg: f32) -> Self {
         const MAX_DEG: f32 = 89.9;
+        let [default_start, default_end] = Self::DEFAULT_DEGREES;
         let start_deg = if start_deg.is_nan() {
-            30.0
+            default_start
         } else {
             start_deg.clamp(0.0, MAX_DEG)
         };
         if start_deg >= MAX_DEG {
             return Self::NEVER;
         }
-        let end_deg = if end_deg.is_nan() { 45.0 } else { end_deg };
+        let end_deg = if end_deg.is_nan() { default_end } else { end_deg };
         let end_deg = end_deg.max(start_deg + 0.1).min(MAX_DEG + 0.09);
         Self {
             start: start_deg.to_radians().tan(),
@@ -148,6 +152,20 @@ impl SteepFade {
     }
 }
 
+impl Default for SteepFade {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// The tangent of the elevation over a crown centre of a viewer at
+/// `offset` from it: its height over its distance across the ground (at
+/// least 1e-9), as the cull pass computes it; what [`SteepFade::keep`] and
+/// [`impostor_fade`] take. Straight above or below, a very large number.
+pub fn elevation_tangent(offset: Vec3) -> f32 {
+    offset.y.abs() / Vec2::new(offset.x, offset.z).length().max(1e-9)
+}
+
 /// Reads a band of elevations as command lines give it, `START,END` in
 /// degrees (`--impostor-steep 15,30`): both from 0 to 90, `START` below
 /// `END`. The message names what was expected otherwise.
@@ -161,12 +179,6 @@ pub fn parse_degree_band(text: &str) -> Result<[f32; 2], String> {
     match values[..] {
         [start, end] if (0.0..=90.0).contains(&start) && (0.0..=90.0).contains(&end) && start < end => Ok([start, end]),
         _ => Err(expected()),
-    }
-}
-
-impl Default for SteepFade {
-    fn default() -> Self {
-        Self::DEFAULT
     }
 }
 
@@ -2278,6 +2290,16 @@ mod tests {
         let sharp = SteepFade::from_degrees(20.0, 10.0);
         assert!((sharp.end.atan().to_degrees() - 20.1).abs() < 1e-3);
         assert_eq!(sharp.keep(20.2f32.to_radians().tan()), 0.0);
+    }
+
+    #[test]
+    fn the_elevation_tangent_is_height_over_ground_distance() {
+        assert_eq!(elevation_tangent(Vec3::new(0.0, 1.0, 1.0)), 1.0);
+        assert!((elevation_tangent(Vec3::new(3.0, -2.5, 4.0)) - 0.5).abs() < 1e-6);
+        assert_eq!(elevation_tangent(Vec3::new(5.0, 0.0, 0.0)), 0.0);
+        let overhead = elevation_tangent(Vec3::Y);
+        assert!(overhead.is_finite() && overhead >= 1e9);
+        assert_eq!(SteepFade::DEFAULT.keep(overhead), 0.0);
     }
 
     #[test]

@@ -285,8 +285,7 @@ fn collect_stats(
                 let centre = transform.transform_point(species.crown_center);
                 let pixel_error = over.and_then(|o| o.pixel_error).unwrap_or(settings.pixel_error);
                 let e = pixel_error.max(0.0) * centre.distance(camera) * slope / scale.max(1e-6);
-                let offset = camera - centre;
-                let elevation = offset.y.abs() / Vec2::new(offset.x, offset.z).length().max(1e-9);
+                let elevation = crate::model::impostor::elevation_tangent(camera - centre);
                 crate::model::impostor::impostor_fade(e, impostor.texel, elevation, settings.impostor_steep_fade())
             }
             _ => 0.0,

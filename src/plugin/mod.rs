@@ -464,7 +464,7 @@ impl Default for ConiferLodSettings {
             max_expanded_placements: 1 << 17,
             error_scope: ErrorScope::default(),
             far_impostor: true,
-            impostor_steep_degrees: [30.0, 45.0],
+            impostor_steep_degrees: crate::model::impostor::SteepFade::DEFAULT_DEGREES,
             sky_occlusion: false,
             shadow_error_scale: 1.0,
             shadow_line_quads: false,
