@@ -569,9 +569,15 @@ mod tests {
         ) {
             let along = [angle.cos(), angle.sin()];
             let (mut centres, offsets) = (0u32, 16);
+            // The segment starts at the middles of 16 × 16 steps across a
+            // texel: from the steps' starts, an axis-aligned quad (angle 0)
+            // has its edges on texel centres, which the inclusive test
+            // below counts on both sides where a rasterizer's fill rule
+            // counts them once (0.1096 texels kept for a strip of 0.1 at
+            // angle 0, length 2, width 0.05).
             for i in 0..offsets {
                 for j in 0..offsets {
-                    let a = [20.0 + i as f32 / offsets as f32, 20.0 + j as f32 / offsets as f32];
+                    let a = [20.0 + (i as f32 + 0.5) / offsets as f32, 20.0 + (j as f32 + 0.5) / offsets as f32];
                     let b = [a[0] + length * along[0], a[1] + length * along[1]];
                     let corners = [0, 1, 2, 5].map(|c| shadow_line_quad_corner(a, b, width, c));
                     for x in 0..48 {
